@@ -1,0 +1,235 @@
+"""Floating-base decomposition of a humanoid's dynamics: Flacco et al. (2016) eq. (9).
+
+``FloatingBaseDynamics(plant, implementation)`` computes, at a state (q, v) in Drake's
+coordinates, the paper's H, F, I0c, C^, p^0c (Algorithm 1), their time derivatives
+(Algorithm 2), the floating inertia H^fb, its derivative (eq. 13), the floating bias C^fb,
+and the floating Jacobian J^fb of a point (eq. 12). Two implementations give the same numbers:
+
+* ``"fast"``: Drake's C++ kernels (mass matrix, bias term, gravity, Jacobians) plus the
+  derivative of the mass matrix along the joint velocities by a central difference of two
+  extra mass matrices, vectorised numpy, no per-body Python loop.
+* ``"reference"``: the paper's recursive Algorithms 1-2 in spatial-vector algebra
+  (``systems.floating_base_reference``), a faithful and slower O(n depth) implementation.
+
+Coordinates of the outputs: see ``systems.floating_base_terms`` (the paper's base frame F0
+for F, I0c, p^ and the base velocity; joint order = the plant's ``v[6:]``). The floating
+Jacobian is returned in world coordinates.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import Frame, JacobianWrtVariable, ModelInstanceIndex
+
+from systems.floating_base_terms import FloatingBaseTerms, reduce_to_floating_terms
+from systems.topology import floating_base_topology
+
+IMPLEMENTATIONS = ("fast", "reference")
+
+#: Length of the configuration-space step of the mass-matrix central difference [rad or m].
+#: Truncation error ~ step^2, rounding error ~ 1e-16 / step: 1e-5 balances both (~1e-10).
+MASS_MATRIX_DERIVATIVE_STEP = 1e-5
+
+#: How far the base quaternion's norm may be from 1 before the state is refused.
+QUATERNION_NORM_TOLERANCE = 1e-3
+
+
+def quaternion_to_rotation(quaternion_wxyz: np.ndarray) -> np.ndarray:
+    """Rotation matrix of a unit quaternion [w, x, y, z] (Drake's order)."""
+    w, x, y, z = np.asarray(quaternion_wxyz, dtype=float).tolist()
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def checked_state(plant: MultibodyPlant, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Returns (q, v) as float arrays with a unit base quaternion, or raises ValueError.
+
+    Raises:
+        ValueError: wrong sizes, NaN or infinite entries (named by index), or a base
+            quaternion whose norm is not 1 within ``QUATERNION_NORM_TOLERANCE``.
+    """
+    q = np.asarray(q, dtype=float).reshape(-1)
+    v = np.asarray(v, dtype=float).reshape(-1)
+    if q.size != plant.num_positions():
+        raise ValueError(f"q has {q.size} entries; the plant has {plant.num_positions()} positions")
+    if v.size != plant.num_velocities():
+        raise ValueError(f"v has {v.size} entries; the plant has {plant.num_velocities()} velocities")
+    if not math.isfinite(float(q @ q) + float(v @ v)):
+        for name, x in (("q", q), ("v", v)):
+            bad = np.flatnonzero(~np.isfinite(x))
+            if bad.size:
+                raise ValueError(f"{name} has non-finite entries (NaN or inf) at indices {bad.tolist()}")
+    norm = float(np.dot(q[:4], q[:4])) ** 0.5
+    if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
+        raise ValueError(f"the base quaternion q[0:4] has norm {norm:.6g}; expected a unit quaternion")
+    if norm != 1.0:
+        q = q.copy()
+        q[:4] /= norm
+    return q, v
+
+
+def _uniform_gravity(plant: MultibodyPlant) -> np.ndarray:
+    """The plant's gravity vector in world [m/s^2]; refuses gravity disabled per model."""
+    field = plant.gravity_field()
+    for index in range(plant.num_model_instances()):
+        if not field.is_enabled(ModelInstanceIndex(index)):
+            raise ValueError(
+                f"gravity is disabled for model instance '{plant.GetModelInstanceName(ModelInstanceIndex(index))}'; "
+                "the floating-base dynamics assume uniform gravity on every body"
+            )
+    return np.asarray(field.gravity_vector(), dtype=float).copy()
+
+
+class DrakeFloatingBaseDynamics:
+    """The ``"fast"`` implementation: Drake's mass matrix, bias and gravity kernels.
+
+    F0-expressed H, F and I0c depend only on the joint positions, so the mass matrix is
+    evaluated with the base at the world origin with identity rotation (there Drake's
+    world-aligned base coordinates coincide with F0's). Its time derivative along the
+    motion is the directional derivative along the joint velocities, taken by a central
+    difference of two more mass matrices (relative error ~1e-10). The bias at the same
+    identity pose with the base velocity expressed in F0 is Drake's C v in F0; gravity and
+    the change to Featherstone's base acceleration are added through M (see ``compute``).
+    """
+
+    def __init__(self, plant: MultibodyPlant, derivative_step: float = MASS_MATRIX_DERIVATIVE_STEP):
+        self.topology = floating_base_topology(plant)
+        self._plant = plant
+        self._n = self.topology.num_joints
+        self._step = float(derivative_step)
+        # Context at the identity base pose: mass matrices and bias in F0.
+        self._context_F0 = plant.CreateDefaultContext()
+        # Context at the true base pose: Jacobians in the world.
+        self._context_W = plant.CreateDefaultContext()
+        self._gravity_W = _uniform_gravity(plant)
+        self._q_F0 = plant.GetPositions(self._context_F0).copy()
+        self._q_F0[:7] = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+
+    def _mass_matrix_F0(self, q_joints: np.ndarray) -> np.ndarray:
+        self._q_F0[7:] = q_joints
+        self._plant.SetPositions(self._context_F0, self._q_F0)
+        return self._plant.CalcMassMatrix(self._context_F0)
+
+    def compute(self, q: np.ndarray, v: np.ndarray) -> FloatingBaseTerms:
+        """The decomposition of eq. (9) at (q, v), in the coordinates of ``FloatingBaseTerms``."""
+        plant, n = self._plant, self._n
+        q, v = checked_state(plant, q, v)
+        R_WB = quaternion_to_rotation(q[:4])
+        v0 = (v[:6].reshape(2, 3) @ R_WB).reshape(6)  # [R^T w_WB_W; R^T v_WBo_W]
+        q_joints, qdot = q[7:], v[6:]
+
+        # Mass matrix derivative along the joint motion (the only thing F0 blocks depend on).
+        speed = np.linalg.norm(qdot)
+        if speed > 0.0:
+            h = self._step / speed
+            M_plus = self._mass_matrix_F0(q_joints + h * qdot)
+            M_minus = self._mass_matrix_F0(q_joints - h * qdot)
+            M_dot = (M_plus - M_minus) / (2.0 * h)
+        else:
+            M_dot = np.zeros((6 + n, 6 + n))
+
+        M = self._mass_matrix_F0(q_joints)
+        v_F0 = v.copy()
+        v_F0[:6] = v0
+        plant.SetVelocities(self._context_F0, v_F0)
+        Cv = plant.CalcBiasTerm(self._context_F0)
+        # Paper's bias C v + g in F0 coordinates (Algorithm 1). Two facts make it cheap:
+        # * uniform gravity's generalized force is M[:, 3:6] g_B (the base's translational
+        #   columns of M are m J_com^T), with g_B the gravity expressed in F0;
+        # * Featherstone's base acceleration (derivative of F0 coordinates) differs from
+        #   Drake's world-aligned one by [0; w_B x v_B], adding M[:, 3:6] (w_B x v_B).
+        # Together they are Algorithm 1's fictitious base acceleration a_0^vp = -a_g.
+        wx, wy, wz, vx, vy, vz = v0.tolist()
+        gx, gy, gz = (self._gravity_W @ R_WB).tolist()
+        a_fictitious = np.array((wy * vz - wz * vy - gx, wz * vx - wx * vz - gy, wx * vy - wy * vx - gz))
+        bias = Cv + M[:, 3:6] @ a_fictitious
+
+        return reduce_to_floating_terms(
+            H=M[6:, 6:],
+            F=M[:6, 6:],
+            I0c=M[:6, :6],
+            C_hat=bias[6:],
+            p_hat=bias[:6],
+            H_dot=M_dot[6:, 6:],
+            F_dot=M_dot[:6, 6:],
+            I0c_dot=M_dot[:6, :6],
+            R_WB=R_WB,
+            v0=v0,
+        )
+
+    def floating_jacobian(
+        self, q: np.ndarray, frame: Frame, p_FoP: np.ndarray, *, spatial: bool = False
+    ) -> np.ndarray:
+        """J^fb of point P fixed in ``frame``, in world coordinates (eq. 12: tau = J^fb^T f_W).
+
+        Args:
+            q: the plant's positions.
+            frame: a frame of the plant; P is fixed in it.
+            p_FoP: position of P in ``frame`` [m].
+            spatial: False for the (3, n) Jacobian of a force at P; True for the (6, n)
+                Jacobian of a wrench [moment about P; force], both in world coordinates.
+        """
+        plant = self._plant
+        q, _ = checked_state(plant, q, np.zeros(plant.num_velocities()))
+        p_FoP = np.asarray(p_FoP, dtype=float).reshape(3)
+        plant.SetPositions(self._context_W, q)
+        world = plant.world_frame()
+        if spatial:
+            J = plant.CalcJacobianSpatialVelocity(self._context_W, JacobianWrtVariable.kV, frame, p_FoP, world, world)
+        else:
+            J = plant.CalcJacobianTranslationalVelocity(
+                self._context_W, JacobianWrtVariable.kV, frame, p_FoP, world, world
+            )
+        M = plant.CalcMassMatrix(self._context_W)
+        # Coordinate-invariant elimination of the base: J_j - J_b M_bb^-1 M_bj.
+        return J[:, 6:] - J[:, :6] @ np.linalg.solve(M[:6, :6], M[:6, 6:])
+
+
+class FloatingBaseDynamics:
+    """Floating-base decomposition (paper eq. 9, Algorithms 1-2, eq. 13) of a Drake plant.
+
+    The plant must be finalized and have exactly one floating base (a quaternion free
+    joint) and otherwise only 1-DoF (revolute, prismatic) and weld joints; anything else
+    raises ``ValueError`` at construction (see ``systems.topology``).
+
+    Args:
+        plant: the robot's finalized MultibodyPlant (its own contexts are created here).
+        implementation: ``"fast"`` (Drake kernels) or ``"reference"`` (the paper's
+            recursive algorithms).
+    """
+
+    def __init__(self, plant: MultibodyPlant, implementation: str = "fast"):
+        if implementation not in IMPLEMENTATIONS:
+            raise ValueError(f"unknown implementation '{implementation}'; choose one of {IMPLEMENTATIONS}")
+        self.implementation = implementation
+        if implementation == "fast":
+            self._impl = DrakeFloatingBaseDynamics(plant)
+        else:
+            from systems.floating_base_reference import RecursiveFloatingBaseDynamics
+
+            self._impl = RecursiveFloatingBaseDynamics(plant)
+        self.topology = floating_base_topology(plant)
+        self.plant = plant
+
+    @property
+    def num_joints(self) -> int:
+        """n, the number of joint velocities (nv - 6)."""
+        return self.topology.num_joints
+
+    def compute(self, q: np.ndarray, v: np.ndarray) -> FloatingBaseTerms:
+        """All terms of eq. (9) and their derivatives at (q, v) (Drake's coordinates in)."""
+        return self._impl.compute(q, v)
+
+    def floating_jacobian(
+        self, q: np.ndarray, frame: Frame, p_FoP: np.ndarray, *, spatial: bool = False
+    ) -> np.ndarray:
+        """J^fb (3 x n, or 6 x n with ``spatial``) of a point fixed in ``frame``, world coordinates."""
+        return self._impl.floating_jacobian(q, frame, p_FoP, spatial=spatial)

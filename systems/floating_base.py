@@ -110,6 +110,9 @@ class DrakeFloatingBaseDynamics:
         # Context at the true base pose: Jacobians in the world.
         self._context_W = plant.CreateDefaultContext()
         self._gravity_W = _uniform_gravity(plant)
+        self._R_WP = (
+            self.topology.free_joint.frame_on_parent().CalcPoseInWorld(self._context_W).rotation().matrix()
+        )
         self._q_F0 = plant.GetPositions(self._context_F0).copy()
         self._q_F0[:7] = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
 
@@ -122,8 +125,12 @@ class DrakeFloatingBaseDynamics:
         """The decomposition of eq. (9) at (q, v), in the coordinates of ``FloatingBaseTerms``."""
         plant, n = self._plant, self._n
         q, v = checked_state(plant, q, v)
-        R_WB = quaternion_to_rotation(q[:4])
-        v0 = (v[:6].reshape(2, 3) @ R_WB).reshape(6)  # [R^T w_WB_W; R^T v_WBo_W]
+        # Drake's free joint gives the pose of F0 (its child frame M) in its parent frame P,
+        # which is fixed in the world (usually the world frame itself), and velocities
+        # expressed in P.
+        R_PB = quaternion_to_rotation(q[:4])
+        R_WB = self._R_WP @ R_PB
+        v0 = (v[:6].reshape(2, 3) @ R_PB).reshape(6)  # [R_PB^T w_PB_P; R_PB^T v_PBo_P]
         q_joints, qdot = q[7:], v[6:]
 
         # Mass matrix derivative along the joint motion (the only thing F0 blocks depend on).

@@ -1,0 +1,127 @@
+"""Speed of the floating-base decomposition (Flacco et al. eq. 9, Algorithms 1-2, eq. 13).
+
+Run: ``make bench`` (or ``python -m apps.benchmark``). For each humanoid model it prints the
+microseconds per call of
+
+* one ``CalcMassMatrix`` after a new state (``SetPositions`` + ``CalcMassMatrix``): the unit;
+* ``FloatingBaseDynamics.compute`` with the ``fast`` and ``reference`` implementations (the
+  whole decomposition: H, F, I0c, C^, p^, their derivatives, H_fb, H_fb_dot, C_fb);
+* ``floating_jacobian`` of a point (fast);
+
+each as a ratio to the ``CalcMassMatrix`` unit measured in the same run, so that the ratios
+hold on a noisy machine. Each figure is the median over several batches at random states.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+from pydrake.multibody.plant import MultibodyPlant
+
+from models import MODEL_NAMES, add_humanoid
+from systems.floating_base import FloatingBaseDynamics
+
+
+def _median_microseconds(call: Callable[[int], object], calls: int, batches: int) -> float:
+    """Median over ``batches`` of the mean time of ``calls`` calls of ``call(i)`` [us]."""
+    call(0)  # warm up
+    samples = []
+    for _ in range(batches):
+        start = time.perf_counter()
+        for i in range(calls):
+            call(i)
+        samples.append((time.perf_counter() - start) / calls * 1e6)
+    return statistics.median(samples)
+
+
+def _random_states(plant: MultibodyPlant, count: int, seed: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    rng = np.random.default_rng(seed)
+    context = plant.CreateDefaultContext()
+    q0 = plant.GetPositions(context)
+    states = []
+    for _ in range(count):
+        q = q0.copy()
+        quaternion = rng.normal(size=4)
+        q[:4] = quaternion / np.linalg.norm(quaternion)
+        q[4:7] = rng.uniform(-1, 1, 3)
+        q[7:] = rng.uniform(-0.5, 0.5, plant.num_positions() - 7)
+        states.append((q, rng.normal(size=plant.num_velocities())))
+    return states
+
+
+def benchmark_model(name: str, *, calls: int = 300, batches: int = 7, reference_calls: int = 10) -> dict:
+    """Timings [us] and ratios to one CalcMassMatrix for one humanoid model."""
+    plant = MultibodyPlant(time_step=0.0)
+    handles = add_humanoid(plant, name)
+    plant.Finalize()
+    states = _random_states(plant, 16, seed=0)
+    context = plant.CreateDefaultContext()
+    fast = FloatingBaseDynamics(plant, "fast")
+    reference = FloatingBaseDynamics(plant, "reference")
+    hand_frame = handles.shoulder_bodies["right"].body_frame()
+    point = np.array([0.0, 0.0, 0.05])
+
+    def mass_matrix(i: int):
+        plant.SetPositions(context, states[i % 16][0])
+        return plant.CalcMassMatrix(context)
+
+    def fast_compute(i: int):
+        return fast.compute(*states[i % 16])
+
+    def reference_compute(i: int):
+        return reference.compute(*states[i % 16])
+
+    def fast_jacobian(i: int):
+        return fast.floating_jacobian(states[i % 16][0], hand_frame, point)
+
+    unit = _median_microseconds(mass_matrix, calls, batches)
+    results = {
+        "model": name,
+        "num_joints": fast.num_joints,
+        "calc_mass_matrix_us": unit,
+        "fast_compute_us": _median_microseconds(fast_compute, calls, batches),
+        "reference_compute_us": _median_microseconds(reference_compute, reference_calls, batches),
+        "fast_floating_jacobian_us": _median_microseconds(fast_jacobian, calls, batches),
+    }
+    for key in ("fast_compute", "reference_compute", "fast_floating_jacobian"):
+        results[key + "_ratio"] = results[key + "_us"] / unit
+    results["reference_over_fast"] = results["reference_compute_us"] / results["fast_compute_us"]
+    return results
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--model", choices=(*MODEL_NAMES, "all"), default="all")
+    parser.add_argument("--calls", type=int, default=300, help="calls per batch (fast paths)")
+    parser.add_argument("--batches", type=int, default=7, help="batches; the median is reported")
+    parser.add_argument("--json", type=Path, help="also write the results to this JSON file")
+    args = parser.parse_args(argv)
+
+    names = MODEL_NAMES if args.model == "all" else (args.model,)
+    rows = [benchmark_model(name, calls=args.calls, batches=args.batches) for name in names]
+    print("Floating-base decomposition, us per call (x one CalcMassMatrix in the same run)")
+    header = f"{'model':<10} {'n':>3} {'CalcMassMatrix':>15} {'fast compute':>20} {'reference compute':>22} {'fast J^fb':>18} {'ref/fast':>9}"
+    print(header)
+    print("-" * len(header))
+    for r in rows:
+        print(
+            f"{r['model']:<10} {r['num_joints']:>3} {r['calc_mass_matrix_us']:>12.1f} us"
+            f" {r['fast_compute_us']:>9.1f} us ({r['fast_compute_ratio']:>5.1f}x)"
+            f" {r['reference_compute_us']:>11.0f} us ({r['reference_compute_ratio']:>5.0f}x)"
+            f" {r['fast_floating_jacobian_us']:>7.1f} us ({r['fast_floating_jacobian_ratio']:>4.1f}x)"
+            f" {r['reference_over_fast']:>8.0f}x"
+        )
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(rows, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -22,71 +22,17 @@ import math
 
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import Frame, JacobianWrtVariable, ModelInstanceIndex
+from pydrake.multibody.tree import Frame, JacobianWrtVariable
 
 from systems.floating_base_terms import FloatingBaseTerms, reduce_to_floating_terms
-from systems.topology import floating_base_topology
+from systems.base_state import checked_state, quaternion_to_rotation
+from systems.topology import floating_base_topology, uniform_gravity
 
 IMPLEMENTATIONS = ("fast", "reference")
 
 #: Length of the configuration-space step of the mass-matrix central difference [rad or m].
 #: Truncation error ~ step^2, rounding error ~ 1e-16 / step: 1e-5 balances both (~1e-10).
 MASS_MATRIX_DERIVATIVE_STEP = 1e-5
-
-#: How far the base quaternion's norm may be from 1 before the state is refused.
-QUATERNION_NORM_TOLERANCE = 1e-3
-
-
-def quaternion_to_rotation(quaternion_wxyz: np.ndarray) -> np.ndarray:
-    """Rotation matrix of a unit quaternion [w, x, y, z] (Drake's order)."""
-    w, x, y, z = np.asarray(quaternion_wxyz, dtype=float).tolist()
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-def checked_state(plant: MultibodyPlant, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Returns (q, v) as float arrays with a unit base quaternion, or raises ValueError.
-
-    Raises:
-        ValueError: wrong sizes, NaN or infinite entries (named by index), or a base
-            quaternion whose norm is not 1 within ``QUATERNION_NORM_TOLERANCE``.
-    """
-    q = np.asarray(q, dtype=float).reshape(-1)
-    v = np.asarray(v, dtype=float).reshape(-1)
-    if q.size != plant.num_positions():
-        raise ValueError(f"q has {q.size} entries; the plant has {plant.num_positions()} positions")
-    if v.size != plant.num_velocities():
-        raise ValueError(f"v has {v.size} entries; the plant has {plant.num_velocities()} velocities")
-    if not math.isfinite(float(q @ q) + float(v @ v)):
-        for name, x in (("q", q), ("v", v)):
-            bad = np.flatnonzero(~np.isfinite(x))
-            if bad.size:
-                raise ValueError(f"{name} has non-finite entries (NaN or inf) at indices {bad.tolist()}")
-    norm = float(np.dot(q[:4], q[:4])) ** 0.5
-    if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
-        raise ValueError(f"the base quaternion q[0:4] has norm {norm:.6g}; expected a unit quaternion")
-    if norm != 1.0:
-        q = q.copy()
-        q[:4] /= norm
-    return q, v
-
-
-def _uniform_gravity(plant: MultibodyPlant) -> np.ndarray:
-    """The plant's gravity vector in world [m/s^2]; refuses gravity disabled per model."""
-    field = plant.gravity_field()
-    for index in range(plant.num_model_instances()):
-        if not field.is_enabled(ModelInstanceIndex(index)):
-            raise ValueError(
-                f"gravity is disabled for model instance '{plant.GetModelInstanceName(ModelInstanceIndex(index))}'; "
-                "the floating-base dynamics assume uniform gravity on every body"
-            )
-    return np.asarray(field.gravity_vector(), dtype=float).copy()
-
 
 class DrakeFloatingBaseDynamics:
     """The ``"fast"`` implementation: Drake's mass matrix, bias and gravity kernels.
@@ -109,10 +55,10 @@ class DrakeFloatingBaseDynamics:
         self._context_F0 = plant.CreateDefaultContext()
         # Context at the true base pose: Jacobians in the world.
         self._context_W = plant.CreateDefaultContext()
-        self._gravity_W = _uniform_gravity(plant)
-        self._R_WP = (
-            self.topology.free_joint.frame_on_parent().CalcPoseInWorld(self._context_W).rotation().matrix()
-        )
+        self._gravity_W = uniform_gravity(plant)
+        R_WP = self.topology.free_joint.frame_on_parent().CalcPoseInWorld(self._context_W).rotation().matrix()
+        self._R_WP = None if np.array_equal(R_WP, np.eye(3)) else R_WP
+        self._sizes = (plant.num_positions(), plant.num_velocities())
         self._q_F0 = plant.GetPositions(self._context_F0).copy()
         self._q_F0[:7] = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
 
@@ -124,22 +70,23 @@ class DrakeFloatingBaseDynamics:
     def compute(self, q: np.ndarray, v: np.ndarray) -> FloatingBaseTerms:
         """The decomposition of eq. (9) at (q, v), in the coordinates of ``FloatingBaseTerms``."""
         plant, n = self._plant, self._n
-        q, v = checked_state(plant, q, v)
+        q, v = checked_state(plant, q, v, self._sizes)
         # Drake's free joint gives the pose of F0 (its child frame M) in its parent frame P,
         # which is fixed in the world (usually the world frame itself), and velocities
         # expressed in P.
         R_PB = quaternion_to_rotation(q[:4])
-        R_WB = self._R_WP @ R_PB
+        R_WB = R_PB if self._R_WP is None else self._R_WP @ R_PB
         v0 = (v[:6].reshape(2, 3) @ R_PB).reshape(6)  # [R_PB^T w_PB_P; R_PB^T v_PBo_P]
         q_joints, qdot = q[7:], v[6:]
 
         # Mass matrix derivative along the joint motion (the only thing F0 blocks depend on).
-        speed = np.linalg.norm(qdot)
+        speed = math.sqrt(float(qdot @ qdot))
         if speed > 0.0:
             h = self._step / speed
-            M_plus = self._mass_matrix_F0(q_joints + h * qdot)
-            M_minus = self._mass_matrix_F0(q_joints - h * qdot)
-            M_dot = (M_plus - M_minus) / (2.0 * h)
+            dq = h * qdot
+            M_dot = self._mass_matrix_F0(q_joints + dq)
+            M_dot -= self._mass_matrix_F0(q_joints - dq)
+            M_dot *= 0.5 / h
         else:
             M_dot = np.zeros((6 + n, 6 + n))
 

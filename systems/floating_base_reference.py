@@ -44,10 +44,8 @@ from pydrake.multibody.tree import Frame
 
 from systems.floating_base_terms import FloatingBaseTerms, reduce_to_floating_terms
 from systems.spatial import crf, crm, plucker, skew, spatial_inertia, transform_inertia
-from systems.topology import floating_base_topology
-
-#: Largest accepted deviation of the base quaternion's norm from 1 (it is then normalised).
-QUATERNION_NORM_TOLERANCE = 1e-3
+from systems.base_state import checked_state, quaternion_to_rotation
+from systems.topology import floating_base_topology, uniform_gravity
 
 _REVOLUTE = "revolute"
 _PRISMATIC = "prismatic"
@@ -74,18 +72,6 @@ def _rodrigues(axis: np.ndarray, angle: float) -> np.ndarray:
     """Rotation matrix of ``angle`` about unit ``axis`` (R_FM of a revolute joint)."""
     K = skew(axis)
     return np.eye(3) + np.sin(angle) * K + (1.0 - np.cos(angle)) * (K @ K)
-
-
-def _quaternion_to_rotation(wxyz: np.ndarray) -> np.ndarray:
-    """Rotation matrix of a unit quaternion [w, x, y, z] (Drake's ordering)."""
-    w, x, y, z = wxyz
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
 
 
 class RecursiveFloatingBaseDynamics:
@@ -120,7 +106,8 @@ class RecursiveFloatingBaseDynamics:
         # Free joint: F0 = its child frame M0; its parent frame Fw is fixed in the world.
         free = topo.free_joint
         self._R_W_Fw = free.frame_on_parent().CalcPoseInWorld(ctx).rotation().matrix()
-        self._g_W = np.array(plant.gravity_field().gravity_vector(), dtype=float)
+        # Uniform gravity is assumed (a_0^vp = -^0 a_g for every link).
+        self._g_W = uniform_gravity(plant)
 
         # Link of each body and the pose of the body in its link frame.
         base_body = topo.base_body
@@ -193,14 +180,6 @@ class RecursiveFloatingBaseDynamics:
             inertia[k] += transform_inertia(_motion_transform(X_LB.inverse()), I_B)
         self._I = inertia
 
-        # Uniform gravity is assumed (a_0^vp = -^0 a_g for every link).
-        for body_index in self._body_link:
-            instance = plant.get_body(body_index).model_instance()
-            if not plant.is_gravity_enabled(instance):
-                raise ValueError(
-                    f"gravity is disabled for model instance '{plant.GetModelInstanceName(instance)}'; "
-                    "the floating-base dynamics assume uniform gravity on every body"
-                )
 
         # Actuator reflected inertia (rotor inertia x gear ratio^2), which Drake adds to the
         # diagonal of the mass matrix; constant, so it adds nothing to H_dot.
@@ -229,26 +208,13 @@ class RecursiveFloatingBaseDynamics:
 
     # ------------------------------------------------------------------ helpers
     def _validate(self, q: np.ndarray, v: np.ndarray | None = None):
-        q = np.asarray(q, dtype=float)
-        if q.shape != (self._nq,):
-            raise ValueError(f"q has shape {q.shape}; expected ({self._nq},) entries, the plant's positions")
-        if not np.all(np.isfinite(q)):
-            raise ValueError(f"q has NaN or inf entries at indices {np.flatnonzero(~np.isfinite(q)).tolist()}")
-        norm = np.linalg.norm(q[:4])
-        if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
-            raise ValueError(f"the base quaternion q[0:4] has norm {norm:.6g}; expected a unit quaternion")
-        if v is None:
-            return q, None
-        v = np.asarray(v, dtype=float)
-        if v.shape != (self._nv,):
-            raise ValueError(f"v has shape {v.shape}; expected ({self._nv},) entries, the plant's velocities")
-        if not np.all(np.isfinite(v)):
-            raise ValueError(f"v has NaN or inf entries at indices {np.flatnonzero(~np.isfinite(v)).tolist()}")
-        return q, v
+        """Shared checks of ``systems.base_state.checked_state`` (sizes, NaN, unit quaternion)."""
+        q, v_checked = checked_state(self._plant, q, np.zeros(self._nv) if v is None else v, (self._nq, self._nv))
+        return q, (None if v is None else v_checked)
 
     def _base_rotation(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(R_Fw_F0, R_W_F0) from Drake's (normalised) quaternion q[0:4]."""
-        R_FwM = _quaternion_to_rotation(q[:4] / np.linalg.norm(q[:4]))
+        R_FwM = quaternion_to_rotation(q[:4])
         return R_FwM, self._R_W_Fw @ R_FwM
 
     def _joint_transform(self, k: int, qk: float) -> np.ndarray:
@@ -327,7 +293,7 @@ class RecursiveFloatingBaseDynamics:
         Args:
             q: (7 + n,) Drake positions [quaternion w,x,y,z of F0; position of F0; joints].
                 The quaternion is normalised here (its norm must be within
-                ``QUATERNION_NORM_TOLERANCE`` of 1).
+                ``systems.base_state.QUATERNION_NORM_TOLERANCE`` of 1).
             v: (6 + n,) Drake velocities [w_WB_W; v_WBo_W; joint rates] (world-aligned; for
                 a free joint whose parent frame is not the world frame, expressed in that
                 parent frame, as Drake does).

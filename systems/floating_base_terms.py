@@ -24,7 +24,7 @@ import numpy as np
 from scipy.linalg import lapack
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class FloatingBaseTerms:
     """Floating-base decomposition of the equations of motion, paper eq. (9), at one (q, v).
 
@@ -78,18 +78,14 @@ def reduce_to_floating_terms(
     H_fb = H - F^T I0c^-1 F, C_fb = C^ - F^T I0c^-1 p^, and
     H_fb_dot = H_dot - F_dot^T I0c^-1 F - F^T I0c^-1 F_dot + F^T I0c^-1 I0c_dot I0c^-1 F.
     """
-    # One Cholesky solve (LAPACK dposv, low call overhead) gives I0c^-1 [F, p^].
-    n = F.shape[1]
-    rhs = np.empty((6, n + 1))
-    rhs[:, :n] = F
-    rhs[:, n] = p_hat
-    _, sol, info = lapack.dposv(I0c, rhs)
+    # One Cholesky solve (LAPACK dposv: low call overhead at this size) gives G = I0c^-1 F;
+    # F^T I0c^-1 p^ = G^T p^ because I0c is symmetric.
+    _, G, info = lapack.dposv(I0c, F)
     if info != 0:
         raise ValueError(f"the composite inertia I0c is not positive definite (LAPACK dposv info={info})")
-    G = sol[:, :n]  # I0c^-1 F
     FT_Iinv_Fdot = G.T @ F_dot
     H_fb = H - F.T @ G
-    C_fb = C_hat - F.T @ sol[:, n]
+    C_fb = C_hat - G.T @ p_hat
     H_fb_dot = H_dot - FT_Iinv_Fdot - FT_Iinv_Fdot.T + G.T @ I0c_dot @ G
     return FloatingBaseTerms(
         H=H,

@@ -17,7 +17,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import Frame, Joint, RigidBody
+import numpy as np
+from pydrake.multibody.tree import Frame, Joint, ModelInstanceIndex, RigidBody
 
 #: Joint type names (``Joint.type_name()``) accepted as the tree's 1-DoF joints.
 ONE_DOF_JOINT_TYPES = ("revolute", "prismatic")
@@ -130,3 +131,15 @@ def _subtree_bodies(plant: MultibodyPlant, root: RigidBody) -> list:
         out.append(body)
         stack.extend(children.get(body, []))
     return out
+
+
+def uniform_gravity(plant: MultibodyPlant) -> np.ndarray:
+    """The plant's gravity vector in world [m/s^2]; refuses gravity disabled per model."""
+    field = plant.gravity_field()
+    for index in range(plant.num_model_instances()):
+        if not field.is_enabled(ModelInstanceIndex(index)):
+            raise ValueError(
+                f"gravity is disabled for model instance '{plant.GetModelInstanceName(ModelInstanceIndex(index))}'; "
+                "the floating-base dynamics assume uniform gravity on every body"
+            )
+    return np.asarray(field.gravity_vector(), dtype=float).copy()

@@ -220,3 +220,15 @@ def test_refuses_bad_states(implementation):
         dynamics.compute(q[:-1], v)
     with pytest.raises(ValueError, match="velocities|entries"):
         dynamics.compute(q, v[:-1])
+    for factor in (0.0, 1.01):
+        bad_quaternion = q.copy()
+        bad_quaternion[:4] *= factor
+        with pytest.raises(ValueError, match="quaternion"):
+            dynamics.compute(bad_quaternion, v)
+    # A slightly denormalised quaternion (as from an integrator) is normalised, not refused.
+    close = q.copy()
+    close[:4] *= 1.0 + 1e-6
+    np.testing.assert_allclose(dynamics.compute(close, v).H_fb, dynamics.compute(q, v).H_fb, rtol=1e-12, atol=1e-14)
+    frame = dynamics.topology.base_frame
+    with pytest.raises(ValueError, match="NaN"):
+        dynamics.floating_jacobian(bad_q, frame, np.zeros(3))

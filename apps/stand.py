@@ -51,6 +51,12 @@ def run_model(name: str, duration: float, meshcat, out_dir: Path) -> dict:
     if meshcat is not None:
         meshcat.Delete()
     diagram, handles = build_standing_diagram(name, meshcat=meshcat)
+    if meshcat is not None:
+        # A three-quarter view framing the robot (Meshcat's default camera is far away).
+        height = 1.5 if name == "hrp4_like" else 0.57
+        meshcat.SetCameraPose(
+            camera_in_world=np.array([1.1, -1.1, 0.8]) * height, target_in_world=np.array([0.0, 0.0, 0.5 * height])
+        )
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
     set_initial_state(diagram, context, handles)

@@ -19,38 +19,20 @@ from __future__ import annotations
 
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import Joint, JointActuatorIndex, JointIndex
+from pydrake.multibody.tree import Joint, JointActuatorIndex
 from pydrake.systems.framework import BasicVector, Context, LeafSystem
 
-_BASE_DOFS = 6
+from systems.topology import floating_base_topology
 
 
 def joints_in_velocity_order(plant: MultibodyPlant) -> list[Joint]:
     """Returns the plant's 1-DoF joints ordered by velocity index, i.e. v[6:].
 
     Raises:
-        ValueError: if the plant's non-base velocities are not all 1-DoF joints (e.g. a
-            second floating body), or the plant has fewer than 6 velocities.
+        ValueError: if the plant is not one floating base with 1-DoF joints (see
+            ``systems.topology.floating_base_topology``).
     """
-    n = plant.num_velocities() - _BASE_DOFS
-    if n < 0:
-        raise ValueError("plant has fewer than 6 velocities: not a floating-base robot")
-    by_v = {}
-    for i in range(plant.num_joints()):
-        joint = plant.get_joint(JointIndex(i))
-        if joint.num_velocities() == 0:
-            continue
-        start = joint.velocity_start()
-        if start < _BASE_DOFS:
-            continue
-        if joint.num_velocities() != 1:
-            raise ValueError(
-                f"joint {joint.name()!r} has {joint.num_velocities()} velocities beyond the "
-                "base's 6; PdGravityController supports one floating base + 1-DoF joints")
-        by_v[start - _BASE_DOFS] = joint
-    if sorted(by_v) != list(range(n)):
-        raise ValueError("the plant's velocities v[6:] are not all 1-DoF joint velocities")
-    return [by_v[k] for k in range(n)]
+    return list(floating_base_topology(plant).joints)
 
 
 def joint_vector_from_names(plant: MultibodyPlant, values: dict[str, float],
@@ -173,5 +155,10 @@ class PdGravityController(LeafSystem):
     def _CalcActuation(self, context: Context, output: BasicVector) -> None:
         q_desired = self._desired_port.Eval(context)
         x = self._state_port.Eval(context)
+        if not (np.isfinite(x).all() and np.isfinite(q_desired).all()):
+            for name, value in (("state", x), ("desired_position", q_desired)):
+                bad = np.flatnonzero(~np.isfinite(value))
+                if bad.size:
+                    raise ValueError(f"PdGravityController: input '{name}' has NaN or inf at indices {bad.tolist()}")
         tau = self.CalcJointTorques(q_desired, x)
         output.SetFromVector(tau[self._act_rows])

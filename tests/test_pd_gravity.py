@@ -189,3 +189,15 @@ def test_internal_context_created_once():
     dut.get_output_port(0).Eval(_fixed_context(dut, np.zeros(3), x))
     dut.get_output_port(0).Eval(_fixed_context(dut, np.ones(3), x))
     assert dut._context is ctx_before
+
+
+def test_nan_inputs_raise_a_named_error():
+    plant, _ = _chain_plant([0, 1, 2])
+    dut = PdGravityController(plant, 10.0, 1.0)
+    x = plant.GetPositionsAndVelocities(plant.CreateDefaultContext())
+    x_bad = x.copy()
+    x_bad[9] = np.nan
+    with pytest.raises(ValueError, match=r"'state' has NaN or inf at indices \[9\]"):
+        dut.get_output_port(0).Eval(_fixed_context(dut, np.zeros(3), x_bad))
+    with pytest.raises(ValueError, match="'desired_position'"):
+        dut.get_output_port(0).Eval(_fixed_context(dut, [0.0, np.inf, 0.0], x))

@@ -44,6 +44,8 @@ class FloatingBaseTerms:
         C_fb: (n,) floating generalized bias force C^ - F^T I0c^-1 p^0c.
         R_WB: (3, 3) rotation of F0 in the world.
         v0: (6,) base velocity [w_WB_B; v_WBo_B].
+        I0c_inv_F: (6, n) I0c^-1 F, the by-product of the elimination; it maps a base-frame
+            wrench w_F0 to its joint share: J^fb^T = J_0^T - F^T I0c^-1 (eq. 9, 10).
     """
 
     H: np.ndarray
@@ -59,6 +61,7 @@ class FloatingBaseTerms:
     C_fb: np.ndarray
     R_WB: np.ndarray
     v0: np.ndarray
+    I0c_inv_F: np.ndarray
 
 
 def reduce_to_floating_terms(
@@ -101,4 +104,5 @@ def reduce_to_floating_terms(
         C_fb=C_fb,
         R_WB=R_WB,
         v0=v0,
+        I0c_inv_F=G,
     )

@@ -1,0 +1,489 @@
+"""Momentum residuals of Flacco, Paolillo, Kheddar (2016) as Drake systems.
+
+* ``ClassicalResidual``: eq. (7) applied to the virtual-joint model (8), size nv.
+* ``InternalResidual``: eq. (11) with the known-force torques of eq. (10), size n = nv - 6;
+  it estimates the true joint effort of the unknown external forces, tau_c,real (eq. 12).
+* ``ExternalResidual``: eq. (16); it estimates the total unknown external wrench on the
+  floating base, eq. (17), reported in the base frame and in the world.
+
+All three are discrete-time momentum observers (what runs on a real robot): at each update
+k (period T) with momentum p_k, the momentum rate a_k of the model and of the measured
+wrenches (M_dot nu - bias + known wrenches: continuous signals), and the motor torques minus
+friction u_k (held over the period, as a digital controller applies them),
+
+    I_k = I_k^- + T/2 a_k,    r_k = K (p_k - I_k),    I_{k+1}^- = I_k + T/2 a_k + T (u_k + r_k),
+
+with I_0 = p_0, so r_0 = 0. The trapezoidal rule on a_k makes the integral second-order
+accurate for a continuously moving robot. Since the true momentum obeys
+p_{k+1} = p_k + T (mean rate + tau_ext,k), the residual is the first-order filter
+r_{k+1} = (1 - K T) r_k + K T tau_ext,k of the unknown external effort (time constant about
+1/K). K T must be in (0, 1).
+
+Model and coordinates (see ``systems.floating_base_terms``): the base velocity is the
+paper's v0 in the base frame F0, so the generalized momentum of model (8) is
+M_F0 [v0; qdot] with M_F0 = [[I0c, F], [F^T, H]], and its rate is
+M_F0_dot [v0; qdot] - [p^; C^] + generalized forces. That is eq. (7)'s
+tau_m + C^T qdot - g, written with M_dot - C = C^T, which costs no O(n^2) Christoffel
+symbols. The classical residual's base entries are therefore [moment about the F0 origin;
+force] in F0, and its joint entries J_j^T f are the same as for any other choice of virtual
+joints.
+
+Inputs (shared names):
+
+* ``state``: the plant's [q; v] as estimated from sensors (never the simulator's truth).
+* ``measured_torque`` (classical and internal only): the motor torques in the plant's
+  joint-velocity order v[6:], N m (N for prismatic joints), WITHOUT friction compensation:
+  the friction model tau_mu = D qdot (viscous, ``joint_damping``) is applied inside, so that
+  tau_m = tau - tau_mu + tau_bar_c as in the paper.
+* ``known_wrenches``: 6 numbers per frame of ``known_wrench_frames`` (the F/T sensors), the
+  measured wrench that the environment applies to the robot, [moment about the frame origin;
+  force], expressed in the world, N m and N.
+
+The external residual does not use the motor torques (the paper's point in Sec. V), so it
+has no ``measured_torque`` input.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import Frame, JacobianWrtVariable
+from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem
+
+from systems.floating_base import DrakeFloatingBaseDynamics, FloatingBaseDynamics
+from systems.floating_base_terms import FloatingBaseTerms
+
+#: Default update period of the residuals [s].
+DEFAULT_PERIOD = 1e-3
+
+
+class ResidualModel:
+    """The dynamics the residuals need at one sensed state, computed once per state.
+
+    Several residual systems can share one ``ResidualModel`` (pass it as ``model=``): the
+    floating-base decomposition and the Jacobians of the known-wrench frames are then
+    computed once per update for all of them.
+
+    Args:
+        plant: the robot's finalized plant (any plant ``FloatingBaseDynamics`` accepts).
+        implementation: ``"fast"`` or ``"reference"`` (see ``FloatingBaseDynamics``).
+    """
+
+    def __init__(self, plant: MultibodyPlant, implementation: str = "fast"):
+        self.plant = plant
+        self.dynamics = FloatingBaseDynamics(plant, implementation)
+        self.num_joints = self.dynamics.num_joints
+        self.num_positions = plant.num_positions()
+        self.num_velocities = plant.num_velocities()
+        impl = self.dynamics._impl
+        if isinstance(impl, DrakeFloatingBaseDynamics):
+            # After compute(q, v) its F0 context holds q's joints at the identity base pose.
+            self._context_F0 = impl._context_F0
+            self._context_is_current = True
+        else:
+            self._context_F0 = plant.CreateDefaultContext()
+            self._context_is_current = False
+        self._q_F0 = plant.GetPositions(self._context_F0).copy()
+        self._q_F0[:7] = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+        free_parent = self.dynamics.topology.free_joint.frame_on_parent()
+        X_WP = free_parent.CalcPoseInWorld(plant.CreateDefaultContext())
+        self._p_WP = X_WP.translation().copy()
+        self._R_WP = X_WP.rotation().matrix().copy()
+        self._key: bytes | None = None
+        self._terms: FloatingBaseTerms | None = None
+        self._jacobians: dict[int, np.ndarray] = {}
+
+    def check_frames(self, frames: Sequence[Frame | str]) -> tuple[Frame, ...]:
+        """Resolves frame names and checks that each frame is on a moving body of the plant.
+
+        Raises:
+            ValueError: an unknown frame name, a frame of another plant, or a frame fixed to
+                the world.
+        """
+        plant = self.plant
+        resolved = []
+        for frame in frames:
+            if isinstance(frame, str):
+                if not plant.HasFrameNamed(frame):
+                    raise ValueError(f"known wrench frame '{frame}' is not a frame of the plant")
+                frame = plant.GetFrameByName(frame)
+            if not isinstance(frame, Frame):
+                raise ValueError(f"known wrench frames must be Frame objects or names, got {type(frame).__name__}")
+            if int(frame.index()) >= plant.num_frames() or plant.get_frame(frame.index()).name() != frame.name() or (
+                plant.get_frame(frame.index()).body().name() != frame.body().name()
+            ):
+                raise ValueError(f"known wrench frame '{frame.name()}' does not belong to this plant")
+            if frame.body().index() == plant.world_body().index():
+                raise ValueError(f"known wrench frame '{frame.name()}' is fixed to the world, not to the robot")
+            resolved.append(frame)
+        return tuple(resolved)
+
+    def evaluate(self, x: np.ndarray) -> FloatingBaseTerms:
+        """The floating-base terms at the sensed state x = [q; v] (cached per state)."""
+        key = x.tobytes()
+        if key != self._key:
+            nq = self.num_positions
+            self._terms = self.dynamics.compute(x[:nq], x[nq:])
+            self._jacobians = {}
+            self._key = key
+            if not self._context_is_current:
+                self._q_F0[7:] = x[7:nq]
+                self.plant.SetPositions(self._context_F0, self._q_F0)
+        return self._terms
+
+    def spatial_jacobian_F0(self, frame: Frame) -> np.ndarray:
+        """(6, nv) Jacobian of ``frame``'s origin w.r.t. [v0; qdot], expressed in F0, rows
+        [angular; linear]: J^T [m; f] (wrench at the frame origin, in F0) is the wrench's
+        generalized force (base rows: [moment about the F0 origin; force] in F0). Valid for
+        the state of the last ``evaluate``."""
+        J = self._jacobians.get(int(frame.index()))
+        if J is None:
+            world = self.plant.world_frame()
+            J = self.plant.CalcJacobianSpatialVelocity(
+                self._context_F0, JacobianWrtVariable.kV, frame, np.zeros(3), world, world
+            )
+            self._jacobians[int(frame.index())] = J
+        return J
+
+    def known_wrench_forces(
+        self, terms: FloatingBaseTerms, frames: Sequence[Frame], wrenches_W: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Generalized forces of measured wrenches (F/T sensors) at the last evaluated state.
+
+        Args:
+            terms: the result of ``evaluate`` for this state.
+            frames: the frames at whose origins the wrenches act.
+            wrenches_W: (6 k,) [moment about the frame origin; force] per frame, in world.
+
+        Returns:
+            (w_F0, tau_joints): their sum as a base wrench in F0 about the F0 origin
+            ([moment; force], the paper's f_bar_sum of eq. 16), and their joint torques
+            J_j^T w (the joint part of the classical model's generalized force).
+        """
+        R_WB = terms.R_WB
+        w_F0 = np.zeros(6)
+        tau = np.zeros(self.num_joints)
+        for i, frame in enumerate(frames):
+            w = wrenches_W[6 * i : 6 * i + 6]
+            # Rotate [m; f] into F0 (the Jacobian is expressed in F0, at the frame origin).
+            w_B = (w.reshape(2, 3) @ R_WB).reshape(6)
+            generalized = self.spatial_jacobian_F0(frame).T @ w_B
+            w_F0 += generalized[:6]
+            tau += generalized[6:]
+        return w_F0, tau
+
+    def base_wrench_to_world(self, terms: FloatingBaseTerms, x: np.ndarray, w_F0: np.ndarray) -> np.ndarray:
+        """[moment about the F0 origin; force] in F0 -> [moment about the world origin; force]
+        in world."""
+        R_WB = terms.R_WB
+        moment_W = R_WB @ w_F0[:3]
+        force_W = R_WB @ w_F0[3:]
+        p_WBo = self._p_WP + self._R_WP @ x[4:7]
+        return np.concatenate((moment_W + np.cross(p_WBo, force_W), force_W))
+
+
+class _MomentumResidual(LeafSystem):
+    """Common machinery: ports, discrete state, the observer update (see module docstring)."""
+
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        gain,
+        period: float,
+        known_wrench_frames: Sequence[Frame | str],
+        *,
+        size: int,
+        uses_torque: bool,
+        joint_damping,
+        model: ResidualModel | None,
+        implementation: str,
+    ):
+        super().__init__()
+        if not plant.is_finalized():
+            raise ValueError(f"{type(self).__name__}: the plant must be finalized")
+        self._model = model if model is not None else ResidualModel(plant, implementation)
+        if self._model.plant is not plant:
+            raise ValueError(f"{type(self).__name__}: the shared ResidualModel was built for another plant")
+        period = float(period)
+        if not np.isfinite(period) or period <= 0.0:
+            raise ValueError(f"{type(self).__name__}: period must be a positive number of seconds, got {period}")
+        self._period = period
+        self._size = size
+        self._gain = _vector_parameter(gain, size, f"{type(self).__name__}: gain")
+        if np.any(self._gain <= 0.0) or np.any(self._gain * period >= 1.0):
+            raise ValueError(
+                f"{type(self).__name__}: each gain K must satisfy 0 < K T < 1 (T = {period} s), "
+                f"got K in [{self._gain.min()}, {self._gain.max()}] 1/s"
+            )
+        self._frames = self._model.check_frames(known_wrench_frames)
+        n = self._model.num_joints
+        nx = self._model.num_positions + self._model.num_velocities
+        self._num_positions = self._model.num_positions
+        if uses_torque:
+            if joint_damping is None:
+                joint_damping = _plant_joint_damping(self._model)
+            self._damping = _vector_parameter(joint_damping, n, f"{type(self).__name__}: joint_damping")
+            if np.any(self._damping < 0.0):
+                raise ValueError(f"{type(self).__name__}: joint_damping must be non-negative")
+
+        self._state_port = self.DeclareVectorInputPort("state", nx)
+        self._torque_port = self.DeclareVectorInputPort("measured_torque", n) if uses_torque else None
+        self._wrench_port = self.DeclareVectorInputPort("known_wrenches", 6 * len(self._frames))
+        # Discrete state: [initialised flag], momentum integral I, residual r.
+        self._flag_index = self.DeclareDiscreteState(1)
+        self._integral_index = self.DeclareDiscreteState(size)
+        self._residual_index = self.DeclareDiscreteState(size)
+        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._Update)
+
+    # -- subclass hooks -------------------------------------------------------------------
+    def _momentum_and_rates(self, terms, x, tau_m, known) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(momentum p, smooth rate a incl. known wrenches, held motor torques u) at one state."""
+        raise NotImplementedError  # pragma: no cover - abstract
+
+    # -- helpers --------------------------------------------------------------------------
+    @property
+    def model(self) -> ResidualModel:
+        """The (possibly shared) dynamics model."""
+        return self._model
+
+    @property
+    def known_wrench_frames(self) -> tuple[Frame, ...]:
+        return self._frames
+
+    def _checked_input(self, port, context: Context) -> np.ndarray:
+        value = port.Eval(context)
+        if not np.isfinite(value).all():
+            bad = np.flatnonzero(~np.isfinite(value)).tolist()
+            raise ValueError(f"{type(self).__name__}: input '{port.get_name()}' has NaN or inf at indices {bad}")
+        return value
+
+    def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
+        x = self._checked_input(self._state_port, context)
+        terms = self._model.evaluate(x)
+        tau_m = None
+        if self._torque_port is not None:
+            qdot = x[self._num_positions + 6 :]
+            tau_m = self._checked_input(self._torque_port, context) - self._damping * qdot
+        known = None
+        if self._frames:
+            wrenches = self._checked_input(self._wrench_port, context)
+            known = self._model.known_wrench_forces(terms, self._frames, wrenches)
+        momentum, model_rate, measured_rate = self._momentum_and_rates(terms, x, tau_m, known)
+
+        half_step = 0.5 * self._period * model_rate
+        initialised = context.get_discrete_state(self._flag_index).get_value()[0] > 0.5
+        if initialised:
+            integral = context.get_discrete_state(self._integral_index).get_value() + half_step
+            residual = self._gain * (momentum - integral)
+        else:  # First update: I_0 = p_0, so that r_0 = 0.
+            integral = momentum
+            residual = np.zeros(self._size)
+        discrete_state.set_value(self._flag_index, [1.0])
+        discrete_state.set_value(
+            self._integral_index, integral + half_step + self._period * (measured_rate + residual)
+        )
+        discrete_state.set_value(self._residual_index, residual)
+        self._after_update(discrete_state, terms, x, residual)
+
+    def _after_update(self, discrete_state: DiscreteValues, terms, x, residual) -> None:
+        """Hook for subclasses that keep more discrete state."""
+
+    def _residual(self, context: Context) -> np.ndarray:
+        return context.get_discrete_state(self._residual_index).get_value()
+
+
+class ClassicalResidual(_MomentumResidual):
+    """Classical momentum residual, paper eq. (7), on the virtual-joint model (8).
+
+    r ~ tau_c of model (8): the generalized force of the unknown external forces with the
+    base treated as 6 virtual joints. Its joint entries are J_j^T f, the fixed-base
+    Jacobian transposed: a push on a shoulder loads only the joints between the contact and
+    the base, never the legs (the paper's negative result, Sec. II-C).
+
+    Inputs: ``state`` (nq + nv), ``measured_torque`` (n), ``known_wrenches`` (6 per frame).
+    State: discrete, [flag; momentum integral (nv); residual (nv)], updated every ``period``.
+    Output: ``residual`` (nv): [base moment about the F0 origin, base force, both in F0;
+    joint efforts in v[6:] order], N m and N.
+
+    Args:
+        plant: finalized floating-base plant (see ``FloatingBaseDynamics``).
+        gain: K, scalar or nv-vector, 1/s; 0 < K period < 1.
+        period: update period T, s (default 1 ms).
+        known_wrench_frames: frames (or names) of the F/T sensors, in ``known_wrenches`` order.
+        joint_damping: viscous friction model D (scalar or n-vector, N m s/rad), subtracted
+            inside (tau_mu = D qdot); default: the plant's joint damping.
+        model: a ``ResidualModel`` shared with other residuals of the same plant.
+        implementation: ``"fast"`` or ``"reference"`` dynamics, when ``model`` is None.
+    """
+
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        gain,
+        period: float = DEFAULT_PERIOD,
+        known_wrench_frames: Sequence[Frame | str] = (),
+        *,
+        joint_damping=None,
+        model: ResidualModel | None = None,
+        implementation: str = "fast",
+    ):
+        super().__init__(
+            plant,
+            gain,
+            period,
+            known_wrench_frames,
+            size=plant.num_velocities(),
+            uses_torque=True,
+            joint_damping=joint_damping,
+            model=model,
+            implementation=implementation,
+        )
+        self.DeclareVectorOutputPort("residual", self._size, self._CalcResidual, {self.xd_ticket()})
+
+    def _momentum_and_rates(self, terms, x, tau_m, known):
+        v0, qdot = terms.v0, x[self._num_positions + 6 :]
+        momentum = np.concatenate((terms.I0c @ v0 + terms.F @ qdot, terms.F.T @ v0 + terms.H @ qdot))
+        model_rate = np.concatenate(
+            (
+                terms.I0c_dot @ v0 + terms.F_dot @ qdot - terms.p_hat,
+                terms.F_dot.T @ v0 + terms.H_dot @ qdot - terms.C_hat,
+            )
+        )
+        if known is not None:
+            model_rate[:6] += known[0]
+            model_rate[6:] += known[1]
+        measured = np.zeros(self._size)
+        measured[6:] = tau_m
+        return momentum, model_rate, measured
+
+    def _CalcResidual(self, context: Context, output: BasicVector) -> None:
+        output.SetFromVector(self._residual(context))
+
+
+class InternalResidual(_MomentumResidual):
+    """Internal (floating-base) residual, paper eq. (11), with tau_bar_c of eq. (10).
+
+    r_int ~ tau_c,real = sum_c J^fb_c^T f_c (eq. 12): the true joint effort of the unknown
+    external forces, legs included.
+
+    Inputs: ``state`` (nq + nv), ``measured_torque`` (n), ``known_wrenches`` (6 per frame).
+    State: discrete, [flag; momentum integral (n); residual (n)], updated every ``period``.
+    Output: ``residual`` (n), joint efforts in v[6:] order, N m (N for prismatic joints).
+
+    Args: as ``ClassicalResidual``, with ``gain`` a scalar or an n-vector.
+    """
+
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        gain,
+        period: float = DEFAULT_PERIOD,
+        known_wrench_frames: Sequence[Frame | str] = (),
+        *,
+        joint_damping=None,
+        model: ResidualModel | None = None,
+        implementation: str = "fast",
+    ):
+        super().__init__(
+            plant,
+            gain,
+            period,
+            known_wrench_frames,
+            size=plant.num_velocities() - 6,
+            uses_torque=True,
+            joint_damping=joint_damping,
+            model=model,
+            implementation=implementation,
+        )
+        self.DeclareVectorOutputPort("residual", self._size, self._CalcResidual, {self.xd_ticket()})
+
+    def _momentum_and_rates(self, terms, x, tau_m, known):
+        qdot = x[self._num_positions + 6 :]
+        momentum = terms.H_fb @ qdot
+        model_rate = terms.H_fb_dot @ qdot - terms.C_fb
+        if known is not None:
+            w_F0, tau_joints = known
+            model_rate += tau_joints - terms.I0c_inv_F.T @ w_F0  # tau_bar_c = J^fb^T w (eq. 10)
+        return momentum, model_rate, tau_m
+
+    def _CalcResidual(self, context: Context, output: BasicVector) -> None:
+        output.SetFromVector(self._residual(context))
+
+
+class ExternalResidual(_MomentumResidual):
+    """External (floating-base) residual, paper eq. (16).
+
+    r_ext ~ sum_c 0X*_ref f_c (eq. 17): the total unknown external wrench on the robot,
+    about the base origin, in the base frame F0. It needs no motor torques.
+
+    Inputs: ``state`` (nq + nv), ``known_wrenches`` (6 per frame).
+    State: discrete, [flag; momentum integral (6); residual (6); residual in world (6)],
+    updated every ``period``.
+    Outputs:
+        ``external_wrench_base``: [moment about the F0 origin; force], in F0, N m and N.
+        ``external_wrench_world``: the same wrench as [moment about the world origin;
+        force], in world (rotated with the sensed base pose).
+
+    Args: as ``ClassicalResidual`` without ``joint_damping``; ``gain`` scalar or 6-vector.
+    """
+
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        gain,
+        period: float = DEFAULT_PERIOD,
+        known_wrench_frames: Sequence[Frame | str] = (),
+        *,
+        model: ResidualModel | None = None,
+        implementation: str = "fast",
+    ):
+        super().__init__(
+            plant,
+            gain,
+            period,
+            known_wrench_frames,
+            size=6,
+            uses_torque=False,
+            joint_damping=None,
+            model=model,
+            implementation=implementation,
+        )
+        # The world-frame wrench uses the sensed base pose of the same update.
+        self._world_index = self.DeclareDiscreteState(6)
+        self.DeclareVectorOutputPort("external_wrench_base", 6, self._CalcBase, {self.xd_ticket()})
+        self.DeclareVectorOutputPort("external_wrench_world", 6, self._CalcWorld, {self.xd_ticket()})
+
+    def _momentum_and_rates(self, terms, x, tau_m, known):
+        v0, qdot = terms.v0, x[self._num_positions + 6 :]
+        momentum = terms.I0c @ v0 + terms.F @ qdot
+        model_rate = terms.I0c_dot @ v0 + terms.F_dot @ qdot - terms.p_hat
+        if known is not None:
+            model_rate = model_rate + known[0]
+        return momentum, model_rate, np.zeros(6)
+
+    def _CalcBase(self, context: Context, output: BasicVector) -> None:
+        output.SetFromVector(self._residual(context))
+
+    def _after_update(self, discrete_state: DiscreteValues, terms, x, residual) -> None:
+        discrete_state.set_value(self._world_index, self._model.base_wrench_to_world(terms, x, residual))
+
+    def _CalcWorld(self, context: Context, output: BasicVector) -> None:
+        output.SetFromVector(context.get_discrete_state(self._world_index).get_value())
+
+
+def _vector_parameter(value, size: int, what: str) -> np.ndarray:
+    array = np.asarray(value, dtype=float)
+    if array.ndim == 0:
+        array = np.full(size, float(array))
+    if array.shape != (size,):
+        raise ValueError(f"{what} must be a scalar or have {size} entries, got shape {array.shape}")
+    if not np.isfinite(array).all():
+        raise ValueError(f"{what} must be finite")
+    return array
+
+
+def _plant_joint_damping(model: ResidualModel) -> np.ndarray:
+    """The plant's viscous joint damping per joint, v[6:] order (N m s/rad)."""
+    return np.array([float(j.default_damping()) for j in model.dynamics.topology.joints])

@@ -75,8 +75,10 @@ class ResidualModel:
         self.plant = plant
         self.dynamics = FloatingBaseDynamics(plant, implementation)
         self.num_joints = self.dynamics.num_joints
+        self.joints = self.dynamics.topology.joints
         self.num_positions = plant.num_positions()
         self.num_velocities = plant.num_velocities()
+        self.joint_velocity_start = 6
         impl = self.dynamics._impl
         if isinstance(impl, DrakeFloatingBaseDynamics):
             # After compute(q, v) its F0 context holds q's joints at the identity base pose.
@@ -96,29 +98,8 @@ class ResidualModel:
         self._jacobians: dict[int, np.ndarray] = {}
 
     def check_frames(self, frames: Sequence[Frame | str]) -> tuple[Frame, ...]:
-        """Resolves frame names and checks that each frame is on a moving body of the plant.
-
-        Raises:
-            ValueError: an unknown frame name, a frame of another plant, or a frame fixed to
-                the world.
-        """
-        plant = self.plant
-        resolved = []
-        for frame in frames:
-            if isinstance(frame, str):
-                if not plant.HasFrameNamed(frame):
-                    raise ValueError(f"known wrench frame '{frame}' is not a frame of the plant")
-                frame = plant.GetFrameByName(frame)
-            if not isinstance(frame, Frame):
-                raise ValueError(f"known wrench frames must be Frame objects or names, got {type(frame).__name__}")
-            if int(frame.index()) >= plant.num_frames() or plant.get_frame(frame.index()).name() != frame.name() or (
-                plant.get_frame(frame.index()).body().name() != frame.body().name()
-            ):
-                raise ValueError(f"known wrench frame '{frame.name()}' does not belong to this plant")
-            if frame.body().index() == plant.world_body().index():
-                raise ValueError(f"known wrench frame '{frame.name()}' is fixed to the world, not to the robot")
-            resolved.append(frame)
-        return tuple(resolved)
+        """See ``check_wrench_frames``."""
+        return check_wrench_frames(self.plant, frames)
 
     def evaluate(self, x: np.ndarray) -> FloatingBaseTerms:
         """The floating-base terms at the sensed state x = [q; v] (cached per state)."""
@@ -184,6 +165,100 @@ class ResidualModel:
         return np.concatenate((moment_W + np.cross(p_WBo, force_W), force_W))
 
 
+def check_wrench_frames(plant: MultibodyPlant, frames: Sequence[Frame | str]) -> tuple[Frame, ...]:
+    """Resolves frame names and checks that each frame is on a moving body of the plant.
+
+    Raises:
+        ValueError: an unknown frame name, a frame of another plant, or a frame fixed to
+            the world.
+    """
+    resolved = []
+    for frame in frames:
+        if isinstance(frame, str):
+            if not plant.HasFrameNamed(frame):
+                raise ValueError(f"known wrench frame '{frame}' is not a frame of the plant")
+            frame = plant.GetFrameByName(frame)
+        if not isinstance(frame, Frame):
+            raise ValueError(f"known wrench frames must be Frame objects or names, got {type(frame).__name__}")
+        if int(frame.index()) >= plant.num_frames() or plant.get_frame(frame.index()).name() != frame.name() or (
+            plant.get_frame(frame.index()).body().name() != frame.body().name()
+        ):
+            raise ValueError(f"known wrench frame '{frame.name()}' does not belong to this plant")
+        if frame.body().index() == plant.world_body().index():
+            raise ValueError(f"known wrench frame '{frame.name()}' is fixed to the world, not to the robot")
+        resolved.append(frame)
+    return tuple(resolved)
+
+
+class FixedBaseModel:
+    """The dynamics of a fixed-base robot (no floating base) for the classical residual,
+    the original De Luca et al. momentum observer that eq. (7) recalls: M(q) qdot,
+    M_dot qdot (central difference of M along qdot) and the bias C qdot - tau_g, all from
+    Drake. Joint velocities are the whole v; known wrenches map through J^T.
+    """
+
+    def __init__(self, plant: MultibodyPlant, derivative_step: float = 1e-5):
+        for index in plant.GetJointIndices():
+            joint = plant.get_joint(index)
+            if joint.num_velocities() > 1 or joint.type_name() == "quaternion_floating":
+                raise ValueError(
+                    f"joint '{joint.name()}' ({joint.type_name()}) is not a 1-DoF joint: the fixed-base "
+                    "classical residual needs revolute or prismatic joints only"
+                )
+        self.plant = plant
+        self.num_positions = plant.num_positions()
+        self.num_velocities = plant.num_velocities()
+        self.num_joints = plant.num_velocities()
+        self.joint_velocity_start = 0
+        self.joints = tuple(
+            sorted(
+                (plant.get_joint(i) for i in plant.GetJointIndices() if plant.get_joint(i).num_velocities() == 1),
+                key=lambda j: j.velocity_start(),
+            )
+        )
+        self._step = derivative_step
+        self._context = plant.CreateDefaultContext()
+        self._key: bytes | None = None
+        self._value = None
+
+    def check_frames(self, frames: Sequence[Frame | str]) -> tuple[Frame, ...]:
+        return check_wrench_frames(self.plant, frames)
+
+    def evaluate(self, x: np.ndarray):
+        """(M, M_dot qdot - (C qdot - tau_g)) at x = [q; qdot] (cached per state)."""
+        key = x.tobytes()
+        if key != self._key:
+            plant, context, nq = self.plant, self._context, self.num_positions
+            q, qdot = x[:nq], x[nq:]
+            speed = float(np.linalg.norm(qdot))
+            M_dot_qdot = np.zeros(self.num_velocities)
+            if speed > 0.0:
+                h = self._step / speed
+                plant.SetPositions(context, q + h * qdot)
+                M_dot_qdot = plant.CalcMassMatrix(context) @ qdot
+                plant.SetPositions(context, q - h * qdot)
+                M_dot_qdot = (M_dot_qdot - plant.CalcMassMatrix(context) @ qdot) / (2.0 * h)
+            plant.SetPositions(context, q)
+            plant.SetVelocities(context, qdot)
+            M = plant.CalcMassMatrix(context)
+            bias = plant.CalcBiasTerm(context) - plant.CalcGravityGeneralizedForces(context)
+            self._value = (M, M_dot_qdot - bias)
+            self._key = key
+        return self._value
+
+    def known_wrench_forces(self, terms, frames: Sequence[Frame], wrenches_W: np.ndarray):
+        """(None, J^T w): generalized forces of wrenches [moment about the frame origin; force]
+        in world, at the last evaluated state."""
+        world = self.plant.world_frame()
+        tau = np.zeros(self.num_velocities)
+        for i, frame in enumerate(frames):
+            J = self.plant.CalcJacobianSpatialVelocity(
+                self._context, JacobianWrtVariable.kV, frame, np.zeros(3), world, world
+            )
+            tau += J.T @ wrenches_W[6 * i : 6 * i + 6]
+        return None, tau
+
+
 class _MomentumResidual(LeafSystem):
     """Common machinery: ports, discrete state, the observer update (see module docstring)."""
 
@@ -221,6 +296,7 @@ class _MomentumResidual(LeafSystem):
         n = self._model.num_joints
         nx = self._model.num_positions + self._model.num_velocities
         self._num_positions = self._model.num_positions
+        self._qdot_start = self._model.num_positions + self._model.joint_velocity_start
         if uses_torque:
             if joint_damping is None:
                 joint_damping = _plant_joint_damping(self._model)
@@ -264,7 +340,7 @@ class _MomentumResidual(LeafSystem):
         terms = self._model.evaluate(x)
         tau_m = None
         if self._torque_port is not None:
-            qdot = x[self._num_positions + 6 :]
+            qdot = x[self._qdot_start :]
             tau_m = self._checked_input(self._torque_port, context) - self._damping * qdot
         known = None
         if self._frames:
@@ -297,6 +373,9 @@ class _MomentumResidual(LeafSystem):
 class ClassicalResidual(_MomentumResidual):
     """Classical momentum residual, paper eq. (7), on the virtual-joint model (8).
 
+    On a plant without a floating base (a fixed-base arm) it is eq. (7) itself, the
+    residual of De Luca et al.: r ~ tau_c = J^T f, size nv, no base entries.
+
     r ~ tau_c of model (8): the generalized force of the unknown external forces with the
     base treated as 6 virtual joints. Its joint entries are J_j^T f, the fixed-base
     Jacobian transposed: a push on a shoulder loads only the joints between the contact and
@@ -326,9 +405,11 @@ class ClassicalResidual(_MomentumResidual):
         known_wrench_frames: Sequence[Frame | str] = (),
         *,
         joint_damping=None,
-        model: ResidualModel | None = None,
+        model: ResidualModel | FixedBaseModel | None = None,
         implementation: str = "fast",
     ):
+        if model is None and plant.is_finalized() and not _has_free_joint(plant):
+            model = FixedBaseModel(plant)  # the fixed-base arm: eq. (7) as in De Luca et al.
         super().__init__(
             plant,
             gain,
@@ -343,7 +424,13 @@ class ClassicalResidual(_MomentumResidual):
         self.DeclareVectorOutputPort("residual", self._size, self._CalcResidual, {self.xd_ticket()})
 
     def _momentum_and_rates(self, terms, x, tau_m, known):
-        v0, qdot = terms.v0, x[self._num_positions + 6 :]
+        if isinstance(self._model, FixedBaseModel):
+            M, rate = terms
+            qdot = x[self._qdot_start :]
+            if known is not None:
+                rate = rate + known[1]
+            return M @ qdot, rate, tau_m
+        v0, qdot = terms.v0, x[self._qdot_start :]
         momentum = np.concatenate((terms.I0c @ v0 + terms.F @ qdot, terms.F.T @ v0 + terms.H @ qdot))
         model_rate = np.concatenate(
             (
@@ -400,7 +487,7 @@ class InternalResidual(_MomentumResidual):
         self.DeclareVectorOutputPort("residual", self._size, self._CalcResidual, {self.xd_ticket()})
 
     def _momentum_and_rates(self, terms, x, tau_m, known):
-        qdot = x[self._num_positions + 6 :]
+        qdot = x[self._qdot_start :]
         momentum = terms.H_fb @ qdot
         model_rate = terms.H_fb_dot @ qdot - terms.C_fb
         if known is not None:
@@ -456,7 +543,7 @@ class ExternalResidual(_MomentumResidual):
         self.DeclareVectorOutputPort("external_wrench_world", 6, self._CalcWorld, {self.xd_ticket()})
 
     def _momentum_and_rates(self, terms, x, tau_m, known):
-        v0, qdot = terms.v0, x[self._num_positions + 6 :]
+        v0, qdot = terms.v0, x[self._qdot_start :]
         momentum = terms.I0c @ v0 + terms.F @ qdot
         model_rate = terms.I0c_dot @ v0 + terms.F_dot @ qdot - terms.p_hat
         if known is not None:
@@ -473,6 +560,10 @@ class ExternalResidual(_MomentumResidual):
         output.SetFromVector(context.get_discrete_state(self._world_index).get_value())
 
 
+def _has_free_joint(plant: MultibodyPlant) -> bool:
+    return any(plant.get_joint(i).num_velocities() == 6 for i in plant.GetJointIndices())
+
+
 def _vector_parameter(value, size: int, what: str) -> np.ndarray:
     array = np.asarray(value, dtype=float)
     if array.ndim == 0:
@@ -484,6 +575,6 @@ def _vector_parameter(value, size: int, what: str) -> np.ndarray:
     return array
 
 
-def _plant_joint_damping(model: ResidualModel) -> np.ndarray:
+def _plant_joint_damping(model: ResidualModel | FixedBaseModel) -> np.ndarray:
     """The plant's viscous joint damping per joint, v[6:] order (N m s/rad)."""
-    return np.array([float(j.default_damping()) for j in model.dynamics.topology.joints])
+    return np.array([float(j.default_damping()) for j in model.joints])

@@ -753,7 +753,7 @@ class SensorHandles:
 
 
 def add_sensors(builder: DiagramBuilder, plant: MultibodyPlant, handles: HumanoidHandles, *,
-                noise: bool = True, seed: int = 0) -> SensorHandles:
+                noise: bool = True, seed: int = 0, name_prefix: str = "") -> SensorHandles:
     """Adds a humanoid's sensors to ``builder`` and wires them to ``plant``.
 
     Adds JointEncoders, MotorTorqueSensor, FootForceTorqueSensors (only if
@@ -775,6 +775,8 @@ def add_sensors(builder: DiagramBuilder, plant: MultibodyPlant, handles: Humanoi
         noise: False sets every noise std to 0 (outputs equal the truth).
         seed: non-negative integer; sensor i gets seed 16 * seed + offset (SEED_OFFSETS),
             so the defaults of the individual sensors are seed = 0.
+        name_prefix: prepended to the added systems' names (e.g. to add two sensor sets,
+            one noisy and one not, to the same diagram).
 
     Returns:
         SensorHandles.
@@ -784,6 +786,8 @@ def add_sensors(builder: DiagramBuilder, plant: MultibodyPlant, handles: Humanoi
     """
     who = "add_sensors"
     _check_plant(plant, who)
+    if not isinstance(name_prefix, str):
+        raise ValueError(f"{who}: name_prefix must be a str, got {type(name_prefix).__name__}")
     if not isinstance(handles, HumanoidHandles):
         raise ValueError(f"{who}: handles must be HumanoidHandles, got {type(handles).__name__}")
     try:
@@ -797,12 +801,12 @@ def add_sensors(builder: DiagramBuilder, plant: MultibodyPlant, handles: Humanoi
     encoders = builder.AddSystem(JointEncoders(
         plant, position_noise_std=on * ENCODER_POSITION_NOISE_STD,
         velocity_noise_std=on * ENCODER_VELOCITY_NOISE_STD, seed=seeds["encoders"]))
-    encoders.set_name("joint_encoders")
+    encoders.set_name(f"{name_prefix}joint_encoders")
     builder.Connect(state_port, encoders.GetInputPort("state"))
 
     torque = builder.AddSystem(MotorTorqueSensor(
         plant, noise_std=on * MOTOR_TORQUE_NOISE_STD, seed=seeds["torque"]))
-    torque.set_name("motor_torque_sensor")
+    torque.set_name(f"{name_prefix}motor_torque_sensor")
 
     ft = None
     sides = tuple(sorted(handles.ft_sensor_joints))
@@ -811,24 +815,25 @@ def add_sensors(builder: DiagramBuilder, plant: MultibodyPlant, handles: Humanoi
             plant, [handles.ft_sensor_joints[s] for s in sides],
             force_noise_std=on * FT_FORCE_NOISE_STD, moment_noise_std=on * FT_MOMENT_NOISE_STD,
             seed=seeds["ft"]))
-        ft.set_name("foot_force_torque_sensors")
+        ft.set_name(f"{name_prefix}foot_force_torque_sensors")
         builder.Connect(plant.get_reaction_forces_output_port(),
                         ft.get_reaction_forces_input_port())
         builder.Connect(state_port, ft.get_state_input_port())
 
     imu = add_imu(builder, plant, handles.imu_frame, gyro_noise_std=on * GYRO_NOISE_STD,
-                  accel_noise_std=on * ACCEL_NOISE_STD, seed=seeds["imu"])
+                  accel_noise_std=on * ACCEL_NOISE_STD, seed=seeds["imu"],
+                  name=f"{name_prefix}imu")
 
     base = builder.AddSystem(BaseStateEstimator(
         plant, orientation_noise_std=on * BASE_ORIENTATION_NOISE_STD,
         position_noise_std=on * BASE_POSITION_NOISE_STD,
         angular_velocity_noise_std=on * BASE_ANGULAR_VELOCITY_NOISE_STD,
         linear_velocity_noise_std=on * BASE_LINEAR_VELOCITY_NOISE_STD, seed=seeds["base"]))
-    base.set_name("base_state_estimator")
+    base.set_name(f"{name_prefix}base_state_estimator")
     builder.Connect(state_port, base.GetInputPort("state"))
 
     assembler = builder.AddSystem(SensedStateAssembler(plant))
-    assembler.set_name("sensed_state")
+    assembler.set_name(f"{name_prefix}sensed_state")
     builder.Connect(base.GetOutputPort("base_pose"), assembler.GetInputPort("base_pose"))
     builder.Connect(base.GetOutputPort("base_velocity"), assembler.GetInputPort("base_velocity"))
     builder.Connect(encoders.GetOutputPort("position"), assembler.GetInputPort("joint_position"))

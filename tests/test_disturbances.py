@@ -408,6 +408,16 @@ def test_applied_forces_do_not_depend_on_state():
     assert len(dut.get_applied_spatial_forces_output_port().Eval(ctx)) == 4
 
 
+def test_empty_push_list_connects_and_outputs_zeros():
+    diagram, plant, source, _ = _pushed_diagram([], 1e-3, True)
+    context = diagram.CreateDefaultContext()
+    sc = source.GetMyContextFromRoot(context)
+    assert source.get_applied_spatial_forces_output_port().Eval(sc) == []
+    assert source.get_force_world_output_port().size() == 0
+    np.testing.assert_array_equal(source.GetOutputPort("total_wrench_base").Eval(sc), np.zeros(6))
+    np.testing.assert_array_equal(source.GetOutputPort("tau_c_real").Eval(sc), np.zeros(plant.num_velocities() - 6))
+
+
 # ---------------------------------------------------------------------------------------
 # Physics: the pushes really act on the plant.
 # ---------------------------------------------------------------------------------------

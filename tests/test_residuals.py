@@ -79,12 +79,12 @@ def _run(plant, pushes, residuals, duration, *, torque=None, initial_state=None)
             builder.AddSystem(ConstantValueSource(AbstractValue.Make(pushes))).get_output_port(),
             plant.get_applied_spatial_force_input_port(),
         )
-    n = plant.num_velocities() - 6
     logs = {}
     for name, residual in residuals.items():
         builder.AddSystem(residual)
         builder.Connect(plant.get_state_output_port(), residual.GetInputPort("state"))
         if residual.HasInputPort("measured_torque"):
+            n = residual.GetInputPort("measured_torque").size()
             tau = np.zeros(n) if torque is None else torque
             builder.Connect(builder.AddSystem(ConstantVectorSource(tau)).get_output_port(), residual.GetInputPort("measured_torque"))
         port = residual.GetOutputPort("residual" if residual.HasOutputPort("residual") else "external_wrench_base")
@@ -358,3 +358,35 @@ def test_known_wrenches_are_removed_from_every_residual():
         value = port.Eval(residual.GetMyContextFromRoot(context))
         # Unknown part ~0: below 0.1 % of the (fully known) push, which moves the robot.
         assert np.abs(value).max() < 1e-3 * np.linalg.norm(f_W), (name, value)
+
+
+def test_classical_residual_on_a_fixed_base_arm():
+    """The classical special case (De Luca et al., recalled by eq. 7): on a fixed-base
+    two-link arm under gravity with a constant force at the tip, r -> J^T f."""
+    plant = MultibodyPlant(time_step=0.0)
+    upper = plant.AddRigidBody("upper", SpatialInertia.SolidCylinderWithMass(2.0, 0.04, 0.4, [0, 0, 1]))
+    lower = plant.AddRigidBody("lower", SpatialInertia.SolidCylinderWithMass(1.0, 0.03, 0.3, [0, 0, 1]))
+    plant.AddJoint(RevoluteJoint("shoulder", plant.world_frame(), plant.AddFrame(_offset("u_top", upper, [0, 0, 0.2])), [0, 1, 0]))
+    plant.AddJoint(
+        RevoluteJoint("elbow", plant.AddFrame(_offset("u_bottom", upper, [0, 0, -0.2])), plant.AddFrame(_offset("l_top", lower, [0, 0, 0.15])), [0, 1, 0])
+    )
+    plant.Finalize()
+    tip = np.array([0.0, 0.0, -0.15])
+    f_W = np.array([3.0, 0.0, 1.0])
+    K = 100.0
+    residual = ClassicalResidual(plant, K, joint_damping=0.0)
+    assert residual.GetOutputPort("residual").size() == 2
+    x0 = np.array([0.3, -0.5, 0.0, 0.0])
+    logs, _ = _run(plant, [_push(plant, lower, tip, f_W)], {"classical": residual}, 0.3, initial_state=x0)
+    states = logs["plant_state"][1]
+    context = plant.CreateDefaultContext()
+    truth = []
+    for k in range(states.shape[1]):
+        plant.SetPositionsAndVelocities(context, states[:, k])
+        J = plant.CalcJacobianTranslationalVelocity(
+            context, JacobianWrtVariable.kV, lower.body_frame(), tip, plant.world_frame(), plant.world_frame()
+        )
+        truth.append(J.T @ f_W)
+    expected = _filtered(np.array(truth).T, K)
+    r = logs["classical"][1]
+    assert np.abs(r - expected).max() < 2e-3 * np.abs(expected).max(), np.abs(r - expected).max()

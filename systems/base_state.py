@@ -11,8 +11,10 @@ import math
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
 
-#: How far the base quaternion's norm may be from 1 before the state is refused.
-QUATERNION_NORM_TOLERANCE = 1e-3
+#: How far the base quaternion's norm may be from 1 before the state is refused; within it
+#: the quaternion is normalised (a discrete simulator or a state estimator lets the norm
+#: drift by a fraction of a per cent; a zero or garbage quaternion is refused).
+QUATERNION_NORM_TOLERANCE = 0.05
 
 
 def quaternion_to_rotation(quaternion_wxyz: np.ndarray) -> np.ndarray:

@@ -52,19 +52,23 @@ from systems.noise import (
 )
 from systems.topology import floating_base_topology
 
-#: Default noise standard deviations (SI) and seeds of the sensors.
+#: Default noise standard deviations (SI) of the sensors: white Gaussian noise, sampled and
+#: held at 1 kHz. A momentum residual passes noise on the momentum (velocities) to its output
+#: amplified by its gain K, so the velocity noises matter most; the values describe a
+#: well-filtered 1 kHz state estimate (a slowly varying bias would not matter: the residual
+#: sees only the momentum's rate). Torque, F/T and IMU figures are datasheet-class values.
 DEFAULT_PERIOD = 1e-3  # s
-ENCODER_POSITION_NOISE_STD = 2e-5  # rad
-ENCODER_VELOCITY_NOISE_STD = 2e-3  # rad/s
-MOTOR_TORQUE_NOISE_STD = 0.05  # N m
-FT_FORCE_NOISE_STD = 0.5  # N
-FT_MOMENT_NOISE_STD = 0.05  # N m
+ENCODER_POSITION_NOISE_STD = 1e-5  # rad (about 19-bit resolution over a turn)
+ENCODER_VELOCITY_NOISE_STD = 5e-4  # rad/s (filtered differentiation of high-resolution encoders)
+MOTOR_TORQUE_NOISE_STD = 0.05  # N m (motor-current torque estimate)
+FT_FORCE_NOISE_STD = 0.1  # N (6-axis F/T sensor of the ATI Mini45 class)
+FT_MOMENT_NOISE_STD = 0.005  # N m
 GYRO_NOISE_STD = 1e-3  # rad/s
 ACCEL_NOISE_STD = 0.02  # m/s^2
-BASE_ORIENTATION_NOISE_STD = 1e-3  # rad (small rotation vector)
+BASE_ORIENTATION_NOISE_STD = 5e-4  # rad (small rotation vector)
 BASE_POSITION_NOISE_STD = 1e-3  # m
-BASE_ANGULAR_VELOCITY_NOISE_STD = 2e-3  # rad/s
-BASE_LINEAR_VELOCITY_NOISE_STD = 2e-3  # m/s
+BASE_ANGULAR_VELOCITY_NOISE_STD = 5e-4  # rad/s
+BASE_LINEAR_VELOCITY_NOISE_STD = 2e-4  # m/s (kinematic-inertial fusion, filtered)
 
 #: Seed offsets used by add_sensors(seed=s): sensor i gets SEEDS_PER_CALL * s + offset.
 SEED_OFFSETS = {"encoders": 0, "torque": 1, "ft": 2, "imu": 3, "base": 4}
@@ -323,7 +327,11 @@ class FootForceTorqueSensors(LeafSystem):
 
     When the sole is at rest, W_ground equals the sum of the contact wrenches on the sole
     (about So, in world); when the sole accelerates it differs by the sole's inertial
-    wrench, as on a real robot.
+    wrench, as on a real robot. Bodies hanging below the sole through non-weld joints are
+    not compensated (their weight is part of the reported wrench). Before a discrete
+    plant's first step the reaction forces read zero, so the output is then −W_gravity
+    (the sole's weight, pointing up). The noise is added to the world-frame components
+    (a simplification of a real sensor's noise in its own axes; the stds are per axis).
 
     Inputs:
         reaction_forces: abstract list of SpatialForce indexed by JointIndex; connect
@@ -786,6 +794,8 @@ def add_sensors(builder: DiagramBuilder, plant: MultibodyPlant, handles: Humanoi
     """
     who = "add_sensors"
     _check_plant(plant, who)
+    if not isinstance(noise, (bool, np.bool_)):
+        raise ValueError(f"{who}: noise must be a bool, got {noise!r}")
     if not isinstance(name_prefix, str):
         raise ValueError(f"{who}: name_prefix must be a str, got {type(name_prefix).__name__}")
     if not isinstance(handles, HumanoidHandles):

@@ -27,6 +27,7 @@ from diagrams.standing import default_gains
 from models import add_ground, add_humanoid, set_standing_state
 from systems.noise import BLOCK_SIZE, NoisyVector, SampledNoise
 from systems.pd_gravity import PdGravityController, joint_vector_from_names
+from systems import sensors as sensor_defaults
 from systems.sensors import (
     BaseStateEstimator,
     FootForceTorqueSensors,
@@ -165,10 +166,17 @@ def test_noise_is_held_within_a_period_and_changes_across():
         for v in held[1:]:
             np.testing.assert_array_equal(v, held[0])
         assert not np.array_equal(noise.value((k + 1) * PERIOD), held[0])
-    # t = k * period in floating point falls in sample k (0.003 / 0.001 < 3 in doubles).
-    assert noise.sample_index(0.003) == 3
-    assert noise.sample_index(3 * 1e-3) == 3
-    np.testing.assert_array_equal(noise.value(0.003), noise.sample(3))
+    # t = k * period in floating point falls in sample k even when t / period < k in
+    # doubles: 2001 * 1e-3 / 1e-3 and a time accumulated by 1 ms steps.
+    assert 2001 * 1e-3 / 1e-3 < 2001
+    assert noise.sample_index(2001 * 1e-3) == 2001
+    t = 0.0
+    for _ in range(1007):
+        t += 1e-3
+    assert t / 1e-3 < 1007
+    assert noise.sample_index(t) == 1007
+    np.testing.assert_array_equal(noise.value(t), noise.sample(1007))
+    assert SampledNoise(1, 1.0, 0.1, 0).sample_index(0.3) == 3  # 0.3 / 0.1 = 2.9999999999999996
 
 
 def test_noise_statistics_and_independence():
@@ -181,6 +189,13 @@ def test_noise_statistics_and_independence():
     for x in (xa, xb):
         np.testing.assert_allclose(x.std(axis=0), std, rtol=0.05)
         assert np.all(np.abs(x.mean(axis=0)) < 4.0 * std / np.sqrt(n))
+    # Gaussian: 68.27 % within one std, 95.45 % within two, kurtosis 3.
+    z = xa / std
+    assert np.mean(np.abs(z) < 1.0) == pytest.approx(0.6827, abs=0.01)
+    assert np.mean(np.abs(z) < 2.0) == pytest.approx(0.9545, abs=0.005)
+    assert np.mean(z**4) == pytest.approx(3.0, abs=0.15)
+    # Consecutive samples are uncorrelated (white).
+    assert abs(np.corrcoef(xa[1:, 0], xa[:-1, 0])[0, 1]) < 4.0 / np.sqrt(n)
     # Entries of one noise and the two seeds are uncorrelated (|rho| < 4 / sqrt(n)).
     for i in range(3):
         assert abs(np.corrcoef(xa[:, i], xb[:, i])[0, 1]) < 4.0 / np.sqrt(n)
@@ -259,7 +274,7 @@ def test_joint_encoders_noise_free_equal_truth_in_velocity_order():
 
 def test_joint_encoders_noise_statistics(hrp4_plant):
     plant, _ = hrp4_plant
-    dut = JointEncoders(plant)  # defaults: 2e-5 rad, 2e-3 rad/s
+    dut = JointEncoders(plant)  # the module's default noise levels
     ctx = dut.CreateDefaultContext()
     pctx = plant.CreateDefaultContext()
     x = plant.GetPositionsAndVelocities(pctx)
@@ -273,9 +288,9 @@ def test_joint_encoders_noise_statistics(hrp4_plant):
         eq.append(dut.GetOutputPort("position").Eval(ctx) - q_true)
         ev.append(dut.GetOutputPort("velocity").Eval(ctx) - v_true)
     eq, ev = np.array(eq), np.array(ev)
-    assert eq.std() == pytest.approx(2e-5, rel=0.05)
-    assert ev.std() == pytest.approx(2e-3, rel=0.05)
-    assert abs(eq.mean()) < 4 * 2e-5 / np.sqrt(eq.size)
+    assert eq.std() == pytest.approx(sensor_defaults.ENCODER_POSITION_NOISE_STD, rel=0.05)
+    assert ev.std() == pytest.approx(sensor_defaults.ENCODER_VELOCITY_NOISE_STD, rel=0.05)
+    assert abs(eq.mean()) < 4 * sensor_defaults.ENCODER_POSITION_NOISE_STD / np.sqrt(eq.size)
     # Position and velocity noises are independent.
     assert abs(np.corrcoef(eq.ravel(), ev.ravel())[0, 1]) < 4.0 / np.sqrt(eq.size)
 
@@ -449,8 +464,8 @@ def test_ft_noise_statistics_and_validation():
         ctx.SetTime(t)
         err.append(dut.GetOutputPort("wrenches").Eval(ctx) - clean)
     err = np.array(err)
-    assert err[:, :3].std() == pytest.approx(0.05, rel=0.05)
-    assert err[:, 3:].std() == pytest.approx(0.5, rel=0.05)
+    assert err[:, :3].std() == pytest.approx(sensor_defaults.FT_MOMENT_NOISE_STD, rel=0.05)
+    assert err[:, 3:].std() == pytest.approx(sensor_defaults.FT_FORCE_NOISE_STD, rel=0.05)
 
     hrp = _branched_plant()
     with pytest.raises(ValueError, match=r"sensor_joints\[0\] \('ja'\) is a 'revolute' joint, not a weld"):
@@ -520,10 +535,12 @@ def test_base_state_estimator_noise_free_and_statistics():
         dps.append(pose[4:] - truth_pose[4:])
         dvs.append(dut.GetOutputPort("base_velocity").Eval(ctx) - truth_vel)
     phis, dps, dvs = np.array(phis), np.array(dps), np.array(dvs)
-    assert phis.std() == pytest.approx(1e-3, rel=0.05)
-    assert dps.std() == pytest.approx(1e-3, rel=0.05)
-    assert dvs.std() == pytest.approx(2e-3, rel=0.05)
-    assert abs(phis.mean()) < 4e-3 / np.sqrt(phis.size)
+    d = sensor_defaults
+    assert phis.std() == pytest.approx(d.BASE_ORIENTATION_NOISE_STD, rel=0.05)
+    assert dps.std() == pytest.approx(d.BASE_POSITION_NOISE_STD, rel=0.05)
+    assert dvs[:, :3].std() == pytest.approx(d.BASE_ANGULAR_VELOCITY_NOISE_STD, rel=0.05)
+    assert dvs[:, 3:].std() == pytest.approx(d.BASE_LINEAR_VELOCITY_NOISE_STD, rel=0.05)
+    assert abs(phis.mean()) < 4 * d.BASE_ORIENTATION_NOISE_STD / np.sqrt(phis.size)
 
 
 def test_assembler_round_trip_on_branched_plant():
@@ -688,6 +705,13 @@ def test_standing_imu_at_rest(hrp4_standing):
     # Exactly Drake's kinematics of the IMU frame (noise off).
     w_WS_W = humanoid.imu_frame.CalcSpatialVelocityInWorld(pctx).rotational()
     np.testing.assert_allclose(gyro, R_WS.T @ w_WS_W, atol=1e-12)
+    body = humanoid.imu_frame.body()
+    A_WB = plant.get_body_spatial_accelerations_output_port().Eval(pctx)[int(body.index())]
+    V_WB = plant.EvalBodySpatialVelocityInWorld(pctx, body)
+    X_WB = plant.EvalBodyPoseInWorld(pctx, body)
+    p_BoSo_W = X_WB.rotation() @ humanoid.imu_frame.GetFixedPoseInBodyFrame().translation()
+    a_WS = A_WB.Shift(p_BoSo_W, V_WB.rotational()).translational()
+    np.testing.assert_allclose(accel, R_WS.T @ (a_WS - [0.0, 0.0, -G]), atol=1e-9)
 
 
 def test_standing_sensed_state_and_torque_are_truth_without_noise(hrp4_standing):
@@ -726,3 +750,30 @@ def test_add_imu_validation(hrp4_plant):
         add_imu(builder, other, handles.imu_frame)
     with pytest.raises(ValueError, match="add_imu: gyro_noise_std must be non-negative"):
         add_imu(builder, plant, handles.imu_frame, gyro_noise_std=-1.0)
+
+
+def test_add_sensors_without_ft_sensors_nao():
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=1e-3), builder)
+    humanoid = add_humanoid(plant, "nao_like", scene_graph=scene_graph)
+    plant.Finalize()
+    sensors = add_sensors(builder, plant, humanoid, seed=2)
+    assert sensors.ft_sensors is None and sensors.ft_wrenches is None
+    assert sensors.ft_frames == () and sensors.ft_sides == ()
+    assert sensors.seeds["encoders"] == 32
+    assert sensors.state.size() == plant.num_positions() + plant.num_velocities()
+    assert sensors.measured_torque.size() == plant.num_velocities() - 6
+    assert sensors.imu.frame.name() == "imu"
+    # The torque sensor's actuation input is left for the caller: Build() accepts an
+    # unconnected input (it becomes a diagram input), and its size is the plant's.
+    assert sensors.actuation_input.size() == plant.num_actuated_dofs()
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    x = plant.GetPositionsAndVelocities(plant.GetMyContextFromRoot(context))
+    np.testing.assert_allclose(_eval(sensors.state, sensors.assembler, context), x, atol=0.02)
+    with pytest.raises(ValueError, match="add_sensors: noise must be a bool"):
+        add_sensors(DiagramBuilder(), plant, humanoid, noise="yes")
+    with pytest.raises(ValueError, match="add_sensors: seed must be a non-negative integer"):
+        add_sensors(DiagramBuilder(), plant, humanoid, seed=-1)
+    with pytest.raises(ValueError, match="add_sensors: handles must be HumanoidHandles"):
+        add_sensors(DiagramBuilder(), plant, None)

@@ -1,0 +1,267 @@
+"""Residual estimation diagram: a humanoid holding its posture while pushed, its sensors, and
+the three residuals of Flacco et al. (2016) fed only by those sensors.
+
+    PushSource ──applied_spatial_forces──► MultibodyPlant (+ ground) ──state──► sensors
+        ▲ true state      │ ground truth            ▲ actuation                  │ sensed state,
+        └─────────────────┤ (tau_c_real, wrenches)  │                            │ motor torque,
+                          ▼                         PdGravityController ◄────────┤ F/T wrenches
+                       loggers                                                   ▼
+                                          ClassicalResidual, InternalResidual, ExternalResidual
+                                          (one shared ResidualModel) ──► loggers
+
+For ``hrp4_like`` and ``nao_like`` the robot stands on flat ground; its F/T sensors (HRP-4)
+make the ground reaction a known wrench. Any other floating-base model (an SDFormat or URDF
+path) floats in zero gravity with no ground, holding its default posture.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydrake.geometry import Meshcat, MeshcatVisualizer, SceneGraph
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
+from pydrake.systems.framework import Context, Diagram, DiagramBuilder
+from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
+
+from diagrams.standing import default_gains
+from models import MODEL_NAMES, HumanoidHandles, add_ground, add_humanoid, set_standing_state
+from systems.disturbances import Push, PushSource, Sinusoid
+from systems.pd_gravity import PdGravityController
+from systems.residuals import ClassicalResidual, ExternalResidual, InternalResidual, ResidualModel
+from systems.sensors import SensorHandles, add_sensors
+from systems.topology import floating_base_topology
+
+
+@dataclass
+class ResidualEstimationConfig:
+    """Settings of the residual comparison (paper Secs. II-C, III, V). SI units.
+
+    Attributes:
+        model: ``hrp4_like``, ``nao_like`` or a path to a floating-base SDFormat/URDF file.
+        push_body: the pushed body (default: the right shoulder body of the humanoids).
+        push_point: the point of the push in the body frame, m.
+        push_direction: the push's world direction (normalised); with horizontal components,
+            as in the paper's Fig. 7, so that it loads the chest yaw and the legs.
+        push_amplitude: N; the sinusoid's amplitude. 40 N with this direction keeps the
+            horizontal part (19 N) well below what tips the 39 kg robot over its feet.
+            None: 10 % of the robot's weight (other models).
+        push_frequency: Hz.
+        push_start: s; the sinusoid starts here (from zero).
+        duration: s.
+        classical_gain, internal_gain, external_gain: residual gains K, 1/s. A residual is a
+            first-order filter (time constant 1/K) whose output noise grows with K (velocity
+            noise enters the momentum and is multiplied by K); 35/s balances the lag
+            (omega/K = 1.8 % at 0.1 Hz) against the default sensor noise.
+        noise: sensor noise on (the sensors' documented defaults) or off.
+        seed: sensor noise seed.
+        time_step: the plant's discrete step, s.
+        period: the residuals' update period, s.
+        log_period: the loggers' sampling period, s.
+    """
+
+    model: str = "hrp4_like"
+    push_body: str | None = None
+    push_point: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    push_direction: tuple[float, float, float] = (-0.4, 0.25, -0.88)
+    push_amplitude: float | None = 40.0
+    push_frequency: float = 0.1
+    push_start: float = 0.5
+    duration: float = 10.0
+    classical_gain: float = 35.0
+    internal_gain: float = 35.0
+    external_gain: float = 35.0
+    noise: bool = True
+    seed: int = 0
+    time_step: float = 1e-3
+    period: float = 1e-3
+    log_period: float = 5e-3
+
+
+@dataclass
+class ResidualEstimationHandles:
+    """What ``build_residual_estimation_diagram`` created (see the module docstring)."""
+
+    plant: MultibodyPlant
+    scene_graph: SceneGraph
+    humanoid: HumanoidHandles | None
+    push_source: PushSource
+    sensors: SensorHandles | None
+    model: ResidualModel
+    classical: ClassicalResidual
+    internal: InternalResidual
+    external: ExternalResidual
+    joint_names: tuple[str, ...]
+    initial_state: np.ndarray
+    loggers: dict[str, VectorLogSink]
+    meshcat_visualizer: MeshcatVisualizer | None = None
+
+
+def _load(plant: MultibodyPlant, scene_graph: SceneGraph, model: str) -> HumanoidHandles | None:
+    if model in MODEL_NAMES:
+        handles = add_humanoid(plant, model, scene_graph=scene_graph)
+        add_ground(plant)
+        return handles
+    path = Path(model)
+    if not path.is_file():
+        raise ValueError(f"--model: '{model}' is neither one of {MODEL_NAMES} nor a readable model file")
+    try:
+        Parser(plant).AddModels(str(path))
+    except Exception as error:  # Drake's parser raises RuntimeError with its own message
+        raise ValueError(f"could not parse the model file '{path}': {error}") from error
+    plant.mutable_gravity_field().set_gravity_vector([0.0, 0.0, 0.0])
+    return None
+
+
+def _set_posture_inside_limits(plant: MultibodyPlant, context: Context, topology) -> None:
+    """Default joint positions, moved to the middle of the range where 0 is within 0.05 of a
+    joint limit (a limit's constraint force would be an unmodelled external effort)."""
+    for joint in topology.joints:
+        lower, upper = joint.position_lower_limits()[0], joint.position_upper_limits()[0]
+        value = plant.GetPositions(context)[joint.position_start()]
+        if not (lower + 0.05 <= value <= upper - 0.05):
+            middle = 0.5 * (lower + upper) if np.isfinite(lower) and np.isfinite(upper) else value
+            q = plant.GetPositions(context)
+            q[joint.position_start()] = middle
+            plant.SetPositions(context, q)
+
+
+def _generic_gains(plant: MultibodyPlant, context: Context, period: float) -> tuple[np.ndarray, np.ndarray]:
+    """PD gains for any robot, from its joint-space inertia H_fb at the posture: kd = 0.2 H/T
+    and kp = 10 kd keep the explicit 1 kHz PD stable (kd T / H well below 2)."""
+    from systems.floating_base import FloatingBaseDynamics
+
+    x = plant.GetPositionsAndVelocities(context)
+    nq = plant.num_positions()
+    inertia = np.diag(FloatingBaseDynamics(plant).compute(x[:nq], x[nq:]).H_fb)
+    kd = 0.2 * inertia / period
+    return 10.0 * kd, kd
+
+
+def build_residual_estimation_diagram(
+    config: ResidualEstimationConfig, meshcat: Meshcat | None = None
+) -> tuple[Diagram, ResidualEstimationHandles]:
+    """Builds the diagram of the module docstring for ``config``.
+
+    Raises:
+        ValueError: an unknown model or body, a model without a floating base, bad settings.
+    """
+    if config.duration <= 0 or config.push_frequency < 0 or config.log_period <= 0:
+        raise ValueError("duration and log_period must be positive, push_frequency non-negative")
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(
+        MultibodyPlantConfig(time_step=config.time_step, discrete_contact_approximation="sap", contact_model="point"),
+        builder,
+    )
+    humanoid = _load(plant, scene_graph, config.model)
+    plant.Finalize()
+    topology = floating_base_topology(plant)  # clear ValueError for a model without a floating base
+    joint_names = tuple(j.name() for j in topology.joints)
+
+    # Initial state and the posture to hold.
+    context = plant.CreateDefaultContext()
+    if humanoid is not None:
+        set_standing_state(plant, context, humanoid)
+        kp, kd = default_gains(plant, humanoid)
+    else:
+        _set_posture_inside_limits(plant, context, topology)
+        kp, kd = _generic_gains(plant, context, config.period)
+    initial_state = plant.GetPositionsAndVelocities(context)
+    q_hold = np.array([initial_state[j.position_start()] for j in topology.joints])
+    amplitude = config.push_amplitude
+    if amplitude is None:
+        mass = plant.CalcTotalMass(context)
+        amplitude = 0.1 * mass * float(np.linalg.norm(plant.gravity_field().gravity_vector()) or 9.81)
+
+    # The pusher and its ground truth.
+    push_body = config.push_body
+    if push_body is None:
+        if humanoid is None:
+            raise ValueError("--push-body is required for a model other than the humanoids")
+        push_body = humanoid.shoulder_bodies["right"].name()
+    push = Push(
+        body_name=push_body,
+        p_BoP_B=np.asarray(config.push_point, dtype=float),
+        direction_W=np.asarray(config.push_direction, dtype=float),
+        profile=Sinusoid(amplitude, config.push_frequency, t_start=config.push_start),
+    )
+    push_source = builder.AddSystem(PushSource(plant, [push]))
+    push_source.set_name("push_source")
+    builder.Connect(push_source.GetOutputPort("applied_spatial_forces"), plant.get_applied_spatial_force_input_port())
+    builder.Connect(plant.get_state_output_port(), push_source.GetInputPort("state"))
+
+    # Sensors (humanoids) or the truth as the sensed state (other models: no sensor suite).
+    controller = builder.AddSystem(PdGravityController(plant, kp, kd))
+    controller.set_name("pd_gravity_controller")
+    builder.Connect(builder.AddSystem(ConstantVectorSource(q_hold)).get_output_port(), controller.GetInputPort("desired_position"))
+    builder.Connect(controller.GetOutputPort("actuation"), plant.get_actuation_input_port())
+    sensors = None
+    if humanoid is not None:
+        sensors = add_sensors(builder, plant, humanoid, noise=config.noise, seed=config.seed)
+        builder.Connect(controller.GetOutputPort("actuation"), sensors.actuation_input)
+        sensed_state = sensors.state
+        measured_torque = sensors.measured_torque
+        known_frames, known_wrenches = sensors.ft_frames, sensors.ft_wrenches
+    else:
+        from pydrake.systems.primitives import MatrixGain
+
+        sensed_state = plant.get_state_output_port()
+        to_joint_torque = builder.AddSystem(MatrixGain(plant.MakeActuationMatrix()[6:, :]))
+        builder.Connect(controller.GetOutputPort("actuation"), to_joint_torque.get_input_port())
+        measured_torque = to_joint_torque.get_output_port()
+        known_frames, known_wrenches = (), None
+    builder.Connect(sensed_state, controller.GetInputPort("state"))
+
+    # The three residuals, sharing one model (one dynamics computation per update).
+    model = ResidualModel(plant)
+    classical = builder.AddSystem(ClassicalResidual(plant, config.classical_gain, config.period, known_frames, model=model))
+    internal = builder.AddSystem(InternalResidual(plant, config.internal_gain, config.period, known_frames, model=model))
+    external = builder.AddSystem(ExternalResidual(plant, config.external_gain, config.period, known_frames, model=model))
+    for name, residual in (("classical_residual", classical), ("internal_residual", internal), ("external_residual", external)):
+        residual.set_name(name)
+        builder.Connect(sensed_state, residual.GetInputPort("state"))
+        if residual.HasInputPort("measured_torque"):
+            builder.Connect(measured_torque, residual.GetInputPort("measured_torque"))
+        if known_frames:
+            builder.Connect(known_wrenches, residual.GetInputPort("known_wrenches"))
+
+    log = config.log_period
+    loggers = {
+        "state": LogVectorOutput(plant.get_state_output_port(), builder, log),
+        "classical": LogVectorOutput(classical.GetOutputPort("residual"), builder, log),
+        "internal": LogVectorOutput(internal.GetOutputPort("residual"), builder, log),
+        "external_base": LogVectorOutput(external.GetOutputPort("external_wrench_base"), builder, log),
+        "external_world": LogVectorOutput(external.GetOutputPort("external_wrench_world"), builder, log),
+        "tau_c_real": LogVectorOutput(push_source.GetOutputPort("tau_c_real"), builder, log),
+        "wrench_base_true": LogVectorOutput(push_source.GetOutputPort("total_wrench_base"), builder, log),
+        "wrench_world_true": LogVectorOutput(push_source.GetOutputPort("total_wrench_world"), builder, log),
+        "force_world_true": LogVectorOutput(push_source.GetOutputPort("force_world"), builder, log),
+    }
+    visualizer = None
+    if meshcat is not None:
+        visualizer = MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)
+    diagram = builder.Build()
+    diagram.set_name("residual_estimation")
+    return diagram, ResidualEstimationHandles(
+        plant=plant,
+        scene_graph=scene_graph,
+        humanoid=humanoid,
+        push_source=push_source,
+        sensors=sensors,
+        model=model,
+        classical=classical,
+        internal=internal,
+        external=external,
+        joint_names=joint_names,
+        initial_state=initial_state,
+        loggers=loggers,
+        meshcat_visualizer=visualizer,
+    )
+
+
+def set_initial_state(diagram: Diagram, context: Context, handles: ResidualEstimationHandles) -> None:
+    """Puts the robot in its initial (standing) state in the diagram's ``context``."""
+    plant_context = handles.plant.GetMyMutableContextFromRoot(context)
+    handles.plant.SetPositionsAndVelocities(plant_context, handles.initial_state)

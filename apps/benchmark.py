@@ -28,6 +28,7 @@ from pydrake.multibody.plant import MultibodyPlant
 
 from models import MODEL_NAMES, add_humanoid
 from systems.floating_base import FloatingBaseDynamics
+from systems.residuals import ClassicalResidual, ExternalResidual, InternalResidual, ResidualModel
 
 
 def _median_microseconds(call: Callable[[int], object], calls: int, batches: int) -> float:
@@ -101,6 +102,57 @@ def benchmark_model(name: str, *, calls: int = 300, batches: int = 7, reference_
     return results
 
 
+def benchmark_residual_update(name: str, *, calls: int = 200, batches: int = 7) -> dict:
+    """One update of the classical, internal and external residuals (sharing one
+    ResidualModel, with the humanoid's F/T sensors as known wrenches) at a new state [us]."""
+    plant = MultibodyPlant(time_step=0.0)
+    handles = add_humanoid(plant, name)
+    plant.Finalize()
+    states = _random_states(plant, 16, seed=1)
+    n = plant.num_velocities() - 6
+    frames = tuple(handles.ft_sensor_frames.values())
+    model = ResidualModel(plant)
+    residuals = [
+        ClassicalResidual(plant, 35.0, known_wrench_frames=frames, model=model),
+        InternalResidual(plant, 35.0, known_wrench_frames=frames, model=model),
+        ExternalResidual(plant, 35.0, known_wrench_frames=frames, model=model),
+    ]
+    rng = np.random.default_rng(2)
+    torque, wrenches = rng.normal(size=n), rng.normal(size=6 * len(frames))
+    contexts = []
+    for residual in residuals:  # the same sensor signals feed all three, as in a diagram
+        context = residual.CreateDefaultContext()
+        if residual.HasInputPort("measured_torque"):
+            residual.GetInputPort("measured_torque").FixValue(context, torque)
+        if frames:
+            residual.GetInputPort("known_wrenches").FixValue(context, wrenches)
+        contexts.append(context)
+    fixed = [residual.GetInputPort("state").FixValue(context, np.concatenate(states[0])) for residual, context in zip(residuals, contexts)]
+    full_states = [np.concatenate(s) for s in states]
+
+    def update_all(i: int):
+        x = full_states[i % 16]
+        for residual, context, value in zip(residuals, contexts, fixed):
+            value.GetMutableData().set_value(x)
+            residual.EvalUniquePeriodicDiscreteUpdate(context)
+
+    context = plant.CreateDefaultContext()
+
+    def mass_matrix(i: int):
+        plant.SetPositions(context, states[i % 16][0])
+        return plant.CalcMassMatrix(context)
+
+    unit = _median_microseconds(mass_matrix, calls, batches)
+    update = _median_microseconds(update_all, calls, batches)
+    return {
+        "model": name,
+        "known_wrench_frames": len(frames),
+        "calc_mass_matrix_us": unit,
+        "three_residuals_update_us": update,
+        "three_residuals_update_ratio": update / unit,
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--model", choices=(*MODEL_NAMES, "all"), default="all")
@@ -124,9 +176,20 @@ def main(argv: list[str] | None = None) -> int:
             f" {r['fast_floating_jacobian_us']:>7.1f} us ({r['fast_floating_jacobian_ratio']:>4.1f}x)"
             f" {r['reference_over_fast']:>8.0f}x"
         )
+    residual_rows = [benchmark_residual_update(name, calls=max(args.calls // 2, 1), batches=args.batches) for name in names]
+    print()
+    print("Residual update: classical + internal + external, one shared model, at a new state (us per update)")
+    header = f"{'model':<10} {'F/T frames':>10} {'CalcMassMatrix':>15} {'three residuals':>22}"
+    print(header)
+    print("-" * len(header))
+    for r in residual_rows:
+        print(
+            f"{r['model']:<10} {r['known_wrench_frames']:>10} {r['calc_mass_matrix_us']:>12.1f} us"
+            f" {r['three_residuals_update_us']:>11.1f} us ({r['three_residuals_update_ratio']:>5.1f}x)"
+        )
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(rows, indent=2))
+        args.json.write_text(json.dumps({"floating_base": rows, "residual_update": residual_rows}, indent=2))
     return 0
 
 

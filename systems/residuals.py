@@ -45,6 +45,7 @@ has no ``measured_torque`` input.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -96,6 +97,7 @@ class ResidualModel:
         self._key: bytes | None = None
         self._terms: FloatingBaseTerms | None = None
         self._jacobians: dict[int, np.ndarray] = {}
+        self._known_cache: dict = {}
 
     def check_frames(self, frames: Sequence[Frame | str]) -> tuple[Frame, ...]:
         """See ``check_wrench_frames``."""
@@ -108,6 +110,7 @@ class ResidualModel:
             nq = self.num_positions
             self._terms = self.dynamics.compute(x[:nq], x[nq:])
             self._jacobians = {}
+            self._known_cache = {}
             self._key = key
             if not self._context_is_current:
                 self._q_F0[7:] = x[7:nq]
@@ -129,7 +132,7 @@ class ResidualModel:
         return J
 
     def known_wrench_forces(
-        self, terms: FloatingBaseTerms, frames: Sequence[Frame], wrenches_W: np.ndarray
+        self, terms: FloatingBaseTerms, frames: Sequence[Frame], wrenches_W: np.ndarray, frames_key=None
     ) -> tuple[np.ndarray, np.ndarray]:
         """Generalized forces of measured wrenches (F/T sensors) at the last evaluated state.
 
@@ -137,32 +140,38 @@ class ResidualModel:
             terms: the result of ``evaluate`` for this state.
             frames: the frames at whose origins the wrenches act.
             wrenches_W: (6 k,) [moment about the frame origin; force] per frame, in world.
+            frames_key: a hashable that identifies ``frames`` (their indices by default).
 
         Returns:
             (w_F0, tau_joints): their sum as a base wrench in F0 about the F0 origin
             ([moment; force], the paper's f_bar_sum of eq. 16), and their joint torques
-            J_j^T w (the joint part of the classical model's generalized force).
+            J_j^T w (the joint part of the classical model's generalized force). Cached:
+            residuals sharing this model with the same frames and wrenches reuse it.
         """
+        if frames_key is None:
+            frames_key = tuple(int(f.index()) for f in frames)
+        key = (frames_key, wrenches_W.tobytes())
+        cached = self._known_cache.get(key)
+        if cached is not None:
+            return cached
         R_WB = terms.R_WB
-        w_F0 = np.zeros(6)
-        tau = np.zeros(self.num_joints)
+        generalized = np.zeros(self.num_velocities)
         for i, frame in enumerate(frames):
-            w = wrenches_W[6 * i : 6 * i + 6]
             # Rotate [m; f] into F0 (the Jacobian is expressed in F0, at the frame origin).
-            w_B = (w.reshape(2, 3) @ R_WB).reshape(6)
-            generalized = self.spatial_jacobian_F0(frame).T @ w_B
-            w_F0 += generalized[:6]
-            tau += generalized[6:]
-        return w_F0, tau
+            w_B = (wrenches_W[6 * i : 6 * i + 6].reshape(2, 3) @ R_WB).reshape(6)
+            generalized += self.spatial_jacobian_F0(frame).T @ w_B
+        result = (generalized[:6], generalized[6:])
+        self._known_cache[key] = result
+        return result
 
     def base_wrench_to_world(self, terms: FloatingBaseTerms, x: np.ndarray, w_F0: np.ndarray) -> np.ndarray:
         """[moment about the F0 origin; force] in F0 -> [moment about the world origin; force]
         in world."""
-        R_WB = terms.R_WB
-        moment_W = R_WB @ w_F0[:3]
-        force_W = R_WB @ w_F0[3:]
-        p_WBo = self._p_WP + self._R_WP @ x[4:7]
-        return np.concatenate((moment_W + np.cross(p_WBo, force_W), force_W))
+        moment_W, force_W = w_F0.reshape(2, 3) @ terms.R_WB.T  # rows: R m, R f
+        px, py, pz = (self._p_WP + self._R_WP @ x[4:7]).tolist()
+        fx, fy, fz = force_W.tolist()
+        shift = np.array((py * fz - pz * fy, pz * fx - px * fz, px * fy - py * fx))  # p_WBo x f
+        return np.concatenate((moment_W + shift, force_W))
 
 
 def check_wrench_frames(plant: MultibodyPlant, frames: Sequence[Frame | str]) -> tuple[Frame, ...]:
@@ -293,6 +302,7 @@ class _MomentumResidual(LeafSystem):
                 f"got K in [{self._gain.min()}, {self._gain.max()}] 1/s"
             )
         self._frames = self._model.check_frames(known_wrench_frames)
+        self._frames_key = tuple(int(f.index()) for f in self._frames)
         n = self._model.num_joints
         nx = self._model.num_positions + self._model.num_velocities
         self._num_positions = self._model.num_positions
@@ -330,9 +340,10 @@ class _MomentumResidual(LeafSystem):
 
     def _checked_input(self, port, context: Context) -> np.ndarray:
         value = port.Eval(context)
-        if not np.isfinite(value).all():
+        if not math.isfinite(float(value @ value)):  # one dot product; details only on failure
             bad = np.flatnonzero(~np.isfinite(value)).tolist()
-            raise ValueError(f"{type(self).__name__}: input '{port.get_name()}' has NaN or inf at indices {bad}")
+            if bad:
+                raise ValueError(f"{type(self).__name__}: input '{port.get_name()}' has NaN or inf at indices {bad}")
         return value
 
     def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
@@ -345,7 +356,7 @@ class _MomentumResidual(LeafSystem):
         known = None
         if self._frames:
             wrenches = self._checked_input(self._wrench_port, context)
-            known = self._model.known_wrench_forces(terms, self._frames, wrenches)
+            known = self._model.known_wrench_forces(terms, self._frames, wrenches, self._frames_key)
         momentum, model_rate, measured_rate = self._momentum_and_rates(terms, x, tau_m, known)
 
         half_step = 0.5 * self._period * model_rate

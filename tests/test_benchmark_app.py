@@ -8,11 +8,14 @@ from apps import benchmark
 def test_benchmark_runs_and_reports_every_figure(tmp_path, capsys):
     out = tmp_path / "bench.json"
     assert benchmark.main(["--model", "nao_like", "--calls", "3", "--batches", "1", "--json", str(out)]) == 0
-    rows = json.loads(out.read_text())
+    results = json.loads(out.read_text())
+    rows = results["floating_base"]
     assert [r["model"] for r in rows] == ["nao_like"]
     row = rows[0]
     assert row["num_joints"] == 26
     for key in ("calc_mass_matrix_us", "fast_compute_us", "reference_compute_us", "fast_floating_jacobian_us"):
         assert row[key] > 0.0
     assert row["fast_compute_ratio"] == row["fast_compute_us"] / row["calc_mass_matrix_us"]
+    (residual,) = results["residual_update"]
+    assert residual["model"] == "nao_like" and residual["three_residuals_update_us"] > 0.0
     assert "nao_like" in capsys.readouterr().out

@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: demo test bench install clean
+.PHONY: demo test bench residuals install clean
 
 install: $(STAMP)
 
@@ -24,6 +24,9 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) -m apps.benchmark $(ARGS)
+
+residuals: $(STAMP)
+	$(PY) -m apps.residual_comparison $(ARGS)
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

@@ -17,7 +17,11 @@ as permissive as the model) by default except the joint-limit clip:
 3. the integration step, see below;
 4. q_d clipped into the joint position limits (the model's, shrunk by ``limit_margin``,
    or given ones), so that the PD never drives a joint into its end stop and, in
-   "desired" mode, the integrator cannot wind up beyond a limit.
+   "desired" mode, the integrator cannot wind up beyond a limit. A joint whose base
+   position (below) is already outside these limits — e.g. resting on its model limit,
+   within the margin, as HRP-4's hand joints in the nominal posture — is not pulled in
+   (that would be a jump of up to the margin): its q_d just may not move further out,
+   i.e. the clip interval is [min(lower, base), max(upper, base)].
 
 Integration (``integrate_from``):
 
@@ -177,7 +181,7 @@ class JointAdmittanceController(LeafSystem):
     then computes
 
         r' = soft_threshold(r, dead_band),  q̇_d = clip(K_a r', ±max_rate),
-        q_d <- clip(base + q̇_d T, lower, upper),
+        q_d <- clip(base + q̇_d T, min(lower, base), max(upper, base)),
 
     with base = the measured q ("measured", eq. 14) or the previous q_d ("desired").
     """
@@ -363,15 +367,20 @@ class JointAdmittanceController(LeafSystem):
 
     def CalcNextDesiredPosition(self, residual: np.ndarray, measured_position: np.ndarray,
                                 previous_desired: np.ndarray) -> np.ndarray:
-        """One update: clip(base + q̇_d T, limits), base = measured or previous q_d.
+        """One update: q_d = base + q̇_d T clipped into the limits (a base outside them is
+        not pulled in, see the module doc),
+        base = measured q or previous q_d.
 
         ``residual`` has the size of the residual input (nv when it includes the base)."""
         r = np.asarray(residual, dtype=float)
         if self._residual_includes_base:
             r = r[6:]
         base = measured_position if self._integrate_from == "measured" else previous_desired
-        q_d = np.asarray(base, dtype=float) + self.CalcDesiredRate(r) * self._period
-        return np.clip(q_d, self._lower, self._upper)
+        base = np.asarray(base, dtype=float)
+        q_d = base + self.CalcDesiredRate(r) * self._period
+        # A base already outside [lower, upper] (e.g. a joint resting on its model limit,
+        # inside the margin) is not pulled in: q_d may not go further out, nor jump in.
+        return np.clip(q_d, np.minimum(self._lower, base), np.maximum(self._upper, base))
 
     def _eval_input(self, port, context: Context) -> np.ndarray:
         value = port.Eval(context)

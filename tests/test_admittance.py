@@ -1,0 +1,372 @@
+"""Tests of systems.admittance.JointAdmittanceController (Flacco et al. 2016, eq. 14)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import RevoluteJoint, SpatialInertia
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
+
+from models import add_humanoid
+from systems.admittance import (
+    JointAdmittanceController,
+    admittance_gains_by_group,
+    joint_position_selector,
+    soft_threshold,
+)
+from systems.pd_gravity import PdGravityController, joint_vector_from_names, joints_in_velocity_order
+
+T = 1e-3
+LOWER = np.array([-1.0, -0.5, -2.0])
+UPPER = np.array([1.0, 0.7, 0.1])
+
+
+def _chain_plant(time_step=0.0, limits=True):
+    """Floating base + 3 revolute links, position limits LOWER/UPPER."""
+    plant = MultibodyPlant(time_step)
+    base = plant.AddRigidBody("base", SpatialInertia.SolidBoxWithMass(5.0, 0.2, 0.2, 0.2))
+    parent = base
+    for i in range(3):
+        link = plant.AddRigidBody(f"link{i}", SpatialInertia.SolidBoxWithMass(1.0, 0.1, 0.1, 0.3))
+        kwargs = dict(pos_lower_limit=LOWER[i], pos_upper_limit=UPPER[i]) if limits else {}
+        joint = plant.AddJoint(RevoluteJoint(f"j{i}", parent.body_frame(), link.body_frame(),
+                                             [0.0, 1.0, 0.0], **kwargs))
+        plant.AddJointActuator(f"a{i}", joint, 50.0)
+        parent = link
+    plant.Finalize()
+    return plant
+
+
+@pytest.fixture(scope="module")
+def chain():
+    return _chain_plant()
+
+
+def _context(dut, residual, measured):
+    ctx = dut.CreateDefaultContext()
+    dut.get_residual_input_port().FixValue(ctx, np.asarray(residual, dtype=float))
+    dut.get_measured_position_input_port().FixValue(ctx, np.asarray(measured, dtype=float))
+    return ctx
+
+
+def _step(dut, ctx, times=1):
+    """Applies ``times`` periodic updates to ctx (the discrete state) in place."""
+    for _ in range(times):
+        ctx.SetDiscreteState(dut.EvalUniquePeriodicDiscreteUpdate(ctx))
+        ctx.SetTime(ctx.get_time() + dut.period)
+    return dut.get_desired_position_output_port().Eval(ctx)
+
+
+Q0 = np.array([0.1, -0.2, -0.3])
+R = np.array([2.0, -3.0, 0.5])
+
+
+# -- ports and structure ---------------------------------------------------------------
+
+
+def test_ports_and_no_direct_feedthrough(chain):
+    dut = JointAdmittanceController(chain, 0.1)
+    assert dut.joint_count == 3
+    assert dut.get_input_port(0).get_name() == "residual" and dut.get_input_port(0).size() == 3
+    assert dut.get_input_port(1).get_name() == "measured_position" and dut.get_input_port(1).size() == 3
+    assert dut.get_output_port(0).get_name() == "desired_position" and dut.get_output_port(0).size() == 3
+    assert not dut.HasDirectFeedthrough(0, 0)
+    assert not dut.HasDirectFeedthrough(1, 0)
+    assert not dut.HasAnyDirectFeedthrough()
+    classical = JointAdmittanceController(chain, 0.1, residual_includes_base=True)
+    assert classical.get_residual_input_port().size() == chain.num_velocities() == 9
+
+
+# -- the law -----------------------------------------------------------------------------
+
+
+def test_one_update_measured_mode_is_eq14(chain):
+    K = np.array([0.1, 0.2, 0.05])
+    dut = JointAdmittanceController(chain, K, T, position_limits=None)
+    ctx = _context(dut, R, Q0)
+    q_d = _step(dut, ctx)
+    np.testing.assert_array_equal(q_d, Q0 + K * R * T)
+    # Measured mode does not accumulate: with the same measured q, more updates give the
+    # same q_d.
+    np.testing.assert_array_equal(_step(dut, ctx, 5), Q0 + K * R * T)
+
+
+def test_desired_mode_integrates_residual(chain):
+    K = np.array([0.1, 0.2, 0.05])
+    dut = JointAdmittanceController(chain, K, 2e-3, position_limits=None, integrate_from="desired")
+    ctx = _context(dut, R, Q0)
+    N = 25
+    q_d = _step(dut, ctx, N)
+    np.testing.assert_allclose(q_d, Q0 + N * K * R * 2e-3, rtol=0, atol=1e-14)
+    # It integrates from q_d, not from the measured position (which stays at Q0).
+    dut.get_measured_position_input_port().FixValue(ctx, Q0 + 1.0)
+    np.testing.assert_allclose(_step(dut, ctx), Q0 + (N + 1) * K * R * 2e-3, atol=1e-14)
+
+
+def test_scalar_gain_and_per_joint_zero_gain(chain):
+    dut = JointAdmittanceController(chain, [0.0, 0.3, 0.0], T, position_limits=None)
+    q_d = _step(dut, _context(dut, R, Q0))
+    np.testing.assert_array_equal(q_d, [Q0[0], Q0[1] + 0.3 * R[1] * T, Q0[2]])
+    dut = JointAdmittanceController(chain, 0.3, T, position_limits=None)
+    np.testing.assert_array_equal(_step(dut, _context(dut, R, Q0)), Q0 + 0.3 * R * T)
+
+
+def test_classical_residual_drops_base_entries(chain):
+    K = np.array([0.1, 0.2, 0.05])
+    dut = JointAdmittanceController(chain, K, T, position_limits=None, residual_includes_base=True)
+    base_part = np.array([100.0, -50.0, 7.0, 30.0, 1.0, -9.0])
+    q_d = _step(dut, _context(dut, np.concatenate([base_part, R]), Q0))
+    np.testing.assert_array_equal(q_d, Q0 + K * R * T)
+
+
+def test_first_update_and_initialisation_start_from_measured(chain):
+    dut = JointAdmittanceController(chain, 0.5, T, integrate_from="desired")
+    # No initialisation event: the first periodic update starts from the measured q.
+    ctx = _context(dut, np.zeros(3), Q0)
+    np.testing.assert_array_equal(_step(dut, ctx), Q0)
+    # In a simulator, the initialisation event sets q_d = measured before any update.
+    builder = DiagramBuilder()
+    sys = builder.AddSystem(dut)
+    builder.Connect(builder.AddSystem(ConstantVectorSource(np.zeros(3))).get_output_port(),
+                    sys.get_residual_input_port())
+    builder.Connect(builder.AddSystem(ConstantVectorSource(Q0)).get_output_port(),
+                    sys.get_measured_position_input_port())
+    diagram = builder.Build()
+    sim = Simulator(diagram)
+    sim.Initialize()
+    out = sys.get_desired_position_output_port().Eval(sys.GetMyContextFromRoot(sim.get_context()))
+    np.testing.assert_array_equal(out, Q0)
+    # initial_position overrides the measured position (desired mode keeps it).
+    q_init = np.array([0.3, 0.2, -0.1])
+    dut2 = JointAdmittanceController(chain, 0.5, T, integrate_from="desired", initial_position=q_init)
+    ctx2 = _context(dut2, np.zeros(3), Q0)
+    np.testing.assert_array_equal(dut2.get_desired_position_output_port().Eval(ctx2), q_init)
+    np.testing.assert_array_equal(_step(dut2, ctx2, 3), q_init)
+
+
+def test_dead_band_is_soft_threshold(chain):
+    np.testing.assert_array_equal(soft_threshold([2.0, -3.0, 0.5, -0.5, 0.0], 1.0),
+                                  [1.0, -2.0, 0.0, 0.0, 0.0])
+    db = np.array([1.0, 1.0, 0.6])  # per joint: the third |r| = 0.5 is inside
+    dut = JointAdmittanceController(chain, 0.1, T, dead_band=db, position_limits=None)
+    q_d = _step(dut, _context(dut, R, Q0))
+    np.testing.assert_allclose(q_d, Q0 + 0.1 * np.array([1.0, -2.0, 0.0]) * T, atol=1e-15)
+    dut = JointAdmittanceController(chain, 0.1, T, dead_band=5.0, position_limits=None)
+    np.testing.assert_array_equal(_step(dut, _context(dut, R, Q0)), Q0)
+
+
+def test_max_rate_clips_rate(chain):
+    K = 1.0
+    dut = JointAdmittanceController(chain, K, T, max_rate=[1.0, 2.5, 10.0], position_limits=None)
+    q_d = _step(dut, _context(dut, R, Q0))
+    # K r = [2, -3, 0.5] -> [1, -2.5, 0.5]
+    np.testing.assert_allclose(q_d, Q0 + np.array([1.0, -2.5, 0.5]) * T, atol=1e-15)
+    assert np.all(np.isinf(JointAdmittanceController(chain, K).max_rate))
+
+
+def test_model_limits_with_margin(chain):
+    margin = 0.05
+    dut = JointAdmittanceController(chain, 100.0, T, integrate_from="desired", limit_margin=margin)
+    np.testing.assert_allclose(dut.position_lower_limits, LOWER + margin)
+    np.testing.assert_allclose(dut.position_upper_limits, UPPER - margin)
+    big = np.array([1e3, -1e3, 1e3])
+    q_d = _step(dut, _context(dut, big, Q0), 10)
+    np.testing.assert_allclose(q_d, [UPPER[0] - margin, LOWER[1] + margin, UPPER[2] - margin])
+    # Also in measured mode.
+    dut = JointAdmittanceController(chain, 100.0, T, limit_margin=margin)
+    q_d = _step(dut, _context(dut, -big, Q0), 10)
+    np.testing.assert_allclose(q_d, [LOWER[0] + margin, UPPER[1] - margin, LOWER[2] + margin])
+    # A joint resting on its model limit (inside the margin) is not pulled in (no jump)
+    # and cannot go further out; it can move inwards.
+    q_at_limit = np.array([UPPER[0], LOWER[1] + 0.01, 0.0])
+    for mode in ("measured", "desired"):
+        dut = JointAdmittanceController(chain, 1.0, T, limit_margin=margin, integrate_from=mode)
+        ctx = _context(dut, [5.0, -5.0, 0.0], q_at_limit)
+        np.testing.assert_array_equal(_step(dut, ctx, 3), q_at_limit)
+        dut.get_residual_input_port().FixValue(ctx, [-5.0, 5.0, 0.0])
+        np.testing.assert_allclose(_step(dut, ctx), q_at_limit + [-5.0 * T, 5.0 * T, 0.0])
+    # A range narrower than two margins collapses to its middle.
+    dut = JointAdmittanceController(chain, 1.0, limit_margin=0.7)
+    assert dut.position_lower_limits[1] == dut.position_upper_limits[1] == pytest.approx(0.1)
+    np.testing.assert_allclose(dut.position_upper_limits[[0, 2]], UPPER[[0, 2]] - 0.7)
+
+
+def test_custom_limits_and_no_limits(chain):
+    lo, hi = np.array([-0.01, -1.0, -np.inf]), np.array([0.2, 0.0, np.inf])
+    dut = JointAdmittanceController(chain, 100.0, T, position_limits=(lo, hi), limit_margin=0.3,
+                                    integrate_from="desired")
+    np.testing.assert_array_equal(dut.position_lower_limits, lo)  # margin not applied
+    q_d = _step(dut, _context(dut, [1e3, 1e3, 1e3], Q0), 10)
+    np.testing.assert_allclose(q_d, [0.2, 0.0, Q0[2] + 10 * 100.0 * 1e3 * T])
+    dut = JointAdmittanceController(chain, 100.0, T, position_limits=None, integrate_from="desired")
+    q_d = _step(dut, _context(dut, [1e3, -1e3, 1e3], Q0), 10)
+    np.testing.assert_allclose(q_d, Q0 + 10 * 100.0 * np.array([1e3, -1e3, 1e3]) * T)
+    # Scalar custom limits.
+    dut = JointAdmittanceController(chain, 100.0, T, position_limits=(-0.05, 0.05))
+    np.testing.assert_allclose(_step(dut, _context(dut, [1e3, -1e3, 0.0], Q0)), [0.05, -0.05, -0.05])
+
+
+# -- humanoid helpers ----------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def hrp4():
+    plant = MultibodyPlant(T)
+    handles = add_humanoid(plant, "hrp4_like")
+    plant.mutable_gravity_field().set_gravity_vector([0.0, 0.0, 0.0])
+    plant.Finalize()
+    return plant, handles
+
+
+def test_gains_by_group(hrp4):
+    plant, handles = hrp4
+    names = [j.name() for j in joints_in_velocity_order(plant)]
+    K = admittance_gains_by_group(plant, handles, {"legs": 0.2, "torso": 1.0, "arms": 0.5,
+                                                   "left_arm": 0.7}, default=0.01)
+    assert K.shape == (len(names),)
+    for k, name in enumerate(names):
+        if name in handles.joint_groups["left_arm"]:
+            assert K[k] == 0.7  # later group overrides
+        elif name in handles.joint_groups["arms"]:
+            assert K[k] == 0.5
+        elif name in handles.joint_groups["legs"]:
+            assert K[k] == 0.2
+        elif name in handles.joint_groups["torso"]:
+            assert K[k] == 1.0
+        else:
+            assert K[k] == 0.01, name  # head, hands
+    with pytest.raises(ValueError, match="unknown joint group 'tail'"):
+        admittance_gains_by_group(plant, handles, {"tail": 1.0})
+    with pytest.raises(ValueError, match="group 'arms'.*non-negative"):
+        admittance_gains_by_group(plant, handles, {"arms": -1.0})
+    with pytest.raises(ValueError, match="default"):
+        admittance_gains_by_group(plant, handles, {}, default=-0.1)
+
+
+def test_closed_loop_joint_moves_with_effort_and_stops_at_limit(hrp4):
+    """hrp4_like in zero gravity, no ground: a constant +5 N m "residual" on R_ELBOW_P
+    (limits [-2.5, 0]) moves that joint up, in desired mode, until q_d stops at the
+    margin-shrunk upper limit 0 - 0.02 and the PD brings the joint there; the other joints
+    stay where they were."""
+    plant, handles = hrp4
+    joints = joints_in_velocity_order(plant)
+    names = [j.name() for j in joints]
+    n = len(joints)
+    k_elbow = names.index("R_ELBOW_P")
+    K_a = admittance_gains_by_group(plant, handles, {"arms": 0.1}, default=0.05)
+    residual = np.zeros(n)
+    residual[k_elbow] = 5.0  # K_a r = 0.5 rad/s
+
+    builder = DiagramBuilder()
+    builder.AddSystem(plant)
+    pd = builder.AddSystem(PdGravityController(plant, kp=200.0, kd=10.0))
+    adm = builder.AddSystem(JointAdmittanceController(plant, K_a, T, integrate_from="desired"))
+    select = builder.AddSystem(joint_position_selector(plant))
+    source = builder.AddSystem(ConstantVectorSource(residual))
+    builder.Connect(plant.get_state_output_port(), select.get_input_port())
+    builder.Connect(plant.get_state_output_port(), pd.get_state_input_port())
+    builder.Connect(select.get_output_port(), adm.get_measured_position_input_port())
+    builder.Connect(source.get_output_port(), adm.get_residual_input_port())
+    builder.Connect(adm.get_desired_position_output_port(), pd.get_desired_position_input_port())
+    builder.Connect(pd.get_output_port(), plant.get_actuation_input_port())
+    log_q = LogVectorOutput(select.get_output_port(), builder, publish_period=0.01)
+    log_qd = LogVectorOutput(adm.get_desired_position_output_port(), builder, publish_period=0.01)
+    diagram = builder.Build()
+
+    sim = Simulator(diagram)
+    root = sim.get_mutable_context()
+    plant_ctx = plant.GetMyMutableContextFromRoot(root)
+    q_start = joint_vector_from_names(plant, handles.nominal_posture)
+    for j, value in zip(joints, q_start):
+        j.set_angle(plant_ctx, value)
+    sim.Initialize()
+    sim.AdvanceTo(1.5)
+
+    q = log_q.FindLog(sim.get_context()).data()
+    q_d = log_qd.FindLog(sim.get_context()).data()
+    t = log_q.FindLog(sim.get_context()).sample_times()
+    upper = plant.GetPositionUpperLimits()[joints[k_elbow].position_start()] - 0.02
+    assert upper == pytest.approx(-0.02)
+    # No jump at start: q_d starts at the measured posture.
+    np.testing.assert_allclose(q_d[:, 0], q_start, atol=1e-3)
+    # q_d ramps at K_a r = 0.5 rad/s until the limit (initial elbow angle -0.3).
+    i = np.searchsorted(t, 0.3)
+    assert q_d[k_elbow, i] == pytest.approx(q_start[k_elbow] + 0.5 * t[i], abs=2e-3)
+    # The elbow moves in the direction of the effort, monotonically up to small ripple.
+    assert np.all(np.diff(q[k_elbow]) > -1e-3)
+    assert q[k_elbow, i] > q_start[k_elbow] + 0.05
+    # ... and stops at the shrunk limit, never beyond.
+    assert np.max(q_d[k_elbow]) <= upper + 1e-12
+    assert q_d[k_elbow, -1] == pytest.approx(upper, abs=1e-12)
+    assert q[k_elbow, -1] == pytest.approx(upper, abs=5e-3)
+    assert np.max(q[k_elbow]) < upper + 0.01
+    assert np.max(np.abs(np.diff(q[k_elbow, -20:]))) < 1e-3  # at rest
+    # Other joints: no residual, so (in desired mode) no motion of their references.
+    others = np.arange(n) != k_elbow
+    np.testing.assert_allclose(q_d[others, -1], q_d[others, 0], atol=1e-12)
+    np.testing.assert_allclose(q[others, -1], q_start[others], atol=0.02)
+
+
+# -- validation ------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(gains=[0.1, 0.2]), "gains must be a scalar or have shape"),
+        (dict(gains=[0.1, -0.2, 0.3]), r"gains must be non-negative; negative at joint indices \[1\]"),
+        (dict(gains=np.nan), "gains has non-finite"),
+        (dict(gains=0.1, dead_band=-1.0), "dead_band must be non-negative"),
+        (dict(gains=0.1, max_rate=[1.0, -1.0, 1.0]), "max_rate must be non-negative"),
+        (dict(gains=0.1, max_rate=[1.0, 1.0]), "max_rate must be a scalar or have shape"),
+        (dict(gains=0.1, period=0.0), "period must be a positive"),
+        (dict(gains=0.1, period=-1e-3), "period must be a positive"),
+        (dict(gains=0.1, limit_margin=-0.1), "limit_margin must be finite and non-negative"),
+        (dict(gains=0.1, position_limits=([0.0, 0.5, 0.0], [1.0, 0.4, 1.0])),
+         r"position_limits lower > upper at joint indices \[1\] \(j1\)"),
+        (dict(gains=0.1, position_limits=([0.0, 0.0], [1.0, 1.0])), "position_limits lower must be"),
+        (dict(gains=0.1, position_limits="urdf"), "position_limits must be 'model'"),
+        (dict(gains=0.1, position_limits=(0.0,)), "position_limits must be"),
+        (dict(gains=0.1, initial_position=[0.0, 0.0]), "initial_position must be a scalar or have shape"),
+        (dict(gains=0.1, initial_position=[0.0, np.nan, 0.0]), "initial_position has non-finite"),
+        (dict(gains=0.1, integrate_from="previous"), "integrate_from must be one of"),
+    ],
+)
+def test_bad_parameters_raise(chain, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        JointAdmittanceController(chain, **kwargs)
+
+
+def test_bad_plants_raise():
+    with pytest.raises(ValueError, match="finalized"):
+        JointAdmittanceController(MultibodyPlant(0.0), 0.1)
+    fixed = MultibodyPlant(0.0)
+    link = fixed.AddRigidBody("link", SpatialInertia.SolidBoxWithMass(1.0, 0.1, 0.1, 0.1))
+    fixed.AddJoint(RevoluteJoint("j", fixed.world_frame(), link.body_frame(), [0, 0, 1]))
+    fixed.Finalize()
+    with pytest.raises(ValueError, match="JointAdmittanceController: .*floating"):
+        JointAdmittanceController(fixed, 0.1)
+    with pytest.raises(ValueError, match="must be a MultibodyPlant"):
+        JointAdmittanceController("plant", 0.1)
+
+
+def test_nan_inputs_raise(chain):
+    dut = JointAdmittanceController(chain, 0.1)
+    ctx = _context(dut, [0.0, np.nan, 0.0], Q0)
+    with pytest.raises(ValueError, match=r"input 'residual' has NaN or inf at indices \[1\]"):
+        _step(dut, ctx)
+    ctx = _context(dut, R, [np.inf, 0.0, 0.0])
+    with pytest.raises(ValueError, match=r"input 'measured_position' has NaN or inf at indices \[0\]"):
+        _step(dut, ctx)
+    # Also at initialisation (Simulator.Initialize) from a NaN measured position.
+    builder = DiagramBuilder()
+    sys = builder.AddSystem(JointAdmittanceController(chain, 0.1))
+    builder.Connect(builder.AddSystem(ConstantVectorSource(np.zeros(3))).get_output_port(),
+                    sys.get_residual_input_port())
+    builder.Connect(builder.AddSystem(ConstantVectorSource([np.nan, 0.0, 0.0])).get_output_port(),
+                    sys.get_measured_position_input_port())
+    with pytest.raises(ValueError, match="measured_position"):
+        Simulator(builder.Build()).Initialize()

@@ -17,22 +17,18 @@ path) floats in zero gravity with no ground, holding its default posture.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, SceneGraph
-from pydrake.multibody.parsing import Parser
-from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
+from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
-from diagrams.standing import default_gains
-from models import MODEL_NAMES, HumanoidHandles, add_ground, add_humanoid, set_standing_state
+from diagrams.humanoid_station import add_humanoid_station
+from models import HumanoidHandles
 from systems.disturbances import Push, PushSource, Sinusoid
-from systems.pd_gravity import PdGravityController
 from systems.residuals import ClassicalResidual, ExternalResidual, InternalResidual, ResidualModel
-from systems.sensors import SensorHandles, add_sensors
-from systems.topology import floating_base_topology
+from systems.sensors import SensorHandles
 
 
 @dataclass
@@ -99,47 +95,6 @@ class ResidualEstimationHandles:
     meshcat_visualizer: MeshcatVisualizer | None = None
 
 
-def _load(plant: MultibodyPlant, scene_graph: SceneGraph, model: str) -> HumanoidHandles | None:
-    if model in MODEL_NAMES:
-        handles = add_humanoid(plant, model, scene_graph=scene_graph)
-        add_ground(plant)
-        return handles
-    path = Path(model)
-    if not path.is_file():
-        raise ValueError(f"--model: '{model}' is neither one of {MODEL_NAMES} nor a readable model file")
-    try:
-        Parser(plant).AddModels(str(path))
-    except Exception as error:  # Drake's parser raises RuntimeError with its own message
-        raise ValueError(f"could not parse the model file '{path}': {error}") from error
-    plant.mutable_gravity_field().set_gravity_vector([0.0, 0.0, 0.0])
-    return None
-
-
-def _set_posture_inside_limits(plant: MultibodyPlant, context: Context, topology) -> None:
-    """Default joint positions, moved to the middle of the range where 0 is within 0.05 of a
-    joint limit (a limit's constraint force would be an unmodelled external effort)."""
-    for joint in topology.joints:
-        lower, upper = joint.position_lower_limits()[0], joint.position_upper_limits()[0]
-        value = plant.GetPositions(context)[joint.position_start()]
-        if not (lower + 0.05 <= value <= upper - 0.05):
-            middle = 0.5 * (lower + upper) if np.isfinite(lower) and np.isfinite(upper) else value
-            q = plant.GetPositions(context)
-            q[joint.position_start()] = middle
-            plant.SetPositions(context, q)
-
-
-def _generic_gains(plant: MultibodyPlant, context: Context, period: float) -> tuple[np.ndarray, np.ndarray]:
-    """PD gains for any robot, from its joint-space inertia H_fb at the posture: kd = 0.2 H/T
-    and kp = 10 kd keep the explicit 1 kHz PD stable (kd T / H well below 2)."""
-    from systems.floating_base import FloatingBaseDynamics
-
-    x = plant.GetPositionsAndVelocities(context)
-    nq = plant.num_positions()
-    inertia = np.diag(FloatingBaseDynamics(plant).compute(x[:nq], x[nq:]).H_fb)
-    kd = 0.2 * inertia / period
-    return 10.0 * kd, kd
-
-
 def build_residual_estimation_diagram(
     config: ResidualEstimationConfig, meshcat: Meshcat | None = None
 ) -> tuple[Diagram, ResidualEstimationHandles]:
@@ -151,29 +106,15 @@ def build_residual_estimation_diagram(
     if config.duration <= 0 or config.push_frequency < 0 or config.log_period <= 0:
         raise ValueError("duration and log_period must be positive, push_frequency non-negative")
     builder = DiagramBuilder()
-    plant, scene_graph = AddMultibodyPlant(
-        MultibodyPlantConfig(time_step=config.time_step, discrete_contact_approximation="sap", contact_model="point"),
-        builder,
+    station = add_humanoid_station(builder, config.model, time_step=config.time_step, noise=config.noise, seed=config.seed)
+    plant, humanoid = station.plant, station.humanoid
+    builder.Connect(
+        builder.AddSystem(ConstantVectorSource(station.q_hold)).get_output_port(), station.desired_position
     )
-    humanoid = _load(plant, scene_graph, config.model)
-    plant.Finalize()
-    topology = floating_base_topology(plant)  # clear ValueError for a model without a floating base
-    joint_names = tuple(j.name() for j in topology.joints)
-
-    # Initial state and the posture to hold.
-    context = plant.CreateDefaultContext()
-    if humanoid is not None:
-        set_standing_state(plant, context, humanoid)
-        kp, kd = default_gains(plant, humanoid)
-    else:
-        _set_posture_inside_limits(plant, context, topology)
-        kp, kd = _generic_gains(plant, context, config.period)
-    initial_state = plant.GetPositionsAndVelocities(context)
-    q_hold = np.array([initial_state[j.position_start()] for j in topology.joints])
     amplitude = config.push_amplitude
     if amplitude is None:
-        mass = plant.CalcTotalMass(context)
-        amplitude = 0.1 * mass * float(np.linalg.norm(plant.gravity_field().gravity_vector()) or 9.81)
+        mass = plant.CalcTotalMass(plant.CreateDefaultContext())
+        amplitude = 0.1 * mass * 9.81
 
     # The pusher and its ground truth.
     push_body = config.push_body
@@ -192,27 +133,8 @@ def build_residual_estimation_diagram(
     builder.Connect(push_source.GetOutputPort("applied_spatial_forces"), plant.get_applied_spatial_force_input_port())
     builder.Connect(plant.get_state_output_port(), push_source.GetInputPort("state"))
 
-    # Sensors (humanoids) or the truth as the sensed state (other models: no sensor suite).
-    controller = builder.AddSystem(PdGravityController(plant, kp, kd))
-    controller.set_name("pd_gravity_controller")
-    builder.Connect(builder.AddSystem(ConstantVectorSource(q_hold)).get_output_port(), controller.GetInputPort("desired_position"))
-    builder.Connect(controller.GetOutputPort("actuation"), plant.get_actuation_input_port())
-    sensors = None
-    if humanoid is not None:
-        sensors = add_sensors(builder, plant, humanoid, noise=config.noise, seed=config.seed)
-        builder.Connect(controller.GetOutputPort("actuation"), sensors.actuation_input)
-        sensed_state = sensors.state
-        measured_torque = sensors.measured_torque
-        known_frames, known_wrenches = sensors.ft_frames, sensors.ft_wrenches
-    else:
-        from pydrake.systems.primitives import MatrixGain
-
-        sensed_state = plant.get_state_output_port()
-        to_joint_torque = builder.AddSystem(MatrixGain(plant.MakeActuationMatrix()[6:, :]))
-        builder.Connect(controller.GetOutputPort("actuation"), to_joint_torque.get_input_port())
-        measured_torque = to_joint_torque.get_output_port()
-        known_frames, known_wrenches = (), None
-    builder.Connect(sensed_state, controller.GetInputPort("state"))
+    sensed_state, measured_torque = station.sensed_state, station.measured_torque
+    known_frames, known_wrenches = station.known_wrench_frames, station.known_wrenches
 
     # The three residuals, sharing one model (one dynamics computation per update).
     model = ResidualModel(plant)
@@ -241,21 +163,21 @@ def build_residual_estimation_diagram(
     }
     visualizer = None
     if meshcat is not None:
-        visualizer = MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)
+        visualizer = MeshcatVisualizer.AddToBuilder(builder, station.scene_graph, meshcat)
     diagram = builder.Build()
     diagram.set_name("residual_estimation")
     return diagram, ResidualEstimationHandles(
         plant=plant,
-        scene_graph=scene_graph,
+        scene_graph=station.scene_graph,
         humanoid=humanoid,
         push_source=push_source,
-        sensors=sensors,
+        sensors=station.sensors,
         model=model,
         classical=classical,
         internal=internal,
         external=external,
-        joint_names=joint_names,
-        initial_state=initial_state,
+        joint_names=station.joint_names,
+        initial_state=station.initial_state,
         loggers=loggers,
         meshcat_visualizer=visualizer,
     )

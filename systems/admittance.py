@@ -17,11 +17,12 @@ as permissive as the model) by default except the joint-limit clip:
 3. the integration step, see below;
 4. q_d clipped into the joint position limits (the model's, shrunk by ``limit_margin``,
    or given ones), so that the PD never drives a joint into its end stop and, in
-   "desired" mode, the integrator cannot wind up beyond a limit. A joint whose base
-   position (below) is already outside these limits — e.g. resting on its model limit,
-   within the margin, as HRP-4's hand joints in the nominal posture — is not pulled in
-   (that would be a jump of up to the margin): its q_d just may not move further out,
-   i.e. the clip interval is [min(lower, base), max(upper, base)].
+   "desired" mode, the integrator cannot wind up beyond a limit. A joint whose previous
+   q_d is outside these limits — e.g. one that starts resting on its model limit, within
+   the margin, as HRP-4's hand joints in the nominal posture — is not pulled in (that
+   would be a jump of up to the margin at the first update): its q_d just may not move
+   further out, i.e. the clip interval is [min(lower, q_d,prev), max(upper, q_d,prev)].
+   Once q_d is inside the limits it stays inside.
 
 Integration (``integrate_from``):
 
@@ -181,7 +182,7 @@ class JointAdmittanceController(LeafSystem):
     then computes
 
         r' = soft_threshold(r, dead_band),  q̇_d = clip(K_a r', ±max_rate),
-        q_d <- clip(base + q̇_d T, min(lower, base), max(upper, base)),
+        q_d <- clip(base + q̇_d T, min(lower, q_d), max(upper, q_d)),
 
     with base = the measured q ("measured", eq. 14) or the previous q_d ("desired").
     """
@@ -367,8 +368,8 @@ class JointAdmittanceController(LeafSystem):
 
     def CalcNextDesiredPosition(self, residual: np.ndarray, measured_position: np.ndarray,
                                 previous_desired: np.ndarray) -> np.ndarray:
-        """One update: q_d = base + q̇_d T clipped into the limits (a base outside them is
-        not pulled in, see the module doc),
+        """One update: q_d = base + q̇_d T clipped into the limits (a previous q_d
+        outside them is not pulled in, see the module doc),
         base = measured q or previous q_d.
 
         ``residual`` has the size of the residual input (nv when it includes the base)."""
@@ -376,11 +377,11 @@ class JointAdmittanceController(LeafSystem):
         if self._residual_includes_base:
             r = r[6:]
         base = measured_position if self._integrate_from == "measured" else previous_desired
-        base = np.asarray(base, dtype=float)
-        q_d = base + self.CalcDesiredRate(r) * self._period
-        # A base already outside [lower, upper] (e.g. a joint resting on its model limit,
-        # inside the margin) is not pulled in: q_d may not go further out, nor jump in.
-        return np.clip(q_d, np.minimum(self._lower, base), np.maximum(self._upper, base))
+        q_d = np.asarray(base, dtype=float) + self.CalcDesiredRate(r) * self._period
+        # A previous q_d outside [lower, upper] (e.g. the start posture of a joint resting on
+        # its model limit, inside the margin) is not pulled in: q_d may not go further out.
+        previous = np.asarray(previous_desired, dtype=float)
+        return np.clip(q_d, np.minimum(self._lower, previous), np.maximum(self._upper, previous))
 
     def _eval_input(self, port, context: Context) -> np.ndarray:
         value = port.Eval(context)

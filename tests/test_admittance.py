@@ -10,6 +10,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
+from diagrams.standing import default_gains
 from models import add_humanoid
 from systems.admittance import (
     JointAdmittanceController,
@@ -188,6 +189,12 @@ def test_model_limits_with_margin(chain):
         np.testing.assert_array_equal(_step(dut, ctx, 3), q_at_limit)
         dut.get_residual_input_port().FixValue(ctx, [-5.0, 5.0, 0.0])
         np.testing.assert_allclose(_step(dut, ctx), q_at_limit + [-5.0 * T, 5.0 * T, 0.0])
+    # Measured mode: a measured q beyond the shrunk limit (overshoot) is pulled back.
+    dut = JointAdmittanceController(chain, 1.0, T, limit_margin=margin)
+    ctx = _context(dut, [5.0, -5.0, 0.0], np.zeros(3))
+    _step(dut, ctx)
+    dut.get_measured_position_input_port().FixValue(ctx, q_at_limit)
+    np.testing.assert_allclose(_step(dut, ctx), [UPPER[0] - margin, LOWER[1] + margin, 0.0])
     # A range narrower than two margins collapses to its middle.
     dut = JointAdmittanceController(chain, 1.0, limit_margin=0.7)
     assert dut.position_lower_limits[1] == dut.position_upper_limits[1] == pytest.approx(0.1)
@@ -206,7 +213,7 @@ def test_custom_limits_and_no_limits(chain):
     np.testing.assert_allclose(q_d, Q0 + 10 * 100.0 * np.array([1e3, -1e3, 1e3]) * T)
     # Scalar custom limits.
     dut = JointAdmittanceController(chain, 100.0, T, position_limits=(-0.05, 0.05))
-    np.testing.assert_allclose(_step(dut, _context(dut, [1e3, -1e3, 0.0], Q0)), [0.05, -0.05, -0.05])
+    np.testing.assert_allclose(_step(dut, _context(dut, [1e3, -1e3, 0.0], np.zeros(3))), [0.05, -0.05, 0.0])
 
 
 # -- humanoid helpers ----------------------------------------------------------------------
@@ -262,7 +269,8 @@ def test_closed_loop_joint_moves_with_effort_and_stops_at_limit(hrp4):
 
     builder = DiagramBuilder()
     builder.AddSystem(plant)
-    pd = builder.AddSystem(PdGravityController(plant, kp=200.0, kd=10.0))
+    kp, kd = default_gains(plant, handles)  # stable explicit 1 kHz PD per joint group
+    pd = builder.AddSystem(PdGravityController(plant, kp, kd))
     adm = builder.AddSystem(JointAdmittanceController(plant, K_a, T, integrate_from="desired"))
     select = builder.AddSystem(joint_position_selector(plant))
     source = builder.AddSystem(ConstantVectorSource(residual))

@@ -110,14 +110,14 @@ def add_humanoid_station(
     builder.Connect(controller.GetOutputPort("actuation"), plant.get_actuation_input_port())
     if humanoid is not None:
         sensors = add_sensors(builder, plant, humanoid, noise=noise, seed=seed)
-        builder.Connect(controller.GetOutputPort("actuation"), sensors.actuation_input)
         sensed_state, measured_torque = sensors.state, sensors.measured_torque
         known_frames, known_wrenches = tuple(sensors.ft_frames), sensors.ft_wrenches
     else:
         sensors = None
         sensed_state = plant.get_state_output_port()
+        # The torque the motors applied over the last step, in joint order (v[6:]).
         to_joint_torque = builder.AddSystem(MatrixGain(plant.MakeActuationMatrix()[6:, :]))
-        builder.Connect(controller.GetOutputPort("actuation"), to_joint_torque.get_input_port())
+        builder.Connect(plant.get_net_actuation_output_port(), to_joint_torque.get_input_port())
         measured_torque = to_joint_torque.get_output_port()
         known_frames, known_wrenches = (), None
     builder.Connect(sensed_state, controller.GetInputPort("state"))

@@ -39,7 +39,7 @@ from pydrake.geometry import (
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import CoulombFriction, MultibodyPlant
-from pydrake.multibody.tree import Frame, Joint, ModelInstanceIndex, RigidBody
+from pydrake.multibody.tree import Frame, ModelInstanceIndex, RigidBody
 
 MODELS_DIR = Path(__file__).resolve().parent
 MODEL_NAMES = ("hrp4_like", "nao_like")

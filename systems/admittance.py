@@ -104,11 +104,12 @@ def admittance_gains_by_group(plant: MultibodyPlant, handles, gains: Mapping[str
     Args:
         plant: the finalized plant holding the humanoid of ``handles``.
         handles: ``models.HumanoidHandles`` of the humanoid.
-        gains: {group name: gain}, group names of ``handles.joint_groups`` (legs, torso,
-            head, arms, hands, left_leg, right_arm, ...), gains in rad/(N m s) (m/(N s)
-            for prismatic joints), non-negative. Groups are applied in the mapping's
-            order, so a later group overrides an earlier one for the joints they share
-            (e.g. ``{"arms": 0.5, "left_arm": 0.0}``).
+        gains: {group or joint name: gain}, group names of ``handles.joint_groups`` (legs,
+            torso, head, arms, hands, left_leg, right_arm, ...) or single joint names of
+            the humanoid (e.g. ``R_ANKLE_P``), gains in rad/(N m s) (m/(N s) for prismatic
+            joints), non-negative. Entries are applied in the mapping's order, so a later
+            one overrides an earlier one for the joints they share (e.g.
+            ``{"arms": 0.5, "left_arm": 0.0}``).
         default: gain of the joints in no listed group (and of joints of the plant that
             belong to no group or to another model instance), rad/(N m s).
 
@@ -126,10 +127,15 @@ def admittance_gains_by_group(plant: MultibodyPlant, handles, gains: Mapping[str
     if not np.isfinite(default) or default < 0:
         raise ValueError(f"{who}: default must be a finite non-negative gain, got {default}")
     out = np.full(len(joints), default)
-    groups = handles.joint_groups
+    groups = dict(handles.joint_groups)
+    for group in gains:
+        if group not in groups and plant.HasJointNamed(group, handles.model_instance):
+            groups[group] = (group,)  # a single joint
     for group, gain in gains.items():
         if group not in groups:
-            raise ValueError(f"{who}: unknown joint group {group!r}; valid groups: {', '.join(sorted(groups))}")
+            raise ValueError(
+                f"{who}: unknown joint group or joint {group!r}; valid groups: {', '.join(sorted(handles.joint_groups))}"
+            )
         try:
             gain = float(gain)
         except (TypeError, ValueError) as err:

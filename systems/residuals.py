@@ -6,18 +6,25 @@
 * ``ExternalResidual``: eq. (16); it estimates the total unknown external wrench on the
   floating base, eq. (17), reported in the base frame and in the world.
 
-All three are discrete-time momentum observers (what runs on a real robot): at each update
-k (period T) with momentum p_k, the momentum rate a_k of the model and of the measured
-wrenches (M_dot nu - bias + known wrenches: continuous signals), and the motor torques minus
-friction u_k (held over the period, as a digital controller applies them),
+All three are discrete-time momentum observers (what runs on a real robot). At each update
+k (period T) they read the momentum p_k of the sensed state, the model's momentum rate a_k
+(M_dot nu - bias: a smooth function of the state), and the measured generalized forces u_k:
+the motor torques minus friction and the known wrenches, as a sensor reports them at t_k,
+i.e. averaged over the last period (t_{k-1}, t_k] (a motor-current or F/T sample; on a
+discrete Drake plant, its net actuation and reaction forces of the last step). Then
 
-    I_k = I_k^- + T/2 a_k,    r_k = K (p_k - I_k),    I_{k+1}^- = I_k + T/2 a_k + T (u_k + r_k),
+    I_k = I_{k-1}^+ + T/2 a_k + T u_k,    r_k = K (p_k - I_k),    I_k^+ = I_k + T/2 a_k + T r_k,
 
 with I_0 = p_0, so r_0 = 0. The trapezoidal rule on a_k makes the integral second-order
 accurate for a continuously moving robot. Since the true momentum obeys
-p_{k+1} = p_k + T (mean rate + tau_ext,k), the residual is the first-order filter
-r_{k+1} = (1 - K T) r_k + K T tau_ext,k of the unknown external effort (time constant about
+p_k = p_{k-1} + T (mean rate + u_k + tau_ext), the residual is the first-order filter
+r_k = (1 - K T) r_{k-1} + K T tau_ext of the unknown external effort (time constant about
 1/K). K T must be in (0, 1).
+
+The timing matters in a closed loop: a torque read at t_k that the motors will apply over
+the NEXT period would differ from the applied one by K_p times the change of the PD target
+within the period, and an admittance loop driven by the residual (eq. 14) would feed that
+error back into itself.
 
 Model and coordinates (see ``systems.floating_base_terms``): the base velocity is the
 paper's v0 in the base frame F0, so the generalized momentum of model (8) is
@@ -325,7 +332,7 @@ class _MomentumResidual(LeafSystem):
 
     # -- subclass hooks -------------------------------------------------------------------
     def _momentum_and_rates(self, terms, x, tau_m, known) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(momentum p, smooth rate a incl. known wrenches, held motor torques u) at one state."""
+        """(momentum p, model rate a, measured generalized forces u) at one sensed state."""
         raise NotImplementedError  # pragma: no cover - abstract
 
     # -- helpers --------------------------------------------------------------------------
@@ -362,15 +369,15 @@ class _MomentumResidual(LeafSystem):
         half_step = 0.5 * self._period * model_rate
         initialised = context.get_discrete_state(self._flag_index).get_value()[0] > 0.5
         if initialised:
-            integral = context.get_discrete_state(self._integral_index).get_value() + half_step
+            integral = (
+                context.get_discrete_state(self._integral_index).get_value() + half_step + self._period * measured_rate
+            )
             residual = self._gain * (momentum - integral)
-        else:  # First update: I_0 = p_0, so that r_0 = 0.
+        else:  # First update: I_0 = p_0, so that r_0 = 0 (no measured period yet).
             integral = momentum
             residual = np.zeros(self._size)
         discrete_state.set_value(self._flag_index, [1.0])
-        discrete_state.set_value(
-            self._integral_index, integral + half_step + self._period * (measured_rate + residual)
-        )
+        discrete_state.set_value(self._integral_index, integral + half_step + self._period * residual)
         discrete_state.set_value(self._residual_index, residual)
         self._after_update(discrete_state, terms, x, residual)
 
@@ -439,7 +446,7 @@ class ClassicalResidual(_MomentumResidual):
             M, rate = terms
             qdot = x[self._qdot_start :]
             if known is not None:
-                rate = rate + known[1]
+                tau_m = tau_m + known[1]
             return M @ qdot, rate, tau_m
         v0, qdot = terms.v0, x[self._qdot_start :]
         momentum = np.concatenate((terms.I0c @ v0 + terms.F @ qdot, terms.F.T @ v0 + terms.H @ qdot))
@@ -449,11 +456,11 @@ class ClassicalResidual(_MomentumResidual):
                 terms.F_dot.T @ v0 + terms.H_dot @ qdot - terms.C_hat,
             )
         )
-        if known is not None:
-            model_rate[:6] += known[0]
-            model_rate[6:] += known[1]
         measured = np.zeros(self._size)
         measured[6:] = tau_m
+        if known is not None:
+            measured[:6] += known[0]
+            measured[6:] += known[1]
         return momentum, model_rate, measured
 
     def _CalcResidual(self, context: Context, output: BasicVector) -> None:
@@ -501,10 +508,11 @@ class InternalResidual(_MomentumResidual):
         qdot = x[self._qdot_start :]
         momentum = terms.H_fb @ qdot
         model_rate = terms.H_fb_dot @ qdot - terms.C_fb
+        measured = tau_m
         if known is not None:
             w_F0, tau_joints = known
-            model_rate += tau_joints - terms.I0c_inv_F.T @ w_F0  # tau_bar_c = J^fb^T w (eq. 10)
-        return momentum, model_rate, tau_m
+            measured = tau_m + tau_joints - terms.I0c_inv_F.T @ w_F0  # tau_bar_c = J^fb^T w (eq. 10)
+        return momentum, model_rate, measured
 
     def _CalcResidual(self, context: Context, output: BasicVector) -> None:
         output.SetFromVector(self._residual(context))
@@ -557,9 +565,7 @@ class ExternalResidual(_MomentumResidual):
         v0, qdot = terms.v0, x[self._qdot_start :]
         momentum = terms.I0c @ v0 + terms.F @ qdot
         model_rate = terms.I0c_dot @ v0 + terms.F_dot @ qdot - terms.p_hat
-        if known is not None:
-            model_rate = model_rate + known[0]
-        return momentum, model_rate, np.zeros(6)
+        return momentum, model_rate, (np.zeros(6) if known is None else known[0])
 
     def _CalcBase(self, context: Context, output: BasicVector) -> None:
         output.SetFromVector(self._residual(context))

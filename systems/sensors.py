@@ -214,12 +214,14 @@ class JointEncoders(LeafSystem):
 
 
 class MotorTorqueSensor(LeafSystem):
-    """Motor torque measurement: the actuation commanded to the plant, plus noise.
+    """Motor torque measurement: the actuation the motors applied, plus noise.
 
     Inputs:
         actuation: u, ``plant.num_actuated_dofs()`` entries in the plant's actuation order
-            (``JointActuator.input_start()``), N m (N for prismatic joints). Connect it to
-            whatever feeds the plant's actuation input port.
+            (``JointActuator.input_start()``), N m (N for prismatic joints). ``add_sensors``
+            connects it to ``plant.get_net_actuation_output_port()``: on a discrete plant
+            that is the actuation applied over the last time step (after effort limits), as
+            a motor-current measurement at t_k reports the torque of the last period.
 
     Outputs:
         measured_torque: n = nv - 6 entries in v[6:] order, N m: u of the joint's
@@ -729,8 +731,7 @@ class SensorHandles:
 
     Attributes:
         encoders: JointEncoders.
-        torque_sensor: MotorTorqueSensor; its ``actuation`` input (``actuation_input``) is
-            NOT connected: connect it to whatever feeds the plant's actuation port.
+        torque_sensor: MotorTorqueSensor, reading the plant's net actuation output.
         ft_sensors: FootForceTorqueSensors, or None if the robot has no F/T welds.
         imu: Imu handles.
         base_estimator: BaseStateEstimator.
@@ -741,7 +742,6 @@ class SensorHandles:
             of the ground on the sole, world), or None.
         ft_frames: the F/T sensor frames in ``ft_wrenches`` order (empty if none).
         ft_sides: the sides ("right", "left", ...) in ``ft_wrenches`` order.
-        actuation_input: the torque sensor's unconnected ``actuation`` input port.
         seeds: the seed of each sensor.
     """
 
@@ -756,7 +756,6 @@ class SensorHandles:
     ft_wrenches: OutputPort | None
     ft_frames: tuple
     ft_sides: tuple
-    actuation_input: object
     seeds: dict
 
 
@@ -772,9 +771,8 @@ def add_sensors(builder: DiagramBuilder, plant: MultibodyPlant, handles: Humanoi
 
     Connected: the plant's state output to the encoders, base estimator and F/T sensors;
     the plant's reaction forces to the F/T sensors; the plant's body poses, velocities and
-    accelerations to the IMU. NOT connected: the torque sensor's ``actuation`` input; the
-    caller must connect it to whatever feeds ``plant.get_actuation_input_port()``
-    (returned as ``actuation_input``).
+    accelerations to the IMU; the plant's net actuation (what the motors applied over the
+    last step) to the torque sensor.
 
     Args:
         builder: the DiagramBuilder holding ``plant``.
@@ -817,6 +815,7 @@ def add_sensors(builder: DiagramBuilder, plant: MultibodyPlant, handles: Humanoi
     torque = builder.AddSystem(MotorTorqueSensor(
         plant, noise_std=on * MOTOR_TORQUE_NOISE_STD, seed=seeds["torque"]))
     torque.set_name(f"{name_prefix}motor_torque_sensor")
+    builder.Connect(plant.get_net_actuation_output_port(), torque.get_actuation_input_port())
 
     ft = None
     sides = tuple(sorted(handles.ft_sensor_joints))
@@ -861,7 +860,6 @@ def add_sensors(builder: DiagramBuilder, plant: MultibodyPlant, handles: Humanoi
         ft_wrenches=None if ft is None else ft.GetOutputPort("wrenches"),
         ft_frames=() if ft is None else ft.sensor_frames,
         ft_sides=sides,
-        actuation_input=torque.get_actuation_input_port(),
         seeds=seeds,
     )
 

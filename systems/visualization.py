@@ -101,7 +101,7 @@ class _Track:
         if t < self.time:  # a new simulation (time went back): start over
             self.reset()
         if self.value is not None:
-            if isinstance(value, bool):
+            if isinstance(value, (bool, np.bool_)):
                 same = value == self.value
             else:
                 same = float(np.max(np.abs(np.asarray(value) - np.asarray(self.value)))) <= self.tol
@@ -410,9 +410,9 @@ class ForceArrows(LeafSystem):
         newtons_per_meter: float = 100.0,
         rgba: Rgba = FORCE_RGBA,
         publish_period: float = DEFAULT_PUBLISH_PERIOD,
-        shaft_radius: float = 0.006,
-        head_radius: float = 0.016,
-        head_length: float = 0.04,
+        shaft_radius: float = 0.008,
+        head_radius: float = 0.02,
+        head_length: float = 0.05,
         min_force: float = 1e-3,
     ):
         super().__init__()
@@ -507,7 +507,8 @@ class ForceArrows(LeafSystem):
         t = context.get_time()
         for i, (pose, shaft, head, cone, visible) in enumerate(self._tracks):
             f = forces[3 * i : 3 * i + 3]
-            shown = bool(np.linalg.norm(f) >= self._min_force) and np.linalg.norm(f) > 0.0
+            norm = float(np.linalg.norm(f))
+            shown = norm >= self._min_force and norm > 0.0
             visible.update(shown, t)
             if not shown:
                 continue  # a hidden arrow keeps its last pose

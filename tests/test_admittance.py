@@ -245,7 +245,7 @@ def test_gains_by_group(hrp4):
             assert K[k] == 1.0
         else:
             assert K[k] == 0.01, name  # head, hands
-    with pytest.raises(ValueError, match="unknown joint group 'tail'"):
+    with pytest.raises(ValueError, match="unknown joint group or joint 'tail'"):
         admittance_gains_by_group(plant, handles, {"tail": 1.0})
     with pytest.raises(ValueError, match="group 'arms'.*non-negative"):
         admittance_gains_by_group(plant, handles, {"arms": -1.0})
@@ -253,25 +253,30 @@ def test_gains_by_group(hrp4):
         admittance_gains_by_group(plant, handles, {}, default=-0.1)
 
 
-def test_closed_loop_joint_moves_with_effort_and_stops_at_limit(hrp4):
-    """hrp4_like in zero gravity, no ground: a constant +5 N m "residual" on R_ELBOW_P
-    (limits [-2.5, 0]) moves that joint up, in desired mode, until q_d stops at the
-    margin-shrunk upper limit 0 - 0.02 and the PD brings the joint there; the other joints
-    stay where they were."""
-    plant, handles = hrp4
+def _hrp4_zero_gravity():
+    plant = MultibodyPlant(T)
+    handles = add_humanoid(plant, "hrp4_like")
+    plant.mutable_gravity_field().set_gravity_vector([0.0, 0.0, 0.0])
+    plant.Finalize()
+    return plant, handles
+
+
+def _simulate_push_on_joint(joint_name, effort, gains_by_group, integrate_from, duration):
+    """hrp4_like in zero gravity, no ground, PD + admittance, a constant "residual" of
+    ``effort`` N m on one joint. Returns (plant, k, t, q, q_d, q_start) with q, q_d logged
+    (n x samples) every 10 ms."""
+    plant, handles = _hrp4_zero_gravity()
     joints = joints_in_velocity_order(plant)
-    names = [j.name() for j in joints]
-    n = len(joints)
-    k_elbow = names.index("R_ELBOW_P")
-    K_a = admittance_gains_by_group(plant, handles, {"arms": 0.1}, default=0.05)
-    residual = np.zeros(n)
-    residual[k_elbow] = 5.0  # K_a r = 0.5 rad/s
+    k = [j.name() for j in joints].index(joint_name)
+    K_a = admittance_gains_by_group(plant, handles, gains_by_group, default=0.05)
+    residual = np.zeros(len(joints))
+    residual[k] = effort
 
     builder = DiagramBuilder()
     builder.AddSystem(plant)
     kp, kd = default_gains(plant, handles)  # stable explicit 1 kHz PD per joint group
     pd = builder.AddSystem(PdGravityController(plant, kp, kd))
-    adm = builder.AddSystem(JointAdmittanceController(plant, K_a, T, integrate_from="desired"))
+    adm = builder.AddSystem(JointAdmittanceController(plant, K_a, T, integrate_from=integrate_from))
     select = builder.AddSystem(joint_position_selector(plant))
     source = builder.AddSystem(ConstantVectorSource(residual))
     builder.Connect(plant.get_state_output_port(), select.get_input_port())
@@ -285,37 +290,63 @@ def test_closed_loop_joint_moves_with_effort_and_stops_at_limit(hrp4):
     diagram = builder.Build()
 
     sim = Simulator(diagram)
-    root = sim.get_mutable_context()
-    plant_ctx = plant.GetMyMutableContextFromRoot(root)
+    plant_ctx = plant.GetMyMutableContextFromRoot(sim.get_mutable_context())
     q_start = joint_vector_from_names(plant, handles.nominal_posture)
     for j, value in zip(joints, q_start):
         j.set_angle(plant_ctx, value)
     sim.Initialize()
-    sim.AdvanceTo(1.5)
-
-    q = log_q.FindLog(sim.get_context()).data()
+    sim.AdvanceTo(duration)
+    log = log_q.FindLog(sim.get_context())
     q_d = log_qd.FindLog(sim.get_context()).data()
-    t = log_q.FindLog(sim.get_context()).sample_times()
-    upper = plant.GetPositionUpperLimits()[joints[k_elbow].position_start()] - 0.02
+    return plant, k, log.sample_times(), log.data(), q_d, q_start
+
+
+def test_closed_loop_desired_mode_moves_with_effort_and_stops_at_limit():
+    """A constant +5 N m "residual" on R_ELBOW_P (limits [-2.5, 0], start -0.3) moves that
+    joint up, in desired mode, until q_d stops at the margin-shrunk upper limit 0 - 0.02
+    and the PD brings the joint there; the other joints stay where they were."""
+    plant, k, t, q, q_d, q_start = _simulate_push_on_joint(
+        "R_ELBOW_P", 5.0, {"arms": 0.1}, "desired", 1.5)  # K_a r = 0.5 rad/s
+    n = q.shape[0]
+    joint = joints_in_velocity_order(plant)[k]
+    upper = plant.GetPositionUpperLimits()[joint.position_start()] - 0.02
     assert upper == pytest.approx(-0.02)
     # No jump at start: q_d starts at the measured posture.
     np.testing.assert_allclose(q_d[:, 0], q_start, atol=1e-3)
     # q_d ramps at K_a r = 0.5 rad/s until the limit (initial elbow angle -0.3).
     i = np.searchsorted(t, 0.3)
-    assert q_d[k_elbow, i] == pytest.approx(q_start[k_elbow] + 0.5 * t[i], abs=2e-3)
+    assert q_d[k, i] == pytest.approx(q_start[k] + 0.5 * t[i], abs=2e-3)
     # The elbow moves in the direction of the effort, monotonically up to small ripple.
-    assert np.all(np.diff(q[k_elbow]) > -1e-3)
-    assert q[k_elbow, i] > q_start[k_elbow] + 0.05
+    assert np.all(np.diff(q[k]) > -1e-3)
+    assert q[k, i] > q_start[k] + 0.05
     # ... and stops at the shrunk limit, never beyond.
-    assert np.max(q_d[k_elbow]) <= upper + 1e-12
-    assert q_d[k_elbow, -1] == pytest.approx(upper, abs=1e-12)
-    assert q[k_elbow, -1] == pytest.approx(upper, abs=5e-3)
-    assert np.max(q[k_elbow]) < upper + 0.01
-    assert np.max(np.abs(np.diff(q[k_elbow, -20:]))) < 1e-3  # at rest
-    # Other joints: no residual, so (in desired mode) no motion of their references.
-    others = np.arange(n) != k_elbow
+    assert np.max(q_d[k]) <= upper + 1e-12
+    assert q_d[k, -1] == pytest.approx(upper, abs=1e-12)
+    assert q[k, -1] == pytest.approx(upper, abs=5e-3)
+    assert np.max(q[k]) < upper + 0.01
+    assert np.max(np.abs(np.diff(q[k, -20:]))) < 1e-3  # at rest
+    # Other joints: no residual, so (in desired mode) their references do not move, not
+    # even those starting on a model limit inside the margin (the hands at 0).
+    others = np.arange(n) != k
     np.testing.assert_allclose(q_d[others, -1], q_d[others, 0], atol=1e-12)
-    np.testing.assert_allclose(q[others, -1], q_start[others], atol=0.02)
+    np.testing.assert_allclose(q[others, -1], q_start[others], atol=1e-3)
+
+
+def test_closed_loop_measured_mode_moves_with_effort_and_stops_at_limit():
+    """Eq. 14 as in the paper (q_d = q + K_a r T): the extra PD torque K_p K_a T r
+    (200 * 2 * 1e-3 * 5 = 2 N m) drives R_ELBOW_P along the effort until the clip at the
+    shrunk limit holds it there."""
+    plant, k, t, q, q_d, q_start = _simulate_push_on_joint(
+        "R_ELBOW_P", 5.0, {"arms": 2.0}, "measured", 2.0)
+    joint = joints_in_velocity_order(plant)[k]
+    upper = plant.GetPositionUpperLimits()[joint.position_start()] - 0.02
+    np.testing.assert_allclose(q_d[:, 0], q_start, atol=1e-2)
+    assert np.all(np.diff(q[k]) > -1e-3)
+    i = np.searchsorted(t, 0.2)
+    assert q[k, i] > q_start[k] + 0.02
+    assert np.max(q_d[k]) <= upper + 1e-12
+    assert q[k, -1] == pytest.approx(upper, abs=5e-3)
+    assert np.max(np.abs(np.diff(q[k, -20:]))) < 1e-3  # at rest
 
 
 # -- validation ------------------------------------------------------------------------------
@@ -378,3 +409,20 @@ def test_nan_inputs_raise(chain):
                     sys.get_measured_position_input_port())
     with pytest.raises(ValueError, match="measured_position"):
         Simulator(builder.Build()).Initialize()
+
+
+def test_gains_by_group_accepts_single_joint_names():
+    from pydrake.multibody.plant import MultibodyPlant
+
+    from models import add_humanoid
+    from systems.admittance import admittance_gains_by_group
+    from systems.pd_gravity import joints_in_velocity_order
+
+    plant = MultibodyPlant(0.0)
+    handles = add_humanoid(plant, "hrp4_like")
+    plant.Finalize()
+    gains = admittance_gains_by_group(plant, handles, {"legs": 0.2, "R_ANKLE_P": 1.0})
+    names = [j.name() for j in joints_in_velocity_order(plant)]
+    assert gains[names.index("R_ANKLE_P")] == 1.0
+    assert gains[names.index("L_ANKLE_P")] == 0.2
+    assert gains[names.index("CHEST_P")] == 0.0

@@ -249,9 +249,9 @@ def test_internal_and_external_residuals_on_a_humanoid_in_zero_gravity(name):
     builder.Connect(builder.AddSystem(ConstantVectorSource(q_joints)).get_output_port(), controller.get_input_port(0))
     builder.Connect(plant.get_state_output_port(), controller.get_input_port(1))
     builder.Connect(controller.get_output_port(), plant.get_actuation_input_port())
-    # The motor torque each joint receives, in v[6:] order (the controller's own map).
+    # The torque each motor applied over the last step, in v[6:] order.
     torque = builder.AddSystem(_ActuationToJointTorque(plant))
-    builder.Connect(controller.get_output_port(), torque.get_input_port())
+    builder.Connect(plant.get_net_actuation_output_port(), torque.get_input_port())
     loggers = {}
     for key, residual in residuals.items():
         builder.AddSystem(residual)
@@ -356,8 +356,10 @@ def test_known_wrenches_are_removed_from_every_residual():
     for name, residual in residuals.items():
         port = residual.GetOutputPort("residual" if name != "external" else "external_wrench_world")
         value = port.Eval(residual.GetMyContextFromRoot(context))
-        # Unknown part ~0: below 0.1 % of the (fully known) push, which moves the robot.
-        assert np.abs(value).max() < 1e-3 * np.linalg.norm(f_W), (name, value)
+        # Unknown part ~0: below 0.5 % of the (fully known) push. What is left is the O(T)
+        # error of reading, at t_k, a wrench whose point moved during the last period
+        # (about 0.2 % here; the residuals take measured forces as held over that period).
+        assert np.abs(value).max() < 5e-3 * np.linalg.norm(f_W), (name, value)
 
 
 def test_classical_residual_on_a_fixed_base_arm():

@@ -637,9 +637,7 @@ def hrp4_standing():
     builder.Connect(plant.get_state_output_port(), controller.get_state_input_port())
     builder.Connect(controller.get_output_port(), plant.get_actuation_input_port())
     sensors = add_sensors(builder, plant, humanoid, noise=False)
-    builder.Connect(controller.get_output_port(), sensors.actuation_input)
     noisy = add_sensors(builder, plant, humanoid, noise=True, seed=5, name_prefix="noisy_")
-    builder.Connect(controller.get_output_port(), noisy.actuation_input)
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
     set_standing_state(plant, plant.GetMyMutableContextFromRoot(context), humanoid)
@@ -720,7 +718,8 @@ def test_standing_sensed_state_and_torque_are_truth_without_noise(hrp4_standing)
     pctx = plant.GetMyContextFromRoot(context)
     x = plant.GetPositionsAndVelocities(pctx)
     np.testing.assert_array_equal(_eval(sensors.state, sensors.assembler, context), x)
-    u = _eval(s["controller"].get_output_port(), s["controller"], context)
+    # The torque sensor reports what the motors applied over the last step.
+    u = plant.get_net_actuation_output_port().Eval(pctx)
     tau = _eval(sensors.measured_torque, sensors.torque_sensor, context)
     np.testing.assert_array_equal(tau, (plant.MakeActuationMatrix() @ u)[6:])
     assert sensors.seeds == {"encoders": 0, "torque": 1, "ft": 2, "imu": 3, "base": 4}
@@ -764,9 +763,8 @@ def test_add_sensors_without_ft_sensors_nao():
     assert sensors.state.size() == plant.num_positions() + plant.num_velocities()
     assert sensors.measured_torque.size() == plant.num_velocities() - 6
     assert sensors.imu.frame.name() == "imu"
-    # The torque sensor's actuation input is left for the caller: Build() accepts an
-    # unconnected input (it becomes a diagram input), and its size is the plant's.
-    assert sensors.actuation_input.size() == plant.num_actuated_dofs()
+    # The torque sensor reads what the motors applied: the plant's net actuation.
+    assert sensors.torque_sensor.get_actuation_input_port().size() == plant.num_actuated_dofs()
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
     x = plant.GetPositionsAndVelocities(plant.GetMyContextFromRoot(context))

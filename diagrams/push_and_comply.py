@@ -1,0 +1,213 @@
+"""Push-and-comply diagram (Flacco et al. 2016, Sec. IV, Figs. 5-6): the humanoid is pushed
+down on both shoulders and complies through a joint admittance controller (eq. 14) driven
+by a residual, the classical one (eq. 7) or the internal one (eq. 11).
+
+    PushSource ─► MultibodyPlant (+ ground) ─► sensors ─► residual ─► JointAdmittanceController
+        ▲ truth        ▲ actuation                │          (eq. 14: q_d = q + K_a r T)
+        └── loggers    └── PdGravityController ◄──┴── sensed state     │ desired_position
+                                   ▲ desired_position ◄────────────────┘
+
+Scenarios are YAML files loaded into ``PushAndComplyScenario`` with
+``pydrake.common.yaml.yaml_load_typed``; the default is the paper's.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydrake.common.yaml import yaml_load_typed
+from pydrake.geometry import Meshcat, MeshcatVisualizer
+from pydrake.systems.framework import Diagram, DiagramBuilder
+from pydrake.systems.primitives import LogVectorOutput, MatrixGain, VectorLogSink
+
+from diagrams.humanoid_station import HumanoidStation, add_humanoid_station
+from systems.admittance import JointAdmittanceController, admittance_gains_by_group
+from systems.disturbances import PolynomialRampUpDown, Push, PushSource
+from systems.residuals import ClassicalResidual, InternalResidual, ResidualModel
+
+RESIDUAL_KINDS = ("internal", "classical")
+
+
+@dataclass
+class PushAndComplyScenario:
+    """The experiment's settings (SI units). Defaults: the paper's scenario, Sec. IV.
+
+    Attributes:
+        model: the humanoid (``hrp4_like``).
+        duration: s (15 s in the paper).
+        push_start, push_peak_time, push_end: the polynomial force profile's times, s
+            (5, 8.5 and 12 s in the paper).
+        push_peak_force: N on each shoulder (5 N in the paper; see the README for the value
+            used by default and why).
+        push_direction: world direction of both forces (downward in the paper).
+        push_point: the point of each shoulder body that is pushed, in its frame, m.
+        residual_gain: K of the residual, 1/s.
+        admittance_gains: K_a per joint group of ``HumanoidHandles.joint_groups`` (legs, torso,
+            head, arms, hands), rad / (N m s).
+        dead_band: residual dead band of the admittance controller, N m.
+        max_rate: joint velocity limit of the admittance controller, rad/s.
+        integrate_from: "measured" (eq. 14 as printed: q_d = q + K_a r T) or "desired"
+            (q_d integrates K_a r). With "measured" the PD keeps no stiffness, and a robot
+            whose gravity compensation ignores the ground reaction collapses under its own
+            weight (measured: the knees buckle); "desired" keeps the posture's stiffness.
+        noise: sensor noise on (the defaults of ``systems.sensors``).
+        seed: sensor noise seed.
+        log_period: loggers' sampling period, s.
+    """
+
+    model: str = "hrp4_like"
+    duration: float = 15.0
+    push_start: float = 5.0
+    push_peak_time: float = 8.5
+    push_end: float = 12.0
+    push_peak_force: float = 5.0
+    push_direction: list[float] = dataclasses.field(default_factory=lambda: [0.0, 0.0, -1.0])
+    push_point: list[float] = dataclasses.field(default_factory=lambda: [0.0, 0.0, 0.0])
+    residual_gain: float = 35.0
+    admittance_gains: dict[str, float] = dataclasses.field(
+        default_factory=lambda: {"legs": 0.5, "torso": 0.5, "arms": 0.5, "head": 0.0, "hands": 0.0}
+    )
+    dead_band: float = 0.0
+    max_rate: float = 0.5
+    integrate_from: str = "desired"
+    noise: bool = True
+    seed: int = 0
+    log_period: float = 0.01
+
+
+def load_scenario(path: str | Path | None) -> PushAndComplyScenario:
+    """The scenario in the YAML file ``path`` (missing keys keep their defaults), or the
+    default scenario when ``path`` is None.
+
+    Raises:
+        ValueError: an unreadable file or a malformed scenario (the message says which).
+    """
+    if path is None:
+        return PushAndComplyScenario()
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"scenario file '{path}' does not exist")
+    try:
+        return yaml_load_typed(schema=PushAndComplyScenario, filename=str(path), defaults=PushAndComplyScenario())
+    except Exception as error:  # Drake's YAML reader raises RuntimeError with details
+        raise ValueError(f"could not read the scenario file '{path}': {error}") from error
+
+
+@dataclass
+class PushAndComplyHandles:
+    """What ``build_push_and_comply_diagram`` created."""
+
+    station: HumanoidStation
+    residual_kind: str
+    residual: ClassicalResidual | InternalResidual
+    admittance: JointAdmittanceController
+    push_source: PushSource
+    loggers: dict[str, VectorLogSink]
+    meshcat_visualizer: MeshcatVisualizer | None
+    overlay: dict | None
+
+
+def build_push_and_comply_diagram(
+    scenario: PushAndComplyScenario, residual_kind: str, meshcat: Meshcat | None = None
+) -> tuple[Diagram, PushAndComplyHandles]:
+    """Builds the closed loop of the module docstring with the ``residual_kind`` residual
+    ("internal" or "classical") driving the admittance controller.
+
+    Raises:
+        ValueError: an unknown residual kind, model or joint group; bad scenario values.
+    """
+    if residual_kind not in RESIDUAL_KINDS:
+        raise ValueError(f"unknown residual '{residual_kind}'; choose one of {RESIDUAL_KINDS}")
+    if not (0.0 <= scenario.push_start < scenario.push_peak_time < scenario.push_end <= scenario.duration):
+        raise ValueError("the scenario needs 0 <= push_start < push_peak_time < push_end <= duration")
+    builder = DiagramBuilder()
+    station = add_humanoid_station(builder, scenario.model, noise=scenario.noise, seed=scenario.seed)
+    plant, humanoid = station.plant, station.humanoid
+    if humanoid is None:
+        raise ValueError("push-and-comply needs one of the humanoid models (its shoulders and joint groups)")
+
+    # Two downward forces on the shoulders, polynomial profile (the paper's Sec. IV).
+    profile = PolynomialRampUpDown(scenario.push_peak_force, scenario.push_start, scenario.push_peak_time, scenario.push_end)
+    pushes = [
+        Push(body.name(), np.asarray(scenario.push_point, float), np.asarray(scenario.push_direction, float), profile)
+        for body in (humanoid.shoulder_bodies["right"], humanoid.shoulder_bodies["left"])
+    ]
+    push_source = builder.AddSystem(PushSource(plant, pushes))
+    push_source.set_name("push_source")
+    builder.Connect(push_source.GetOutputPort("applied_spatial_forces"), plant.get_applied_spatial_force_input_port())
+    builder.Connect(plant.get_state_output_port(), push_source.GetInputPort("state"))
+
+    # The residual, from the sensors only.
+    residual_type = InternalResidual if residual_kind == "internal" else ClassicalResidual
+    residual = builder.AddSystem(
+        residual_type(plant, scenario.residual_gain, known_wrench_frames=station.known_wrench_frames, model=ResidualModel(plant))
+    )
+    residual.set_name(f"{residual_kind}_residual")
+    builder.Connect(station.sensed_state, residual.GetInputPort("state"))
+    builder.Connect(station.measured_torque, residual.GetInputPort("measured_torque"))
+    if station.known_wrenches is not None:
+        builder.Connect(station.known_wrenches, residual.GetInputPort("known_wrenches"))
+
+    # Joint admittance (eq. 14) on the measured joint positions.
+    gains = admittance_gains_by_group(plant, humanoid, scenario.admittance_gains)
+    admittance = builder.AddSystem(
+        JointAdmittanceController(
+            plant,
+            gains,
+            residual_includes_base=(residual_kind == "classical"),
+            dead_band=scenario.dead_band,
+            max_rate=scenario.max_rate,
+            integrate_from=scenario.integrate_from,
+        )
+    )
+    admittance.set_name("joint_admittance_controller")
+    nq, nv = plant.num_positions(), plant.num_velocities()
+    select_q = np.zeros((station.topology.num_joints, nq + nv))
+    for k, joint in enumerate(station.topology.joints):
+        select_q[k, joint.position_start()] = 1.0
+    measured_position = builder.AddSystem(MatrixGain(select_q))
+    builder.Connect(station.sensed_state, measured_position.get_input_port())
+    builder.Connect(residual.GetOutputPort("residual"), admittance.GetInputPort("residual"))
+    builder.Connect(measured_position.get_output_port(), admittance.GetInputPort("measured_position"))
+    builder.Connect(admittance.GetOutputPort("desired_position"), station.desired_position)
+
+    log = scenario.log_period
+    loggers = {
+        "state": LogVectorOutput(plant.get_state_output_port(), builder, log),
+        "residual": LogVectorOutput(residual.GetOutputPort("residual"), builder, log),
+        "tau_c_real": LogVectorOutput(push_source.GetOutputPort("tau_c_real"), builder, log),
+        "desired_position": LogVectorOutput(admittance.GetOutputPort("desired_position"), builder, log),
+        "force_world": LogVectorOutput(push_source.GetOutputPort("force_world"), builder, log),
+    }
+    visualizer = overlay = None
+    if meshcat is not None:
+        from systems.visualization import add_effort_visualization
+
+        visualizer = MeshcatVisualizer.AddToBuilder(builder, station.scene_graph, meshcat)
+        overlay = add_effort_visualization(
+            builder,
+            plant,
+            meshcat,
+            residual.GetOutputPort("residual"),
+            plant.get_state_output_port(),
+            list(station.topology.joints),
+            max_effort=2.0,
+            force_port=push_source.GetOutputPort("force_world"),
+            point_port=push_source.GetOutputPort("point_world"),
+            includes_base=(residual_kind == "classical"),
+        )
+    diagram = builder.Build()
+    diagram.set_name(f"push_and_comply_{residual_kind}")
+    return diagram, PushAndComplyHandles(
+        station=station,
+        residual_kind=residual_kind,
+        residual=residual,
+        admittance=admittance,
+        push_source=push_source,
+        loggers=loggers,
+        meshcat_visualizer=visualizer,
+        overlay=overlay,
+    )

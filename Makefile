@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: demo test bench residuals install clean
+.PHONY: demo stand test bench residuals install clean
 
 install: $(STAMP)
 
@@ -17,9 +17,15 @@ $(STAMP): pyproject.toml
 	@touch $(STAMP)
 
 demo: $(STAMP)
+	$(PY) -m apps.push_and_comply $(ARGS)
+
+stand: $(STAMP)
 	$(PY) -m apps.stand $(ARGS)
 
 test: $(STAMP)
+	@command -v chromium >/dev/null 2>&1 || [ "$$(id -u)" != 0 ] || ! command -v apt-get >/dev/null 2>&1 || \
+		{ echo "installing Debian's chromium for the replay browser test"; \
+		  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium) >/dev/null 2>&1 || true; }
 	$(PY) -m pytest -q $(ARGS)
 
 bench: $(STAMP)

@@ -94,7 +94,7 @@ def run_model(name: str, duration: float, meshcat, out_dir: Path) -> dict:
 def main(argv=None) -> int:
     """Runs the app; returns the process exit status (1 if a robot fell)."""
     args = _parse(argv)
-    print("push-and-comply app not yet available; running the standing simulation")
+    print("standing simulation of the humanoids (PD + gravity compensation)")
     names = MODEL_NAMES if args.model == "all" else (args.model,)
     out_dir = args.out / "stand"
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 from pydrake.common.yaml import yaml_load_typed
-from pydrake.geometry import Meshcat, MeshcatVisualizer
+from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput, MatrixGain, VectorLogSink
 
@@ -197,7 +197,10 @@ def build_push_and_comply_diagram(
     if meshcat is not None:
         from systems.visualization import add_effort_visualization
 
-        visualizer = MeshcatVisualizer.AddToBuilder(builder, station.scene_graph, meshcat)
+        # 32 Hz, the replay's frame rate: publishing faster only costs simulation time.
+        visualizer = MeshcatVisualizer.AddToBuilder(
+            builder, station.scene_graph, meshcat, MeshcatVisualizerParams(publish_period=1.0 / 32.0)
+        )
         overlay = add_effort_visualization(
             builder,
             plant,

@@ -12,7 +12,7 @@ def test_stand_app_runs_and_reports(tmp_path, capsys):
                          "--out", str(tmp_path)])
     out = capsys.readouterr().out
     assert status == 0
-    assert "push-and-comply app not yet available; running the standing simulation" in out
+    assert "standing simulation of the humanoids" in out
     for name in ("hrp4_like", "nao_like"):
         assert name in out
         row = json.loads((tmp_path / "stand" / f"{name}.json").read_text())

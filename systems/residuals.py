@@ -387,6 +387,12 @@ class _MomentumResidual(LeafSystem):
     def _residual(self, context: Context) -> np.ndarray:
         return context.get_discrete_state(self._residual_index).get_value()
 
+    def _declare_residual_output(self) -> None:
+        """The ``residual`` output port (classical and internal residuals): the discrete state."""
+        self.DeclareVectorOutputPort(
+            "residual", self._size, lambda context, output: output.SetFromVector(self._residual(context)), {self.xd_ticket()}
+        )
+
 
 class ClassicalResidual(_MomentumResidual):
     """Classical momentum residual, paper eq. (7), on the virtual-joint model (8).
@@ -439,7 +445,7 @@ class ClassicalResidual(_MomentumResidual):
             model=model,
             implementation=implementation,
         )
-        self.DeclareVectorOutputPort("residual", self._size, self._CalcResidual, {self.xd_ticket()})
+        self._declare_residual_output()
 
     def _momentum_and_rates(self, terms, x, tau_m, known):
         if isinstance(self._model, FixedBaseModel):
@@ -463,8 +469,6 @@ class ClassicalResidual(_MomentumResidual):
             measured[6:] += known[1]
         return momentum, model_rate, measured
 
-    def _CalcResidual(self, context: Context, output: BasicVector) -> None:
-        output.SetFromVector(self._residual(context))
 
 
 class InternalResidual(_MomentumResidual):
@@ -502,7 +506,7 @@ class InternalResidual(_MomentumResidual):
             model=model,
             implementation=implementation,
         )
-        self.DeclareVectorOutputPort("residual", self._size, self._CalcResidual, {self.xd_ticket()})
+        self._declare_residual_output()
 
     def _momentum_and_rates(self, terms, x, tau_m, known):
         qdot = x[self._qdot_start :]
@@ -514,8 +518,6 @@ class InternalResidual(_MomentumResidual):
             measured = tau_m + tau_joints - terms.I0c_inv_F.T @ w_F0  # tau_bar_c = J^fb^T w (eq. 10)
         return momentum, model_rate, measured
 
-    def _CalcResidual(self, context: Context, output: BasicVector) -> None:
-        output.SetFromVector(self._residual(context))
 
 
 class ExternalResidual(_MomentumResidual):

@@ -20,10 +20,10 @@ import numpy as np
 from pydrake.common.yaml import yaml_load_typed
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import LogVectorOutput, MatrixGain, VectorLogSink
+from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
 from diagrams.humanoid_station import HumanoidStation, add_humanoid_station
-from systems.admittance import JointAdmittanceController, admittance_gains_by_group
+from systems.admittance import JointAdmittanceController, admittance_gains_by_group, joint_position_selector
 from systems.disturbances import PolynomialRampUpDown, Push, PushSource
 from systems.residuals import ClassicalResidual, InternalResidual, ResidualModel
 
@@ -175,11 +175,7 @@ def build_push_and_comply_diagram(
         )
     )
     admittance.set_name("joint_admittance_controller")
-    nq, nv = plant.num_positions(), plant.num_velocities()
-    select_q = np.zeros((station.topology.num_joints, nq + nv))
-    for k, joint in enumerate(station.topology.joints):
-        select_q[k, joint.position_start()] = 1.0
-    measured_position = builder.AddSystem(MatrixGain(select_q))
+    measured_position = builder.AddSystem(joint_position_selector(plant))
     builder.Connect(station.sensed_state, measured_position.get_input_port())
     builder.Connect(residual.GetOutputPort("residual"), admittance.GetInputPort("residual"))
     builder.Connect(measured_position.get_output_port(), admittance.GetInputPort("measured_position"))

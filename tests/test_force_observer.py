@@ -1,0 +1,116 @@
+"""Kalman force observer (Hawley et al. 2019) against the authors' own output on real Nao
+recordings, plus the observer's behaviour and input checks."""
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.io
+
+from apps import replay_nao_dataset
+from systems.force_observer import (
+    STANDING,
+    LipForceObserver,
+    LipObserverParameters,
+    calibrated_normal_force,
+    transition_matrices,
+)
+
+DATASET = Path(__file__).resolve().parents[2] / "shared" / "datasets" / "hawley2019-nao"
+RECORDINGS = ("Force_Y_data", "Force_Z_data")
+
+
+@pytest.mark.parametrize("name", RECORDINGS)
+def test_reproduces_the_authors_implementation_on_real_nao_data(name, tmp_path, capsys):
+    """reference_F.csv is the authors' MATLAB observer run on the same recording (Octave)."""
+    assert replay_nao_dataset.main([str(DATASET / name), "--out", str(tmp_path)]) == 0
+    estimates = np.loadtxt(tmp_path / "estimates.csv", delimiter=",", skiprows=1)
+    reference = np.loadtxt(DATASET / name / "reference_F.csv", delimiter=",")
+    assert estimates.shape == (len(reference), 4)
+    np.testing.assert_allclose(estimates[:, 0], STANDING.period * np.arange(1, len(reference) + 1), rtol=1e-12)
+    assert np.abs(estimates[:, 1:] - reference).max() < 1e-9 * np.abs(reference).max()
+    assert (tmp_path / "estimates.png").stat().st_size > 10_000
+    assert (tmp_path / "estimates.csv").read_text().startswith("t,Fx,Fy,Fz\n")
+
+
+def test_estimates_the_papers_loads_on_real_data():
+    """While loaded, the estimate is near the paper's expected virtual force (eq. 24)."""
+    forces = replay_nao_dataset.replay(DATASET / "Force_Y_data")
+    loaded = forces[np.abs(forces[:, 1]) > 0.8 * 10.96]
+    assert len(loaded) > 100
+    assert abs(np.median(loaded[:, 1]) - (-10.96)) < 1.0
+
+
+def test_observer_converges_to_a_constant_force_on_a_synthetic_lip():
+    """LIP statics: a constant horizontal force F_x at CoM height z shifts the ZMP by
+    -z F_x / f_n (eq. 10 with f_n = -M g); the observer recovers F_x."""
+    M, g, z = STANDING.mass, STANDING.gravity, 0.3
+    Fx, Fy = 3.0, -2.0
+    fn = -M * g
+    observer = LipForceObserver()
+    com, acc = np.array([0.01, 0.0, z]), np.zeros(3)
+    zmp = np.array([com[0] - z / fn * Fx, com[1] - z / fn * Fy])
+    for _ in range(600):
+        F, valid = observer.update(com, acc, zmp, fn)
+    assert valid and np.allclose(F[:2], [Fx, Fy], atol=0.02) and abs(F[2]) < 1e-6
+
+
+def test_lifted_robot_is_flagged_invalid_instead_of_dividing_by_zero():
+    observer = LipForceObserver()
+    com, acc = np.array([0.0, 0.0, 0.3]), np.zeros(3)
+    for _ in range(5):
+        observer.update(com, acc, np.zeros(2), -STANDING.mass * STANDING.gravity)
+    for _ in range(400):  # feet off the ground: the FSRs read 0
+        F, valid = observer.update(com, acc, np.zeros(2), 0.0)
+    assert not valid and np.all(np.isfinite(F))
+
+
+def test_model_matrices_and_parameter_checks():
+    A, B = transition_matrices(0.5)
+    assert A[0, 2] == 0.125 and A[3, 4] == 0.5 and B[0, 0] == 0.5**3 / 6 and B[3, 1] == 0.125
+    with pytest.raises(ValueError, match="period"):
+        LipObserverParameters(period=0.0)
+    with pytest.raises(ValueError, match="R_z"):
+        LipObserverParameters(R_z=((1, 0, 0), (0, -1, 0), (0, 0, 1)))
+    with pytest.raises(ValueError, match="first sample"):
+        calibrated_normal_force(np.array([0.0, 1.0]))
+    with pytest.raises(ValueError, match="zmp"):
+        LipForceObserver().update(np.zeros(3), np.zeros(3), [np.nan, 0.0], -50.0)
+
+
+def _copy(tmp_path: Path) -> Path:
+    target = tmp_path / "recording"
+    shutil.copytree(DATASET / "Force_Y_data", target)
+    return target
+
+
+def test_clear_errors_for_broken_recordings(tmp_path, capsys):
+    recording = _copy(tmp_path)
+    (recording / "Acc.mat").unlink()
+    assert replay_nao_dataset.main([str(recording), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "missing file" in err and "Acc.mat" in err
+
+    recording = _copy(tmp_path / "b")
+    scipy.io.savemat(recording / "ZMP.mat", {"zmp_wrong": np.zeros((5, 2))})
+    with pytest.raises(replay_nao_dataset.DatasetError, match="no variable 'ZMP'"):
+        replay_nao_dataset.load_recording(recording)
+
+    recording = _copy(tmp_path / "c")
+    acc = scipy.io.loadmat(recording / "Acc.mat")["acc"][:-3]
+    scipy.io.savemat(recording / "Acc.mat", {"acc": acc})
+    with pytest.raises(replay_nao_dataset.DatasetError, match="different lengths"):
+        replay_nao_dataset.load_recording(recording)
+
+    recording = _copy(tmp_path / "d")
+    com = scipy.io.loadmat(recording / "CoM_Pos.mat")["Xc_Yc_Zc"]
+    com[[4, 9]] = np.nan
+    scipy.io.savemat(recording / "CoM_Pos.mat", {"Xc_Yc_Zc": com})
+    with pytest.raises(replay_nao_dataset.DatasetError, match="NaN or inf in rows 5, 10"):
+        replay_nao_dataset.load_recording(recording)
+
+    recording = _copy(tmp_path / "e")
+    (recording / "total_force.mat").write_bytes(b"not a mat file")
+    with pytest.raises(replay_nao_dataset.DatasetError, match="cannot read"):
+        replay_nao_dataset.load_recording(recording)

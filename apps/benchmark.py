@@ -158,10 +158,11 @@ def benchmark_force_observer(batches: int = 5) -> dict:
     authors' Force_Y_data, found beside the repository in ../shared/datasets)."""
     from systems.force_observer import calibrated_normal_force, estimate_virtual_forces
 
-    dataset = Path(__file__).resolve().parents[2] / "shared" / "datasets" / "hawley2019-nao" / "Force_Y_data"
+    from apps.replay_nao_dataset import load_recording, published_dataset_dir
+
+    dataset = published_dataset_dir() / "Force_Y_data"
     if not dataset.is_dir():
         return {"samples_per_s": None, "note": f"dataset not found at {dataset}"}
-    from apps.replay_nao_dataset import load_recording
 
     data = load_recording(dataset)
     normal_force = calibrated_normal_force(data["total_force"].sum(axis=1))

@@ -34,6 +34,17 @@ DATASET_FILES = {
 EXPECTED = {"Force_Y_data": (0.0, -10.96, 0.0), "Force_Z_data": (2.22, -4.16, -11.12)}
 
 
+def published_dataset_dir() -> Path:
+    """The authors' recordings: ``$HCO_SHARED_DIR/datasets/hawley2019-nao`` when that
+    variable is set, else ``../shared/datasets/hawley2019-nao`` beside the repository (where
+    the project's shared data lives; the data are not copied into the repository)."""
+    import os
+
+    root = os.environ.get("HCO_SHARED_DIR")
+    shared = Path(root) if root else Path(__file__).resolve().parents[2] / "shared"
+    return shared / "datasets" / "hawley2019-nao"
+
+
 class DatasetError(ValueError):
     """A recording that cannot be used: the message names the file, variable or rows."""
 

@@ -17,7 +17,12 @@ from systems.force_observer import (
     transition_matrices,
 )
 
-DATASET = Path(__file__).resolve().parents[2] / "shared" / "datasets" / "hawley2019-nao"
+DATASET = replay_nao_dataset.published_dataset_dir()
+
+
+def test_published_recordings_are_available():
+    """The real-data tests need the authors' recordings beside the repository."""
+    assert DATASET.is_dir(), f"{DATASET} not found: set HCO_SHARED_DIR to the folder that holds datasets/"
 RECORDINGS = ("Force_Y_data", "Force_Z_data")
 
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from pydrake.systems.framework import Context, DiscreteValues, LeafSystem
 
 #: Gravity and Nao's mass used by Hawley et al.
 GRAVITY = 9.81
@@ -247,3 +248,77 @@ def _vector3(name: str, value) -> np.ndarray:
     if v.shape != (3,) or not np.all(np.isfinite(v)):
         raise ValueError(f"{name} must be 3 finite numbers, got {value}")
     return v
+
+
+class LipForceObserverSystem(LeafSystem):
+    """The observer as a Drake system, updated every ``parameters.period`` seconds.
+
+    Inputs:
+        com_position: (3,) CoM position in the support-foot frame, m.
+        com_acceleration: (3,) CoM acceleration in the inertial frame, gravity-compensated, m/s^2.
+        zmp: (2,) ZMP = CoP of the FSRs (eq. 13), m.
+        normal_force: (1,) f_n^o = -(sum of the FSR normal forces) (eq. 12), N (-M g at rest).
+    State: discrete, [initialised flag; per filter (z, x, y) its 5 states and 5x5 covariance].
+    Outputs:
+        virtual_force: (3,) F^ = [F^_x, F^_y, F^_z] (eq. 11), N, world-aligned CoM frame.
+        valid: (1,) 1 when the normal force allows the x/y estimate, else 0 (feet off the
+            ground: the x/y filters only predict).
+        filter_states: (15,) the z, x and y filters' states (eq. 18, 20).
+
+    The first update initialises the filters from the inputs as the authors do
+    (``LipForceObserver.reset``), then runs one predict/correct step.
+    """
+
+    def __init__(self, parameters: LipObserverParameters = STANDING):
+        super().__init__()
+        self._core = LipForceObserver(parameters)
+        self._period = parameters.period
+        self._ports = {
+            "com_position": self.DeclareVectorInputPort("com_position", 3),
+            "com_acceleration": self.DeclareVectorInputPort("com_acceleration", 3),
+            "zmp": self.DeclareVectorInputPort("zmp", 2),
+            "normal_force": self.DeclareVectorInputPort("normal_force", 1),
+        }
+        # [flag, valid, 3 x (x (5), P (25))]
+        self._state_index = self.DeclareDiscreteState(2 + 3 * 30)
+        self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._Update)
+        xd = {self.xd_ticket()}
+        self.DeclareVectorOutputPort("virtual_force", 3, lambda c, o: o.SetFromVector(self._unpacked(c)[2][[8, 13, 3]]), xd)
+        self.DeclareVectorOutputPort("valid", 1, lambda c, o: o.SetFromVector([self._unpacked(c)[1]]), xd)
+        self.DeclareVectorOutputPort("filter_states", 15, lambda c, o: o.SetFromVector(self._unpacked(c)[2]), xd)
+
+    def _unpacked(self, context: Context):
+        s = context.get_discrete_state(self._state_index).get_value()
+        states = np.concatenate([s[2 + 30 * i : 7 + 30 * i] for i in range(3)])  # z, x, y
+        return s[0], s[1], states
+
+    def _inputs(self, context: Context):
+        values = {}
+        for name, port in self._ports.items():
+            value = port.Eval(context)
+            if not np.all(np.isfinite(value)):
+                bad = np.flatnonzero(~np.isfinite(value)).tolist()
+                raise ValueError(f"LipForceObserverSystem: input '{name}' has NaN or inf at indices {bad}")
+            values[name] = np.array(value)
+        return values
+
+    def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
+        u = self._inputs(context)
+        s = context.get_discrete_state(self._state_index).get_value()
+        core = self._core
+        if s[0] < 0.5:
+            core.reset(u["com_position"], u["com_acceleration"])
+        else:  # load the filters of this context (order z, x, y) into the core
+            if core._filters is None:
+                core.reset(np.zeros(3), np.zeros(3))
+            for i, state in zip(range(3), (core._filters[2], core._filters[0], core._filters[1])):
+                block = s[2 + 30 * i : 32 + 30 * i]
+                state.x = block[:5].copy()
+                state.P = block[5:].reshape(5, 5).copy()
+        _, valid = core._update(u["com_position"], u["com_acceleration"], u["zmp"], float(u["normal_force"][0]))
+        out = np.empty_like(s)
+        out[0], out[1] = 1.0, float(valid)
+        for i, state in zip(range(3), (core._filters[2], core._filters[0], core._filters[1])):
+            out[2 + 30 * i : 7 + 30 * i] = state.x
+            out[7 + 30 * i : 32 + 30 * i] = state.P.reshape(-1)
+        discrete_state.set_value(self._state_index, out)

@@ -119,3 +119,27 @@ def test_clear_errors_for_broken_recordings(tmp_path, capsys):
     (recording / "total_force.mat").write_bytes(b"not a mat file")
     with pytest.raises(replay_nao_dataset.DatasetError, match="cannot read"):
         replay_nao_dataset.load_recording(recording)
+
+
+def test_drake_system_matches_the_core_on_real_data():
+    """LipForceObserverSystem, stepped by its own periodic update, equals the numpy core
+    (and so the authors' output) on the first 300 samples of a real recording."""
+    from systems.force_observer import LipForceObserverSystem
+
+    data = replay_nao_dataset.load_recording(DATASET / "Force_Z_data")
+    normal_force = calibrated_normal_force(data["total_force"].sum(axis=1))
+    reference = np.loadtxt(DATASET / "Force_Z_data" / "reference_F.csv", delimiter=",")
+    system = LipForceObserverSystem()
+    context = system.CreateDefaultContext()
+    for k in range(300):
+        system.GetInputPort("com_position").FixValue(context, data["Xc_Yc_Zc"][k])
+        system.GetInputPort("com_acceleration").FixValue(context, data["acc"][k])
+        system.GetInputPort("zmp").FixValue(context, data["ZMP"][k])
+        system.GetInputPort("normal_force").FixValue(context, [normal_force[k]])
+        context.SetDiscreteState(system.EvalUniquePeriodicDiscreteUpdate(context))
+        force = system.GetOutputPort("virtual_force").Eval(context)
+        assert np.abs(force - reference[k]).max() < 1e-9 * max(1.0, np.abs(reference[k]).max()), k
+    assert system.GetOutputPort("valid").Eval(context)[0] == 1.0
+    system.GetInputPort("zmp").FixValue(context, [np.nan, 0.0])
+    with pytest.raises(ValueError, match="input 'zmp' has NaN"):
+        system.EvalUniquePeriodicDiscreteUpdate(context)

@@ -54,6 +54,7 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem
 from pydrake.systems.primitives import MatrixGain
 
+from systems.inputs import eval_finite_input
 from systems.pd_gravity import joints_in_velocity_order
 
 #: Default update period T of the admittance [s] (the residuals' period).
@@ -390,11 +391,7 @@ class JointAdmittanceController(LeafSystem):
         return np.clip(q_d, np.minimum(self._lower, previous), np.maximum(self._upper, previous))
 
     def _eval_input(self, port, context: Context) -> np.ndarray:
-        value = port.Eval(context)
-        if not np.isfinite(value).all():
-            bad = np.flatnonzero(~np.isfinite(value))
-            raise ValueError(f"{_WHO}: input '{port.get_name()}' has NaN or inf at indices {bad.tolist()}")
-        return value
+        return eval_finite_input(_WHO, port, context)
 
     def _start_position(self, context: Context) -> np.ndarray:
         if self._initial_position is not None:

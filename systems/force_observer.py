@@ -26,6 +26,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from pydrake.systems.framework import Context, DiscreteValues, LeafSystem
 
+from systems.inputs import eval_finite_input
+
 #: Gravity and Nao's mass used by Hawley et al.
 GRAVITY = 9.81
 NAO_MASS = 5.19
@@ -293,14 +295,10 @@ class LipForceObserverSystem(LeafSystem):
         return s[0], s[1], states
 
     def _inputs(self, context: Context):
-        values = {}
-        for name, port in self._ports.items():
-            value = port.Eval(context)
-            if not np.all(np.isfinite(value)):
-                bad = np.flatnonzero(~np.isfinite(value)).tolist()
-                raise ValueError(f"LipForceObserverSystem: input '{name}' has NaN or inf at indices {bad}")
-            values[name] = np.array(value)
-        return values
+        return {
+            name: np.array(eval_finite_input("LipForceObserverSystem", port, context))
+            for name, port in self._ports.items()
+        }
 
     def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
         u = self._inputs(context)

@@ -24,6 +24,8 @@ from collections import OrderedDict
 import numpy as np
 from pydrake.systems.framework import BasicVector, Context, LeafSystem
 
+from systems.inputs import check_finite_input
+
 #: Samples generated per random-generator call (one block per (seed, block index)).
 BLOCK_SIZE = 1024
 #: Number of blocks kept in each noise's cache.
@@ -151,20 +153,6 @@ class SampledNoise:
         if self._zero:
             return np.zeros(self._dimension)
         return self.sample(self.sample_index(t))
-
-
-def check_finite_input(system_name: str, port_name: str, value: np.ndarray) -> None:
-    """Raises ValueError naming the system, port and indices if ``value`` has NaN/inf.
-
-    One dot product per call (this runs in every sensor at every step); the indices are
-    looked up only when the sum is not finite (an overflowing sum of finite values passes).
-    """
-    flat = np.asarray(value, dtype=float).reshape(-1)
-    if not math.isfinite(float(flat @ flat)):
-        bad = np.flatnonzero(~np.isfinite(flat))
-        if bad.size:
-            raise ValueError(
-                f"{system_name}: input '{port_name}' has NaN or inf at indices {bad.tolist()}")
 
 
 class NoisyVector(LeafSystem):

@@ -22,6 +22,7 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Joint, JointActuatorIndex
 from pydrake.systems.framework import BasicVector, Context, LeafSystem
 
+from systems.inputs import eval_finite_input
 from systems.topology import floating_base_topology
 
 
@@ -153,12 +154,7 @@ class PdGravityController(LeafSystem):
         return np.clip(tau, -self._limits, self._limits)
 
     def _CalcActuation(self, context: Context, output: BasicVector) -> None:
-        q_desired = self._desired_port.Eval(context)
-        x = self._state_port.Eval(context)
-        if not (np.isfinite(x).all() and np.isfinite(q_desired).all()):
-            for name, value in (("state", x), ("desired_position", q_desired)):
-                bad = np.flatnonzero(~np.isfinite(value))
-                if bad.size:
-                    raise ValueError(f"PdGravityController: input '{name}' has NaN or inf at indices {bad.tolist()}")
+        q_desired = eval_finite_input("PdGravityController", self._desired_port, context)
+        x = eval_finite_input("PdGravityController", self._state_port, context)
         tau = self.CalcJointTorques(q_desired, x)
         output.SetFromVector(tau[self._act_rows])

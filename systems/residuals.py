@@ -52,7 +52,6 @@ has no ``measured_torque`` input.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -62,6 +61,7 @@ from pydrake.systems.framework import BasicVector, Context, DiscreteValues, Leaf
 
 from systems.floating_base import DrakeFloatingBaseDynamics, FloatingBaseDynamics
 from systems.floating_base_terms import FloatingBaseTerms
+from systems.inputs import eval_finite_input
 
 #: Default update period of the residuals [s].
 DEFAULT_PERIOD = 1e-3
@@ -346,12 +346,7 @@ class _MomentumResidual(LeafSystem):
         return self._frames
 
     def _checked_input(self, port, context: Context) -> np.ndarray:
-        value = port.Eval(context)
-        if not math.isfinite(float(value @ value)):  # one dot product; details only on failure
-            bad = np.flatnonzero(~np.isfinite(value)).tolist()
-            if bad:
-                raise ValueError(f"{type(self).__name__}: input '{port.get_name()}' has NaN or inf at indices {bad}")
-        return value
+        return eval_finite_input(type(self).__name__, port, context)
 
     def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
         x = self._checked_input(self._state_port, context)

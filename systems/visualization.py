@@ -54,6 +54,8 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Joint
 from pydrake.systems.framework import Context, DiagramBuilder, EventStatus, LeafSystem, OutputPort
 
+from systems.inputs import eval_finite_input
+
 __all__ = [
     "DEFAULT_PUBLISH_PERIOD",
     "ForceArrows",
@@ -117,11 +119,7 @@ class _Track:
 
 
 def _checked(system: LeafSystem, port, context: Context) -> np.ndarray:
-    value = port.Eval(context)
-    if not np.isfinite(value).all():
-        bad = np.flatnonzero(~np.isfinite(value)).tolist()
-        raise ValueError(f"{type(system).__name__}: input '{port.get_name()}' has NaN or inf at indices {bad}")
-    return value
+    return eval_finite_input(type(system).__name__, port, context)
 
 
 def _period(period: float, who: str) -> float:

@@ -18,7 +18,7 @@ from pydrake.geometry import SceneGraph
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.framework import Context, DiagramBuilder, InputPort, OutputPort
-from pydrake.systems.primitives import MatrixGain
+from pydrake.systems.primitives import MatrixGain, ZeroOrderHold
 
 from diagrams.standing import default_gains
 from models import MODEL_NAMES, HumanoidHandles, add_ground, add_humanoid, set_standing_state
@@ -44,6 +44,9 @@ class HumanoidStation:
         known_wrenches: output port of their wrenches, or None.
         initial_state: the plant's initial [q; v] (standing, or the posture held in space).
         q_hold: the initial joint positions, v[6:] order, rad.
+        sensed_state_hold: the ZeroOrderHold between the sensors and the PD (humanoids), or
+            None. Its held sample is set by ``set_initial_state``: call it before
+            ``Simulator.Initialize``.
     """
 
     plant: MultibodyPlant
@@ -59,14 +62,27 @@ class HumanoidStation:
     known_wrenches: OutputPort | None
     initial_state: np.ndarray
     q_hold: np.ndarray
+    sensed_state_hold: ZeroOrderHold | None = None
 
     @property
     def joint_names(self) -> tuple[str, ...]:
         return tuple(j.name() for j in self.topology.joints)
 
-    def set_initial_state(self, root_context: Context) -> None:
-        """Puts the robot in its initial state in the diagram's ``root_context``."""
-        self.plant.SetPositionsAndVelocities(self.plant.GetMyMutableContextFromRoot(root_context), self.initial_state)
+    def set_initial_state(self, root_context: Context, state: np.ndarray | None = None) -> None:
+        """Puts the robot in ``state`` ([q; v], default ``initial_state``) in the diagram's
+        ``root_context``, and the PD's held sensor sample at that state (noise-free: the
+        first reading). Use this rather than setting the plant's state alone: a hold left
+        at zero makes the PD raise a ValueError at the first step.
+
+        Raises:
+            ValueError: ``state`` of the wrong size or not finite.
+        """
+        x = self.initial_state if state is None else np.asarray(state, dtype=float).reshape(-1)
+        if x.shape != self.initial_state.shape or not np.isfinite(x).all():
+            raise ValueError(f"set_initial_state: state must be {self.initial_state.size} finite numbers [q; v]")
+        self.plant.SetPositionsAndVelocities(self.plant.GetMyMutableContextFromRoot(root_context), x)
+        if self.sensed_state_hold is not None:
+            self.sensed_state_hold.GetMyMutableContextFromRoot(root_context).SetDiscreteState(x)
 
 
 def add_humanoid_station(
@@ -120,7 +136,22 @@ def add_humanoid_station(
         builder.Connect(plant.get_net_actuation_output_port(), to_joint_torque.get_input_port())
         measured_torque = to_joint_torque.get_output_port()
         known_frames, known_wrenches = (), None
-    builder.Connect(sensed_state, controller.GetInputPort("state"))
+    sensed_state_hold = None
+    if sensors is not None:
+        # One sensor reading per step, shared by the PD and the estimators. In a discrete
+        # MultibodyPlant diagram Drake evaluates the plant's actuation input (the PD and,
+        # through it, the whole Python sensor chain) before the plant's step, and the other
+        # periodic updates (residuals, admittance) after it, at the same time stamp, on the
+        # new state. Without a hold the sensor chain would run twice per step on two states;
+        # with it the chain runs once, in the update pass, and the PD reads at t_k + T the
+        # sample the estimators saw at t_k: the same plant state x(t_k + T), so the closed
+        # loop is unchanged (bit for bit without noise; measured), at ~9 % less time per step.
+        sensed_state_hold = builder.AddSystem(ZeroOrderHold(time_step, len(initial_state)))
+        sensed_state_hold.set_name("sensed_state_hold")
+        builder.Connect(sensed_state, sensed_state_hold.get_input_port())
+        builder.Connect(sensed_state_hold.get_output_port(), controller.GetInputPort("state"))
+    else:
+        builder.Connect(sensed_state, controller.GetInputPort("state"))
     return HumanoidStation(
         plant=plant,
         scene_graph=scene_graph,
@@ -135,6 +166,7 @@ def add_humanoid_station(
         known_wrenches=known_wrenches,
         initial_state=initial_state,
         q_hold=q_hold,
+        sensed_state_hold=sensed_state_hold,
     )
 
 

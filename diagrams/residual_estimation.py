@@ -24,7 +24,7 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
-from diagrams.humanoid_station import add_humanoid_station
+from diagrams.humanoid_station import HumanoidStation, add_humanoid_station
 from models import HumanoidHandles
 from systems.disturbances import Push, PushSource, Sinusoid
 from systems.residuals import ClassicalResidual, ExternalResidual, InternalResidual, ResidualModel
@@ -93,6 +93,7 @@ class ResidualEstimationHandles:
     initial_state: np.ndarray
     loggers: dict[str, VectorLogSink]
     meshcat_visualizer: MeshcatVisualizer | None = None
+    station: HumanoidStation | None = None
 
 
 def build_residual_estimation_diagram(
@@ -180,10 +181,11 @@ def build_residual_estimation_diagram(
         initial_state=station.initial_state,
         loggers=loggers,
         meshcat_visualizer=visualizer,
+        station=station,
     )
 
 
 def set_initial_state(diagram: Diagram, context: Context, handles: ResidualEstimationHandles) -> None:
-    """Puts the robot in its initial (standing) state in the diagram's ``context``."""
-    plant_context = handles.plant.GetMyMutableContextFromRoot(context)
-    handles.plant.SetPositionsAndVelocities(plant_context, handles.initial_state)
+    """Puts the robot in its initial (standing) state in the diagram's ``context`` (and the
+    station's held sensor sample, see ``HumanoidStation.set_initial_state``)."""
+    handles.station.set_initial_state(context)

@@ -17,11 +17,14 @@ quaternion has 4 coordinates and the angular velocity 3).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Joint, JointActuatorIndex
 from pydrake.systems.framework import BasicVector, Context, LeafSystem
 
+from systems.base_state import QUATERNION_NORM_TOLERANCE
 from systems.inputs import eval_finite_input
 from systems.topology import floating_base_topology
 
@@ -105,6 +108,7 @@ class PdGravityController(LeafSystem):
         self._q_index = np.array([j.position_start() for j in joints], dtype=int)
         self._v_index = np.array([j.velocity_start() for j in joints], dtype=int)
         self._nq = plant.num_positions()
+        self._quaternion_start = floating_base_topology(plant).free_joint.position_start()
 
         # Actuation order: actuator -> joint k (index into v[6:]).
         k_of_joint = {int(j.index()): k for k, j in enumerate(joints)}
@@ -156,5 +160,14 @@ class PdGravityController(LeafSystem):
     def _CalcActuation(self, context: Context, output: BasicVector) -> None:
         q_desired = eval_finite_input("PdGravityController", self._desired_port, context)
         x = eval_finite_input("PdGravityController", self._state_port, context)
+        s = self._quaternion_start
+        qw, qx, qy, qz = x[s : s + 4].tolist()
+        norm = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+        if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
+            raise ValueError(
+                f"PdGravityController: input 'state' has a base quaternion of norm {norm:.6g}, not a pose "
+                "(an uninitialised state? HumanoidStation.set_initial_state sets the robot and the held "
+                "sensor sample before Simulator.Initialize)"
+            )
         tau = self.CalcJointTorques(q_desired, x)
         output.SetFromVector(tau[self._act_rows])

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+import math
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -646,13 +647,27 @@ class BaseStateEstimator(LeafSystem):
         return x
 
     def _CalcPose(self, context: Context, output: BasicVector) -> None:
-        pose = np.array(self._eval_state(context)[self._q0: self._q0 + 7])
-        if not self._noise.is_zero:
-            noise = self._noise.value(context.get_time())
-            quaternion = _quaternion_multiply(pose[:4], rotation_vector_to_quaternion(noise[:3]))
-            pose[:4] = quaternion / np.linalg.norm(quaternion)
-            pose[4:] += noise[3:6]
-        output.SetFromVector(pose)
+        pose = self._eval_state(context)[self._q0: self._q0 + 7]
+        if self._noise.is_zero:
+            output.SetFromVector(pose)
+            return
+        # q ⊗ exp(φ/2), renormalised, in scalar arithmetic (this runs twice per time step;
+        # equal to _quaternion_multiply(q, rotation_vector_to_quaternion(φ)) / norm).
+        noise = self._noise.value(context.get_time())
+        px, py, pz, dx, dy, dz = noise[:6].tolist()
+        aw, ax, ay, az, x, y, z = pose.tolist()
+        angle = math.sqrt(px * px + py * py + pz * pz)
+        if angle < 1e-12:
+            bw, s = 1.0, 0.5
+        else:
+            bw, s = math.cos(0.5 * angle), math.sin(0.5 * angle) / angle
+        bx, by, bz = s * px, s * py, s * pz
+        w = aw * bw - ax * bx - ay * by - az * bz
+        qx = aw * bx + ax * bw + ay * bz - az * by
+        qy = aw * by - ax * bz + ay * bw + az * bx
+        qz = aw * bz + ax * by - ay * bx + az * bw
+        inv = 1.0 / math.sqrt(w * w + qx * qx + qy * qy + qz * qz)
+        output.SetFromVector((w * inv, qx * inv, qy * inv, qz * inv, x + dx, y + dy, z + dz))
 
     def _CalcVelocity(self, context: Context, output: BasicVector) -> None:
         velocity = np.array(self._eval_state(context)[self._v0: self._v0 + 6])
@@ -714,9 +729,10 @@ class SensedStateAssembler(LeafSystem):
     def _CalcState(self, context: Context, output: BasicVector) -> None:
         x = np.empty(self._size)
         for port, index in self._ports:
-            value = port.Eval(context)
-            check_finite_input("SensedStateAssembler", port.get_name(), value)
-            x[index] = value
+            x[index] = port.Eval(context)
+        if not math.isfinite(float(x @ x)):  # one check for all four inputs; name the culprit
+            for port, index in self._ports:
+                check_finite_input("SensedStateAssembler", port.get_name(), x[index])
         output.SetFromVector(x)
 
 

@@ -412,6 +412,8 @@ class FootForceTorqueSensors(LeafSystem):
             self._sole_mass[i] = mass
             self._p_SCcm_S[i] = first_moment / mass if mass > 0 else np.zeros(3)
         self._weight = self._sole_mass[:, None] * gravity[None, :]  # m g_W per sensor, N
+        self._weight_skew = np.array([[[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]]
+                                      for w in self._weight])
 
         m = len(joints)
         force_std = _std(force_noise_std, 3, "force_noise_std", who)
@@ -452,26 +454,23 @@ class FootForceTorqueSensors(LeafSystem):
     def CalcGroundWrenches(self, reaction_forces, x: np.ndarray) -> np.ndarray:
         """Noise-free ``wrenches`` for a reaction-force list and a state x = [q; v]."""
         self._plant.SetPositions(self._context, x[: self._nq])
-        out = np.empty(6 * len(self._joints))
         if len(reaction_forces) <= max(self._joint_index):
             raise ValueError(f"FootForceTorqueSensors: input 'reaction_forces' has "
                              f"{len(reaction_forces)} entries; the plant has joint index "
                              f"{max(self._joint_index)}")
-        for i, (index, frame) in enumerate(zip(self._joint_index, self._frames)):
-            F = reaction_forces[index]
-            tau_S, f_S = F.rotational(), F.translational()
-            R_WS = frame.CalcRotationMatrixInWorld(self._context).matrix()
-            moment = -(R_WS @ tau_S)
-            force = -(R_WS @ f_S)
-            if self._compensate:
-                weight = self._weight[i]
-                force -= weight
-                r = R_WS @ self._p_SCcm_S[i]
-                moment -= (r[1] * weight[2] - r[2] * weight[1],
-                           r[2] * weight[0] - r[0] * weight[2],
-                           r[0] * weight[1] - r[1] * weight[0])
-            out[6 * i: 6 * i + 3] = moment
-            out[6 * i + 3: 6 * i + 6] = force
+        # Vectorised over the sensors: R_WS per sensor, then -R_WS [tau_S; f_S] and the
+        # sole-weight compensation (force - m g, moment - (R_WS p_SCcm) x m g).
+        measured = [reaction_forces[index] for index in self._joint_index]
+        tau_S = np.array([F.rotational() for F in measured])
+        f_S = np.array([F.translational() for F in measured])
+        R_WS = np.array([frame.CalcRotationMatrixInWorld(self._context).matrix() for frame in self._frames])
+        moment = -np.einsum("kij,kj->ki", R_WS, tau_S)
+        force = -np.einsum("kij,kj->ki", R_WS, f_S)
+        if self._compensate:
+            force -= self._weight
+            # (R p) x w = -[w]x (R p): one more batched product with the fixed [w]x.
+            moment += np.einsum("kij,kj->ki", self._weight_skew, np.einsum("kij,kj->ki", R_WS, self._p_SCcm_S))
+        out = np.concatenate((moment, force), axis=1).reshape(-1)
         if not np.isfinite(out).all():
             for index, joint in zip(self._joint_index, self._joints):
                 F = reaction_forces[index]

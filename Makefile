@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: demo stand test bench residuals install clean
+.PHONY: demo stand test bench residuals nao install clean
 
 install: $(STAMP)
 
@@ -33,6 +33,9 @@ bench: $(STAMP)
 
 residuals: $(STAMP)
 	$(PY) -m apps.residual_comparison $(ARGS)
+
+nao: $(STAMP)
+	$(PY) -m apps.nao_force_observer $(ARGS)
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

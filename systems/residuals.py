@@ -57,7 +57,7 @@ from collections.abc import Sequence
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Frame, JacobianWrtVariable
-from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem
+from pydrake.systems.framework import Context, DiscreteValues, LeafSystem
 
 from systems.floating_base import DrakeFloatingBaseDynamics, FloatingBaseDynamics
 from systems.floating_base_terms import FloatingBaseTerms
@@ -383,10 +383,9 @@ class _MomentumResidual(LeafSystem):
         return context.get_discrete_state(self._residual_index).get_value()
 
     def _declare_residual_output(self) -> None:
-        """The ``residual`` output port (classical and internal residuals): the discrete state."""
-        self.DeclareVectorOutputPort(
-            "residual", self._size, lambda context, output: output.SetFromVector(self._residual(context)), {self.xd_ticket()}
-        )
+        """The ``residual`` output port (classical and internal residuals): the discrete
+        state group itself, copied by Drake without a Python call."""
+        self.DeclareStateOutputPort("residual", self._residual_index)
 
 
 class ClassicalResidual(_MomentumResidual):
@@ -555,8 +554,8 @@ class ExternalResidual(_MomentumResidual):
         )
         # The world-frame wrench uses the sensed base pose of the same update.
         self._world_index = self.DeclareDiscreteState(6)
-        self.DeclareVectorOutputPort("external_wrench_base", 6, self._CalcBase, {self.xd_ticket()})
-        self.DeclareVectorOutputPort("external_wrench_world", 6, self._CalcWorld, {self.xd_ticket()})
+        self.DeclareStateOutputPort("external_wrench_base", self._residual_index)
+        self.DeclareStateOutputPort("external_wrench_world", self._world_index)
 
     def _momentum_and_rates(self, terms, x, tau_m, known):
         v0, qdot = terms.v0, x[self._qdot_start :]
@@ -564,14 +563,8 @@ class ExternalResidual(_MomentumResidual):
         model_rate = terms.I0c_dot @ v0 + terms.F_dot @ qdot - terms.p_hat
         return momentum, model_rate, (np.zeros(6) if known is None else known[0])
 
-    def _CalcBase(self, context: Context, output: BasicVector) -> None:
-        output.SetFromVector(self._residual(context))
-
     def _after_update(self, discrete_state: DiscreteValues, terms, x, residual) -> None:
         discrete_state.set_value(self._world_index, self._model.base_wrench_to_world(terms, x, residual))
-
-    def _CalcWorld(self, context: Context, output: BasicVector) -> None:
-        output.SetFromVector(context.get_discrete_state(self._world_index).get_value())
 
 
 def _has_free_joint(plant: MultibodyPlant) -> bool:

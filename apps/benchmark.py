@@ -12,6 +12,12 @@ microseconds per call of
 
 each as a ratio to the ``CalcMassMatrix`` unit measured in the same run, so that the ratios
 hold on a noisy machine. Each figure is the median over several batches at random states.
+
+It also times the push-and-comply closed loop (``hrp4_like``, 1 ms steps, the scenario's
+first ``--loop-seconds`` with the push moved to start at once): the station alone (plant with
+SAP contact, sensors, PD + gravity; constant posture), the whole internal-residual loop, and
+the same with Meshcat recording its replay: microseconds of wall and CPU time per step and
+the real-time factor; and the Kalman force observer's throughput on a real Nao recording.
 """
 
 from __future__ import annotations
@@ -174,11 +180,73 @@ def benchmark_force_observer(batches: int = 5) -> dict:
     return {"samples_per_s": statistics.median(samples), "samples": len(normal_force)}
 
 
+def benchmark_closed_loop(seconds: float = 2.0) -> list[dict]:
+    """Wall and CPU (this thread) time per 1 ms step of the push-and-comply loop and parts."""
+    from pydrake.geometry import Meshcat
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import ConstantVectorSource
+
+    from diagrams.humanoid_station import add_humanoid_station
+    from diagrams.push_and_comply import PushAndComplyScenario, build_push_and_comply_diagram
+
+    scenario = PushAndComplyScenario(
+        duration=seconds, push_start=0.0, push_peak_time=0.6 * seconds, push_end=seconds
+    )
+
+    def station_only():
+        builder = DiagramBuilder()
+        station = add_humanoid_station(builder, scenario.model, noise=True, seed=0)
+        posture = builder.AddSystem(ConstantVectorSource(station.q_hold))
+        builder.Connect(posture.get_output_port(), station.desired_position)
+        return builder.Build(), station, None
+
+    def loop(meshcat):
+        def build():
+            diagram, handles = build_push_and_comply_diagram(scenario, "internal", meshcat)
+            return diagram, handles.station, meshcat
+        return build
+
+    rows = []
+    meshcat = Meshcat()
+    for label, build in (
+        ("station: plant + sensors + PD", station_only),
+        ("push-and-comply, internal residual", loop(None)),
+        ("  + Meshcat recording", loop(meshcat)),
+    ):
+        diagram, station, recorder = build()
+        simulator = Simulator(diagram)
+        context = simulator.get_mutable_context()
+        station.set_initial_state(context)
+        if recorder is not None:
+            recorder.StartRecording(frames_per_second=32.0)
+        simulator.Initialize()
+        simulator.AdvanceTo(0.05)  # warm-up: caches, first contact
+        wall, cpu = time.perf_counter(), time.thread_time()
+        simulator.AdvanceTo(seconds)
+        wall, cpu = time.perf_counter() - wall, time.thread_time() - cpu
+        if recorder is not None:
+            recorder.StopRecording()
+            recorder.DeleteRecording()
+            recorder.Delete()
+        steps = round((seconds - 0.05) / 1e-3)
+        rows.append({
+            "loop": label.strip(" +"),
+            "wall_us_per_step": wall / steps * 1e6,
+            "cpu_us_per_step": cpu / steps * 1e6,
+            "real_time_factor": (seconds - 0.05) / wall,
+        })
+        rows[-1]["label"] = label
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--model", choices=(*MODEL_NAMES, "all"), default="all")
     parser.add_argument("--calls", type=int, default=300, help="calls per batch (fast paths)")
     parser.add_argument("--batches", type=int, default=7, help="batches; the median is reported")
+    parser.add_argument("--loop-seconds", type=float, default=2.0,
+                        help="simulated seconds per closed-loop timing (0 skips them)")
     parser.add_argument("--json", type=Path, help="also write the results to this JSON file")
     args = parser.parse_args(argv)
 
@@ -217,10 +285,23 @@ def main(argv: list[str] | None = None) -> int:
             f"Kalman force observer (Hawley et al.), real Nao recording of {observer['samples']} samples: "
             f"{observer['samples_per_s']:.0f} samples/s (60 Hz real time needs 60)"
         )
+    loop_rows = []
+    if args.loop_seconds > 0:
+        loop_rows = benchmark_closed_loop(args.loop_seconds)
+        print()
+        print(f"Push-and-comply closed loop on hrp4_like, {args.loop_seconds:g} s simulated, 1 ms steps")
+        header = f"{'loop':<36} {'wall/step':>11} {'CPU/step':>11} {'real-time factor':>17}"
+        print(header)
+        print("-" * len(header))
+        for r in loop_rows:
+            print(f"{r.pop('label'):<36} {r['wall_us_per_step']:>8.0f} us {r['cpu_us_per_step']:>8.0f} us {r['real_time_factor']:>17.2f}")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(
-            json.dumps({"floating_base": rows, "residual_update": residual_rows, "force_observer": observer}, indent=2)
+            json.dumps(
+                {"floating_base": rows, "residual_update": residual_rows, "force_observer": observer, "closed_loop": loop_rows},
+                indent=2,
+            )
         )
     return 0
 

@@ -7,7 +7,9 @@ from apps import benchmark
 
 def test_benchmark_runs_and_reports_every_figure(tmp_path, capsys):
     out = tmp_path / "bench.json"
-    assert benchmark.main(["--model", "nao_like", "--calls", "3", "--batches", "1", "--json", str(out)]) == 0
+    assert benchmark.main(
+        ["--model", "nao_like", "--calls", "3", "--batches", "1", "--loop-seconds", "0.08", "--json", str(out)]
+    ) == 0
     results = json.loads(out.read_text())
     rows = results["floating_base"]
     assert [r["model"] for r in rows] == ["nao_like"]
@@ -18,4 +20,7 @@ def test_benchmark_runs_and_reports_every_figure(tmp_path, capsys):
     assert row["fast_compute_ratio"] == row["fast_compute_us"] / row["calc_mass_matrix_us"]
     (residual,) = results["residual_update"]
     assert residual["model"] == "nao_like" and residual["three_residuals_update_us"] > 0.0
+    loops = results["closed_loop"]
+    assert [r["loop"] for r in loops] == ["station: plant + sensors + PD", "push-and-comply, internal residual", "Meshcat recording"]
+    assert all(r["wall_us_per_step"] > 0 and r["cpu_us_per_step"] > 0 for r in loops)
     assert "nao_like" in capsys.readouterr().out

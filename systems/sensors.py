@@ -412,8 +412,9 @@ class FootForceTorqueSensors(LeafSystem):
             self._sole_mass[i] = mass
             self._p_SCcm_S[i] = first_moment / mass if mass > 0 else np.zeros(3)
         self._weight = self._sole_mass[:, None] * gravity[None, :]  # m g_W per sensor, N
-        self._weight_skew = np.array([[[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]]
-                                      for w in self._weight])
+        # [m g]x transposed, per sensor: (row r) @ [w]x^T = ([w]x r)^T = (w x r)^T.
+        self._weight_skew_T = np.array([[[0.0, w[2], -w[1]], [-w[2], 0.0, w[0]], [w[1], -w[0], 0.0]]
+                                        for w in self._weight])
 
         m = len(joints)
         force_std = _std(force_noise_std, 3, "force_noise_std", who)
@@ -458,18 +459,21 @@ class FootForceTorqueSensors(LeafSystem):
             raise ValueError(f"FootForceTorqueSensors: input 'reaction_forces' has "
                              f"{len(reaction_forces)} entries; the plant has joint index "
                              f"{max(self._joint_index)}")
-        # Vectorised over the sensors: R_WS per sensor, then -R_WS [tau_S; f_S] and the
-        # sole-weight compensation (force - m g, moment - (R_WS p_SCcm) x m g).
-        measured = [reaction_forces[index] for index in self._joint_index]
-        tau_S = np.array([F.rotational() for F in measured])
-        f_S = np.array([F.translational() for F in measured])
-        R_WS = np.array([frame.CalcRotationMatrixInWorld(self._context).matrix() for frame in self._frames])
-        moment = -np.einsum("kij,kj->ki", R_WS, tau_S)
-        force = -np.einsum("kij,kj->ki", R_WS, f_S)
+        # Vectorised over the sensors, one batched product: rows [tau_S; f_S; p_SCcm_S] times
+        # R_WS^T give R_WS tau_S, R_WS f_S and r = R_WS p_SCcm_S; the wrench is -R_WS [tau_S; f_S]
+        # with the sole weight removed (force - m g, moment - r x m g = moment + [m g]x r).
+        rows = np.empty((len(self._frames), 3, 3))
+        for i, index in enumerate(self._joint_index):
+            F = reaction_forces[index]
+            rows[i, 0] = F.rotational()
+            rows[i, 1] = F.translational()
+        rows[:, 2] = self._p_SCcm_S
+        R_WS_T = np.array([frame.CalcRotationMatrixInWorld(self._context).matrix().T for frame in self._frames])
+        rotated = rows @ R_WS_T
+        moment, force = -rotated[:, 0], -rotated[:, 1]
         if self._compensate:
             force -= self._weight
-            # (R p) x w = -[w]x (R p): one more batched product with the fixed [w]x.
-            moment += np.einsum("kij,kj->ki", self._weight_skew, np.einsum("kij,kj->ki", R_WS, self._p_SCcm_S))
+            moment += (rotated[:, 2:3] @ self._weight_skew_T)[:, 0]
         out = np.concatenate((moment, force), axis=1).reshape(-1)
         if not np.isfinite(out).all():
             for index, joint in zip(self._joint_index, self._joints):

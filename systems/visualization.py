@@ -100,13 +100,18 @@ class _Track:
         self.skipped_time = None
 
     def update(self, value, t: float) -> None:
+        """``value``: a bool, a float, or a tuple/list of floats (plain Python numbers: this
+        runs for every marker at every publish)."""
         if t < self.time:  # a new simulation (time went back): start over
             self.reset()
-        if self.value is not None:
-            if isinstance(value, (bool, np.bool_)):
-                same = value == self.value
+        held = self.value
+        if held is not None:
+            if isinstance(value, bool):
+                same = value == held
+            elif isinstance(value, float):
+                same = abs(value - held) <= self.tol
             else:
-                same = float(np.max(np.abs(np.asarray(value) - np.asarray(self.value)))) <= self.tol
+                same = max(abs(a - b) for a, b in zip(value, held)) <= self.tol
             if same:
                 self.skipped_time = t
                 return
@@ -305,11 +310,11 @@ class JointEffortOverlay(LeafSystem):
         if not self._objects_set:
             self._set_objects()
         t = context.get_time()
-        positions = self.joint_positions(x)
-        for (where, scale, visible), p, s in zip(self._tracks, positions, self.scales(effort)):
+        positions = self.joint_positions(x).tolist()
+        for (where, scale, visible), p, s in zip(self._tracks, positions, self.scales(effort).tolist()):
             where.update(p, t)
-            scale.update(max(float(s), _MIN_SCALE), t)
-            visible.update(bool(s >= 0.01), t)
+            scale.update(max(s, _MIN_SCALE), t)
+            visible.update(s >= 0.01, t)
         return EventStatus.Succeeded()
 
 
@@ -505,16 +510,17 @@ class ForceArrows(LeafSystem):
         t = context.get_time()
         for i, (pose, shaft, head, cone, visible) in enumerate(self._tracks):
             f = forces[3 * i : 3 * i + 3]
-            norm = float(np.linalg.norm(f))
+            fx, fy, fz = f.tolist()
+            norm = math.sqrt(fx * fx + fy * fy + fz * fz)
             shown = norm >= self._min_force and norm > 0.0
             visible.update(shown, t)
             if not shown:
                 continue  # a hidden arrow keeps its last pose
             tail, R, length, c = self.arrow(f, points[3 * i : 3 * i + 3])
-            pose.update(np.concatenate((R.matrix().ravel(), tail)), t)
-            c = max(c, _MIN_SCALE)
-            shaft.update(np.array([c, c, max(length - c * self._head_length, _MIN_SCALE)]), t)
-            head.update(length, t)
+            pose.update(R.matrix().ravel().tolist() + tail.tolist(), t)
+            c = max(float(c), _MIN_SCALE)
+            shaft.update((c, c, max(float(length) - c * self._head_length, _MIN_SCALE)), t)
+            head.update(float(length), t)
             cone.update(c, t)
         return EventStatus.Succeeded()
 

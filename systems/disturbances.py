@@ -506,6 +506,9 @@ class PushSource(LeafSystem):
 
     def _CalcAppliedForces(self, context: Context, output: AbstractValue) -> None:
         forces = self.forces_at(context.get_time())
+        if not forces.any():  # no push active (most of an experiment): the zero-force list
+            output.set_value(self._template)
+            return
         out = []
         for template, f in zip(self._template, forces):
             applied = ExternallyAppliedSpatialForce()

@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: demo stand test bench residuals nao install clean
+.PHONY: demo stand test bench residuals nao contact install clean
 
 install: $(STAMP)
 
@@ -36,6 +36,9 @@ residuals: $(STAMP)
 
 nao: $(STAMP)
 	$(PY) -m apps.nao_force_observer $(ARGS)
+
+contact: $(STAMP)
+	$(PY) -m apps.contact_localization $(ARGS)
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

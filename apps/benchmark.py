@@ -17,7 +17,8 @@ It also times the push-and-comply closed loop (``hrp4_like``, 1 ms steps, the sc
 first ``--loop-seconds`` with the push moved to start at once): the station alone (plant with
 SAP contact, sensors, PD + gravity; constant posture), the whole internal-residual loop, and
 the same with Meshcat recording its replay: microseconds of wall and CPU time per step and
-the real-time factor; and the Kalman force observer's throughput on a real Nao recording.
+the real-time factor; the Kalman force observer's throughput on a real Nao recording; and
+one update of the contact localizer (Flacco et al. Sec. VI) on ``hrp4_like``.
 """
 
 from __future__ import annotations
@@ -35,6 +36,8 @@ from pydrake.multibody.plant import MultibodyPlant
 from models import MODEL_NAMES, add_humanoid
 from systems.floating_base import FloatingBaseDynamics
 from systems.residuals import ClassicalResidual, ExternalResidual, InternalResidual, ResidualModel
+
+from apps.contact_localization import benchmark_localizer_update
 
 
 def _median_microseconds(call: Callable[[int], object], calls: int, batches: int) -> float:
@@ -295,11 +298,28 @@ def main(argv: list[str] | None = None) -> int:
         print("-" * len(header))
         for r in loop_rows:
             print(f"{r.pop('label'):<36} {r['wall_us_per_step']:>8.0f} us {r['cpu_us_per_step']:>8.0f} us {r['real_time_factor']:>17.2f}")
+    localizer_rows = [
+        benchmark_localizer_update(name, calls=max(args.calls // 3, 1), batches=args.batches)
+        for name in names
+        if name == "hrp4_like"  # the contact study needs the foot F/T sensors
+    ]
+    if localizer_rows:
+        print()
+        print("Contact localizer (Sec. VI: line of action, every collision primitive, scores): one update at a new state")
+        header = f"{'model':<10} {'primitives':>10} {'CalcMassMatrix':>15} {'one update':>22} {'floor':>8}"
+        print(header)
+        print("-" * len(header))
+        for r in localizer_rows:
+            print(
+                f"{r['model']:<10} {r['num_primitives']:>10} {r['calc_mass_matrix_us']:>12.1f} us"
+                f" {r['localizer_update_us']:>11.1f} us ({r['localizer_update_ratio']:>5.1f}x) {'2000 us':>8}"
+            )
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(
             json.dumps(
-                {"floating_base": rows, "residual_update": residual_rows, "force_observer": observer, "closed_loop": loop_rows},
+                {"floating_base": rows, "residual_update": residual_rows, "force_observer": observer, "closed_loop": loop_rows,
+                 "contact_localizer": localizer_rows},
                 indent=2,
             )
         )

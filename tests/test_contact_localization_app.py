@@ -1,0 +1,47 @@
+"""Smoke test of apps/contact_localization.py: two short trials in two spawned processes,
+a short run without contact and one Meshcat replay."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from apps import contact_localization
+from systems.visualization import read_static_html
+
+
+def test_app_smoke(tmp_path):
+    code = contact_localization.main([
+        "--trials", "2", "--workers", "2", "--replays", "1", "--headless", "--push-start", "0.2",
+        "--contact-duration", "0.4", "--no-contact-duration", "0.5", "--seed", "3", "--out", str(tmp_path)])
+    assert code == 0
+    out = tmp_path / "contact_localization"
+    metrics = json.loads((out / "metrics.json").read_text())
+    for key in ("detection_rate", "median_detection_delay_s", "false_detections", "correct_link_rate",
+                "median_position_error_m", "p95_position_error_m", "median_force_error_rel",
+                "median_angle_error_deg", "trials"):
+        assert key in metrics
+    assert metrics["trials"] == 2 and len(metrics["per_trial"]) == 2
+    assert metrics["no_contact_run"]["duration_s"] == 0.5
+    # Physics, not bookkeeping: the contacts are found (noise on, 0.2 s of averaging).
+    assert metrics["detection_rate"] == 1.0
+    assert metrics["correct_link_rate"] == 1.0
+    assert metrics["median_position_error_m"] < 0.02
+    assert metrics["median_force_error_rel"] < 0.05
+    assert (out / "position_errors.png").stat().st_size > 10_000
+    # The replay animates the true and the estimated force arrows.
+    scene = read_static_html((out / "replay_trial_0.html").read_text())
+    for path in ("/drake/true_force/0", "/drake/estimated_force/0"):
+        assert path in scene.tracks, sorted(scene.tracks)[:10]
+        visible = [value for _, value in scene.tracks[path].get("visible", [])]
+        assert True in visible, path  # shown during the push
+
+
+def test_sampled_contacts_are_on_the_outer_surface_and_within_the_cone():
+    specs = contact_localization.sample_trials("hrp4_like", 5, seed=0)
+    assert len({s["body"] for s in specs}) > 1
+    for s in specs:
+        f = np.asarray(s["force_world"])
+        assert 5.0 <= np.linalg.norm(f) <= 40.0
+        assert s["body"] not in ("l_sole", "r_sole")

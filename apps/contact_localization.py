@@ -248,68 +248,6 @@ def run_no_contact(model: str, duration: float, seed: int, noise: bool = True) -
     }
 
 
-def benchmark_localizer_update(model: str = "hrp4_like", *, calls: int = 100, batches: int = 7, seed: int = 0) -> dict:
-    """One full ContactLocalizer update (line of action, all primitives, buried-point test,
-    scores) at a new sensed state, for the lines of 16 random contacts of the study, in us
-    and as a ratio to one CalcMassMatrix after a new state measured in the same run (the
-    unit of ``apps.benchmark``). For ``make bench``; the issue's floor is 2 ms."""
-    import statistics
-
-    from systems.floating_base import FloatingBaseDynamics
-    from diagrams.contact_study import ContactStudyConfig, build_contact_study_diagram
-
-    _, handles = build_contact_study_diagram(ContactStudyConfig(model=model, noise=False))
-    plant, localizer = handles.plant, handles.localizer
-    x0 = handles.station.initial_state
-    nq = plant.num_positions()
-    context = plant.CreateDefaultContext()
-    plant.SetPositionsAndVelocities(context, x0)
-    dynamics = FloatingBaseDynamics(plant)
-    inputs = []
-    for spec in sample_trials(model, 16, seed):
-        body = plant.GetBodyByName(spec["body"])
-        f = np.asarray(spec["force_world"])
-        p_W = plant.EvalBodyPoseInWorld(context, body).multiply(np.asarray(spec["point_body"]))
-        tau = dynamics.floating_jacobian(x0[:nq], body.body_frame(), np.asarray(spec["point_body"])).T @ f
-        inputs.append((np.concatenate((np.cross(p_W, f), f)), tau))
-    probe = localizer.CreateDefaultContext()
-    state = localizer.GetInputPort("state").FixValue(probe, x0)
-    wrench = localizer.GetInputPort("external_wrench_world").FixValue(probe, inputs[0][0])
-    residual = localizer.GetInputPort("residual").FixValue(probe, inputs[0][1])
-    localizer.GetInputPort("contact_detected").FixValue(probe, [1.0])
-    rng = np.random.default_rng(seed)
-    states = []
-    for _ in range(16):
-        x = x0.copy()
-        x[7:nq] += 1e-6 * rng.normal(size=nq - 7)  # a new q: no pose or mass matrix reused
-        states.append(x)
-
-    def update(i: int):
-        state.GetMutableData().set_value(states[i % 16])
-        wrench.GetMutableData().set_value(inputs[i % 16][0])
-        residual.GetMutableData().set_value(inputs[i % 16][1])
-        return localizer.EvalUniquePeriodicDiscreteUpdate(probe)
-
-    def mass_matrix(i: int):
-        plant.SetPositions(context, states[i % 16][:nq])
-        return plant.CalcMassMatrix(context)
-
-    def median_us(call) -> float:
-        call(0)
-        samples = []
-        for _ in range(batches):
-            start = time.perf_counter()
-            for i in range(calls):
-                call(i)
-            samples.append((time.perf_counter() - start) / calls * 1e6)
-        return statistics.median(samples)
-
-    unit = median_us(mass_matrix)
-    update_us = median_us(update)
-    return {"model": model, "num_primitives": len(localizer.geometry), "calc_mass_matrix_us": unit,
-            "localizer_update_us": update_us, "localizer_update_ratio": update_us / unit}
-
-
 def _job(job: tuple) -> tuple[str, dict]:
     kind, payload, options = job
     if kind == "trial":

@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: demo stand test bench residuals nao contact install clean
+.PHONY: demo stand test bench residuals nao contact walk install clean
 
 install: $(STAMP)
 
@@ -39,6 +39,9 @@ nao: $(STAMP)
 
 contact: $(STAMP)
 	$(PY) -m apps.contact_localization $(ARGS)
+
+walk: $(STAMP)
+	$(PY) -m apps.nao_walk $(ARGS)
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: demo stand test bench residuals nao contact walk install clean
+.PHONY: demo stand test bench residuals nao contact walk arms install clean
 
 install: $(STAMP)
 
@@ -42,6 +42,9 @@ contact: $(STAMP)
 
 walk: $(STAMP)
 	$(PY) -m apps.nao_walk $(ARGS)
+
+arms: $(STAMP)
+	$(PY) -m apps.nao_compliant_arms $(ARGS)
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

@@ -49,7 +49,6 @@ expected value at the same sample (the observer's output is logged one period la
 from __future__ import annotations
 
 import argparse
-import bisect
 import json
 import math
 import sys
@@ -66,7 +65,7 @@ from pydrake.geometry import Meshcat  # noqa: E402
 from pydrake.systems.analysis import Simulator  # noqa: E402
 
 from diagrams.nao_standing import build_nao_standing_diagram, settled_standing_state, wide_stance  # noqa: E402
-from systems.disturbances import Push  # noqa: E402
+from systems.disturbances import Push, SmoothPiecewise  # noqa: E402
 
 #: The paper's load: 2.5 lb = 1.13 kg (Sec. 6.2), and g.
 LOAD_MASS = 1.13
@@ -88,55 +87,6 @@ STEADY_WINDOW = 1.0
 #: gives an RMS error above 1 N over a ~20 s run, even on exact LIP data).
 DEFAULT_RAMP = 5.0
 COMPONENTS = ("x", "y", "z")
-
-
-def _smoothstep(x):
-    x = np.clip(x, 0.0, 1.0)
-    return x * x * x * (10.0 + x * (-15.0 + 6.0 * x))
-
-
-@dataclass(frozen=True)
-class SmoothPiecewise:
-    """A force profile through knots (t_i, v_i): constant before the first and after the
-    last knot, a quintic smoothstep (C2) from each knot's value to the next's.
-
-    Attributes:
-        times: increasing knot times, s.
-        values: the values at the knots (N, or rad for an angle).
-    """
-
-    times: tuple
-    values: tuple
-
-    def __post_init__(self):
-        if len(self.times) != len(self.values) or len(self.times) < 1:
-            raise ValueError("SmoothPiecewise needs as many values as times (>= 1)")
-        if any(b <= a for a, b in zip(self.times, self.times[1:])):
-            raise ValueError(f"SmoothPiecewise times must increase, got {self.times}")
-
-    def value(self, t):
-        if np.ndim(t) == 0:  # scalar path: called by the plant's force input every step
-            t = float(t)
-            k = bisect.bisect_right(self.times, t)
-            if k == 0:
-                return float(self.values[0])
-            if k == len(self.times):
-                return float(self.values[-1])
-            t0, t1, v0, v1 = self.times[k - 1], self.times[k], self.values[k - 1], self.values[k]
-            x = (t - t0) / (t1 - t0)
-            return float(v0 + (v1 - v0) * x * x * x * (10.0 + x * (-15.0 + 6.0 * x)))
-        times, values = np.asarray(self.times, float), np.asarray(self.values, float)
-        t_arr = np.asarray(t, dtype=float)
-        out = np.full(t_arr.shape, values[0])
-        for (t0, v0), (t1, v1) in zip(zip(times, values), zip(times[1:], values[1:])):
-            out = np.where(t_arr >= t0, v0 + (v1 - v0) * _smoothstep((t_arr - t0) / (t1 - t0)), out)
-        out = np.where(t_arr >= times[-1], values[-1], out)
-        return float(out) if np.ndim(t) == 0 else out
-
-    def plateaus(self, min_length: float) -> list[tuple[float, float]]:
-        """Intervals between consecutive equal-valued knots lasting >= min_length, s."""
-        return [(a, b) for (a, va), (b, vb) in zip(zip(self.times, self.values), zip(self.times[1:], self.values[1:]))
-                if va == vb and b - a >= min_length]
 
 
 @dataclass(frozen=True)

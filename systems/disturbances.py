@@ -26,6 +26,7 @@ Typical use::
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass
 from typing import Protocol, Sequence, Union, runtime_checkable
@@ -46,6 +47,7 @@ __all__ = [
     "Push",
     "PushSource",
     "Sinusoid",
+    "SmoothPiecewise",
     "Step",
 ]
 
@@ -207,7 +209,56 @@ class Step:
         return np.where((t >= self.t_on) & (t < self.t_off), self.magnitude, 0.0)
 
 
-Profile = Union[Sinusoid, PolynomialRampUpDown, Step, ForceProfile]
+def _smoothstep_array(x):
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * x * (10.0 + x * (-15.0 + 6.0 * x))
+
+
+@dataclass(frozen=True)
+class SmoothPiecewise:
+    """A force profile through knots (t_i, v_i): constant before the first and after the
+    last knot, a quintic smoothstep (C2) from each knot's value to the next's.
+
+    Attributes:
+        times: increasing knot times, s.
+        values: the values at the knots (N, or rad for an angle).
+    """
+
+    times: tuple
+    values: tuple
+
+    def __post_init__(self):
+        if len(self.times) != len(self.values) or len(self.times) < 1:
+            raise ValueError("SmoothPiecewise needs as many values as times (>= 1)")
+        if any(b <= a for a, b in zip(self.times, self.times[1:])):
+            raise ValueError(f"SmoothPiecewise times must increase, got {self.times}")
+
+    def value(self, t):
+        if np.ndim(t) == 0:  # scalar path: called by the plant's force input every step
+            t = float(t)
+            k = bisect.bisect_right(self.times, t)
+            if k == 0:
+                return float(self.values[0])
+            if k == len(self.times):
+                return float(self.values[-1])
+            t0, t1, v0, v1 = self.times[k - 1], self.times[k], self.values[k - 1], self.values[k]
+            x = (t - t0) / (t1 - t0)
+            return float(v0 + (v1 - v0) * x * x * x * (10.0 + x * (-15.0 + 6.0 * x)))
+        times, values = np.asarray(self.times, float), np.asarray(self.values, float)
+        t_arr = np.asarray(t, dtype=float)
+        out = np.full(t_arr.shape, values[0])
+        for (t0, v0), (t1, v1) in zip(zip(times, values), zip(times[1:], values[1:])):
+            out = np.where(t_arr >= t0, v0 + (v1 - v0) * _smoothstep_array((t_arr - t0) / (t1 - t0)), out)
+        out = np.where(t_arr >= times[-1], values[-1], out)
+        return float(out) if np.ndim(t) == 0 else out
+
+    def plateaus(self, min_length: float) -> list[tuple[float, float]]:
+        """Intervals between consecutive equal-valued knots lasting >= min_length, s."""
+        return [(a, b) for (a, va), (b, vb) in zip(zip(self.times, self.values), zip(self.times[1:], self.values[1:]))
+                if va == vb and b - a >= min_length]
+
+
+Profile = Union[Sinusoid, PolynomialRampUpDown, Step, SmoothPiecewise, ForceProfile]
 
 
 # ---------------------------------------------------------------------------------------

@@ -525,3 +525,20 @@ def test_momentum_change_equals_impulse_discrete():
         np.testing.assert_allclose(h1[3:] - h0[3:], expected, rtol=0, atol=1e-2 * np.linalg.norm(expected))
         errors.append(np.linalg.norm(h1[3:] - h0[3:] - expected))
     assert errors[1] < 0.5 * errors[0], errors
+
+
+def test_smooth_piecewise_profile_through_its_knots():
+    from systems.disturbances import SmoothPiecewise
+
+    profile = SmoothPiecewise((1.0, 2.0, 4.0, 5.0), (0.0, 3.0, 3.0, -1.0))
+    t = np.linspace(0.0, 6.0, 601)
+    values = profile.value(t)
+    np.testing.assert_allclose(values, [profile.value(float(s)) for s in t], atol=1e-12)  # scalar == vector path
+    np.testing.assert_allclose(profile.value(np.array([0.5, 1.0, 2.0, 3.0, 4.0, 5.0, 5.5])),
+                               [0.0, 0.0, 3.0, 3.0, 3.0, -1.0, -1.0], atol=1e-12)
+    assert profile.value(1.5) == pytest.approx(1.5)  # the smoothstep's midpoint
+    slope = np.gradient(values, t)
+    assert abs(slope[np.searchsorted(t, 2.0)]) < 0.05  # flat at the knot (the ramp peaks at 4.5 N/s)
+    assert profile.plateaus(1.0) == [(2.0, 4.0)]
+    with pytest.raises(ValueError, match="times must increase"):
+        SmoothPiecewise((0.0, 0.0), (1.0, 2.0))

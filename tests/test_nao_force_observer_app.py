@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from apps import nao_force_observer
-from apps.nao_force_observer import LOAD_MASS, SmoothPiecewise, make_experiment
+from apps.nao_force_observer import LOAD_MASS, make_experiment
+from systems.disturbances import SmoothPiecewise
 from systems.visualization import read_static_html
 
 

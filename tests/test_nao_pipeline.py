@@ -252,7 +252,7 @@ def test_statics_of_a_pushed_robot_match_the_virtual_force():
     """Ground truth against physics: with a steady push the true FSR forces' total
     (eq. 12) and CoP (eq. 13) satisfy eq. (10) with the virtual force of eq. (11) (on
     average over a second: the position-controlled robot keeps swaying by ~0.1 mm)."""
-    from apps.nao_force_observer import SmoothPiecewise
+    from systems.disturbances import SmoothPiecewise
 
     push = Push("torso", (0.05, 0.0, -0.05), (0.6, 0.0, 0.8), SmoothPiecewise((0.0, 1.0), (0.0, 3.0)))
     diagram, handles = build_nao_standing_diagram([push], noise=False)

@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: demo stand test bench residuals nao contact walk arms install clean
+.PHONY: demo stand test bench residuals nao contact walk walk-pulled guided arms install clean
 
 install: $(STAMP)
 
@@ -42,6 +42,12 @@ contact: $(STAMP)
 
 walk: $(STAMP)
 	$(PY) -m apps.nao_walk $(ARGS)
+
+walk-pulled: $(STAMP)
+	$(PY) -m apps.nao_walk_with_force $(ARGS)
+
+guided: $(STAMP)
+	$(PY) -m apps.nao_force_guided_walk $(ARGS)
 
 arms: $(STAMP)
 	$(PY) -m apps.nao_compliant_arms $(ARGS)

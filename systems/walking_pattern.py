@@ -78,7 +78,7 @@ SIDES = ("left", "right")
 MAX_STEP_LENGTH = 0.08
 
 
-def _smoothstep5(s: np.ndarray) -> np.ndarray:
+def smoothstep5(s: np.ndarray) -> np.ndarray:
     """10 s^3 - 15 s^4 + 6 s^5 on [0, 1] (clipped): 0 -> 1 with zero end velocity and
     acceleration."""
     s = np.clip(s, 0.0, 1.0)
@@ -302,7 +302,7 @@ def foot_trajectories(t: np.ndarray, steps: list[Footstep], left0: np.ndarray, r
         during = (t > step.t_lift) & (t < step.t_land)
         after = t >= step.t_land
         s = (t[during] - step.t_lift) / (step.t_land - step.t_lift)
-        p[during] = step.start + np.outer(_smoothstep5(s), step.end - step.start)
+        p[during] = step.start + np.outer(smoothstep5(s), step.end - step.start)
         p[during, 2] += step.swing_height * _bump(s)
         p[after] = step.end
         contact[step.side][during] = False
@@ -471,7 +471,7 @@ def make_walking_pattern(params: WalkingParameters, left0: np.ndarray, right0: n
     states, zmp = preview_control(gains, zmp_ref, com0[:2])
     ground = 0.5 * (left0[2] + right0[2])
     lower_time = 0.5 * params.initial_wait
-    blend = _smoothstep5(t / lower_time) if lower_time > 0 else np.ones_like(t)
+    blend = smoothstep5(t / lower_time) if lower_time > 0 else np.ones_like(t)
     z = com0[2] + (ground + params.com_height - com0[2]) * blend
     soles, contact = foot_trajectories(t, steps, left0, right0)
     return WalkingPattern(params=params, t=t, steps=steps, zmp_reference=zmp_ref, zmp=zmp,

@@ -14,8 +14,8 @@ each as a ratio to the ``CalcMassMatrix`` unit measured in the same run, so that
 hold on a noisy machine. Each figure is the median over several batches at random states.
 
 It also times the push-and-comply closed loop (``hrp4_like``, 1 ms steps, the scenario's
-first ``--loop-seconds`` with the push moved to start at once): the station alone (plant with
-SAP contact, sensors, PD + gravity; constant posture), the whole internal-residual loop, and
+contact solver, its first ``--loop-seconds`` with the push moved to start at once): the
+station alone (plant with contact, sensors, PD + gravity; constant posture), the whole internal-residual loop, and
 the same with Meshcat recording its replay: microseconds of wall and CPU time per step and
 the real-time factor; the Kalman force observer's throughput on a real Nao recording; and
 one update of the contact localizer (Flacco et al. Sec. VI) on ``hrp4_like``.
@@ -198,7 +198,8 @@ def benchmark_closed_loop(seconds: float = 2.0) -> list[dict]:
 
     def station_only():
         builder = DiagramBuilder()
-        station = add_humanoid_station(builder, scenario.model, noise=True, seed=0)
+        station = add_humanoid_station(builder, scenario.model, noise=True, seed=0,
+                                       contact_approximation=scenario.contact_approximation)
         posture = builder.AddSystem(ConstantVectorSource(station.q_hold))
         builder.Connect(posture.get_output_port(), station.desired_position)
         return builder.Build(), station, None

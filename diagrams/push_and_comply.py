@@ -58,6 +58,12 @@ class PushAndComplyScenario:
             weight (measured: the knees buckle); "desired" keeps the posture's stiffness.
         noise: sensor noise on (the defaults of ``systems.sensors``).
         seed: sensor noise seed.
+        contact_approximation: the plant's discrete contact solver ("tamsi" or "sap", see
+            ``diagrams.humanoid_station``). "tamsi" by default: on this scenario it gives the
+            same metrics as "sap" (knee flexion, CoM drop and joint motion equal to 1e-5;
+            foot slip 0.02 vs 0.004 mm) in 19 % less time per step (measured, 15 s internal
+            run: 11.2 s vs 13.8 s of CPU), which the 1 kHz Python loop needs to run in real
+            time; ``tests/test_push_and_comply.py`` compares the two solvers.
         log_period: loggers' sampling period, s.
     """
 
@@ -86,6 +92,7 @@ class PushAndComplyScenario:
     integrate_from: str = "desired"
     noise: bool = True
     seed: int = 0
+    contact_approximation: str = "tamsi"
     log_period: float = 0.01
 
 
@@ -135,7 +142,10 @@ def build_push_and_comply_diagram(
     if not (0.0 <= scenario.push_start < scenario.push_peak_time < scenario.push_end <= scenario.duration):
         raise ValueError("the scenario needs 0 <= push_start < push_peak_time < push_end <= duration")
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, scenario.model, noise=scenario.noise, seed=scenario.seed)
+    station = add_humanoid_station(
+        builder, scenario.model, noise=scenario.noise, seed=scenario.seed,
+        contact_approximation=scenario.contact_approximation,
+    )
     plant, humanoid = station.plant, station.humanoid
     if humanoid is None:
         raise ValueError("push-and-comply needs one of the humanoid models (its shoulders and joint groups)")

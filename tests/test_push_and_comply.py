@@ -42,6 +42,8 @@ def test_scenario_files_load_into_the_dataclass(tmp_path):
         build_push_and_comply_diagram(PushAndComplyScenario(push_peak_time=20.0), "internal")
     with pytest.raises(ValueError, match="unknown residual"):
         build_push_and_comply_diagram(PushAndComplyScenario(), "magic")
+    with pytest.raises(ValueError, match="unknown contact approximation 'ode'"):
+        build_push_and_comply_diagram(PushAndComplyScenario(contact_approximation="ode"), "internal")
 
 
 @pytest.fixture(scope="module")
@@ -62,6 +64,20 @@ def test_internal_residual_bends_the_legs_and_classical_does_not(short_runs):
     assert moved["CHEST_P"] > 1.0 and max(moved, key=moved.get) == "CHEST_P"
     for metrics in (internal, classical):
         assert metrics["upright"] and metrics["max_foot_slip_m"] < 0.005
+
+
+def test_tamsi_and_sap_contact_give_the_same_experiment(short_runs):
+    """The scenario's default solver (TAMSI, cheaper) against Drake's SAP: the same motion."""
+    scenario, runs = short_runs
+    assert scenario.contact_approximation == "tamsi"
+    sap_scenario = PushAndComplyScenario(**SHORT, push_peak_force=30.0, contact_approximation="sap")
+    tamsi = run_metrics(scenario, runs["internal"])
+    sap = run_metrics(sap_scenario, simulate(sap_scenario, "internal", None, progress=False))
+    assert tamsi["knee_pitch_flexion_deg"] == pytest.approx(sap["knee_pitch_flexion_deg"], rel=0.01)
+    assert tamsi["com_height_drop_m"] == pytest.approx(sap["com_height_drop_m"], abs=2e-4)
+    for joint, value in sap["max_joint_displacement_deg"].items():
+        assert tamsi["max_joint_displacement_deg"][joint] == pytest.approx(value, abs=0.05), joint
+    assert tamsi["max_foot_slip_m"] < 0.001 and sap["max_foot_slip_m"] < 0.001
 
 
 def test_residual_follows_the_true_effort_in_the_loop(short_runs):

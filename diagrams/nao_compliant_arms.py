@@ -28,11 +28,10 @@ from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 from diagrams.humanoid_station import HumanoidStation, add_humanoid_station
 from diagrams.standing import default_gains
 from diagrams.nao_standing import (
-    FSR_SEED_OFFSET,
     OBSERVER_PERIOD,
     VirtualForceTruth,
+    add_observer_pipeline,
     full_posture,
-    nao_observer_parameters,
     wide_stance,
 )
 from systems.arm_compliance import (
@@ -50,9 +49,8 @@ from systems.arm_compliance import (
 )
 from systems.disturbances import Push, PushSource
 from systems.force_observer import LipForceObserverSystem
-from systems.fsr_sensing import FSR_NOISE_STD, CenterOfPressure, FsrArray, ImuComAcceleration, SupportFootCom
+from systems.fsr_sensing import CenterOfPressure, FsrArray, ImuComAcceleration, SupportFootCom
 from systems.pd_gravity import joint_vector_from_names
-from systems.sensors import SEEDS_PER_CALL
 from systems.visualization import ForceArrows
 
 
@@ -257,28 +255,10 @@ def build_nao_compliant_arms_diagram(
     builder.Connect(station.sensed_state, estimator.GetInputPort("state"))
 
     # Observer pipeline (as diagrams.nao_standing).
-    std = FSR_NOISE_STD if noise else 0.0
-    fsr = builder.AddSystem(FsrArray(plant, humanoid, noise_std=std, seed=SEEDS_PER_CALL * seed + FSR_SEED_OFFSET))
-    fsr.set_name("fsr_array")
-    builder.Connect(plant.get_contact_results_output_port(), fsr.GetInputPort("contact_results"))
-    cop = builder.AddSystem(CenterOfPressure(plant, humanoid, support_foot=support_foot))
-    cop.set_name("center_of_pressure")
-    builder.Connect(fsr.GetOutputPort("fsr_forces"), cop.GetInputPort("fsr_forces"))
-    builder.Connect(station.sensed_state, cop.GetInputPort("state"))
-    com = builder.AddSystem(SupportFootCom(plant, humanoid, support_foot=support_foot))
-    com.set_name("support_foot_com")
-    builder.Connect(station.sensed_state, com.GetInputPort("state"))
-    acc = builder.AddSystem(ImuComAcceleration(plant, humanoid.imu_frame))
-    acc.set_name("imu_com_acceleration")
-    builder.Connect(station.sensors.imu.linear_acceleration, acc.GetInputPort("linear_acceleration"))
-    builder.Connect(station.sensed_state, acc.GetInputPort("state"))
-    parameters = nao_observer_parameters(plant, humanoid.model_instance, period=OBSERVER_PERIOD)
-    observer = builder.AddSystem(LipForceObserverSystem(parameters))
-    observer.set_name("lip_force_observer")
-    builder.Connect(com.GetOutputPort("com_position"), observer.GetInputPort("com_position"))
-    builder.Connect(acc.GetOutputPort("com_acceleration"), observer.GetInputPort("com_acceleration"))
-    builder.Connect(cop.GetOutputPort("zmp"), observer.GetInputPort("zmp"))
-    builder.Connect(cop.GetOutputPort("normal_force"), observer.GetInputPort("normal_force"))
+    pipeline = add_observer_pipeline(builder, station, support_foot=support_foot, noise=noise, seed=seed,
+                                     observer_period=OBSERVER_PERIOD)
+    fsr, cop, com, acc = pipeline.fsr_array, pipeline.center_of_pressure, pipeline.support_foot_com, pipeline.imu_com_acceleration
+    observer = pipeline.observer
     hand_force = builder.AddSystem(ObserverHandForce(plant, humanoid.sole_frames[support_foot], NAO_ARM_CHAINS,
                                                      model_instances=[humanoid.model_instance]))
     hand_force.set_name("observer_hand_force")

@@ -176,6 +176,67 @@ class NaoStandingHandles:
         self.station.set_initial_state(root_context, state)
 
 
+@dataclass
+class ObserverPipeline:
+    """What ``add_observer_pipeline`` added (sensors to observer, paper Fig. 4)."""
+
+    fsr_array: FsrArray
+    center_of_pressure: CenterOfPressure
+    support_foot_com: SupportFootCom
+    imu_com_acceleration: ImuComAcceleration
+    parameters: LipObserverParameters
+    observer: LipForceObserverSystem
+
+
+def add_observer_pipeline(
+    builder: DiagramBuilder,
+    station: HumanoidStation,
+    *,
+    support_foot: str = "right",
+    noise: bool = True,
+    seed: int = 0,
+    fsr_noise_std: float | None = None,
+    observer_period: float = OBSERVER_PERIOD,
+) -> ObserverPipeline:
+    """Adds the Nao's measurement pipeline and the Kalman observer to ``builder``: FSR array
+    (from the plant's contact results), CoP/ZMP and total normal force (eqs. 12-13), CoM by
+    forward kinematics and CoM acceleration from the IMU (all from the sensed state, in the
+    support-foot frame), and ``LipForceObserverSystem`` with the model's mass (eq. 21
+    parameters) at ``observer_period``.
+
+    Args:
+        station: a ``nao_like`` station (``add_humanoid_station``) with its sensors.
+        support_foot: "left" or "right": origin of the support-foot frame.
+        noise, seed: FSR noise on, and the seed (the FSRs use 16 seed + 5).
+        fsr_noise_std: N per FSR (default ``fsr_sensing.FSR_NOISE_STD``; ignored without noise).
+        observer_period: T, s.
+    """
+    plant, humanoid = station.plant, station.humanoid
+    std = (FSR_NOISE_STD if fsr_noise_std is None else fsr_noise_std) if noise else 0.0
+    fsr = builder.AddSystem(FsrArray(plant, humanoid, noise_std=std, seed=SEEDS_PER_CALL * seed + FSR_SEED_OFFSET))
+    fsr.set_name("fsr_array")
+    builder.Connect(plant.get_contact_results_output_port(), fsr.GetInputPort("contact_results"))
+    cop = builder.AddSystem(CenterOfPressure(plant, humanoid, support_foot=support_foot))
+    cop.set_name("center_of_pressure")
+    builder.Connect(fsr.GetOutputPort("fsr_forces"), cop.GetInputPort("fsr_forces"))
+    builder.Connect(station.sensed_state, cop.GetInputPort("state"))
+    com = builder.AddSystem(SupportFootCom(plant, humanoid, support_foot=support_foot))
+    com.set_name("support_foot_com")
+    builder.Connect(station.sensed_state, com.GetInputPort("state"))
+    acc = builder.AddSystem(ImuComAcceleration(plant, humanoid.imu_frame))
+    acc.set_name("imu_com_acceleration")
+    builder.Connect(station.sensors.imu.linear_acceleration, acc.GetInputPort("linear_acceleration"))
+    builder.Connect(station.sensed_state, acc.GetInputPort("state"))
+    parameters = nao_observer_parameters(plant, humanoid.model_instance, period=observer_period)
+    observer = builder.AddSystem(LipForceObserverSystem(parameters))
+    observer.set_name("lip_force_observer")
+    builder.Connect(com.GetOutputPort("com_position"), observer.GetInputPort("com_position"))
+    builder.Connect(acc.GetOutputPort("com_acceleration"), observer.GetInputPort("com_acceleration"))
+    builder.Connect(cop.GetOutputPort("zmp"), observer.GetInputPort("zmp"))
+    builder.Connect(cop.GetOutputPort("normal_force"), observer.GetInputPort("normal_force"))
+    return ObserverPipeline(fsr, cop, com, acc, parameters, observer)
+
+
 def build_nao_standing_diagram(
     pushes: Sequence[Push] = (),
     *,
@@ -221,30 +282,11 @@ def build_nao_standing_diagram(
     builder.Connect(push_source.GetOutputPort("applied_spatial_forces"), plant.get_applied_spatial_force_input_port())
     builder.Connect(plant.get_state_output_port(), push_source.GetInputPort("state"))
 
-    # Measurement pipeline (sensors only).
-    std = (FSR_NOISE_STD if fsr_noise_std is None else fsr_noise_std) if noise else 0.0
-    fsr = builder.AddSystem(FsrArray(plant, humanoid, noise_std=std, seed=SEEDS_PER_CALL * seed + FSR_SEED_OFFSET))
-    fsr.set_name("fsr_array")
-    builder.Connect(plant.get_contact_results_output_port(), fsr.GetInputPort("contact_results"))
-    cop = builder.AddSystem(CenterOfPressure(plant, humanoid, support_foot=support_foot))
-    cop.set_name("center_of_pressure")
-    builder.Connect(fsr.GetOutputPort("fsr_forces"), cop.GetInputPort("fsr_forces"))
-    builder.Connect(station.sensed_state, cop.GetInputPort("state"))
-    com = builder.AddSystem(SupportFootCom(plant, humanoid, support_foot=support_foot))
-    com.set_name("support_foot_com")
-    builder.Connect(station.sensed_state, com.GetInputPort("state"))
-    acc = builder.AddSystem(ImuComAcceleration(plant, humanoid.imu_frame))
-    acc.set_name("imu_com_acceleration")
-    builder.Connect(station.sensors.imu.linear_acceleration, acc.GetInputPort("linear_acceleration"))
-    builder.Connect(station.sensed_state, acc.GetInputPort("state"))
-
-    parameters = nao_observer_parameters(plant, humanoid.model_instance, period=observer_period)
-    observer = builder.AddSystem(LipForceObserverSystem(parameters))
-    observer.set_name("lip_force_observer")
-    builder.Connect(com.GetOutputPort("com_position"), observer.GetInputPort("com_position"))
-    builder.Connect(acc.GetOutputPort("com_acceleration"), observer.GetInputPort("com_acceleration"))
-    builder.Connect(cop.GetOutputPort("zmp"), observer.GetInputPort("zmp"))
-    builder.Connect(cop.GetOutputPort("normal_force"), observer.GetInputPort("normal_force"))
+    # Measurement pipeline (sensors only) and the observer.
+    pipeline = add_observer_pipeline(builder, station, support_foot=support_foot, noise=noise, seed=seed,
+                                     fsr_noise_std=fsr_noise_std, observer_period=observer_period)
+    fsr, cop, com, acc = pipeline.fsr_array, pipeline.center_of_pressure, pipeline.support_foot_com, pipeline.imu_com_acceleration
+    parameters, observer = pipeline.parameters, pipeline.observer
 
     truth = builder.AddSystem(VirtualForceTruth(plant, humanoid, support_foot=support_foot))
     truth.set_name("virtual_force_truth")
@@ -351,6 +393,8 @@ def settled_standing_state(posture: dict[str, float] | None = None, duration: fl
 
 
 __all__ = [
+    "ObserverPipeline",
+    "add_observer_pipeline",
     "OBSERVER_PERIOD",
     "NaoStandingHandles",
     "VirtualForceTruth",

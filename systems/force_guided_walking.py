@@ -267,8 +267,9 @@ class ForceGuidedWalkingController(LeafSystem):
     """Walks along x while the estimated force exceeds a threshold (module docstring).
 
     Inputs:
-        force_estimate: (3) the estimated external force, N (e.g. the LIP observer's
-            ``virtual_force``); only x is used.
+        force_estimate: (3) the estimated external force, N (e.g. the total force on the
+            hands from the arm joints, ``systems.arm_compliance.ArmExternalForceEstimator``,
+            or the LIP observer's ``virtual_force``); only x is used.
 
     State: discrete (mode, direction, segment start t_0, segment and stop-variant indices,
         cross-fade interval, trigger memory, end time), updated every ``period``.

@@ -61,18 +61,6 @@ MIN_FORCE, MAX_FORCE, MAX_ANGLE_DEG = 5.0, 40.0, 60.0
 # ---------------------------------------------------------------------------------------
 
 
-def _inward_direction(n_W: np.ndarray, rng: np.random.Generator, max_angle_deg: float = MAX_ANGLE_DEG) -> np.ndarray:
-    """A unit direction uniform on the spherical cap of half-angle max_angle around -n."""
-    ct = rng.uniform(math.cos(math.radians(max_angle_deg)), 1.0)
-    phi = rng.uniform(0.0, 2.0 * math.pi)
-    a = np.cross(n_W, [1.0, 0.0, 0.0])
-    if np.linalg.norm(a) < 0.1:
-        a = np.cross(n_W, [0.0, 1.0, 0.0])
-    a /= np.linalg.norm(a)
-    b = np.cross(n_W, a)
-    return -ct * n_W + math.sqrt(1.0 - ct * ct) * (math.cos(phi) * a + math.sin(phi) * b)
-
-
 def sample_trials(model: str, trials: int, seed: int) -> list[dict]:
     """Random contacts at the standing pose: link uniform over the candidate links, point
     uniform (by area) on the link's collision surface but not inside another link's
@@ -81,7 +69,7 @@ def sample_trials(model: str, trials: int, seed: int) -> list[dict]:
     from pydrake.multibody.tree import BodyIndex
 
     from diagrams.contact_study import ContactStudyConfig, build_contact_study_diagram
-    from systems.geometry_intersection import sample_surface, signed_distances, surface_areas
+    from systems.geometry_intersection import inward_direction, sample_surface, surface_areas
 
     _, handles = build_contact_study_diagram(ContactStudyConfig(model=model, noise=False))
     plant, localizer = handles.plant, handles.localizer
@@ -101,15 +89,13 @@ def sample_trials(model: str, trials: int, seed: int) -> list[dict]:
             g = rng.choice(rows, p=areas[rows] / areas[rows].sum())
             p_G, n_G = sample_surface(geo.kinds[g], geo.params[g], rng)
             p_W = R_WG[g] @ p_G + p_WG[g]
-            sd = signed_distances(np.einsum("gji,gj->gi", R_WG, p_W - p_WG)[None], geo.kinds, geo.params, geo.planes)[0]
-            sd[geo.body_indices == link] = np.inf
-            if sd.min() > 0.0 and p_W[2] > 0.02:  # outer surface, above the ground
+            if geo.outside_other_links(p_W, R_WG, p_WG, link) and p_W[2] > 0.02:  # outer surface, above the ground
                 break
         body = plant.get_body(BodyIndex(int(link)))
         n_W = R_WG[g] @ n_G
         X = X_WB[int(np.searchsorted(geo.bodies, link))]
         p_B = X[:, :3].T @ (p_W - X[:, 3])
-        force = rng.uniform(MIN_FORCE, MAX_FORCE) * _inward_direction(n_W, rng)
+        force = rng.uniform(MIN_FORCE, MAX_FORCE) * inward_direction(n_W, rng, MAX_ANGLE_DEG)
         specs.append({
             "trial": i,
             "body": body.name(),

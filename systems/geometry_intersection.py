@@ -30,6 +30,7 @@ ValueError unless told to skip them).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -411,3 +412,25 @@ class RobotGeometry:
         R_WG = R_WB @ self.X_BG[:, :, :3]
         p_WG = np.einsum("gij,gj->gi", R_WB, self.X_BG[:, :, 3]) + p_WB
         return R_WG, p_WG
+
+    def outside_other_links(self, p_W: np.ndarray, R_WG: np.ndarray, p_WG: np.ndarray, body_index: int) -> bool:
+        """True when the world point p_W lies outside every primitive of the links other
+        than ``body_index`` (poses from ``world_poses``): a point of the robot's outer
+        surface, where a pusher can touch it."""
+        local = np.einsum("gji,gj->gi", R_WG, p_W - p_WG)[None]
+        distances = signed_distances(local, self.kinds, self.params, self.planes)[0]
+        distances[self.body_indices == body_index] = np.inf
+        return bool(distances.min() > 0.0)
+
+
+def inward_direction(n_W: np.ndarray, rng: np.random.Generator, max_angle_deg: float = 60.0) -> np.ndarray:
+    """A unit direction uniform on the spherical cap of half-angle ``max_angle_deg`` around
+    -n_W (a push into a surface of outward normal n_W)."""
+    ct = rng.uniform(math.cos(math.radians(max_angle_deg)), 1.0)
+    phi = rng.uniform(0.0, 2.0 * math.pi)
+    a = np.cross(n_W, [1.0, 0.0, 0.0])
+    if np.linalg.norm(a) < 0.1:
+        a = np.cross(n_W, [0.0, 1.0, 0.0])
+    a /= np.linalg.norm(a)
+    b = np.cross(n_W, a)
+    return -ct * n_W + math.sqrt(1.0 - ct * ct) * (math.cos(phi) * a + math.sin(phi) * b)

@@ -38,6 +38,7 @@ from systems.geometry_intersection import (
     SPHERE,
     line_intersections,
     sample_surface,
+    inward_direction,
     signed_distances,
 )
 
@@ -101,19 +102,6 @@ def primitive_robot():
     return _primitive_robot()
 
 
-def _inward_direction(n_W, rng, max_angle_deg=60.0):
-    """A unit direction within max_angle of -n (uniform on the spherical cap)."""
-    cos_max = math.cos(math.radians(max_angle_deg))
-    ct = rng.uniform(cos_max, 1.0)
-    phi = rng.uniform(0.0, 2.0 * math.pi)
-    a = np.cross(n_W, [1.0, 0.0, 0.0])
-    if np.linalg.norm(a) < 0.1:
-        a = np.cross(n_W, [0.0, 1.0, 0.0])
-    a /= np.linalg.norm(a)
-    b = np.cross(n_W, a)
-    return -ct * n_W + math.sqrt(1.0 - ct * ct) * (math.cos(phi) * a + math.sin(phi) * b)
-
-
 def _outer_surface_contact(plant, context, localizer, geometry_index, rng):
     """(body, p_B, p_W, f_W): a random point on primitive ``geometry_index``'s surface that is
     not inside another link's primitive, and a force within 60 deg of its inward normal."""
@@ -124,17 +112,14 @@ def _outer_surface_contact(plant, context, localizer, geometry_index, rng):
     for _ in range(200):
         p_G, n_G = sample_surface(geo.kinds[geometry_index], geo.params[geometry_index], rng)
         p_W = R_WG[geometry_index] @ p_G + p_WG[geometry_index]
-        local = np.einsum("gji,gj->gi", R_WG, p_W - p_WG)[None]
-        sd = signed_distances(local, geo.kinds, geo.params, geo.planes)[0]
-        sd[geo.body_indices == geo.body_indices[geometry_index]] = np.inf
-        if sd.min() > 0.0:
+        if geo.outside_other_links(p_W, R_WG, p_WG, geo.body_indices[geometry_index]):
             break
     else:
-        pytest.skip("no outer surface point found")
+        raise AssertionError(f"no outer surface point of primitive {geo.names[geometry_index]} in 200 samples")
     n_W = R_WG[geometry_index] @ n_G
     X_WB = plant.EvalBodyPoseInWorld(context, body)
     p_B = X_WB.inverse().multiply(p_W)
-    f_W = rng.uniform(5.0, 40.0) * _inward_direction(n_W, rng)
+    f_W = rng.uniform(5.0, 40.0) * inward_direction(n_W, rng)
     return body, p_B, p_W, f_W
 
 
@@ -161,7 +146,7 @@ def test_line_enters_at_sampled_surface_point(kind, params):
     params = np.array([params], dtype=float)
     for _ in range(50):
         p, n = sample_surface(kind, params[0], rng)
-        d = _inward_direction(n, rng, 80.0)
+        d = inward_direction(n, rng, 80.0)
         origin = p - 0.7 * d
         l_in, l_out, hit = line_intersections(origin[None], d[None], np.array([kind]), params)
         assert hit[0] and l_out[0] >= l_in[0]
@@ -477,7 +462,7 @@ def test_localizer_convex_mesh_link(tmp_path):
         n_G = np.ones(3) / math.sqrt(3.0)
         p_B = X_BG.multiply(p_G)
         n_W = X_WB.rotation().multiply(X_BG.rotation().multiply(n_G))
-        f_W = rng.uniform(5.0, 40.0) * _inward_direction(n_W, rng)
+        f_W = rng.uniform(5.0, 40.0) * inward_direction(n_W, rng)
         wrench, tau = _exact_residuals(plant, context, link, p_B, f_W)
         result = dut.localize(q, wrench, tau)
         assert result.body_index == int(link.index())

@@ -86,17 +86,14 @@ from pydrake.systems.framework import DiagramBuilder  # noqa: E402
 from pydrake.systems.primitives import LogVectorOutput, MatrixGain  # noqa: E402
 
 from diagrams.humanoid_station import add_humanoid_station  # noqa: E402
-from diagrams.nao_standing import FSR_SEED_OFFSET, nao_observer_parameters  # noqa: E402
-from diagrams.nao_walk_pulled import StanceFrameMeasurements  # noqa: E402
+from diagrams.nao_standing import add_observer_pipeline, nao_observer_parameters  # noqa: E402
 from diagrams.nao_walking import ContactZmp, detect_steps  # noqa: E402
 from diagrams.standing import default_gains  # noqa: E402
 from systems.arm_compliance import (NAO_ARM_CHAINS, ArmExternalForceEstimator, CompliantArmBlender,  # noqa: E402
                                     JointTorqueFromPositionError, ObserverHandForce)
 from systems.disturbances import Push, PushSource  # noqa: E402
 from systems.force_guided_walking import GUIDED_WALKING, ForceGuidedWalkingController, TriggerParameters  # noqa: E402
-from systems.force_observer import STANDING, WALKING, LipForceObserverSystem  # noqa: E402
-from systems.fsr_sensing import FSR_NOISE_STD, FsrArray, ImuComAcceleration  # noqa: E402
-from systems.sensors import SEEDS_PER_CALL  # noqa: E402
+from systems.force_observer import STANDING, WALKING  # noqa: E402
 from systems.walking_pattern import WalkingParameters, smoothstep5  # noqa: E402
 
 #: Floors of issue 7 (force-guided walking).
@@ -215,26 +212,13 @@ def build_force_guided_diagram(profile: GuidanceProfile, trigger: TriggerParamet
     context0 = plant.CreateDefaultContext()
     plant.SetPositions(context0, q0)
     origin = humanoid.sole_frames["right"].CalcPoseInWorld(context0).translation()
-    fsr = builder.AddSystem(FsrArray(plant, humanoid, noise_std=FSR_NOISE_STD if noise else 0.0,
-                                     seed=SEEDS_PER_CALL * seed + FSR_SEED_OFFSET))
-    builder.Connect(plant.get_contact_results_output_port(), fsr.GetInputPort("contact_results"))
-    meas = builder.AddSystem(StanceFrameMeasurements(plant, humanoid, origin))
-    builder.Connect(fsr.GetOutputPort("fsr_forces"), meas.GetInputPort("fsr_forces"))
-    builder.Connect(station.sensed_state, meas.GetInputPort("state"))
-    acc = builder.AddSystem(ImuComAcceleration(plant, humanoid.imu_frame))
-    builder.Connect(station.sensors.imu.linear_acceleration, acc.GetInputPort("linear_acceleration"))
-    builder.Connect(station.sensed_state, acc.GetInputPort("state"))
     base = nao_observer_parameters(plant, humanoid.model_instance)
     chosen = WALKING if preset == "walking" else STANDING
     parameters = dataclasses.replace(chosen, mass=base.mass, gravity=base.gravity, period=base.period)
     if force_rate_variance is not None:
         parameters = dataclasses.replace(parameters, force_rate_variance=float(force_rate_variance))
-    observer = builder.AddSystem(LipForceObserverSystem(parameters))
-    observer.set_name("lip_force_observer")
-    builder.Connect(meas.GetOutputPort("com_position"), observer.GetInputPort("com_position"))
-    builder.Connect(acc.GetOutputPort("com_acceleration"), observer.GetInputPort("com_acceleration"))
-    builder.Connect(meas.GetOutputPort("zmp"), observer.GetInputPort("zmp"))
-    builder.Connect(meas.GetOutputPort("normal_force"), observer.GetInputPort("normal_force"))
+    pipeline = add_observer_pipeline(builder, station, origin_W=origin, noise=noise, seed=seed, parameters=parameters)
+    fsr, observer = pipeline.fsr_array, pipeline.observer
 
     # Joint-level estimate of the hands' force (Sec. 6.4, eqs. 25-27) from the arm joints'
     # position errors against the walking controller's own (constant) arm targets; K_m of

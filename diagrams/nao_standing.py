@@ -193,41 +193,47 @@ def add_observer_pipeline(
     station: HumanoidStation,
     *,
     support_foot: str = "right",
+    origin_W: np.ndarray | None = None,
     noise: bool = True,
     seed: int = 0,
     fsr_noise_std: float | None = None,
     observer_period: float = OBSERVER_PERIOD,
+    parameters: LipObserverParameters | None = None,
 ) -> ObserverPipeline:
     """Adds the Nao's measurement pipeline and the Kalman observer to ``builder``: FSR array
     (from the plant's contact results), CoP/ZMP and total normal force (eqs. 12-13), CoM by
-    forward kinematics and CoM acceleration from the IMU (all from the sensed state, in the
-    support-foot frame), and ``LipForceObserverSystem`` with the model's mass (eq. 21
-    parameters) at ``observer_period``.
+    forward kinematics and CoM acceleration from the IMU (all from the sensed state, in one
+    world-aligned frame F), and ``LipForceObserverSystem``.
 
     Args:
         station: a ``nao_like`` station (``add_humanoid_station``) with its sensors.
-        support_foot: "left" or "right": origin of the support-foot frame.
+        support_foot: "left" or "right": origin of F (the support-foot frame, standing).
+        origin_W: instead, a fixed world point as F's origin, m (walking; see
+            ``systems.fsr_sensing.CenterOfPressure``).
         noise, seed: FSR noise on, and the seed (the FSRs use 16 seed + 5).
         fsr_noise_std: N per FSR (default ``fsr_sensing.FSR_NOISE_STD``; ignored without noise).
-        observer_period: T, s.
+        observer_period: T, s (with the default parameters).
+        parameters: the observer's parameters; default eq. (21) with the model's mass at
+            ``observer_period`` (``nao_observer_parameters``).
     """
     plant, humanoid = station.plant, station.humanoid
     std = (FSR_NOISE_STD if fsr_noise_std is None else fsr_noise_std) if noise else 0.0
     fsr = builder.AddSystem(FsrArray(plant, humanoid, noise_std=std, seed=SEEDS_PER_CALL * seed + FSR_SEED_OFFSET))
     fsr.set_name("fsr_array")
     builder.Connect(plant.get_contact_results_output_port(), fsr.GetInputPort("contact_results"))
-    cop = builder.AddSystem(CenterOfPressure(plant, humanoid, support_foot=support_foot))
+    cop = builder.AddSystem(CenterOfPressure(plant, humanoid, support_foot=support_foot, origin_W=origin_W))
     cop.set_name("center_of_pressure")
     builder.Connect(fsr.GetOutputPort("fsr_forces"), cop.GetInputPort("fsr_forces"))
     builder.Connect(station.sensed_state, cop.GetInputPort("state"))
-    com = builder.AddSystem(SupportFootCom(plant, humanoid, support_foot=support_foot))
+    com = builder.AddSystem(SupportFootCom(plant, humanoid, support_foot=support_foot, origin_W=origin_W))
     com.set_name("support_foot_com")
     builder.Connect(station.sensed_state, com.GetInputPort("state"))
     acc = builder.AddSystem(ImuComAcceleration(plant, humanoid.imu_frame))
     acc.set_name("imu_com_acceleration")
     builder.Connect(station.sensors.imu.linear_acceleration, acc.GetInputPort("linear_acceleration"))
     builder.Connect(station.sensed_state, acc.GetInputPort("state"))
-    parameters = nao_observer_parameters(plant, humanoid.model_instance, period=observer_period)
+    if parameters is None:
+        parameters = nao_observer_parameters(plant, humanoid.model_instance, period=observer_period)
     observer = builder.AddSystem(LipForceObserverSystem(parameters))
     observer.set_name("lip_force_observer")
     builder.Connect(com.GetOutputPort("com_position"), observer.GetInputPort("com_position"))

@@ -11,11 +11,11 @@ the encoders.
                                                  │ force, point
                                                  ▼
     CableVirtualForceTruth (eq. 11, ground plane z = 0 of the stance frame) ─► loggers
-    FsrArray ─► StanceFrameMeasurements ─► zmp, normal_force ┐
-    sensed state ────────────┘  └────────► com_position     ├─► LipForceObserverSystem
+    FsrArray ─► CenterOfPressure ─► zmp, normal_force ┐
+    sensed state ─► SupportFootCom ─► com_position   ├─► LipForceObserverSystem
     IMU ─► ImuComAcceleration ─────────────► com_acceleration┘    (WALKING, T = 1/60 s)
 
-Frame convention while walking (``StanceFrameMeasurements``): the observer's CoM position
+Frame convention while walking (``origin_W`` of ``CenterOfPressure`` and ``SupportFootCom``): the observer's CoM position
 and ZMP are both expressed in ONE frame F0, world-aligned (x forward, z up), fixed for the
 whole run, with its origin at the right sole frame's origin at t = 0 (on the ground). The
 support foot changes every step, so a frame at the current support foot would make the
@@ -55,6 +55,7 @@ force-guided walk's eq. G-3) did not help either.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -65,15 +66,15 @@ from pydrake.systems.framework import BasicVector, Context, Diagram, DiagramBuil
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
 from diagrams.humanoid_station import add_humanoid_station
-from diagrams.nao_standing import FSR_SEED_OFFSET, OBSERVER_PERIOD, VirtualForceTruth, nao_observer_parameters
+from diagrams.nao_standing import (OBSERVER_PERIOD, ObserverPipeline, VirtualForceTruth, add_observer_pipeline,
+                                  nao_observer_parameters)
 from diagrams.nao_walking import ContactZmp, NaoWalkingHandles
 from diagrams.standing import default_gains
 from models import HumanoidHandles
 from systems.cable import PulleyLoad
 from systems.force_observer import WALKING, LipForceObserverSystem, LipObserverParameters
-from systems.fsr_sensing import FSR_NOISE_STD, FSR_SIDES, MIN_CONTACT_FORCE, FsrArray, ImuComAcceleration
+from systems.fsr_sensing import FsrArray, ImuComAcceleration
 from systems.inputs import eval_finite_input
-from systems.sensors import SEEDS_PER_CALL
 from systems.visualization import ForceArrows
 from systems.walking_pattern import NaoWalkingController, WalkingParameters
 
@@ -122,91 +123,6 @@ class CableSetup:
                 raise ValueError(f"CableSetup.{name} must be non-negative, got {value}")
         if not (0.0 <= self.lateral_angle_deg < 45.0):
             raise ValueError(f"CableSetup.lateral_angle_deg must be in [0, 45), got {self.lateral_angle_deg}")
-
-
-class StanceFrameMeasurements(LeafSystem):
-    """CoM position, total normal force (eq. 12) and CoP = ZMP (eq. 13) in one fixed,
-    world-aligned frame F0 (module docstring), from the FSRs and the SENSED state.
-
-    Inputs:
-        fsr_forces: (8) N, ``FsrArray`` order (left foot then right foot).
-        state: the SENSED plant state [q; v].
-
-    Outputs:
-        com_position: (3) p_F0Cm = p_WCm - p_WF0, m (z: CoM height above the ground).
-        zmp: (2) sum_i F_i (x_i, y_i) / sum_i F_i with the FSR positions in F0, m; (0, 0)
-            when the total force < ``min_contact_force`` (then the observer's estimated
-            normal force flags its output invalid).
-        normal_force: (1) f_n^o = -(sum of the 8 readings), N (-M g at rest; eq. 12).
-
-    Args:
-        plant: the finalized plant; humanoid: its handles.
-        origin_W: (3) p_WF0, the origin of F0 in world, m.
-        min_contact_force: N.
-
-    Raises:
-        ValueError: unfinalized plant, bad origin / threshold; NaN on an input.
-    """
-
-    def __init__(self, plant: MultibodyPlant, humanoid: HumanoidHandles, origin_W: np.ndarray, *,
-                 min_contact_force: float = MIN_CONTACT_FORCE):
-        super().__init__()
-        if not isinstance(plant, MultibodyPlant) or not plant.is_finalized():
-            raise ValueError("StanceFrameMeasurements: needs a finalized MultibodyPlant")
-        origin = np.asarray(origin_W, float).reshape(-1)
-        if origin.shape != (3,) or not np.isfinite(origin).all():
-            raise ValueError(f"StanceFrameMeasurements: origin_W must be 3 finite numbers, got {origin_W!r}")
-        if not (math.isfinite(min_contact_force) and min_contact_force > 0):
-            raise ValueError(f"StanceFrameMeasurements: min_contact_force must be positive, got {min_contact_force}")
-        self._plant = plant
-        self._plant_context = plant.CreateDefaultContext()
-        self._nq = plant.num_positions()
-        self._origin = origin
-        self._min = float(min_contact_force)
-        self._instances = [humanoid.model_instance]
-        self._soles = [humanoid.sole_frames[side] for side in FSR_SIDES]
-        self._fsr_S = [np.column_stack((np.asarray(humanoid.fsr_positions[side], float), np.zeros(4)))
-                       for side in FSR_SIDES]
-        self._fsr = self.DeclareVectorInputPort("fsr_forces", 2 * 4)
-        self._state = self.DeclareVectorInputPort("state", plant.num_positions() + plant.num_velocities())
-        self.DeclareVectorOutputPort("com_position", 3, self._CalcCom,
-                                     prerequisites_of_calc={self.input_port_ticket(self._state.get_index())})
-        self.DeclareVectorOutputPort("zmp", 2, self._CalcZmp)
-        self.DeclareVectorOutputPort("normal_force", 1, self._CalcNormal,
-                                     prerequisites_of_calc={self.input_port_ticket(self._fsr.get_index())})
-
-    @property
-    def origin(self) -> np.ndarray:
-        return self._origin.copy()
-
-    def _set_positions(self, context: Context) -> None:
-        x = eval_finite_input("StanceFrameMeasurements", self._state, context)
-        self._plant.SetPositions(self._plant_context, x[: self._nq])
-
-    def fsr_positions(self, context: Context) -> np.ndarray:
-        """(8, 3) FSR positions in F0, m (from the ``state`` input)."""
-        self._set_positions(context)
-        rows = []
-        for sole, p_S in zip(self._soles, self._fsr_S):
-            X_WS = sole.CalcPoseInWorld(self._plant_context)
-            rows.append(p_S @ X_WS.rotation().matrix().T + (X_WS.translation() - self._origin))
-        return np.vstack(rows)
-
-    def _CalcCom(self, context: Context, output: BasicVector) -> None:
-        self._set_positions(context)
-        output.SetFromVector(self._plant.CalcCenterOfMassPositionInWorld(self._plant_context, self._instances)
-                             - self._origin)
-
-    def _CalcZmp(self, context: Context, output: BasicVector) -> None:
-        forces = np.asarray(eval_finite_input("StanceFrameMeasurements", self._fsr, context))
-        total = float(forces.sum())
-        if total < self._min:
-            output.SetFromVector(np.zeros(2))
-            return
-        output.SetFromVector(forces @ self.fsr_positions(context)[:, :2] / total)
-
-    def _CalcNormal(self, context: Context, output: BasicVector) -> None:
-        output.SetFromVector([-float(np.sum(eval_finite_input("StanceFrameMeasurements", self._fsr, context)))])
 
 
 class CableVirtualForceTruth(LeafSystem):
@@ -268,7 +184,8 @@ class NaoWalkPulledHandles(NaoWalkingHandles):
         planned_tighten_time / planned_lift_time: when the plan makes the line taut / the
             load start rising (quasi-static, from the planned torso motion), s.
         frame_origin: p_WF0, m.
-        measurements, fsr_array, imu_com_acceleration, observer, truth: the pipeline.
+        pipeline (``diagrams.nao_standing.ObserverPipeline``, F at ``frame_origin``),
+            fsr_array, imu_com_acceleration, observer: its parts; truth: the ground truth.
         parameters: the observer's parameters (eq. 22 with the model's mass, T = 1/60 s).
         observer_loggers: loggers at the observer period: ``virtual_force``, ``valid``,
             ``truth`` (eq. 11), ``cable_force``, ``tension``, ``load_height``, ``zmp``
@@ -282,7 +199,7 @@ class NaoWalkPulledHandles(NaoWalkingHandles):
     planned_tighten_time: float = float("nan")
     planned_lift_time: float = float("nan")
     frame_origin: np.ndarray | None = None
-    measurements: StanceFrameMeasurements | None = None
+    pipeline: ObserverPipeline | None = None
     fsr_array: FsrArray | None = None
     imu_com_acceleration: ImuComAcceleration | None = None
     observer: LipForceObserverSystem | None = None
@@ -381,30 +298,10 @@ def build_nao_walk_pulled_diagram(
     context0 = plant.CreateDefaultContext()
     plant.SetPositions(context0, q0)
     origin = humanoid.sole_frames["right"].CalcPoseInWorld(context0).translation()
-    std = FSR_NOISE_STD if noise else 0.0
-    fsr = builder.AddSystem(FsrArray(plant, humanoid, noise_std=std, seed=SEEDS_PER_CALL * seed + FSR_SEED_OFFSET))
-    fsr.set_name("fsr_array")
-    builder.Connect(plant.get_contact_results_output_port(), fsr.GetInputPort("contact_results"))
-    meas = builder.AddSystem(StanceFrameMeasurements(plant, humanoid, origin))
-    meas.set_name("stance_frame_measurements")
-    builder.Connect(fsr.GetOutputPort("fsr_forces"), meas.GetInputPort("fsr_forces"))
-    builder.Connect(station.sensed_state, meas.GetInputPort("state"))
-    acc = builder.AddSystem(ImuComAcceleration(plant, humanoid.imu_frame))
-    acc.set_name("imu_com_acceleration")
-    builder.Connect(station.sensors.imu.linear_acceleration, acc.GetInputPort("linear_acceleration"))
-    builder.Connect(station.sensed_state, acc.GetInputPort("state"))
     standing = nao_observer_parameters(plant, humanoid.model_instance, period=observer_period)
-    obs_params = LipObserverParameters(
-        mass=standing.mass, gravity=standing.gravity, period=standing.period,
-        jerk_variance=WALKING.jerk_variance, force_rate_variance=WALKING.force_rate_variance,
-        R_z=WALKING.R_z, R_xy=WALKING.R_xy, initial_covariance=WALKING.initial_covariance,
-        min_normal_force_fraction=WALKING.min_normal_force_fraction)
-    observer = builder.AddSystem(LipForceObserverSystem(obs_params))
-    observer.set_name("lip_force_observer")
-    builder.Connect(meas.GetOutputPort("com_position"), observer.GetInputPort("com_position"))
-    builder.Connect(acc.GetOutputPort("com_acceleration"), observer.GetInputPort("com_acceleration"))
-    builder.Connect(meas.GetOutputPort("zmp"), observer.GetInputPort("zmp"))
-    builder.Connect(meas.GetOutputPort("normal_force"), observer.GetInputPort("normal_force"))
+    obs_params = dataclasses.replace(WALKING, mass=standing.mass, gravity=standing.gravity, period=standing.period)
+    pipeline = add_observer_pipeline(builder, station, origin_W=origin, noise=noise, seed=seed, parameters=obs_params)
+    fsr, acc, observer = pipeline.fsr_array, pipeline.imu_com_acceleration, pipeline.observer
 
     truth = builder.AddSystem(CableVirtualForceTruth(plant, humanoid, ground_height=float(origin[2])))
     truth.set_name("cable_virtual_force_truth")
@@ -429,9 +326,9 @@ def build_nao_walk_pulled_diagram(
         "virtual_force": LogVectorOutput(observer.GetOutputPort("virtual_force"), builder, T),
         "valid": LogVectorOutput(observer.GetOutputPort("valid"), builder, T),
         "truth": LogVectorOutput(truth.GetOutputPort("virtual_force"), builder, T),
-        "zmp": LogVectorOutput(meas.GetOutputPort("zmp"), builder, T),
-        "normal_force": LogVectorOutput(meas.GetOutputPort("normal_force"), builder, T),
-        "com_position": LogVectorOutput(meas.GetOutputPort("com_position"), builder, T),
+        "zmp": LogVectorOutput(pipeline.center_of_pressure.GetOutputPort("zmp"), builder, T),
+        "normal_force": LogVectorOutput(pipeline.center_of_pressure.GetOutputPort("normal_force"), builder, T),
+        "com_position": LogVectorOutput(pipeline.support_foot_com.GetOutputPort("com_position"), builder, T),
         "com_acceleration": LogVectorOutput(acc.GetOutputPort("com_acceleration"), builder, T),
         "fsr_forces": LogVectorOutput(fsr.GetOutputPort("fsr_forces"), builder, T),
         "true_fsr_forces": LogVectorOutput(fsr.GetOutputPort("true_fsr_forces"), builder, T),
@@ -464,7 +361,7 @@ def build_nao_walk_pulled_diagram(
         station=station, controller=controller, contact_zmp=contact_zmp, loggers=loggers,
         meshcat_visualizer=visualizer, cable=cable, setup=setup, slack_length=cable_length,
         planned_tighten_time=planned_tighten, planned_lift_time=planned_lift, frame_origin=origin,
-        measurements=meas, fsr_array=fsr, imu_com_acceleration=acc, observer=observer, truth=truth,
+        pipeline=pipeline, fsr_array=fsr, imu_com_acceleration=acc, observer=observer, truth=truth,
         parameters=obs_params, observer_loggers=observer_loggers)
 
 
@@ -540,4 +437,4 @@ def observer_metrics(handles: NaoWalkPulledHandles, root_context: Context, *, se
 
 
 __all__ = ["CableSetup", "CableVirtualForceTruth", "LOAD_MASS", "NaoWalkPulledHandles",
-           "StanceFrameMeasurements", "build_nao_walk_pulled_diagram", "observer_metrics"]
+           "build_nao_walk_pulled_diagram", "observer_metrics"]

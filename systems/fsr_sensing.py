@@ -195,6 +195,25 @@ class _KinematicsSystem(LeafSystem):
         x = eval_finite_input(self._who, self._state, context)
         self._plant.SetPositions(self._plant_context, x[: self._nq])
 
+    def _frame_origin(self, handles: HumanoidHandles, support_foot, origin_W) -> None:
+        """F's origin: the support sole frame's origin (standing), or the fixed world point
+        ``origin_W`` (walking: a frame that followed the support foot would make the
+        observer's CoM state jump by a step length at every change of support)."""
+        if origin_W is None:
+            self._support = self._check_frame(_support_frame(handles, support_foot, self._who), "support sole frame")
+            self._origin_W = None
+        else:
+            origin = np.asarray(origin_W, dtype=float).reshape(-1)
+            if origin.shape != (3,) or not np.isfinite(origin).all():
+                raise ValueError(f"{self._who}: origin_W must be 3 finite numbers (m), got {origin_W!r}")
+            self._support, self._origin_W = None, origin
+
+    def _p_WF(self) -> np.ndarray:
+        """The origin of F in world at the context's positions (after ``_set_positions``)."""
+        if self._origin_W is not None:
+            return self._origin_W
+        return self._support.CalcPoseInWorld(self._plant_context).translation()
+
     def _check_frame(self, frame, name: str) -> Frame:
         if not isinstance(frame, Frame):
             raise ValueError(f"{self._who}: {name} must be a Frame, got {type(frame).__name__}")
@@ -222,6 +241,8 @@ class CenterOfPressure(_KinematicsSystem):
         plant: the finalized plant.
         handles: the humanoid's handles (sole frames, FSR positions in the sole frames).
         support_foot: "left" or "right", the sole frame at the origin of F.
+        origin_W: instead, a fixed world point as F's origin, m (for a walking robot:
+            CoM and ZMP stay continuous when the support foot changes).
         min_contact_force: N, see ``zmp``.
 
     Raises:
@@ -230,10 +251,10 @@ class CenterOfPressure(_KinematicsSystem):
     """
 
     def __init__(self, plant: MultibodyPlant, handles: HumanoidHandles, *, support_foot: str = "right",
-                 min_contact_force: float = MIN_CONTACT_FORCE):
+                 origin_W: np.ndarray | None = None, min_contact_force: float = MIN_CONTACT_FORCE):
         super().__init__(plant, type(self).__name__)
         _check_handles(handles, self._who)
-        self._support = _support_frame(handles, support_foot, self._who)
+        self._frame_origin(handles, support_foot, origin_W)
         self._soles = [self._check_frame(handles.sole_frames[side], f"sole_frames['{side}']") for side in FSR_SIDES]
         # FSR positions in their sole frame, homogeneous: (4, 3) per side, z = 0 (sole plane).
         self._fsr_S = [np.column_stack((np.asarray(handles.fsr_positions[side], float), np.zeros(4)))
@@ -247,10 +268,9 @@ class CenterOfPressure(_KinematicsSystem):
         self.DeclareVectorOutputPort("zmp", 2, self._CalcZmp)
 
     def fsr_positions(self, context: Context) -> np.ndarray:
-        """(8, 3) the FSR positions in F (world-aligned, origin at the support sole), m,
-        from the ``state`` input."""
+        """(8, 3) the FSR positions in F (world-aligned), m, from the ``state`` input."""
         self._set_positions(context)
-        p_WF = self._support.CalcPoseInWorld(self._plant_context).translation()
+        p_WF = self._p_WF()
         rows = []
         for sole, p_S in zip(self._soles, self._fsr_S):
             X_WS = sole.CalcPoseInWorld(self._plant_context)
@@ -286,16 +306,18 @@ class SupportFootCom(_KinematicsSystem):
         plant: the finalized plant.
         handles: the humanoid's handles (its model instance defines the CoM).
         support_foot: "left" or "right".
+        origin_W: instead, a fixed world point as F's origin, m (see ``CenterOfPressure``).
 
     Raises:
-        ValueError: unfinalized plant, unknown support foot; NaN/inf on ``state``.
+        ValueError: unfinalized plant, unknown support foot, bad origin; NaN/inf on ``state``.
     """
 
-    def __init__(self, plant: MultibodyPlant, handles: HumanoidHandles, *, support_foot: str = "right"):
+    def __init__(self, plant: MultibodyPlant, handles: HumanoidHandles, *, support_foot: str = "right",
+                 origin_W: np.ndarray | None = None):
         super().__init__(plant, type(self).__name__)
         if not isinstance(handles, HumanoidHandles):
             raise ValueError(f"{self._who}: handles must be HumanoidHandles, got {type(handles).__name__}")
-        self._support = self._check_frame(_support_frame(handles, support_foot, self._who), "support sole frame")
+        self._frame_origin(handles, support_foot, origin_W)
         self._instances = [handles.model_instance]
         self.DeclareVectorOutputPort("com_position", 3, self._CalcCom)
 
@@ -303,7 +325,7 @@ class SupportFootCom(_KinematicsSystem):
         self._set_positions(context)
         ctx = self._plant_context
         p_WCm = self._plant.CalcCenterOfMassPositionInWorld(ctx, self._instances)
-        output.SetFromVector(p_WCm - self._support.CalcPoseInWorld(ctx).translation())
+        output.SetFromVector(p_WCm - self._p_WF())
 
 
 class ImuComAcceleration(_KinematicsSystem):

@@ -1,4 +1,4 @@
-"""Experiment 4 (diagrams.nao_walk_pulled): the stance-frame measurements and the cable's
+"""Experiment 4 (diagrams.nao_walk_pulled): the fixed-frame measurements and the cable's
 virtual-force truth against hand-computed values, and the app's pulled walk (22 steps, the line
 taut after 0.55 m, ~10-15 s wall) whose walk and observer estimate must meet the issue's
 floors.
@@ -18,10 +18,10 @@ import pytest
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.analysis import Simulator
 
-from diagrams.nao_walk_pulled import (CableSetup, CableVirtualForceTruth, StanceFrameMeasurements,
-                                      build_nao_walk_pulled_diagram, observer_metrics)
+from diagrams.nao_walk_pulled import CableSetup, CableVirtualForceTruth, build_nao_walk_pulled_diagram, observer_metrics
 from diagrams.nao_walking import walking_metrics
 from models import add_humanoid, set_standing_state
+from systems.fsr_sensing import CenterOfPressure, SupportFootCom
 from systems.walking_pattern import WalkingParameters
 
 G = 9.81
@@ -37,29 +37,34 @@ def nao():
     return plant, handles, context
 
 
-def test_stance_frame_measurements_match_kinematics(nao):
+def test_fixed_frame_measurements_match_kinematics(nao):
+    """CenterOfPressure and SupportFootCom with a fixed world origin (the walking frame F0)."""
     plant, handles, context = nao
     x = plant.GetPositionsAndVelocities(context)
     origin = np.array([0.1, -0.2, 0.0])
-    dut = StanceFrameMeasurements(plant, handles, origin)
-    ctx = dut.CreateDefaultContext()
-    dut.GetInputPort("state").FixValue(ctx, x)
+    cop = CenterOfPressure(plant, handles, origin_W=origin)
+    com_system = SupportFootCom(plant, handles, origin_W=origin)
+    cop_ctx, com_ctx = cop.CreateDefaultContext(), com_system.CreateDefaultContext()
+    cop.GetInputPort("state").FixValue(cop_ctx, x)
+    com_system.GetInputPort("state").FixValue(com_ctx, x)
     forces = np.array([1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0])
-    dut.GetInputPort("fsr_forces").FixValue(ctx, forces)
+    cop.GetInputPort("fsr_forces").FixValue(cop_ctx, forces)
     com = plant.CalcCenterOfMassPositionInWorld(context, [handles.model_instance])
-    np.testing.assert_allclose(dut.GetOutputPort("com_position").Eval(ctx), com - origin, atol=1e-12)
-    assert dut.GetOutputPort("normal_force").Eval(ctx)[0] == pytest.approx(-forces.sum())
+    np.testing.assert_allclose(com_system.GetOutputPort("com_position").Eval(com_ctx), com - origin, atol=1e-12)
+    assert cop.GetOutputPort("normal_force").Eval(cop_ctx)[0] == pytest.approx(-forces.sum())
     # CoP: the force-weighted FSR positions (the soles are level: sole frame + FSR offsets).
     points = []
     for side in ("left", "right"):
         X = handles.sole_frames[side].CalcPoseInWorld(context)
         points += [X.multiply(np.array([px, py, 0.0])) - origin for px, py in handles.fsr_positions[side]]
-    np.testing.assert_allclose(dut.GetOutputPort("zmp").Eval(ctx), forces @ np.array(points)[:, :2] / forces.sum(),
+    np.testing.assert_allclose(cop.GetOutputPort("zmp").Eval(cop_ctx), forces @ np.array(points)[:, :2] / forces.sum(),
                                atol=1e-12)
-    dut.GetInputPort("fsr_forces").FixValue(ctx, np.zeros(8))
-    np.testing.assert_array_equal(dut.GetOutputPort("zmp").Eval(ctx), np.zeros(2))
+    cop.GetInputPort("fsr_forces").FixValue(cop_ctx, np.zeros(8))
+    np.testing.assert_array_equal(cop.GetOutputPort("zmp").Eval(cop_ctx), np.zeros(2))
     with pytest.raises(ValueError, match="origin_W"):
-        StanceFrameMeasurements(plant, handles, [0.0, np.nan, 0.0])
+        CenterOfPressure(plant, handles, origin_W=[0.0, np.nan, 0.0])
+    with pytest.raises(ValueError, match="origin_W"):
+        SupportFootCom(plant, handles, origin_W=[0.0, 0.0])
 
 
 def test_cable_virtual_force_follows_eq_11(nao):

@@ -154,12 +154,49 @@ def _base_velocities(plant: MultibodyPlant) -> int:
     return 0
 
 
+class _MeshcatOverlay(LeafSystem):
+    """Shared part of the overlays: a Meshcat path whose nodes carry ``_Track``s, published
+    at a fixed period, on forced publishes and at initialization (which (re)creates the
+    objects, so that a new simulation starts from a clean scene and fresh tracks).
+    Subclasses set ``_meshcat``, ``_path``, ``_tracks`` and implement ``_add_objects`` and
+    ``_Publish``, then call ``_declare_overlay_events``."""
+
+    def _declare_overlay_events(self, period: float) -> None:
+        self._objects_set = False
+        self._visible = True
+        self.DeclarePeriodicPublishEvent(period, 0.0, self._Publish)
+        self.DeclareForcedPublishEvent(self._Publish)
+        self.DeclareInitializationPublishEvent(self._Initialize)
+
+    def set_visible(self, visible: bool, time_in_recording: float | None = None) -> None:
+        """Shows or hides the whole overlay (the root path's "visible" property)."""
+        self._visible = bool(visible)
+        self._meshcat.SetProperty(self._path, "visible", self._visible, time_in_recording)
+
+    def _set_objects(self) -> None:
+        self._meshcat.Delete(self._path)
+        self._add_objects()
+        self._meshcat.SetProperty(self._path, "visible", self._visible)
+        for tracks in self._tracks:
+            for track in tracks:
+                track.reset()
+        self._objects_set = True
+
+    def _ensure_objects(self) -> None:
+        if not self._objects_set:
+            self._set_objects()
+
+    def _Initialize(self, context: Context) -> EventStatus:
+        self._set_objects()
+        return self._Publish(context)
+
+
 # ---------------------------------------------------------------------------------------
 # Joint effort markers.
 # ---------------------------------------------------------------------------------------
 
 
-class JointEffortOverlay(LeafSystem):
+class JointEffortOverlay(_MeshcatOverlay):
     """Red spheres at chosen joints, sized by the estimated joint effort (paper Figs. 5-6).
 
     Inputs:
@@ -246,14 +283,9 @@ class JointEffortOverlay(LeafSystem):
                 _Track(lambda s, t, m=marker: meshcat.SetProperty(m, "scale", [s, s, s], t), _SCALE_TOL),
                 _Track(lambda v, t, node=node: meshcat.SetProperty(node, "visible", v, t), 0.0),
             ))
-        self._objects_set = False
-        self._visible = True
-
         self._residual_port = self.DeclareVectorInputPort("residual", self._size)
         self._state_port = self.DeclareVectorInputPort("state", plant.num_positions() + nv)
-        self.DeclarePeriodicPublishEvent(period, 0.0, self._Publish)
-        self.DeclareForcedPublishEvent(self._Publish)
-        self.DeclareInitializationPublishEvent(self._Initialize)
+        self._declare_overlay_events(period)
 
     # -- accessors ------------------------------------------------------------------------
     @property
@@ -283,32 +315,16 @@ class JointEffortOverlay(LeafSystem):
             out[i] = self._plant.EvalBodyPoseInWorld(self._context, body).multiply(p_BF)
         return out
 
-    def set_visible(self, visible: bool, time_in_recording: float | None = None) -> None:
-        """Shows or hides the whole overlay (the root path's "visible" property)."""
-        self._visible = bool(visible)
-        self._meshcat.SetProperty(self._path, "visible", self._visible, time_in_recording)
-
     # -- events ---------------------------------------------------------------------------
-    def _set_objects(self) -> None:
-        self._meshcat.Delete(self._path)
+    def _add_objects(self) -> None:
         sphere = Sphere(self.radius)
         for node in self._nodes:
             self._meshcat.SetObject(f"{node}/marker", sphere, self._rgba)
-        self._meshcat.SetProperty(self._path, "visible", self._visible)
-        for tracks in self._tracks:
-            for track in tracks:
-                track.reset()
-        self._objects_set = True
-
-    def _Initialize(self, context: Context) -> EventStatus:
-        self._set_objects()
-        return self._Publish(context)
 
     def _Publish(self, context: Context) -> EventStatus:
         effort = _checked(self, self._residual_port, context)
         x = _checked(self, self._state_port, context)
-        if not self._objects_set:
-            self._set_objects()
+        self._ensure_objects()
         t = context.get_time()
         positions = self.joint_positions(x).tolist()
         for (where, scale, visible), p, s in zip(self._tracks, positions, self.scales(effort).tolist()):
@@ -379,7 +395,7 @@ def _default_radius(plant: MultibodyPlant, context) -> float:
 # ---------------------------------------------------------------------------------------
 
 
-class ForceArrows(LeafSystem):
+class ForceArrows(_MeshcatOverlay):
     """Red arrows for external forces, each ending at its application point (paper Figs.
     5-6's "red lines").
 
@@ -446,14 +462,9 @@ class ForceArrows(LeafSystem):
                 _Track(lambda c, t, n=f"{node}/head/cone": meshcat.SetProperty(n, "scale", [c, c, c], t), _SCALE_TOL),
                 _Track(lambda v, t, n=node: meshcat.SetProperty(n, "visible", v, t), 0.0),
             ))
-        self._objects_set = False
-        self._visible = True
-
         self._force_port = self.DeclareVectorInputPort("force_world", 3 * k)
         self._point_port = self.DeclareVectorInputPort("point_world", 3 * k)
-        self.DeclarePeriodicPublishEvent(period, 0.0, self._Publish)
-        self.DeclareForcedPublishEvent(self._Publish)
-        self.DeclareInitializationPublishEvent(self._Initialize)
+        self._declare_overlay_events(period)
 
     @property
     def paths(self) -> tuple[str, ...]:
@@ -465,11 +476,6 @@ class ForceArrows(LeafSystem):
 
     def get_point_world_input_port(self):
         return self._point_port
-
-    def set_visible(self, visible: bool, time_in_recording: float | None = None) -> None:
-        """Shows or hides all arrows (the root path's "visible" property)."""
-        self._visible = bool(visible)
-        self._meshcat.SetProperty(self._path, "visible", self._visible, time_in_recording)
 
     def arrow(self, f_W: np.ndarray, p_W: np.ndarray):
         """(tail, R_WA, length, cone scale c): the arrow drawn for one force."""
@@ -483,30 +489,19 @@ class ForceArrows(LeafSystem):
         c = min(1.0, length / (2.0 * self._head_length))
         return np.asarray(p_W, dtype=float) - length * R.col(2), R, length, c
 
-    def _set_objects(self) -> None:
+    def _add_objects(self) -> None:
         m = self._meshcat
-        m.Delete(self._path)
         shaft = Cylinder(self._shaft_radius, 1.0)
         cone = MeshcatCone(self._head_length, self._head_radius, self._head_radius)
         for node in self._nodes:
             m.SetObject(f"{node}/shaft/cylinder", shaft, self._rgba)
             m.SetTransform(f"{node}/shaft/cylinder", RigidTransform([0.0, 0.0, 0.5]))
             m.SetObject(f"{node}/head/cone", cone, self._rgba)
-        m.SetProperty(self._path, "visible", self._visible)
-        for tracks in self._tracks:
-            for track in tracks:
-                track.reset()
-        self._objects_set = True
-
-    def _Initialize(self, context: Context) -> EventStatus:
-        self._set_objects()
-        return self._Publish(context)
 
     def _Publish(self, context: Context) -> EventStatus:
         forces = _checked(self, self._force_port, context)
         points = _checked(self, self._point_port, context)
-        if not self._objects_set:
-            self._set_objects()
+        self._ensure_objects()
         t = context.get_time()
         for i, (pose, shaft, head, cone, visible) in enumerate(self._tracks):
             f = forces[3 * i : 3 * i + 3]

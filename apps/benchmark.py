@@ -293,6 +293,15 @@ def benchmark_contact_localizer(model: str = "hrp4_like", *, calls: int = 100, b
             "localizer_update_us": update_us, "localizer_update_ratio": update_us / unit}
 
 
+def _table_header(title: str, header: str, *, blank_line: bool = True) -> None:
+    """Prints a table's title, its column header and a rule."""
+    if blank_line:
+        print()
+    print(title)
+    print(header)
+    print("-" * len(header))
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--model", choices=(*MODEL_NAMES, "all"), default="all")
@@ -305,10 +314,12 @@ def main(argv: list[str] | None = None) -> int:
 
     names = MODEL_NAMES if args.model == "all" else (args.model,)
     rows = [benchmark_model(name, calls=args.calls, batches=args.batches) for name in names]
-    print("Floating-base decomposition, us per call (x one CalcMassMatrix in the same run)")
-    header = f"{'model':<10} {'n':>3} {'CalcMassMatrix':>15} {'(cached kin.)':>14} {'fast compute':>20} {'reference compute':>22} {'fast J^fb':>18} {'ref/fast':>9}"
-    print(header)
-    print("-" * len(header))
+    _table_header(
+        "Floating-base decomposition, us per call (x one CalcMassMatrix in the same run)",
+        f"{'model':<10} {'n':>3} {'CalcMassMatrix':>15} {'(cached kin.)':>14} {'fast compute':>20} "
+        f"{'reference compute':>22} {'fast J^fb':>18} {'ref/fast':>9}",
+        blank_line=False,
+    )
     for r in rows:
         print(
             f"{r['model']:<10} {r['num_joints']:>3} {r['calc_mass_matrix_us']:>12.1f} us"
@@ -319,11 +330,10 @@ def main(argv: list[str] | None = None) -> int:
             f" {r['reference_over_fast']:>8.0f}x"
         )
     residual_rows = [benchmark_residual_update(name, calls=max(args.calls // 2, 1), batches=args.batches) for name in names]
-    print()
-    print("Residual update: classical + internal + external, one shared model, at a new state (us per update)")
-    header = f"{'model':<10} {'F/T frames':>10} {'CalcMassMatrix':>15} {'three residuals':>22}"
-    print(header)
-    print("-" * len(header))
+    _table_header(
+        "Residual update: classical + internal + external, one shared model, at a new state (us per update)",
+        f"{'model':<10} {'F/T frames':>10} {'CalcMassMatrix':>15} {'three residuals':>22}",
+    )
     for r in residual_rows:
         print(
             f"{r['model']:<10} {r['known_wrench_frames']:>10} {r['calc_mass_matrix_us']:>12.1f} us"
@@ -341,11 +351,10 @@ def main(argv: list[str] | None = None) -> int:
     loop_rows = []
     if args.loop_seconds > 0:
         loop_rows = benchmark_closed_loop(args.loop_seconds)
-        print()
-        print(f"Push-and-comply closed loop on hrp4_like, {args.loop_seconds:g} s simulated, 1 ms steps")
-        header = f"{'loop':<36} {'wall/step':>11} {'CPU/step':>11} {'real-time factor':>17}"
-        print(header)
-        print("-" * len(header))
+        _table_header(
+            f"Push-and-comply closed loop on hrp4_like, {args.loop_seconds:g} s simulated, 1 ms steps",
+            f"{'loop':<36} {'wall/step':>11} {'CPU/step':>11} {'real-time factor':>17}",
+        )
         for r in loop_rows:
             print(f"{r.pop('label'):<36} {r['wall_us_per_step']:>8.0f} us {r['cpu_us_per_step']:>8.0f} us {r['real_time_factor']:>17.2f}")
     localizer_rows = [
@@ -354,11 +363,10 @@ def main(argv: list[str] | None = None) -> int:
         if name == "hrp4_like"  # the contact study needs the foot F/T sensors
     ]
     if localizer_rows:
-        print()
-        print("Contact localizer (Sec. VI: line of action, every collision primitive, scores): one update at a new state")
-        header = f"{'model':<10} {'primitives':>10} {'CalcMassMatrix':>15} {'one update':>22} {'floor':>8}"
-        print(header)
-        print("-" * len(header))
+        _table_header(
+            "Contact localizer (Sec. VI: line of action, every collision primitive, scores): one update at a new state",
+            f"{'model':<10} {'primitives':>10} {'CalcMassMatrix':>15} {'one update':>22} {'floor':>8}",
+        )
         for r in localizer_rows:
             print(
                 f"{r['model']:<10} {r['num_primitives']:>10} {r['calc_mass_matrix_us']:>12.1f} us"

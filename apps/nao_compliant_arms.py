@@ -47,6 +47,7 @@ import numpy as np  # noqa: E402
 from pydrake.geometry import Meshcat  # noqa: E402
 from pydrake.systems.analysis import Simulator  # noqa: E402
 
+from apps.common import replay_meshcat  # noqa: E402
 from systems.disturbances import SmoothPiecewise  # noqa: E402
 from diagrams.nao_compliant_arms import (  # noqa: E402
     build_nao_compliant_arms_diagram,
@@ -304,11 +305,7 @@ def main(argv: list[str] | None = None) -> int:
     km = dict(identified_motor_constants())
     print(f"K_m identified (static loads on the hands, {time.perf_counter() - start:.1f} s): "
           + ", ".join(f"{n} {v:.3f}" for n, v in km.items()) + " N m/rad")
-    meshcat = None
-    if not args.no_replay:
-        meshcat = Meshcat()
-        if not args.headless:
-            print(f"Meshcat (live view): {meshcat.web_url()}")
+    meshcat = replay_meshcat(not args.no_replay, args.headless)
     metrics = {}
     for scenario in scenarios:
         print(f"scenario {scenario.title}: {DURATION:g} s simulated ...", flush=True)

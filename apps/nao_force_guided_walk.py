@@ -85,6 +85,7 @@ from pydrake.systems.analysis import Simulator  # noqa: E402
 from pydrake.systems.framework import DiagramBuilder  # noqa: E402
 from pydrake.systems.primitives import LogVectorOutput, MatrixGain  # noqa: E402
 
+from apps.common import replay_meshcat  # noqa: E402
 from diagrams.humanoid_station import add_humanoid_station  # noqa: E402
 from diagrams.nao_standing import add_observer_pipeline, nao_observer_parameters  # noqa: E402
 from diagrams.nao_walking import ContactZmp, detect_steps  # noqa: E402
@@ -464,11 +465,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
-    meshcat = None
-    if not args.no_replay:
-        meshcat = Meshcat()
-        if not args.headless:
-            print(f"Meshcat (live view): {meshcat.web_url()}")
+    meshcat = replay_meshcat(not args.no_replay, args.headless)
     source = {"joint": "the arm joints' hand force estimate",
               "observer": f"the observer's estimate ({args.preset} preset)",
               "blend": f"eq. 28's blend of the observer ({args.preset} preset) and the arm joints"}[args.trigger_source]

@@ -64,6 +64,7 @@ import numpy as np  # noqa: E402
 from pydrake.geometry import Meshcat  # noqa: E402
 from pydrake.systems.analysis import Simulator  # noqa: E402
 
+from apps.common import replay_meshcat  # noqa: E402
 from diagrams.nao_standing import build_nao_standing_diagram, settled_standing_state, wide_stance  # noqa: E402
 from systems.disturbances import Push, SmoothPiecewise  # noqa: E402
 
@@ -336,11 +337,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     out_dir = args.out
     out_dir.mkdir(parents=True, exist_ok=True)
-    meshcat = None
-    if not args.no_replay:
-        meshcat = Meshcat()
-        if not args.headless:
-            print(f"Meshcat (live view): {meshcat.web_url()}")
+    meshcat = replay_meshcat(not args.no_replay, args.headless)
     metrics = {}
     for experiment in experiments:
         print(f"{experiment.title}: {experiment.duration:.1f} s simulated ...", flush=True)

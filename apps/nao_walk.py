@@ -34,6 +34,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 from pydrake.geometry import Meshcat  # noqa: E402
 from pydrake.systems.analysis import Simulator  # noqa: E402
 
+from apps.common import replay_meshcat  # noqa: E402
 from diagrams.nao_walking import build_nao_walking_diagram, walking_metrics  # noqa: E402
 from systems.walking_pattern import WalkingParameters  # noqa: E402
 
@@ -173,11 +174,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
-    meshcat = None
-    if not args.no_replay:
-        meshcat = Meshcat()
-        if not args.headless:
-            print(f"Meshcat (live view): {meshcat.web_url()}")
+    meshcat = replay_meshcat(not args.no_replay, args.headless)
     print(f"walking {params.num_steps} steps of {params.step_length} m, {params.step_duration} s each "
           f"({params.duration:.1f} s simulated) ...", flush=True)
     try:

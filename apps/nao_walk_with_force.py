@@ -34,6 +34,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 from pydrake.geometry import Meshcat  # noqa: E402
 from pydrake.systems.analysis import Simulator  # noqa: E402
 
+from apps.common import replay_meshcat  # noqa: E402
 from apps.nao_walk import floors as walking_floors  # noqa: E402
 from apps.nao_walk import plot_time  # noqa: E402
 from diagrams.nao_walk_pulled import CableSetup, build_nao_walk_pulled_diagram, observer_metrics  # noqa: E402
@@ -191,11 +192,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
-    meshcat = None
-    if not args.no_replay:
-        meshcat = Meshcat()
-        if not args.headless:
-            print(f"Meshcat (live view): {meshcat.web_url()}")
+    meshcat = replay_meshcat(not args.no_replay, args.headless)
     print(f"walking {params.num_steps} steps of {params.step_length} m ({params.duration:.1f} s simulated)"
           f"{' pulled by a 0.3 kg load over a pulley' if pull else ' without the cable'} ...", flush=True)
     try:

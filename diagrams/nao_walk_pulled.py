@@ -68,7 +68,7 @@ from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 from diagrams.humanoid_station import add_humanoid_station
 from diagrams.nao_standing import (OBSERVER_PERIOD, ObserverPipeline, VirtualForceTruth, add_observer_pipeline,
                                   nao_observer_parameters)
-from diagrams.nao_walking import ContactZmp, NaoWalkingHandles
+from diagrams.nao_walking import ContactZmp, NaoWalkingHandles, add_walking_loggers
 from diagrams.standing import default_gains
 from models import HumanoidHandles
 from systems.cable import PulleyLoad
@@ -246,12 +246,12 @@ def build_nao_walk_pulled_diagram(
     kp, kd = default_gains(plant, humanoid)
     q0 = station.initial_state[: plant.num_positions()]
 
-    # The plain plan first: it fixes the attachment height and the cable's slack.
-    plain = NaoWalkingController(plant, humanoid, parameters, initial_positions=q0, joint_stiffness=kp)
-    torso = plain.trajectory.torso_position  # (K, 3) planned torso origin, world
-    t_plan = plain.pattern.t
+    # The plan first: it fixes the attachment height and the cable's slack.
+    controller = NaoWalkingController(plant, humanoid, parameters, initial_positions=q0, joint_stiffness=kp)
+    torso = controller.trajectory.torso_position  # (K, 3) planned torso origin, world
+    t_plan = controller.pattern.t
     walk_k = int(np.searchsorted(t_plan, parameters.walk_start))
-    dz = float(plain.pattern.com[walk_k, 2] - torso[walk_k, 2])  # CoM height relative to the torso origin
+    dz = float(controller.pattern.com[walk_k, 2] - torso[walk_k, 2])  # CoM height relative to the torso origin
     p_BA = np.array([-setup.attachment_back, 0.0, dz])
     A_plan = torso + p_BA  # the torso stays level with heading 0 in the plan
     alpha = math.radians(setup.lateral_angle_deg)
@@ -272,7 +272,6 @@ def build_nao_walk_pulled_diagram(
     planned_tighten = float(t_plan[np.argmax(reach >= d_tight)])
     planned_lift = float(t_plan[np.argmax(lift > 0)])
 
-    controller = plain
     builder.AddSystem(controller)
     controller.set_name("nao_walking_controller")
     builder.Connect(controller.GetOutputPort("desired_position"), station.desired_position)
@@ -314,13 +313,7 @@ def build_nao_walk_pulled_diagram(
         builder.Connect(zero.get_output_port(), truth.GetInputPort("force_world"))
         builder.Connect(zero.get_output_port(), truth.GetInputPort("point_world"))
 
-    loggers = {"state": LogVectorOutput(plant.get_state_output_port(), builder, log_period)}
-    for name in ("zmp", "foot_normal_forces", "normal_force"):
-        loggers[name] = LogVectorOutput(contact_zmp.GetOutputPort(name), builder, log_period)
-    for name in ("zmp_reference", "com_reference", "sole_targets", "planned_contact", "desired_position"):
-        loggers[name] = LogVectorOutput(controller.GetOutputPort(name), builder, log_period)
-    for name, logger in loggers.items():
-        logger.set_name(f"log_{name}")
+    loggers = add_walking_loggers(builder, plant, controller, contact_zmp, log_period)
     T = obs_params.period
     observer_loggers = {
         "virtual_force": LogVectorOutput(observer.GetOutputPort("virtual_force"), builder, T),

@@ -116,6 +116,22 @@ class NaoWalkingHandles:
         self.station.set_initial_state(root_context)
 
 
+def add_walking_loggers(builder: DiagramBuilder, plant: MultibodyPlant, controller: NaoWalkingController,
+                        contact_zmp: ContactZmp, log_period: float) -> dict[str, VectorLogSink]:
+    """Loggers of a walking diagram, every ``log_period`` s: the plant's ``state``, the
+    contact ZMP's ``zmp``, ``foot_normal_forces`` and ``normal_force``, and the controller's
+    ``zmp_reference``, ``com_reference``, ``sole_targets``, ``planned_contact`` and
+    ``desired_position`` (what ``walking_metrics`` reads)."""
+    loggers = {"state": LogVectorOutput(plant.get_state_output_port(), builder, log_period)}
+    for name in ("zmp", "foot_normal_forces", "normal_force"):
+        loggers[name] = LogVectorOutput(contact_zmp.GetOutputPort(name), builder, log_period)
+    for name in ("zmp_reference", "com_reference", "sole_targets", "planned_contact", "desired_position"):
+        loggers[name] = LogVectorOutput(controller.GetOutputPort(name), builder, log_period)
+    for name, logger in loggers.items():
+        logger.set_name(f"log_{name}")
+    return loggers
+
+
 def build_nao_walking_diagram(
     parameters: WalkingParameters | None = None,
     *,
@@ -174,13 +190,7 @@ def build_nao_walking_diagram(
     contact_zmp.set_name("contact_zmp")
     builder.Connect(plant.get_contact_results_output_port(), contact_zmp.GetInputPort("contact_results"))
 
-    loggers = {"state": LogVectorOutput(plant.get_state_output_port(), builder, log_period)}
-    for name in ("zmp", "foot_normal_forces", "normal_force"):
-        loggers[name] = LogVectorOutput(contact_zmp.GetOutputPort(name), builder, log_period)
-    for name in ("zmp_reference", "com_reference", "sole_targets", "planned_contact", "desired_position"):
-        loggers[name] = LogVectorOutput(controller.GetOutputPort(name), builder, log_period)
-    for name, logger in loggers.items():
-        logger.set_name(f"log_{name}")
+    loggers = add_walking_loggers(builder, plant, controller, contact_zmp, log_period)
 
     visualizer = None
     if meshcat is not None:
@@ -369,5 +379,5 @@ def walking_metrics(handles: NaoWalkingHandles, root_context: Context) -> dict:
     }
 
 
-__all__ = ["ContactZmp", "MIN_NORMAL_FORCE", "detect_steps", "NaoWalkingHandles", "build_nao_walking_diagram",
+__all__ = ["ContactZmp", "MIN_NORMAL_FORCE", "detect_steps", "NaoWalkingHandles", "add_walking_loggers", "build_nao_walking_diagram",
            "signed_distance_to_polygon", "walking_metrics"]

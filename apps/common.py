@@ -14,3 +14,12 @@ def replay_meshcat(enabled: bool, headless: bool) -> Meshcat | None:
     if not headless:
         print(f"Meshcat (live view): {meshcat.web_url()}")
     return meshcat
+
+
+def logged_signals(loggers: dict, context, time_from: str) -> dict:
+    """{name: (size, samples) array} of every logger's log in ``context``, plus ``"t"``, the
+    sample times of the logger ``time_from`` (all loggers of one rate share them)."""
+    logs = {name: logger.FindLog(context) for name, logger in loggers.items()}
+    signals = {name: log.data() for name, log in logs.items()}
+    signals["t"] = logs[time_from].sample_times()
+    return signals

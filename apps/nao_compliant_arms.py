@@ -47,7 +47,7 @@ import numpy as np  # noqa: E402
 from pydrake.geometry import Meshcat  # noqa: E402
 from pydrake.systems.analysis import Simulator  # noqa: E402
 
-from apps.common import replay_meshcat  # noqa: E402
+from apps.common import logged_signals, replay_meshcat  # noqa: E402
 from systems.disturbances import SmoothPiecewise  # noqa: E402
 from diagrams.nao_compliant_arms import (  # noqa: E402
     build_nao_compliant_arms_diagram,
@@ -128,9 +128,7 @@ def simulate(scenario: Scenario, *, seed: int = 0, meshcat: Meshcat | None = Non
     if meshcat is not None:
         meshcat.StopRecording()
         meshcat.PublishRecording()
-    logs = {name: logger.FindLog(context) for name, logger in handles.loggers.items()}
-    signals = {name: log.data() for name, log in logs.items()}
-    signals["t"] = logs["state"].sample_times()
+    signals = logged_signals(handles.loggers, context, "state")
     return {"signals": signals, "handles": handles, "wall": wall}
 
 

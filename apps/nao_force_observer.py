@@ -64,7 +64,7 @@ import numpy as np  # noqa: E402
 from pydrake.geometry import Meshcat  # noqa: E402
 from pydrake.systems.analysis import Simulator  # noqa: E402
 
-from apps.common import replay_meshcat  # noqa: E402
+from apps.common import logged_signals, replay_meshcat  # noqa: E402
 from diagrams.nao_standing import build_nao_standing_diagram, settled_standing_state, wide_stance  # noqa: E402
 from systems.disturbances import Push, SmoothPiecewise  # noqa: E402
 
@@ -210,9 +210,7 @@ def simulate(experiment: Experiment, *, seed: int = 0, meshcat: Meshcat | None =
     if meshcat is not None:
         meshcat.StopRecording()
         meshcat.PublishRecording()
-    logs = {name: logger.FindLog(context) for name, logger in handles.loggers.items()}
-    signals = {name: log.data() for name, log in logs.items()}
-    signals["t"] = logs["virtual_force"].sample_times()
+    signals = logged_signals(handles.loggers, context, "virtual_force")
     return {"signals": signals, "handles": handles, "wall": wall}
 
 

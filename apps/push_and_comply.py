@@ -29,6 +29,7 @@ import numpy as np  # noqa: E402
 from pydrake.geometry import Meshcat  # noqa: E402
 from pydrake.systems.analysis import Simulator  # noqa: E402
 
+from apps.common import logged_signals  # noqa: E402
 from diagrams.push_and_comply import (  # noqa: E402
     RESIDUAL_KINDS,
     PushAndComplyScenario,
@@ -79,9 +80,7 @@ def simulate(scenario: PushAndComplyScenario, kind: str, meshcat: Meshcat | None
     if meshcat is not None:
         meshcat.StopRecording()
         meshcat.PublishRecording()
-    logs = {name: logger.FindLog(context) for name, logger in handles.loggers.items()}
-    signals = {name: log.data() for name, log in logs.items()}
-    signals["t"] = logs["state"].sample_times()
+    signals = logged_signals(handles.loggers, context, "state")
     return {"signals": signals, "handles": handles, "wall": wall}
 
 

@@ -39,7 +39,7 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Frame, JacobianWrtVariable
 from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem
 
-from systems.inputs import eval_finite_input
+from systems.inputs import eval_finite_input, positive_number
 from systems.topology import floating_base_topology
 
 #: Nao's number of FSRs, K_t of eq. (28).
@@ -136,16 +136,6 @@ def _per_joint(value, names: Sequence[str], what: str, who: str, *, positive: bo
     if not positive and np.any(arr < 0):
         raise ValueError(f"{who}: {what} must be non-negative, got {arr.tolist()}")
     return arr
-
-
-def _positive(value, name: str, who: str, *, allow_zero: bool = False) -> float:
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{who}: {name} must be a number, got {value!r}") from None
-    if not math.isfinite(x) or x < 0 or (x == 0 and not allow_zero):
-        raise ValueError(f"{who}: {name} must be {'non-negative' if allow_zero else 'positive'}, got {value!r}")
-    return x
 
 
 def _joint_names(resolved) -> list[str]:
@@ -271,10 +261,10 @@ class ArmExternalForceEstimator(LeafSystem):
         self._joint_damping = np.concatenate(
             [[plant.GetJointByName(n).default_damping_vector()[0] for n in r.chain.joint_names] for r in self._chains])
         self._gravity_compensated = bool(gravity_compensated)
-        self._period = _positive(period, "period", who)
-        tau_f = _positive(filter_time_constant, "filter_time_constant", who, allow_zero=True)
+        self._period = positive_number(period, f"{who}: period")
+        tau_f = positive_number(filter_time_constant, f"{who}: filter_time_constant", allow_zero=True)
         self._alpha = 1.0 if tau_f == 0.0 else 1.0 - math.exp(-self._period / tau_f)
-        self._rcond = _positive(rcond, "rcond", who)
+        self._rcond = positive_number(rcond, f"{who}: rcond")
         self._rows = np.concatenate([r.v_index for r in self._chains])
         self._nf = 3 * len(self._chains)
         self._torque = self.DeclareVectorInputPort("motor_torque", self._m)
@@ -449,14 +439,14 @@ class CompliantArmBlender(LeafSystem):
         if not (isinstance(total_fsr, (int, np.integer)) and total_fsr > 0):
             raise ValueError(f"{who}: total_fsr must be a positive integer, got {total_fsr!r}")
         self._total = int(total_fsr)
-        self._threshold = _positive(fsr_threshold, "fsr_threshold", who, allow_zero=True)
+        self._threshold = positive_number(fsr_threshold, f"{who}: fsr_threshold", allow_zero=True)
         if constant_k1 is not None:
             k1 = float(constant_k1)
             if not (0.0 <= k1 <= 1.0):
                 raise ValueError(f"{who}: constant_k1 must be in [0, 1], got {constant_k1!r}")
             constant_k1 = k1
         self._constant = constant_k1
-        self._saturation = None if saturation_guard is None else _positive(saturation_guard, "saturation_guard", who)
+        self._saturation = None if saturation_guard is None else positive_number(saturation_guard, f"{who}: saturation_guard")
         self._observer = self.DeclareVectorInputPort("observer_force", int(size))
         self._joint = self.DeclareVectorInputPort("joint_force", int(size))
         self._fsr = self.DeclareVectorInputPort("fsr_forces", self._total)
@@ -546,13 +536,13 @@ class HandComplianceController(LeafSystem):
         if nominal.shape != (self._n,) or not np.all(np.isfinite(nominal)):
             raise ValueError(f"{who}: nominal_position must be {self._n} finite joint positions (v[6:] order)")
         self._nominal = nominal.copy()
-        self._stiffness = _positive(stiffness, "stiffness", who)
-        self._period = _positive(period, "period", who)
+        self._stiffness = positive_number(stiffness, f"{who}: stiffness")
+        self._period = positive_number(period, f"{who}: period")
         if not (isinstance(ik_iterations, (int, np.integer)) and ik_iterations >= 1):
             raise ValueError(f"{who}: ik_iterations must be a positive integer, got {ik_iterations!r}")
         self._iterations = int(ik_iterations)
-        self._lambda2 = _positive(ik_damping, "ik_damping", who, allow_zero=True) ** 2
-        self._max_dx = _positive(max_displacement, "max_displacement", who)
+        self._lambda2 = positive_number(ik_damping, f"{who}: ik_damping", allow_zero=True) ** 2
+        self._max_dx = positive_number(max_displacement, f"{who}: max_displacement")
         names = _joint_names(self._chains)
         self._m = len(names)
         self._km = None if motor_constants is None else _per_joint(motor_constants, names, "motor_constants", who,
@@ -740,8 +730,8 @@ def identify_motor_constant(
     loads = np.asarray(loads, dtype=float)
     if loads.ndim != 2 or loads.shape[1] != 3 or len(loads) < 1 or not np.all(np.isfinite(loads)):
         raise ValueError("identify_motor_constant: loads must be a list of finite 3-vectors")
-    hold = _positive(hold, "hold", "identify_motor_constant")
-    window = _positive(window, "window", "identify_motor_constant")
+    hold = positive_number(hold, "identify_motor_constant: hold")
+    window = positive_number(window, "identify_motor_constant: window")
     if window >= hold:
         raise ValueError("identify_motor_constant: window must be shorter than hold")
     builder = DiagramBuilder()

@@ -32,28 +32,11 @@ from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import ExternallyAppliedSpatialForce, MultibodyPlant
 from pydrake.systems.framework import Context, DiscreteValues, LeafSystem
 
-from systems.inputs import eval_finite_input
+from systems.inputs import eval_finite_input, positive_number, vector3
 
 __all__ = ["PulleyLoad"]
 
 _WHO = "PulleyLoad"
-
-
-def _positive(value, name: str, allow_zero: bool = False) -> float:
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{_WHO}: {name} must be a number, got {value!r}") from None
-    if not math.isfinite(x) or x < 0.0 or (x == 0.0 and not allow_zero):
-        raise ValueError(f"{_WHO}: {name} must be {'non-negative' if allow_zero else 'positive'} and finite, got {value!r}")
-    return x
-
-
-def _vector3(value, name: str) -> np.ndarray:
-    v = np.asarray(value, dtype=float)
-    if v.shape != (3,) or not np.isfinite(v).all():
-        raise ValueError(f"{_WHO}: {name} must be 3 finite numbers (m), got {value!r}")
-    return v.copy()
 
 
 class PulleyLoad(LeafSystem):
@@ -113,14 +96,14 @@ class PulleyLoad(LeafSystem):
             raise ValueError(f"{_WHO}: the plant has no body named {body_name!r}")
         self._plant = plant
         self._body = plant.GetBodyByName(body_name)
-        self._p_BA = _vector3(p_BA, "p_BA")
-        self._pulley = _vector3(pulley_W, "pulley_W")
-        self._m = _positive(load_mass, "load_mass")
-        self._L0 = _positive(cable_length, "cable_length")
-        self._k = _positive(stiffness, "stiffness")
-        self._c = _positive(damping, "damping", allow_zero=True)
-        self._g = _positive(gravity, "gravity", allow_zero=True)
-        self._period = _positive(period, "period")
+        self._p_BA = vector3(p_BA, f"{_WHO}: p_BA")
+        self._pulley = vector3(pulley_W, f"{_WHO}: pulley_W")
+        self._m = positive_number(load_mass, f"{_WHO}: load_mass")
+        self._L0 = positive_number(cable_length, f"{_WHO}: cable_length")
+        self._k = positive_number(stiffness, f"{_WHO}: stiffness")
+        self._c = positive_number(damping, f"{_WHO}: damping", allow_zero=True)
+        self._g = positive_number(gravity, f"{_WHO}: gravity", allow_zero=True)
+        self._period = positive_number(period, f"{_WHO}: period")
         if self._period >= 0.5 * math.sqrt(self._m / self._k):
             raise ValueError(
                 f"{_WHO}: period {self._period} s does not resolve the line's vibration "

@@ -44,7 +44,7 @@ from systems.geometry_intersection import (
     outward_normals,
     signed_distances,
 )
-from systems.inputs import eval_finite_input
+from systems.inputs import eval_finite_input, positive_number
 from systems.topology import floating_base_topology
 
 DEFAULT_PERIOD = 1e-3  # s
@@ -153,13 +153,6 @@ def _weights(value, size: int, what: str) -> np.ndarray:
     if w.shape != (size,) or not np.all(np.isfinite(w)) or np.any(w < 0.0):
         raise ValueError(f"{what} must be a non-negative scalar or {size} non-negative finite numbers, got shape {w.shape}")
     return w
-
-
-def _positive(value, what: str) -> float:
-    x = float(value)
-    if not math.isfinite(x) or x <= 0.0:
-        raise ValueError(f"{what} must be a positive number, got {value}")
-    return x
 
 
 # ---------------------------------------------------------------------------------------
@@ -421,7 +414,7 @@ def predicted_residual_covariances(
         q = plant.GetPositions(kin.context)
     q = np.asarray(q, dtype=float)
     terms = FloatingBaseDynamics(plant).compute(q, np.zeros(plant.num_velocities()))
-    T = _positive(period, "period")
+    T = positive_number(period, "period")
     n = kin.n
     cov_qdot = encoder_velocity_std**2 * np.eye(n)
 
@@ -440,13 +433,13 @@ def predicted_residual_covariances(
         J = plant.CalcJacobianSpatialVelocity(kin.context, JacobianWrtVariable.kV, frame, np.zeros(3), world, world)
         Jfb = J[:, 6:] - J[:, :6] @ E
         cov_u_int += Jfb.T @ cov_w @ Jfb
-    cov_int = steady(_positive(internal_gain, "internal_gain"), cov_p_int, cov_u_int)
+    cov_int = steady(positive_number(internal_gain, "internal_gain"), cov_p_int, cov_u_int)
     # External (F0), force block, then world.
     cov_v0 = np.diag([base_angular_velocity_std**2] * 3 + [base_linear_velocity_std**2] * 3)
     cov_p_ext = terms.I0c @ cov_v0 @ terms.I0c.T + terms.F @ cov_qdot @ terms.F.T
     cov_u_ext = np.zeros((6, 6))
     cov_u_ext[3:, 3:] = len(known_wrench_frames) * ft_force_std**2 * np.eye(3)
-    cov_ext = steady(_positive(external_gain, "external_gain"), cov_p_ext, cov_u_ext)[3:, 3:]
+    cov_ext = steady(positive_number(external_gain, "external_gain"), cov_p_ext, cov_u_ext)[3:, 3:]
     R = terms.R_WB
     return cov_int, R @ cov_ext @ R.T
 
@@ -530,7 +523,7 @@ class ContactDetector(LeafSystem):
             raise ValueError(f"{who}: release_probability must exceed false_alarm_probability (hysteresis)")
         if int(on_samples) != on_samples or on_samples < 1:
             raise ValueError(f"{who}: on_samples must be a positive integer, got {on_samples}")
-        self._period = _positive(period, f"{who}: period")
+        self._period = positive_number(period, f"{who}: period")
         self._release_time = float(release_time)
         if not math.isfinite(self._release_time) or self._release_time < 0.0:
             raise ValueError(f"{who}: release_time must be >= 0, got {release_time}")
@@ -751,12 +744,12 @@ class ContactLocalizer(LeafSystem):
             raise ValueError(f"{who}: no candidate link left")
         self._geometry = RobotGeometry.from_plant(plant, inspector, candidates, skip_unsupported=skip_unsupported_shapes)
         self._bodies = [plant.get_body(BodyIndex(int(i))) for i in self._geometry.bodies]
-        self._period = _positive(period, f"{who}: period")
-        self._min_force = _positive(min_force, f"{who}: min_force")
+        self._period = positive_number(period, f"{who}: period")
+        self._min_force = positive_number(min_force, f"{who}: min_force")
         self._settle_time = float(settle_time)
         if not math.isfinite(self._settle_time) or self._settle_time < 0.0:
             raise ValueError(f"{who}: settle_time must be >= 0")
-        self._tau = None if averaging_time_constant is None else _positive(averaging_time_constant, f"{who}: averaging_time_constant")
+        self._tau = None if averaging_time_constant is None else positive_number(averaging_time_constant, f"{who}: averaging_time_constant")
         self._margin = float(ambiguity_margin)
         self._tolerance = float(surface_tolerance)
         if not (math.isfinite(self._margin) and self._margin >= 0.0 and math.isfinite(self._tolerance) and self._tolerance >= 0.0):

@@ -40,6 +40,7 @@ from pydrake.multibody.tree import JacobianWrtVariable, RigidBody
 from pydrake.systems.framework import BasicVector, Context, LeafSystem, ValueProducer
 
 from systems.floating_base import FloatingBaseDynamics
+from systems.inputs import vector3
 
 __all__ = [
     "ForceProfile",
@@ -266,16 +267,6 @@ Profile = Union[Sinusoid, PolynomialRampUpDown, Step, SmoothPiecewise, ForceProf
 # ---------------------------------------------------------------------------------------
 
 
-def _vector3(name: str, value) -> np.ndarray:
-    try:
-        x = np.array(value, dtype=float).reshape(-1)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be 3 real numbers, got {value!r}") from None
-    if x.shape != (3,) or not np.all(np.isfinite(x)):
-        raise ValueError(f"{name} must be 3 finite numbers, got {value!r}")
-    return x
-
-
 @dataclass(frozen=True, eq=False)
 class Push:
     """A force of fixed world direction and time-varying magnitude on a point of a body.
@@ -307,8 +298,8 @@ class Push:
             raise ValueError(f"body_name must be a non-empty string, got {self.body_name!r}")
         if self.model_instance_name is not None and not isinstance(self.model_instance_name, str):
             raise ValueError(f"model_instance_name must be a string or None, got {self.model_instance_name!r}")
-        p = _vector3("p_BoP_B", self.p_BoP_B)
-        d = _vector3("direction_W", self.direction_W)
+        p = vector3(self.p_BoP_B, "p_BoP_B")
+        d = vector3(self.direction_W, "direction_W")
         norm = float(np.linalg.norm(d))
         if norm < 1e-12:
             raise ValueError(f"direction_W must be non-zero, got {self.direction_W!r}")

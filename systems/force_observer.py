@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.systems.framework import Context, DiscreteValues, LeafSystem
 
-from systems.inputs import eval_finite_input
+from systems.inputs import eval_finite_input, vector3
 
 #: Gravity and Nao's mass used by Hawley et al.
 GRAVITY = 9.81
@@ -298,8 +298,8 @@ class LipForceObserver:
 
     def reset(self, com_position: np.ndarray, com_acceleration: np.ndarray) -> None:
         """Initial states [c(0), 0, ddc(0), 0, 0] per axis and P = p0 I (as the authors)."""
-        com_position = _vector3("com_position", com_position)
-        com_acceleration = _vector3("com_acceleration", com_acceleration)
+        com_position = vector3(com_position, "com_position")
+        com_acceleration = vector3(com_acceleration, "com_acceleration")
         P0 = self.parameters.initial_covariance * np.eye(5)
         self._filters = [
             _KalmanState(np.array([com_position[i], 0.0, com_acceleration[i], 0.0, 0.0]), P0) for i in range(3)
@@ -318,8 +318,8 @@ class LipForceObserver:
         """
         if self._filters is None:
             self.reset(com_position, com_acceleration)
-        c = _vector3("com_position", com_position)
-        a = _vector3("com_acceleration", com_acceleration)
+        c = vector3(com_position, "com_position")
+        a = vector3(com_acceleration, "com_acceleration")
         p = np.asarray(zmp, dtype=float).reshape(-1)
         if p.shape != (2,) or not np.all(np.isfinite(p)):
             raise ValueError(f"zmp must be 2 finite numbers, got {zmp}")
@@ -397,13 +397,6 @@ def estimate_virtual_forces(
     forces = np.array([r[0] for r in results], dtype=float).reshape(n, 3)
     valid = np.array([r[1] for r in results], dtype=bool)
     return forces, valid
-
-
-def _vector3(name: str, value) -> np.ndarray:
-    v = np.asarray(value, dtype=float).reshape(-1)
-    if v.shape != (3,) or not np.all(np.isfinite(v)):
-        raise ValueError(f"{name} must be 3 finite numbers, got {value}")
-    return v
 
 
 class LipForceObserverSystem(LeafSystem):

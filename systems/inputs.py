@@ -29,3 +29,35 @@ def eval_finite_input(system_name: str, port, context) -> np.ndarray:
     value = port.Eval(context)
     check_finite_input(system_name, port.get_name(), value)
     return value
+
+
+def positive_number(value, name: str, *, allow_zero: bool = False) -> float:
+    """``value`` as a float, checked: finite and > 0 (>= 0 with ``allow_zero``).
+
+    Raises:
+        ValueError: naming ``name`` (e.g. "PulleyLoad: stiffness"): not a number, NaN/inf,
+            negative, or zero when not allowed.
+    """
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(x) or x < 0.0 or (x == 0.0 and not allow_zero):
+        kind = "non-negative" if allow_zero else "positive"
+        raise ValueError(f"{name} must be {kind} and finite, got {value!r}")
+    return x
+
+
+def vector3(value, name: str) -> np.ndarray:
+    """``value`` as a new (3,) float array of finite numbers.
+
+    Raises:
+        ValueError: naming ``name``: not 3 real numbers, or NaN/inf among them.
+    """
+    try:
+        x = np.array(value, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be 3 real numbers, got {value!r}") from None
+    if x.shape != (3,) or not np.isfinite(x).all():
+        raise ValueError(f"{name} must be 3 finite numbers, got {value!r}")
+    return x

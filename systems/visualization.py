@@ -54,7 +54,7 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Joint
 from pydrake.systems.framework import Context, DiagramBuilder, EventStatus, LeafSystem, OutputPort
 
-from systems.inputs import eval_finite_input
+from systems.inputs import eval_finite_input, positive_number
 
 __all__ = [
     "DEFAULT_PUBLISH_PERIOD",
@@ -132,13 +132,6 @@ def _period(period: float, who: str) -> float:
     if not math.isfinite(period) or period <= 0.0:
         raise ValueError(f"{who}: publish_period must be a positive number of seconds, got {period}")
     return period
-
-
-def _positive(value, who: str) -> float:
-    value = float(value)
-    if not math.isfinite(value) or value <= 0.0:
-        raise ValueError(f"{who} must be a positive finite number, got {value}")
-    return value
 
 
 def _node_name(name: str) -> str:
@@ -262,7 +255,7 @@ class JointEffortOverlay(_MeshcatOverlay):
             raise ValueError(f"{who}: max_effort must be positive and finite, got {max_effort}")
         self._inv_max = 1.0 / max_effort
         self._context = plant.CreateDefaultContext()
-        self.radius = _positive(radius, f"{who}: radius") if radius is not None else _default_radius(plant, self._context)
+        self.radius = positive_number(radius, f"{who}: radius") if radius is not None else _default_radius(plant, self._context)
         period = _period(publish_period, who)
 
         base_nv = _base_velocities(plant)
@@ -442,10 +435,10 @@ class ForceArrows(_MeshcatOverlay):
         self._meshcat = meshcat
         self._path = path.rstrip("/")
         self._rgba = rgba
-        self._meters_per_newton = 1.0 / _positive(newtons_per_meter, f"{who}: newtons_per_meter")
-        self._shaft_radius = _positive(shaft_radius, f"{who}: shaft_radius")
-        self._head_radius = _positive(head_radius, f"{who}: head_radius")
-        self._head_length = _positive(head_length, f"{who}: head_length")
+        self._meters_per_newton = 1.0 / positive_number(newtons_per_meter, f"{who}: newtons_per_meter")
+        self._shaft_radius = positive_number(shaft_radius, f"{who}: shaft_radius")
+        self._head_radius = positive_number(head_radius, f"{who}: head_radius")
+        self._head_length = positive_number(head_length, f"{who}: head_length")
         self._min_force = float(min_force)
         if not math.isfinite(self._min_force) or self._min_force < 0:
             raise ValueError(f"{who}: min_force must be non-negative, got {min_force}")

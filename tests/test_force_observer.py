@@ -45,12 +45,12 @@ def test_reproduces_the_authors_implementation_on_real_nao_data(name, tmp_path, 
 )
 def test_estimates_the_papers_loads_on_real_data(name, expected, axis):
     """While loaded (the load's main component past 80 % of its expected value), every
-    component's median is within 1.5 N of the paper's expected virtual force (eq. 24;
-    measured: at most 0.89 N off)."""
+    component's median is within 1.0 N of the paper's expected virtual force (eq. 24; the
+    issue's floor is 1.5 N; measured: at most 0.89 N off)."""
     forces = replay_nao_dataset.replay(DATASET / name)
     loaded = forces[np.abs(forces[:, axis]) > 0.8 * abs(expected[axis])]
     assert len(loaded) > 100
-    np.testing.assert_array_less(np.abs(np.median(loaded, axis=0) - np.array(expected)), 1.5)
+    np.testing.assert_array_less(np.abs(np.median(loaded, axis=0) - np.array(expected)), 1.0)
 
 
 def test_observer_converges_to_a_constant_force_on_a_synthetic_lip():

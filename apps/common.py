@@ -2,7 +2,15 @@
 
 from __future__ import annotations
 
+import os
+
 from pydrake.geometry import Meshcat
+
+
+def memory_allocator() -> str:
+    """"tcmalloc" when the process runs with tcmalloc preloaded (``make`` does it when the
+    library is installed: Drake's SAP solver then takes less time per step), else "system"."""
+    return "tcmalloc" if "tcmalloc" in os.environ.get("LD_PRELOAD", "") else "system"
 
 
 def replay_meshcat(enabled: bool, headless: bool) -> Meshcat | None:

@@ -29,7 +29,7 @@ import numpy as np  # noqa: E402
 from pydrake.geometry import Meshcat  # noqa: E402
 from pydrake.systems.analysis import Simulator  # noqa: E402
 
-from apps.common import logged_signals  # noqa: E402
+from apps.common import logged_signals, memory_allocator  # noqa: E402
 from diagrams.push_and_comply import (  # noqa: E402
     RESIDUAL_KINDS,
     PushAndComplyScenario,
@@ -54,8 +54,12 @@ def _parse(argv):
     return parser.parse_args(argv)
 
 
-def simulate(scenario: PushAndComplyScenario, kind: str, meshcat: Meshcat | None, *, progress: bool = True) -> dict:
-    """Runs one closed loop; returns the logged signals and the wall time."""
+def simulate(
+    scenario: PushAndComplyScenario, kind: str, meshcat: Meshcat | None, *, progress: bool = True, live: bool = True
+) -> dict:
+    """Runs one closed loop; returns the logged signals and the wall time. With ``meshcat``
+    the run is recorded for the replay, and shown live too when ``live`` (sending every
+    frame to the browser costs about 10 % of the step time; a headless run skips it)."""
     if meshcat is not None:
         meshcat.Delete()
         meshcat.DeleteRecording()
@@ -65,7 +69,7 @@ def simulate(scenario: PushAndComplyScenario, kind: str, meshcat: Meshcat | None
     handles.station.set_initial_state(context)
     if meshcat is not None:
         meshcat.SetCameraPose(camera_in_world=[1.6, -1.6, 1.2], target_in_world=[0.0, 0.0, 0.7])
-        meshcat.StartRecording(frames_per_second=32.0)
+        meshcat.StartRecording(frames_per_second=32.0, set_visualizations_while_recording=live)
     simulator.Initialize()
     start = time.perf_counter()
     t, step = 0.0, 0.5
@@ -218,7 +222,7 @@ def main(argv: list[str] | None = None) -> int:
     runs, metrics = {}, {}
     try:
         for kind in args.runs:
-            runs[kind] = simulate(scenario, kind, meshcat)
+            runs[kind] = simulate(scenario, kind, meshcat, live=not args.headless)
             (out_dir / f"{kind}.html").write_text(meshcat.StaticHtml())
             metrics[kind] = run_metrics(scenario, runs[kind])
     except ValueError as error:
@@ -226,8 +230,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     _plot(out_dir, scenario, runs)
     metrics["scenario"] = {k: v for k, v in vars(scenario).items()}
+    metrics["memory_allocator"] = memory_allocator()
     (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2))
     _print_table({k: v for k, v in metrics.items() if k in RESIDUAL_KINDS})
+    print(f"memory allocator: {metrics['memory_allocator']} (make preloads tcmalloc when installed; see BENCHMARKS.md)")
     print(f"wrote {out_dir}: " + ", ".join(sorted(p.name for p in out_dir.iterdir())))
     return 0
 

@@ -144,7 +144,8 @@ def build_contact_study_diagram(
     builder.Connect(plant.get_state_output_port(), push_source.GetInputPort("state"))
 
     frames = station.known_wrench_frames
-    model = ResidualModel(plant)
+    # The station's model: the PD's gravity comes from the same per-state computation.
+    model = station.dynamics_model if station.dynamics_model is not None else ResidualModel(plant)
     internal = builder.AddSystem(InternalResidual(plant, config.internal_gain, config.period, frames, model=model))
     external = builder.AddSystem(ExternalResidual(plant, config.external_gain, config.period, frames, model=model))
     internal.set_name("internal_residual")

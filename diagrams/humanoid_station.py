@@ -23,12 +23,14 @@ from pydrake.systems.primitives import MatrixGain, ZeroOrderHold
 from diagrams.standing import default_gains
 from models import MODEL_NAMES, HumanoidHandles, add_ground, add_humanoid, set_standing_state
 from systems.pd_gravity import PdGravityController
+from systems.residuals import ResidualModel
 from systems.sensors import SensorHandles, add_sensors
 from systems.topology import FloatingBaseTopology, floating_base_topology
 
 
-#: Drake's discrete contact solvers the station accepts (``MultibodyPlantConfig``).
-CONTACT_APPROXIMATIONS = ("sap", "tamsi", "similar", "lagged")
+#: Drake's discrete contact approximations the station accepts (``MultibodyPlantConfig``),
+#: all solved by SAP. TAMSI is refused: Drake deprecated it (removal on or after 2026-09-01).
+CONTACT_APPROXIMATIONS = ("sap", "similar", "lagged")
 
 
 @dataclass
@@ -51,6 +53,10 @@ class HumanoidStation:
         sensed_state_hold: the ZeroOrderHold between the sensors and the PD (humanoids), or
             None. Its held sample is set by ``set_initial_state``: call it before
             ``Simulator.Initialize``.
+        dynamics_model: the ``ResidualModel`` whose gravity the PD uses (humanoids), or
+            None. Give it to the diagram's residuals (``model=``): the PD reads the
+            sample they evaluated one step earlier, so the dynamics at each sensed state
+            are computed once for the PD and all residuals.
     """
 
     plant: MultibodyPlant
@@ -67,6 +73,7 @@ class HumanoidStation:
     initial_state: np.ndarray
     q_hold: np.ndarray
     sensed_state_hold: ZeroOrderHold | None = None
+    dynamics_model: ResidualModel | None = None
 
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -105,14 +112,19 @@ def add_humanoid_station(
         time_step: the plant's discrete step, s.
         contact_approximation: the discrete contact solver, one of
             ``CONTACT_APPROXIMATIONS`` (Drake's ``discrete_contact_approximation``): "sap"
-            (default, Drake's recommended convex solver) or "tamsi" (cheaper; on the
-            push-and-comply experiment it gives the same metrics to 1e-5, measured).
+            (default, Drake's convex solver), "similar" or "lagged". Drake's TAMSI solver
+            is deprecated and refused.
         noise, seed: the sensors' noise (defaults of ``systems.sensors``) and its seed.
 
     Raises:
         ValueError: an unknown or unreadable model, a model without a floating base, an
             unknown contact approximation.
     """
+    if contact_approximation == "tamsi":
+        raise ValueError(
+            "contact approximation 'tamsi': Drake deprecated the TAMSI solver (removal on or after "
+            f"2026-09-01); choose one of {CONTACT_APPROXIMATIONS}"
+        )
     if contact_approximation not in CONTACT_APPROXIMATIONS:
         raise ValueError(
             f"unknown contact approximation {contact_approximation!r}; choose one of {CONTACT_APPROXIMATIONS}"
@@ -136,7 +148,9 @@ def add_humanoid_station(
     initial_state = plant.GetPositionsAndVelocities(context)
     q_hold = np.array([initial_state[j.position_start()] for j in topology.joints])
 
-    controller = builder.AddSystem(PdGravityController(plant, kp, kd))
+    # Humanoids: gravity from the dynamics model the estimators share (see HumanoidStation).
+    dynamics_model = ResidualModel(plant) if humanoid is not None else None
+    controller = builder.AddSystem(PdGravityController(plant, kp, kd, gravity_model=dynamics_model))
     controller.set_name("pd_gravity_controller")
     builder.Connect(controller.GetOutputPort("actuation"), plant.get_actuation_input_port())
     if humanoid is not None:
@@ -182,6 +196,7 @@ def add_humanoid_station(
         initial_state=initial_state,
         q_hold=q_hold,
         sensed_state_hold=sensed_state_hold,
+        dynamics_model=dynamics_model,
     )
 
 

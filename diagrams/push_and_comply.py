@@ -58,12 +58,8 @@ class PushAndComplyScenario:
             weight (measured: the knees buckle); "desired" keeps the posture's stiffness.
         noise: sensor noise on (the defaults of ``systems.sensors``).
         seed: sensor noise seed.
-        contact_approximation: the plant's discrete contact solver ("tamsi" or "sap", see
-            ``diagrams.humanoid_station``). "tamsi" by default: on this scenario it gives the
-            same metrics as "sap" (knee flexion, CoM drop and joint motion equal to 1e-5;
-            foot slip 0.02 vs 0.004 mm) in 19 % less time per step (measured, 15 s internal
-            run: 11.2 s vs 13.8 s of CPU), which the 1 kHz Python loop needs to run in real
-            time; ``tests/test_push_and_comply.py`` compares the two solvers.
+        contact_approximation: the plant's discrete contact approximation ("sap", "similar"
+            or "lagged", see ``diagrams.humanoid_station``); Drake's SAP by default.
         log_period: loggers' sampling period, s.
     """
 
@@ -92,7 +88,7 @@ class PushAndComplyScenario:
     integrate_from: str = "desired"
     noise: bool = True
     seed: int = 0
-    contact_approximation: str = "tamsi"
+    contact_approximation: str = "sap"
     log_period: float = 0.01
 
 
@@ -164,7 +160,7 @@ def build_push_and_comply_diagram(
     # The residual, from the sensors only.
     residual_type = InternalResidual if residual_kind == "internal" else ClassicalResidual
     residual = builder.AddSystem(
-        residual_type(plant, scenario.residual_gain, known_wrench_frames=station.known_wrench_frames, model=ResidualModel(plant))
+        residual_type(plant, scenario.residual_gain, known_wrench_frames=station.known_wrench_frames, model=station.dynamics_model)
     )
     residual.set_name(f"{residual_kind}_residual")
     builder.Connect(station.sensed_state, residual.GetInputPort("state"))

@@ -138,7 +138,8 @@ def build_residual_estimation_diagram(
     known_frames, known_wrenches = station.known_wrench_frames, station.known_wrenches
 
     # The three residuals, sharing one model (one dynamics computation per update).
-    model = ResidualModel(plant)
+    # The station's model: the PD's gravity comes from the same per-state computation.
+    model = station.dynamics_model if station.dynamics_model is not None else ResidualModel(plant)
     classical = builder.AddSystem(ClassicalResidual(plant, config.classical_gain, config.period, known_frames, model=model))
     internal = builder.AddSystem(InternalResidual(plant, config.internal_gain, config.period, known_frames, model=model))
     external = builder.AddSystem(ExternalResidual(plant, config.external_gain, config.period, known_frames, model=model))

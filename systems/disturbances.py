@@ -472,6 +472,12 @@ class PushSource(LeafSystem):
             f.F_Bq_W = SpatialForce(np.zeros(3), np.zeros(3))
             template.append(f)
         self._template = template
+        self._active = []
+        for f in template:
+            applied = ExternallyAppliedSpatialForce()
+            applied.body_index = f.body_index
+            applied.p_BoBq_B = f.p_BoBq_B
+            self._active.append(applied)
 
         time_only = {self.time_ticket()}
         truth = {self.time_ticket(), self.input_port_ticket(self._state_port.get_index())}
@@ -551,14 +557,10 @@ class PushSource(LeafSystem):
         if not forces.any():  # no push active (most of an experiment): the zero-force list
             output.set_value(self._template)
             return
-        out = []
-        for template, f in zip(self._template, forces):
-            applied = ExternallyAppliedSpatialForce()
-            applied.body_index = template.body_index
-            applied.p_BoBq_B = template.p_BoBq_B
+        # The plant copies the list: one set of force objects, refilled at each step.
+        for applied, f in zip(self._active, forces):
             applied.F_Bq_W = SpatialForce(_ZERO3, f)
-            out.append(applied)
-        output.set_value(out)
+        output.set_value(self._active)
 
     def _CalcKinematics(self, context: Context, value: AbstractValue) -> None:
         kin = value.get_mutable_value()

@@ -77,10 +77,10 @@ class PdGravityController(LeafSystem):
             -τ_g + K_p (q_d - q) - K_d q̇, clipped to ±effort limit.
 
     The system is stateless and direct-feedthrough; it evaluates gravity on its own plant
-    context, created once.
+    context, created once, or through a ``gravity_model`` shared with the estimators.
     """
 
-    def __init__(self, plant: MultibodyPlant, kp, kd, *, effort_limits=None):
+    def __init__(self, plant: MultibodyPlant, kp, kd, *, effort_limits=None, gravity_model=None):
         """Constructs the controller.
 
         Args:
@@ -89,6 +89,11 @@ class PdGravityController(LeafSystem):
             kd: derivative gain, N m s/rad: scalar or array of n.
             effort_limits: |u| bound per joint, N m, scalar or array of n (v[6:] order);
                 default: each actuator's ``effort_limit()`` (inf for unactuated joints).
+            gravity_model: optional object with ``plant`` (this plant) and
+                ``gravity_joint_torques(x)`` returning tau_g[6:] at a state, e.g. the
+                ``systems.residuals.ResidualModel`` the residuals of the same diagram use:
+                the PD's state (the sensed sample held for one step) is then the state
+                the residuals evaluated at the previous update, and gravity costs nothing.
 
         Raises:
             ValueError: bad gain/limit shapes, negative values, or an unsupported plant.
@@ -98,6 +103,12 @@ class PdGravityController(LeafSystem):
             raise ValueError("PdGravityController needs a finalized plant")
         self._plant = plant
         self._context = plant.CreateDefaultContext()
+        if gravity_model is not None and (
+            getattr(gravity_model, "plant", None) is not plant or not hasattr(gravity_model, "gravity_joint_torques")
+        ):
+            raise ValueError("PdGravityController: gravity_model must have gravity_joint_torques(x) and be "
+                             "built on the controller's plant")
+        self._gravity_model = gravity_model
         joints = joints_in_velocity_order(plant)
         n = len(joints)
         self._n = n
@@ -150,11 +161,14 @@ class PdGravityController(LeafSystem):
         """Returns the clipped joint torques (n, v[6:] order) for desired q and state x."""
         q = x[: self._nq]
         v = x[self._nq:]
-        self._plant.SetPositions(self._context, q)
-        tau_g = self._plant.CalcGravityGeneralizedForces(self._context)
-        tau = (-tau_g[self._v_index]
-               + self._kp * (q_desired - q[self._q_index])
-               - self._kd * v[self._v_index])
+        if self._gravity_model is not None:
+            tau_g = self._gravity_model.gravity_joint_torques(x)
+        else:
+            self._plant.SetPositions(self._context, q)
+            tau_g = self._plant.CalcGravityGeneralizedForces(self._context)[self._v_index]
+        tau = self._kp * (q_desired - q[self._q_index])
+        tau -= tau_g
+        tau -= self._kd * v[self._v_index]
         return np.clip(tau, -self._limits, self._limits)
 
     def _CalcActuation(self, context: Context, output: BasicVector) -> None:

@@ -62,6 +62,7 @@ from pydrake.systems.framework import Context, DiscreteValues, LeafSystem
 from systems.floating_base import DrakeFloatingBaseDynamics, FloatingBaseDynamics
 from systems.floating_base_terms import FloatingBaseTerms
 from systems.inputs import eval_finite_input
+from systems.topology import uniform_gravity
 
 #: Default update period of the residuals [s].
 DEFAULT_PERIOD = 1e-3
@@ -101,6 +102,7 @@ class ResidualModel:
         X_WP = free_parent.CalcPoseInWorld(plant.CreateDefaultContext())
         self._p_WP = X_WP.translation().copy()
         self._R_WP = X_WP.rotation().matrix().copy()
+        self._gravity_W = uniform_gravity(plant)
         self._key: bytes | None = None
         self._terms: FloatingBaseTerms | None = None
         self._jacobians: dict[int, np.ndarray] = {}
@@ -123,6 +125,19 @@ class ResidualModel:
                 self._q_F0[7:] = x[7:nq]
                 self.plant.SetPositions(self._context_F0, self._q_F0)
         return self._terms
+
+    def gravity_joint_torques(self, x: np.ndarray) -> np.ndarray:
+        """The joint entries (v[6:] order) of Drake's generalized gravity force tau_g
+        (``CalcGravityGeneralizedForces``) at the state x = [q; v], N m.
+
+        Uniform gravity's generalized force is M[:, 3:6] g (the base's translational columns
+        of the mass matrix are m J_com^T); in F0 coordinates its joint entries are
+        F[3:6]^T g_B with g_B = R_WB^T g_W. Free when x is the state of the last
+        ``evaluate`` (a PD controller reading the sample the residuals evaluated one step
+        earlier shares their mass matrix instead of computing gravity again).
+        """
+        terms = self.evaluate(x)
+        return terms.F[3:6].T @ (self._gravity_W @ terms.R_WB)
 
     def spatial_jacobian_F0(self, frame: Frame) -> np.ndarray:
         """(6, nv) Jacobian of ``frame``'s origin w.r.t. [v0; qdot], expressed in F0, rows

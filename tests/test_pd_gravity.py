@@ -201,3 +201,41 @@ def test_nan_inputs_raise_a_named_error():
         dut.get_output_port(0).Eval(_fixed_context(dut, np.zeros(3), x_bad))
     with pytest.raises(ValueError, match="'desired_position'"):
         dut.get_output_port(0).Eval(_fixed_context(dut, [0.0, np.inf, 0.0], x))
+
+
+def test_gravity_from_a_shared_residual_model_equals_drakes_gravity():
+    """The PD's gravity through the estimators' ResidualModel (F[3:6]^T R_WB^T g) against
+    Drake's CalcGravityGeneralizedForces, at random tilted, moving states of HRP-4."""
+    from systems.residuals import ResidualModel
+
+    plant = MultibodyPlant(1e-3)
+    add_humanoid(plant, "hrp4_like")
+    plant.Finalize()
+    model = ResidualModel(plant)
+    shared = PdGravityController(plant, 50.0, 2.0, gravity_model=model)
+    own = PdGravityController(plant, 50.0, 2.0)
+    rng = np.random.default_rng(7)
+    context = plant.CreateDefaultContext()
+    n = shared.joint_count
+    for _ in range(3):
+        q = plant.GetPositions(context)
+        q[:4] = RollPitchYaw(rng.uniform(-0.6, 0.6, 3)).ToQuaternion().wxyz()
+        q[4:7] = rng.uniform(-1.0, 1.0, 3)
+        q[7:] = rng.uniform(-0.3, 0.3, q.size - 7)
+        x = np.concatenate([q, rng.normal(size=plant.num_velocities())])
+        plant.SetPositions(context, q)
+        tau_g = plant.CalcGravityGeneralizedForces(context)[6:]
+        np.testing.assert_allclose(model.gravity_joint_torques(x), tau_g, atol=1e-9 * np.abs(tau_g).max())
+        q_d = rng.uniform(-0.3, 0.3, n)
+        u_shared = shared.get_output_port(0).Eval(_fixed_context(shared, q_d, x))
+        u_own = own.get_output_port(0).Eval(_fixed_context(own, q_d, x))
+        np.testing.assert_allclose(u_shared, u_own, atol=1e-9 * np.abs(u_own).max())
+
+
+def test_a_gravity_model_of_another_plant_is_refused():
+    from systems.residuals import ResidualModel
+
+    plant, _ = _chain_plant([0, 1, 2])
+    other, _ = _chain_plant([0, 1, 2])
+    with pytest.raises(ValueError, match="gravity_model"):
+        PdGravityController(plant, 1.0, 1.0, gravity_model=ResidualModel(other))

@@ -66,18 +66,12 @@ def test_internal_residual_bends_the_legs_and_classical_does_not(short_runs):
         assert metrics["upright"] and metrics["max_foot_slip_m"] < 0.005
 
 
-def test_tamsi_and_sap_contact_give_the_same_experiment(short_runs):
-    """The scenario's default solver (TAMSI, cheaper) against Drake's SAP: the same motion."""
-    scenario, runs = short_runs
-    assert scenario.contact_approximation == "tamsi"
-    sap_scenario = PushAndComplyScenario(**SHORT, push_peak_force=30.0, contact_approximation="sap")
-    tamsi = run_metrics(scenario, runs["internal"])
-    sap = run_metrics(sap_scenario, simulate(sap_scenario, "internal", None, progress=False))
-    assert tamsi["knee_pitch_flexion_deg"] == pytest.approx(sap["knee_pitch_flexion_deg"], rel=0.01)
-    assert tamsi["com_height_drop_m"] == pytest.approx(sap["com_height_drop_m"], abs=2e-4)
-    for joint, value in sap["max_joint_displacement_deg"].items():
-        assert tamsi["max_joint_displacement_deg"][joint] == pytest.approx(value, abs=0.05), joint
-    assert tamsi["max_foot_slip_m"] < 0.001 and sap["max_foot_slip_m"] < 0.001
+def test_the_scenario_uses_sap_and_deprecated_tamsi_is_refused():
+    """Drake deprecated TAMSI (removal on or after 2026-09-01): the scenario runs on SAP and
+    asking for TAMSI gets a message that says why, not a Drake deprecation warning."""
+    assert PushAndComplyScenario().contact_approximation == "sap"
+    with pytest.raises(ValueError, match="deprecated the TAMSI solver"):
+        build_push_and_comply_diagram(PushAndComplyScenario(contact_approximation="tamsi"), "internal")
 
 
 def test_residual_follows_the_true_effort_in_the_loop(short_runs):

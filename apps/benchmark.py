@@ -17,8 +17,10 @@ It also times the push-and-comply closed loop (``hrp4_like``, 1 ms steps, the sc
 contact solver, its first ``--loop-seconds`` with the push moved to start at once): the
 station alone (plant with contact, sensors, PD + gravity; constant posture), the whole internal-residual loop, and
 the same with Meshcat recording its replay: microseconds of wall and CPU time per step and
-the real-time factor; the Kalman force observer's throughput on a real Nao recording; and
-one update of the contact localizer (Flacco et al. Sec. VI) on ``hrp4_like``.
+the real-time factor; the Kalman force observer's throughput on a real Nao recording (the
+authors' ``Force_Y_data``, shipped in ``data/hawley2019-nao``; ``HCO_SHARED_DIR`` moves it, see
+``apps.replay_nao_dataset``: a missing recording stops the run with an error naming the
+path); and one update of the contact localizer (Flacco et al. Sec. VI) on ``hrp4_like``.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import statistics
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -161,17 +164,19 @@ def benchmark_residual_update(name: str, *, calls: int = 200, batches: int = 7) 
     }
 
 
-def benchmark_force_observer(batches: int = 5) -> dict:
+def benchmark_force_observer(batches: int = 5, dataset_dir: Path | None = None) -> dict:
     """Samples per second of the Kalman force observer core on a real Nao recording (the
-    authors' Force_Y_data, found beside the repository in ../shared/datasets)."""
+    authors' Force_Y_data, shipped in data/hawley2019-nao; ``dataset_dir`` defaults to
+    ``apps.replay_nao_dataset.published_dataset_dir()``).
+
+    Raises:
+        apps.replay_nao_dataset.DatasetError: the recording is missing or unreadable.
+    """
     from systems.force_observer import calibrated_normal_force, estimate_virtual_forces
 
     from apps.replay_nao_dataset import load_recording, published_dataset_dir
 
-    dataset = published_dataset_dir() / "Force_Y_data"
-    if not dataset.is_dir():
-        return {"samples_per_s": None, "note": f"dataset not found at {dataset}"}
-
+    dataset = (published_dataset_dir() if dataset_dir is None else Path(dataset_dir)) / "Force_Y_data"
     data = load_recording(dataset)
     normal_force = calibrated_normal_force(data["total_force"].sum(axis=1))
     samples = []
@@ -311,6 +316,13 @@ def main(argv: list[str] | None = None) -> int:
                         help="simulated seconds per closed-loop timing (0 skips them)")
     parser.add_argument("--json", type=Path, help="also write the results to this JSON file")
     args = parser.parse_args(argv)
+    from apps.replay_nao_dataset import DatasetError, published_dataset_dir
+
+    try:  # before the long timings: a missing recording is an error, not a skipped figure
+        dataset_dir = published_dataset_dir()
+    except DatasetError as error:
+        print(f"benchmark: error: {error}", file=sys.stderr)
+        return 2
 
     names = MODEL_NAMES if args.model == "all" else (args.model,)
     rows = [benchmark_model(name, calls=args.calls, batches=args.batches) for name in names]
@@ -339,15 +351,12 @@ def main(argv: list[str] | None = None) -> int:
             f"{r['model']:<10} {r['known_wrench_frames']:>10} {r['calc_mass_matrix_us']:>12.1f} us"
             f" {r['three_residuals_update_us']:>11.1f} us ({r['three_residuals_update_ratio']:>5.1f}x)"
         )
-    observer = benchmark_force_observer(batches=args.batches)
+    observer = benchmark_force_observer(batches=args.batches, dataset_dir=dataset_dir)
     print()
-    if observer["samples_per_s"] is None:
-        print(f"Kalman force observer: skipped ({observer['note']})")
-    else:
-        print(
-            f"Kalman force observer (Hawley et al.), real Nao recording of {observer['samples']} samples: "
-            f"{observer['samples_per_s']:.0f} samples/s (60 Hz real time needs 60)"
-        )
+    print(
+        f"Kalman force observer (Hawley et al.), real Nao recording of {observer['samples']} samples: "
+        f"{observer['samples_per_s']:.0f} samples/s (60 Hz real time needs 60)"
+    )
     loop_rows = []
     if args.loop_seconds > 0:
         loop_rows = benchmark_closed_loop(args.loop_seconds)

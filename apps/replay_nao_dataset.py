@@ -10,11 +10,22 @@ virtual force when the recording is one of the paper's two).
 
 The FSR scale is calibrated as in the authors' implementation: f_n^o = -(sum of both feet)
 scaled once so that the first sample equals M g (no external force then).
+
+The authors' two published recordings ship with the repository in ``data/hawley2019-nao/``
+(``Force_Y_data``, ``Force_Z_data``; GPL-2.0 data, see that folder's README), e.g.
+``python -m apps.replay_nao_dataset data/hawley2019-nao/Force_Y_data --out out/nao_Y``.
+DIR may be any folder of your own recordings in the same format. The tests and
+``apps.benchmark`` find the published recordings with ``published_dataset_dir()``: the
+repository's ``data/hawley2019-nao`` by default, or, when the environment variable
+``HCO_SHARED_DIR`` is set, ``$HCO_SHARED_DIR/datasets/hawley2019-nao`` (a folder holding
+``Force_Y_data/`` and ``Force_Z_data/``: to run them on your own copy of the recordings).
+A missing or unreadable folder is an error that names the path.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -34,19 +45,43 @@ DATASET_FILES = {
 EXPECTED = {"Force_Y_data": (0.0, -10.96, 0.0), "Force_Z_data": (2.22, -4.16, -11.12)}
 
 
-def published_dataset_dir() -> Path:
-    """The authors' recordings: ``$HCO_SHARED_DIR/datasets/hawley2019-nao`` when that
-    variable is set, else ``../shared/datasets/hawley2019-nao`` beside the repository (where
-    the project's shared data lives; the data are not copied into the repository)."""
-    import os
-
-    root = os.environ.get("HCO_SHARED_DIR")
-    shared = Path(root) if root else Path(__file__).resolve().parents[2] / "shared"
-    return shared / "datasets" / "hawley2019-nao"
+#: The published recordings' folders (``published_dataset_dir()`` must hold both).
+RECORDINGS = ("Force_Y_data", "Force_Z_data")
+#: Environment variable that moves ``published_dataset_dir()`` to
+#: ``$HCO_SHARED_DIR/datasets/hawley2019-nao`` (a folder of your own).
+DATA_DIR_VARIABLE = "HCO_SHARED_DIR"
+#: The recordings shipped with the repository (GPL-2.0 data, see its README.md).
+BUNDLED_DATASET_DIR = Path(__file__).resolve().parents[1] / "data" / "hawley2019-nao"
 
 
 class DatasetError(ValueError):
     """A recording that cannot be used: the message names the file, variable or rows."""
+
+
+def published_dataset_dir() -> Path:
+    """The folder holding the authors' recordings ``Force_Y_data`` and ``Force_Z_data``:
+    ``$HCO_SHARED_DIR/datasets/hawley2019-nao`` when that variable is set (non-empty), else
+    ``data/hawley2019-nao`` in the repository (shipped with it).
+
+    Raises:
+        DatasetError: the folder, or one of the two recordings' folders in it, is missing
+            or unreadable (the message names the path and where it came from).
+    """
+    root = os.environ.get(DATA_DIR_VARIABLE)
+    if root:
+        directory = Path(root) / "datasets" / "hawley2019-nao"
+        origin = f"set by the environment variable {DATA_DIR_VARIABLE}={root!r}"
+        hint = f"point {DATA_DIR_VARIABLE} at a folder holding datasets/hawley2019-nao/, or unset it to use {BUNDLED_DATASET_DIR}"
+    else:
+        directory = BUNDLED_DATASET_DIR
+        origin = "the recordings shipped with the repository"
+        hint = f"restore data/hawley2019-nao from the repository, or set {DATA_DIR_VARIABLE} (see apps/replay_nao_dataset.py)"
+    for folder in (directory, *(directory / name for name in RECORDINGS)):
+        if not folder.is_dir():
+            raise DatasetError(f"Nao recordings not found: '{folder}' is not a folder ({origin}); {hint}")
+        if not os.access(folder, os.R_OK | os.X_OK):
+            raise DatasetError(f"Nao recordings not readable: cannot read the folder '{folder}' ({origin})")
+    return directory
 
 
 def load_recording(directory: Path) -> dict[str, np.ndarray]:
@@ -59,6 +94,8 @@ def load_recording(directory: Path) -> dict[str, np.ndarray]:
     directory = Path(directory)
     if not directory.is_dir():
         raise DatasetError(f"'{directory}' is not a folder")
+    if not os.access(directory, os.R_OK | os.X_OK):
+        raise DatasetError(f"cannot read the folder '{directory}'")
     data = {}
     for file_name, (variable, columns) in DATASET_FILES.items():
         path = directory / file_name
@@ -122,7 +159,10 @@ def write_outputs(out_dir: Path, forces: np.ndarray, period: float, name: str) -
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m apps.replay_nao_dataset", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(
+        prog="python -m apps.replay_nao_dataset", description=__doc__.split("\n\n")[0],
+        epilog=f"The authors' published recordings: {', '.join(f'data/hawley2019-nao/{n}' for n in RECORDINGS)} "
+        "(in the repository; GPL-2.0 data, see data/hawley2019-nao/README.md).")
     parser.add_argument("directory", type=Path, help="folder of one recording (CoM_Pos.mat, Acc.mat, ZMP.mat, total_force.mat)")
     parser.add_argument("--out", type=Path, required=True, help="output folder")
     parser.add_argument("--preset", choices=("standing", "walking"), default="standing", help="eq. (21) or eq. (22)")

@@ -39,7 +39,7 @@ from systems.noise import SampledNoise, as_std_vector, check_period, check_seed
 #: Nao's FSR range (paper Sec. 4.1), N.
 FSR_SATURATION = 25.0
 #: Default FSR noise standard deviation, N per sensor. In the authors' two real recordings
-#: (``../shared/datasets/hawley2019-nao``, first 2 s, at rest, scaled to newtons by their
+#: (``data/hawley2019-nao`` in the repository, first 2 s, at rest, scaled to newtons by their
 #: calibration) each foot's summed reading varies from sample to sample by 0.15-0.30 N
 #: (std), i.e. 0.08-0.15 N per sensor if the 4 are independent: hence 0.1 N.
 FSR_NOISE_STD = 0.1

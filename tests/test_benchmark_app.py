@@ -24,3 +24,12 @@ def test_benchmark_runs_and_reports_every_figure(tmp_path, capsys):
     assert [r["loop"] for r in loops] == ["station: plant + sensors + PD", "push-and-comply, internal residual", "Meshcat recording"]
     assert all(r["wall_us_per_step"] > 0 and r["cpu_us_per_step"] > 0 for r in loops)
     assert "nao_like" in capsys.readouterr().out
+
+
+def test_benchmark_stops_with_a_clear_error_when_the_nao_recording_is_missing(tmp_path, monkeypatch, capsys):
+    """The observer's figure is never silently skipped: a missing recording is an error
+    naming the path, reported before the timings start."""
+    monkeypatch.setenv("HCO_SHARED_DIR", str(tmp_path))
+    assert benchmark.main(["--model", "nao_like", "--loop-seconds", "0"]) == 2
+    err = capsys.readouterr().err
+    assert "benchmark: error:" in err and str(tmp_path / "datasets" / "hawley2019-nao") in err

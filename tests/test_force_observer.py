@@ -1,6 +1,7 @@
 """Kalman force observer (Hawley et al. 2019) against the authors' own output on real Nao
 recordings, plus the observer's behaviour and input checks."""
 
+import re
 import shutil
 from pathlib import Path
 
@@ -17,21 +18,51 @@ from systems.force_observer import (
     transition_matrices,
 )
 
-DATASET = replay_nao_dataset.published_dataset_dir()
+RECORDINGS = replay_nao_dataset.RECORDINGS
 
 
-def test_published_recordings_are_available():
-    """The real-data tests need the authors' recordings beside the repository."""
-    assert DATASET.is_dir(), f"{DATASET} not found: set HCO_SHARED_DIR to the folder that holds datasets/"
-RECORDINGS = ("Force_Y_data", "Force_Z_data")
+@pytest.fixture(scope="module")
+def dataset() -> Path:
+    """The authors' recordings (shipped in data/hawley2019-nao): a missing folder fails the
+    real-data tests with an error naming the path, it never skips them."""
+    return replay_nao_dataset.published_dataset_dir()
+
+
+def test_published_recordings_ship_with_the_repository(monkeypatch):
+    monkeypatch.delenv(replay_nao_dataset.DATA_DIR_VARIABLE, raising=False)
+    directory = replay_nao_dataset.published_dataset_dir()
+    assert directory == Path(__file__).resolve().parents[1] / "data" / "hawley2019-nao"
+    for name in RECORDINGS:
+        assert sorted(p.name for p in (directory / name).iterdir()) == [
+            "Acc.mat", "CoM_Pos.mat", "ZMP.mat", "reference_F.csv", "total_force.mat"
+        ]
+    notice = (directory / "README.md").read_text()
+    assert "wael-suleiman-UdeS/External_Force_ROS_Package" in notice and "GPL-2.0" in notice
+
+
+def test_environment_variable_points_at_other_recordings_or_fails_clearly(monkeypatch, tmp_path):
+    variable = replay_nao_dataset.DATA_DIR_VARIABLE
+    mine = tmp_path / "datasets" / "hawley2019-nao"
+    for name in RECORDINGS:
+        shutil.copytree(replay_nao_dataset.BUNDLED_DATASET_DIR / name, mine / name)
+    monkeypatch.setenv(variable, str(tmp_path))
+    assert replay_nao_dataset.published_dataset_dir() == mine
+
+    shutil.rmtree(mine / "Force_Z_data")
+    with pytest.raises(replay_nao_dataset.DatasetError, match=re.escape(f"'{mine / 'Force_Z_data'}' is not a folder") + f".*{variable}"):
+        replay_nao_dataset.published_dataset_dir()
+
+    monkeypatch.setenv(variable, str(tmp_path / "nowhere"))
+    with pytest.raises(replay_nao_dataset.DatasetError, match=re.escape(f"'{tmp_path / 'nowhere' / 'datasets' / 'hawley2019-nao'}' is not a folder")):
+        replay_nao_dataset.published_dataset_dir()
 
 
 @pytest.mark.parametrize("name", RECORDINGS)
-def test_reproduces_the_authors_implementation_on_real_nao_data(name, tmp_path, capsys):
+def test_reproduces_the_authors_implementation_on_real_nao_data(name, dataset, tmp_path, capsys):
     """reference_F.csv is the authors' MATLAB observer run on the same recording (Octave)."""
-    assert replay_nao_dataset.main([str(DATASET / name), "--out", str(tmp_path)]) == 0
+    assert replay_nao_dataset.main([str(dataset / name), "--out", str(tmp_path)]) == 0
     estimates = np.loadtxt(tmp_path / "estimates.csv", delimiter=",", skiprows=1)
-    reference = np.loadtxt(DATASET / name / "reference_F.csv", delimiter=",")
+    reference = np.loadtxt(dataset / name / "reference_F.csv", delimiter=",")
     assert estimates.shape == (len(reference), 4)
     np.testing.assert_allclose(estimates[:, 0], STANDING.period * np.arange(1, len(reference) + 1), rtol=1e-12)
     assert np.abs(estimates[:, 1:] - reference).max() < 1e-9 * np.abs(reference).max()
@@ -43,11 +74,11 @@ def test_reproduces_the_authors_implementation_on_real_nao_data(name, tmp_path, 
     "name, expected, axis",
     [("Force_Y_data", (0.0, -10.96, 0.0), 1), ("Force_Z_data", (2.22, -4.16, -11.12), 2)],
 )
-def test_estimates_the_papers_loads_on_real_data(name, expected, axis):
+def test_estimates_the_papers_loads_on_real_data(name, expected, axis, dataset):
     """While loaded (the load's main component past 80 % of its expected value), every
     component's median is within 1.0 N of the paper's expected virtual force (eq. 24; the
     issue's floor is 1.5 N; measured: at most 0.89 N off)."""
-    forces = replay_nao_dataset.replay(DATASET / name)
+    forces = replay_nao_dataset.replay(dataset / name)
     loaded = forces[np.abs(forces[:, axis]) > 0.8 * abs(expected[axis])]
     assert len(loaded) > 100
     np.testing.assert_array_less(np.abs(np.median(loaded, axis=0) - np.array(expected)), 1.0)
@@ -90,51 +121,51 @@ def test_model_matrices_and_parameter_checks():
         LipForceObserver().update(np.zeros(3), np.zeros(3), [np.nan, 0.0], -50.0)
 
 
-def _copy(tmp_path: Path) -> Path:
+def _copy(dataset: Path, tmp_path: Path) -> Path:
     target = tmp_path / "recording"
-    shutil.copytree(DATASET / "Force_Y_data", target)
+    shutil.copytree(dataset / "Force_Y_data", target)
     return target
 
 
-def test_clear_errors_for_broken_recordings(tmp_path, capsys):
-    recording = _copy(tmp_path)
+def test_clear_errors_for_broken_recordings(dataset, tmp_path, capsys):
+    recording = _copy(dataset, tmp_path)
     (recording / "Acc.mat").unlink()
     assert replay_nao_dataset.main([str(recording), "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
     assert "missing file" in err and "Acc.mat" in err
 
-    recording = _copy(tmp_path / "b")
+    recording = _copy(dataset, tmp_path / "b")
     scipy.io.savemat(recording / "ZMP.mat", {"zmp_wrong": np.zeros((5, 2))})
     with pytest.raises(replay_nao_dataset.DatasetError, match="no variable 'ZMP'"):
         replay_nao_dataset.load_recording(recording)
 
-    recording = _copy(tmp_path / "c")
+    recording = _copy(dataset, tmp_path / "c")
     acc = scipy.io.loadmat(recording / "Acc.mat")["acc"][:-3]
     scipy.io.savemat(recording / "Acc.mat", {"acc": acc})
     with pytest.raises(replay_nao_dataset.DatasetError, match="different lengths"):
         replay_nao_dataset.load_recording(recording)
 
-    recording = _copy(tmp_path / "d")
+    recording = _copy(dataset, tmp_path / "d")
     com = scipy.io.loadmat(recording / "CoM_Pos.mat")["Xc_Yc_Zc"]
     com[[4, 9]] = np.nan
     scipy.io.savemat(recording / "CoM_Pos.mat", {"Xc_Yc_Zc": com})
     with pytest.raises(replay_nao_dataset.DatasetError, match="NaN or inf in rows 5, 10"):
         replay_nao_dataset.load_recording(recording)
 
-    recording = _copy(tmp_path / "e")
+    recording = _copy(dataset, tmp_path / "e")
     (recording / "total_force.mat").write_bytes(b"not a mat file")
     with pytest.raises(replay_nao_dataset.DatasetError, match="cannot read"):
         replay_nao_dataset.load_recording(recording)
 
 
-def test_drake_system_matches_the_core_on_real_data():
+def test_drake_system_matches_the_core_on_real_data(dataset):
     """LipForceObserverSystem, stepped by its own periodic update, equals the numpy core
     (and so the authors' output) on the first 300 samples of a real recording."""
     from systems.force_observer import LipForceObserverSystem
 
-    data = replay_nao_dataset.load_recording(DATASET / "Force_Z_data")
+    data = replay_nao_dataset.load_recording(dataset / "Force_Z_data")
     normal_force = calibrated_normal_force(data["total_force"].sum(axis=1))
-    reference = np.loadtxt(DATASET / "Force_Z_data" / "reference_F.csv", delimiter=",")
+    reference = np.loadtxt(dataset / "Force_Z_data" / "reference_F.csv", delimiter=",")
     system = LipForceObserverSystem()
     context = system.CreateDefaultContext()
     for k in range(300):

@@ -1,0 +1,252 @@
+"""No deprecated Drake feature: building and stepping each of the project's diagrams logs no
+``DRAKE_DEPRECATED`` message and raises no ``DrakeDeprecationWarning``.
+
+Drake deprecates in two ways. C++ code logs "DRAKE_DEPRECATED: ..." through spdlog, which
+pydrake forwards to the Python logger named "drake"; Python bindings raise a
+``DrakeDeprecationWarning``. Drake logs each C++ message only once per process (and pydrake
+shows each warning once by default), so an earlier test of the same session could hide it:
+every case therefore runs in a fresh Python process (this file run as a script, from the
+repository root), which reports what it saw as one JSON line. The two positive controls
+(a TAMSI plant; ``Simulator.set_publish_every_time_step``) check that each channel is seen,
+so that the check cannot pass silently.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+#: Simulated time each diagram is stepped, s (10 steps of the 1 ms plants).
+STEP_TIME = 0.01
+
+
+# --------------------------------------------------------------------------------------
+# The cases: each builds one diagram (default settings, with a Meshcat when the builder
+# takes one, so that the visualisation code is covered too), puts it in its initial state
+# and steps a Simulator STEP_TIME. Run in the child process only.
+# --------------------------------------------------------------------------------------
+
+
+def _simulate(diagram, set_initial_state=None) -> None:
+    from pydrake.systems.analysis import Simulator
+
+    simulator = Simulator(diagram)
+    if set_initial_state is not None:
+        set_initial_state(simulator.get_mutable_context())
+    simulator.Initialize()
+    simulator.AdvanceTo(STEP_TIME)
+
+
+def _meshcat():
+    from pydrake.geometry import Meshcat
+
+    return Meshcat()
+
+
+def _case_humanoid_station() -> None:
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import ConstantVectorSource
+
+    from diagrams.humanoid_station import add_humanoid_station
+
+    for model in ("hrp4_like", "nao_like"):
+        builder = DiagramBuilder()
+        station = add_humanoid_station(builder, model)
+        posture = builder.AddSystem(ConstantVectorSource(station.q_hold))
+        builder.Connect(posture.get_output_port(), station.desired_position)
+        _simulate(builder.Build(), station.set_initial_state)
+
+
+def _case_standing() -> None:
+    from diagrams.standing import build_standing_diagram, set_initial_state
+
+    for model in ("hrp4_like", "nao_like"):
+        diagram, handles = build_standing_diagram(model, meshcat=_meshcat())
+        _simulate(diagram, lambda context: set_initial_state(diagram, context, handles))
+
+
+def _case_residual_estimation() -> None:
+    from diagrams.residual_estimation import ResidualEstimationConfig, build_residual_estimation_diagram, set_initial_state
+
+    diagram, handles = build_residual_estimation_diagram(ResidualEstimationConfig(), _meshcat())
+    _simulate(diagram, lambda context: set_initial_state(diagram, context, handles))
+
+
+def _case_push_and_comply() -> None:
+    from diagrams.push_and_comply import PushAndComplyScenario, build_push_and_comply_diagram
+
+    for kind in ("internal", "classical"):
+        diagram, handles = build_push_and_comply_diagram(PushAndComplyScenario(), kind, _meshcat())
+        _simulate(diagram, handles.station.set_initial_state)
+
+
+def _case_contact_study() -> None:
+    from diagrams.contact_study import ContactStudyConfig, build_contact_study_diagram
+
+    config = ContactStudyConfig(push_body="CHEST_Y_LINK", push_force=(-20.0, 0.0, 0.0), push_start=0.0)
+    diagram, handles = build_contact_study_diagram(config, _meshcat())
+    _simulate(diagram, handles.station.set_initial_state)
+
+
+def _case_nao_standing() -> None:
+    from diagrams.nao_standing import build_nao_standing_diagram, wide_stance
+    from systems.disturbances import Push, SmoothPiecewise
+
+    push = Push("torso", (0.05, 0.0, -0.05), (0.6, 0.0, 0.8), SmoothPiecewise((0.0, 1.0), (0.0, 3.0)))
+    diagram, handles = build_nao_standing_diagram([push], posture=wide_stance(), meshcat=_meshcat())
+    _simulate(diagram, handles.set_initial_state)
+
+
+def _case_nao_walking() -> None:
+    from diagrams.nao_walking import build_nao_walking_diagram
+
+    diagram, handles = build_nao_walking_diagram(meshcat=_meshcat())
+    _simulate(diagram, handles.set_initial_state)
+
+
+def _case_nao_walk_pulled() -> None:
+    from diagrams.nao_walk_pulled import build_nao_walk_pulled_diagram
+
+    diagram, handles = build_nao_walk_pulled_diagram(meshcat=_meshcat())
+    _simulate(diagram, handles.set_initial_state)
+
+
+def _case_nao_compliant_arms() -> None:
+    # Default motor constants: identify_motor_constant() builds and runs its own diagram.
+    from diagrams.nao_compliant_arms import build_nao_compliant_arms_diagram
+
+    diagram, handles = build_nao_compliant_arms_diagram(meshcat=_meshcat())
+    _simulate(diagram, handles.set_initial_state)
+
+
+def _case_force_guided_walking() -> None:
+    from apps.nao_force_guided_walk import GuidanceProfile, build_force_guided_diagram
+    from systems.force_guided_walking import TriggerParameters
+
+    diagram, handles = build_force_guided_diagram(GuidanceProfile(), TriggerParameters(), meshcat=_meshcat())
+    _simulate(diagram, handles["station"].set_initial_state)
+
+
+def _control_tamsi_plant() -> None:
+    """Positive control of the log channel: Drake 1.51 deprecates TAMSI."""
+    from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
+    from pydrake.systems.framework import DiagramBuilder
+
+    builder = DiagramBuilder()
+    plant, _ = AddMultibodyPlant(MultibodyPlantConfig(time_step=1e-3, discrete_contact_approximation="tamsi"), builder)
+    plant.Finalize()
+    _simulate(builder.Build())
+
+
+def _control_deprecated_binding() -> None:
+    """Positive control of the warning channel: a binding Drake 1.51 deprecates."""
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.primitives import ConstantVectorSource
+
+    Simulator(ConstantVectorSource([1.0])).set_publish_every_time_step(False)
+
+
+CASES = {name[len("_case_"):]: f for name, f in list(globals().items()) if name.startswith("_case_")}
+CONTROLS = {name[len("_control_"):]: f for name, f in list(globals().items()) if name.startswith("_control_")}
+
+
+def _run_in_this_process(name: str) -> dict:
+    """Runs one case or control with both channels watched; returns what was seen."""
+    import logging
+    import traceback
+    import warnings
+
+    logged = []
+
+    class _Collect(logging.Handler):
+        def emit(self, record):
+            logged.append(record.getMessage())
+
+    from pydrake.common.deprecation import DrakeDeprecationWarning
+
+    logger = logging.getLogger("drake")
+    logger.addHandler(_Collect(level=logging.WARNING))
+    if logger.getEffectiveLevel() > logging.WARNING:
+        logger.setLevel(logging.WARNING)
+    warning, error = None, None
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DrakeDeprecationWarning)
+        try:
+            {**CASES, **CONTROLS}[name]()
+        except DrakeDeprecationWarning:
+            warning = traceback.format_exc()
+        except Exception:
+            error = traceback.format_exc()
+    return {
+        "drake_deprecated": [m for m in logged if "DRAKE_DEPRECATED" in m or "DRAKE DEPRECATED" in m],
+        "deprecation_warning": warning,
+        "error": error,
+    }
+
+
+# --------------------------------------------------------------------------------------
+# The tests: one child process per case, started together (their imports and model loads
+# overlap) when the module's first test runs.
+# --------------------------------------------------------------------------------------
+
+_results: dict[str, dict] = {}
+
+
+def _start(name: str) -> subprocess.Popen:
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, (str(ROOT), os.environ.get("PYTHONPATH")))))
+    return subprocess.Popen([sys.executable, __file__, name], cwd=ROOT, env=env, text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+
+
+def _result(name: str) -> dict:
+    if not _results:  # first call: run them all, a few at a time (each loads Drake and a model)
+        pending, running = [*CONTROLS, *CASES], {}
+        limit = max(2, min(4, os.cpu_count() or 2))
+        while pending or running:
+            while pending and len(running) < limit:
+                n = pending.pop(0)
+                running[n] = _start(n)
+            n, process = next(iter(running.items()))
+            del running[n]
+            try:
+                out, err = process.communicate(timeout=300)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                out, err = process.communicate()
+            lines = [line for line in out.splitlines() if line.startswith("{")]
+            _results[n] = json.loads(lines[-1]) if process.returncode == 0 and lines else {
+                "drake_deprecated": [], "deprecation_warning": None,
+                "error": f"child process exited with {process.returncode}:\n{err[-4000:]}"}
+    return _results[name]
+
+
+def test_log_channel_positive_control():
+    """A TAMSI plant logs DRAKE_DEPRECATED, and this test's handler sees it."""
+    result = _result("tamsi_plant")
+    assert result["error"] is None, result["error"]
+    assert any("TAMSI" in m for m in result["drake_deprecated"]), result
+
+
+def test_warning_channel_positive_control():
+    result = _result("deprecated_binding")
+    assert result["error"] is None, result["error"]
+    assert result["deprecation_warning"] and "DrakeDeprecationWarning" in result["deprecation_warning"], result
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_diagram_uses_no_deprecated_drake_feature(case):
+    result = _result(case)
+    assert result["error"] is None, f"building or stepping '{case}' failed:\n{result['error']}"
+    assert result["deprecation_warning"] is None, f"'{case}' raised a DrakeDeprecationWarning:\n{result['deprecation_warning']}"
+    assert not result["drake_deprecated"], f"'{case}' logged: {result['drake_deprecated']}"
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(ROOT))
+    print(json.dumps(_run_in_this_process(sys.argv[1])))

@@ -258,6 +258,7 @@ class JointAdmittanceController(LeafSystem):
             self._max_rate = np.full(n, np.inf)
         else:
             self._max_rate = _non_negative(_per_joint(max_rate, n, "max_rate", allow_inf=True), "max_rate")
+        self._neg_max_rate = -self._max_rate
 
         try:
             limit_margin = float(limit_margin)
@@ -370,8 +371,16 @@ class JointAdmittanceController(LeafSystem):
 
     def CalcDesiredRate(self, residual: np.ndarray) -> np.ndarray:
         """q̇_d = clip(K_a soft_threshold(r), ±max_rate) for an n-entry (joint) residual."""
-        r = soft_threshold(residual, self._dead_band)
-        return np.clip(self._gains * r, -self._max_rate, self._max_rate)
+        # sign(r) K_a max(|r| - dead band, 0) (K_a >= 0), clipped; in place (every step).
+        r = np.asarray(residual, dtype=float)
+        rate = np.abs(r)
+        rate -= self._dead_band
+        np.maximum(rate, 0.0, out=rate)
+        rate *= self._gains
+        np.copysign(rate, r, out=rate)
+        np.minimum(rate, self._max_rate, out=rate)
+        np.maximum(rate, self._neg_max_rate, out=rate)
+        return rate
 
     def CalcNextDesiredPosition(self, residual: np.ndarray, measured_position: np.ndarray,
                                 previous_desired: np.ndarray) -> np.ndarray:
@@ -384,11 +393,15 @@ class JointAdmittanceController(LeafSystem):
         if self._residual_includes_base:
             r = r[6:]
         base = measured_position if self._integrate_from == "measured" else previous_desired
-        q_d = np.asarray(base, dtype=float) + self.CalcDesiredRate(r) * self._period
+        q_d = self.CalcDesiredRate(r)
+        q_d *= self._period
+        q_d += np.asarray(base, dtype=float)
         # A previous q_d outside [lower, upper] (e.g. the start posture of a joint resting on
         # its model limit, inside the margin) is not pulled in: q_d may not go further out.
         previous = np.asarray(previous_desired, dtype=float)
-        return np.clip(q_d, np.minimum(self._lower, previous), np.maximum(self._upper, previous))
+        np.maximum(q_d, np.minimum(self._lower, previous), out=q_d)
+        np.minimum(q_d, np.maximum(self._upper, previous), out=q_d)
+        return q_d
 
     def _eval_input(self, port, context: Context) -> np.ndarray:
         return eval_finite_input(_WHO, port, context)

@@ -553,13 +553,15 @@ class PushSource(LeafSystem):
     # -- calculations ---------------------------------------------------------------------
 
     def _CalcAppliedForces(self, context: Context, output: AbstractValue) -> None:
-        forces = self.forces_at(context.get_time())
-        if not forces.any():  # no push active (most of an experiment): the zero-force list
+        t = context.get_time()
+        magnitudes = [float(push.profile.value(t)) for push in self._pushes]
+        if not any(magnitudes):  # no push active (most of an experiment): the zero-force list
             output.set_value(self._template)
             return
-        # The plant copies the list: one set of force objects, refilled at each step.
-        for applied, f in zip(self._active, forces):
-            applied.F_Bq_W = SpatialForce(_ZERO3, f)
+        # The plant copies the list: one set of force objects, refilled at each step
+        # (the forces of ``forces_at``, in plain floats: this runs at every step).
+        for applied, push, magnitude in zip(self._active, self._pushes, magnitudes):
+            applied.F_Bq_W = SpatialForce(_ZERO3, magnitude * push.direction_W)
         output.set_value(self._active)
 
     def _CalcKinematics(self, context: Context, value: AbstractValue) -> None:

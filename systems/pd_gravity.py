@@ -140,6 +140,7 @@ class PdGravityController(LeafSystem):
             self._limits = _per_joint(effort_limits, n, "effort_limits")
             if np.any(self._limits < 0):
                 raise ValueError("effort_limits must be non-negative")
+        self._neg_limits = -self._limits
 
         self._desired_port = self.DeclareVectorInputPort("desired_position", n)
         self._state_port = self.DeclareVectorInputPort(
@@ -169,7 +170,9 @@ class PdGravityController(LeafSystem):
         tau = self._kp * (q_desired - q[self._q_index])
         tau -= tau_g
         tau -= self._kd * v[self._v_index]
-        return np.clip(tau, -self._limits, self._limits)
+        np.minimum(tau, self._limits, out=tau)
+        np.maximum(tau, self._neg_limits, out=tau)
+        return tau
 
     def _CalcActuation(self, context: Context, output: BasicVector) -> None:
         q_desired = eval_finite_input("PdGravityController", self._desired_port, context)

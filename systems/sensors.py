@@ -178,6 +178,8 @@ class JointEncoders(LeafSystem):
         n = topology.num_joints
         self._n = n
         self._nq = plant.num_positions()
+        self._q_select = _as_slice(self._q_index)
+        self._v_select = _as_slice(self._nq + self._v_index)
         std = np.concatenate([_std(position_noise_std, n, "position_noise_std", who),
                               _std(velocity_noise_std, n, "velocity_noise_std", who)])
         period, seed = _period_seed(period, seed, who)
@@ -197,13 +199,13 @@ class JointEncoders(LeafSystem):
         return x
 
     def _CalcPosition(self, context: Context, output: BasicVector) -> None:
-        q = self._eval_state(context)[self._q_index]
+        q = self._eval_state(context)[self._q_select]
         if not self._noise.is_zero:
             q = q + self._noise.value(context.get_time())[: self._n]
         output.SetFromVector(q)
 
     def _CalcVelocity(self, context: Context, output: BasicVector) -> None:
-        v = self._eval_state(context)[self._nq + self._v_index]
+        v = self._eval_state(context)[self._v_select]
         if not self._noise.is_zero:
             v = v + self._noise.value(context.get_time())[self._n:]
         output.SetFromVector(v)
@@ -393,6 +395,7 @@ class FootForceTorqueSensors(LeafSystem):
         self._joints = tuple(joints)
         self._frames = tuple(j.frame_on_child() for j in joints)
         self._joint_index = [int(j.index()) for j in joints]
+        self._max_joint_index = max(self._joint_index)
         self._compensate = bool(compensate_sole_weight)
         self._context = plant.CreateDefaultContext()
         self._nq = plant.num_positions()
@@ -455,10 +458,10 @@ class FootForceTorqueSensors(LeafSystem):
     def CalcGroundWrenches(self, reaction_forces, x: np.ndarray) -> np.ndarray:
         """Noise-free ``wrenches`` for a reaction-force list and a state x = [q; v]."""
         self._plant.SetPositions(self._context, x[: self._nq])
-        if len(reaction_forces) <= max(self._joint_index):
+        if len(reaction_forces) <= self._max_joint_index:
             raise ValueError(f"FootForceTorqueSensors: input 'reaction_forces' has "
                              f"{len(reaction_forces)} entries; the plant has joint index "
-                             f"{max(self._joint_index)}")
+                             f"{self._max_joint_index}")
         # Vectorised over the sensors, one batched product: rows [tau_S; f_S; p_SCcm_S] times
         # R_WS^T give R_WS tau_S, R_WS f_S and r = R_WS p_SCcm_S; the wrench is -R_WS [tau_S; f_S]
         # with the sole weight removed (force - m g, moment - r x m g = moment + [m g]x r).
@@ -475,7 +478,7 @@ class FootForceTorqueSensors(LeafSystem):
             force -= self._weight
             moment += (rotated[:, 2:3] @ self._weight_skew_T)[:, 0]
         out = np.concatenate((moment, force), axis=1).reshape(-1)
-        if not np.isfinite(out).all():
+        if not math.isfinite(out.dot(out)) and not np.isfinite(out).all():
             for index, joint in zip(self._joint_index, self._joints):
                 F = reaction_forces[index]
                 if not (np.isfinite(F.rotational()).all() and np.isfinite(F.translational()).all()):
@@ -684,6 +687,13 @@ class BaseStateEstimator(LeafSystem):
 # ---------------------------------------------------------------------------------------
 
 
+def _as_slice(index: np.ndarray) -> slice | np.ndarray:
+    """A run of consecutive indices as a slice (a view, no gather), else the indices."""
+    if index.size and np.array_equal(index, np.arange(index[0], index[0] + index.size)):
+        return slice(int(index[0]), int(index[0]) + index.size)
+    return index
+
+
 class SensedStateAssembler(LeafSystem):
     """Packs sensed base and joint values into the plant's state layout [q; v].
 
@@ -722,10 +732,10 @@ class SensedStateAssembler(LeafSystem):
         n = topology.num_joints
         self._size = nq + nv
         self._ports = (
-            (self.DeclareVectorInputPort("base_pose", 7), self._pose_index),
-            (self.DeclareVectorInputPort("base_velocity", 6), self._velocity_index),
-            (self.DeclareVectorInputPort("joint_position", n), self._q_index),
-            (self.DeclareVectorInputPort("joint_velocity", n), self._v_index),
+            (self.DeclareVectorInputPort("base_pose", 7), _as_slice(self._pose_index)),
+            (self.DeclareVectorInputPort("base_velocity", 6), _as_slice(self._velocity_index)),
+            (self.DeclareVectorInputPort("joint_position", n), _as_slice(self._q_index)),
+            (self.DeclareVectorInputPort("joint_velocity", n), _as_slice(self._v_index)),
         )
         self.DeclareVectorOutputPort("state", nq + nv, self._CalcState)
 

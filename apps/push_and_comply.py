@@ -58,8 +58,8 @@ def simulate(
     scenario: PushAndComplyScenario, kind: str, meshcat: Meshcat | None, *, progress: bool = True, live: bool = True
 ) -> dict:
     """Runs one closed loop; returns the logged signals and the wall time. With ``meshcat``
-    the run is recorded for the replay, and shown live too when ``live`` (sending every
-    frame to the browser costs about 10 % of the step time; a headless run skips it)."""
+    the run is recorded for the replay, and shown live too when ``live`` (a headless run
+    records without sending each frame to the live view)."""
     if meshcat is not None:
         meshcat.Delete()
         meshcat.DeleteRecording()

@@ -21,7 +21,14 @@ from pydrake.systems.framework import Context, DiagramBuilder, InputPort, Output
 from pydrake.systems.primitives import MatrixGain, ZeroOrderHold
 
 from diagrams.standing import default_gains
-from models import MODEL_NAMES, HumanoidHandles, add_ground, add_humanoid, set_standing_state
+from models import (
+    MODEL_NAMES,
+    HumanoidHandles,
+    add_ground,
+    add_humanoid,
+    point_contact_scene_graph_config,
+    set_standing_state,
+)
 from systems.pd_gravity import PdGravityController
 from systems.residuals import ResidualModel
 from systems.sensors import SensorHandles, add_sensors
@@ -132,6 +139,7 @@ def add_humanoid_station(
     plant, scene_graph = AddMultibodyPlant(
         MultibodyPlantConfig(time_step=time_step, discrete_contact_approximation=contact_approximation,
                              contact_model="point"),
+        point_contact_scene_graph_config(),
         builder,
     )
     humanoid = _load(plant, scene_graph, model)

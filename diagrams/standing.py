@@ -23,7 +23,14 @@ from pydrake.multibody.plant import (
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
-from models import MODEL_NAMES, HumanoidHandles, add_ground, add_humanoid, set_standing_state
+from models import (
+    MODEL_NAMES,
+    HumanoidHandles,
+    add_ground,
+    add_humanoid,
+    point_contact_scene_graph_config,
+    set_standing_state,
+)
 from systems.pd_gravity import PdGravityController, joint_vector_from_names
 
 #: Default PD gains per joint group: (kp [N m/rad], kd [N m s/rad]). Chosen so that the
@@ -113,7 +120,7 @@ def build_standing_diagram(
     builder = DiagramBuilder()
     config = MultibodyPlantConfig(
         time_step=time_step, discrete_contact_approximation="sap", contact_model="point")
-    plant, scene_graph = AddMultibodyPlant(config, builder)
+    plant, scene_graph = AddMultibodyPlant(config, point_contact_scene_graph_config(), builder)
     humanoid = add_humanoid(plant, model_name, scene_graph=scene_graph)
     add_ground(plant)
     plant.Finalize()

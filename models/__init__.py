@@ -35,6 +35,7 @@ from pydrake.geometry import (
     HalfSpace,
     ProximityProperties,
     SceneGraph,
+    SceneGraphConfig,
 )
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
@@ -324,6 +325,17 @@ def add_humanoid(
 #: dissipation time scale (a sum) is the spheres'.
 GROUND_STIFFNESS = 1.0e9  # N/m
 GROUND_DISSIPATION = 0.0  # s/m
+
+
+def point_contact_scene_graph_config() -> SceneGraphConfig:
+    """SceneGraph settings for the project's point-contact plants: Drake's defaults without
+    the default hydroelastic ``resolution_hint``. Point contact does not use it, and with it
+    SceneGraph prepares every geometry for deformable contact and warns that the ground's
+    half space cannot take part ("Rigid (non-deformable) half spaces are not currently
+    supported for deformable contact"). Pass it to ``AddMultibodyPlant``."""
+    config = SceneGraphConfig()
+    config.default_proximity_properties.resolution_hint = None
+    return config
 
 
 def add_ground(plant: MultibodyPlant, friction: float = 1.0) -> GeometryId:

@@ -262,3 +262,28 @@ def test_two_instances_in_one_plant():
     assert a.model_instance != b.model_instance
     assert plant.GetModelInstanceName(b.model_instance) == "nao_2"
     assert set(a.fsr_geometries["left"]).isdisjoint(b.fsr_geometries["left"])
+
+
+def _ground_has_resolution_hint(scene_graph_config) -> bool:
+    """Whether the ground's proximity properties, as SceneGraph fills them in a context,
+    carry a hydroelastic resolution hint (what prepares geometry for deformable contact)."""
+    builder = DiagramBuilder()
+    config = MultibodyPlantConfig(time_step=1e-3, discrete_contact_approximation="sap", contact_model="point")
+    if scene_graph_config is None:
+        plant, scene_graph = AddMultibodyPlant(config, builder)
+    else:
+        plant, scene_graph = AddMultibodyPlant(config, scene_graph_config, builder)
+    ground = add_ground(plant)
+    plant.Finalize()
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    inspector = scene_graph.get_query_output_port().Eval(scene_graph.GetMyContextFromRoot(context)).inspector()
+    return inspector.GetProximityProperties(ground).HasProperty("hydroelastic", "resolution_hint")
+
+
+def test_point_contact_scene_graph_config_drops_the_default_resolution_hint():
+    """Drake's default SceneGraph config gives the ground half space a resolution hint, and
+    with it a warning that half spaces cannot take part in deformable contact; the project's
+    point-contact config does not."""
+    assert _ground_has_resolution_hint(None)
+    assert not _ground_has_resolution_hint(models.point_contact_scene_graph_config())

@@ -25,7 +25,7 @@ from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 from diagrams.humanoid_station import HumanoidStation, add_humanoid_station
 from systems.admittance import JointAdmittanceController, admittance_gains_by_group, joint_position_selector
 from systems.disturbances import PolynomialRampUpDown, Push, PushSource
-from systems.residuals import ClassicalResidual, InternalResidual, ResidualModel
+from systems.residuals import ClassicalResidual, InternalResidual
 
 RESIDUAL_KINDS = ("internal", "classical")
 

@@ -95,7 +95,10 @@ def soft_threshold(r: np.ndarray, dead_band) -> np.ndarray:
     """Dead-band with continuity: entries with |r| <= dead_band become 0, the others shrink
     toward 0 by dead_band, i.e. sign(r) max(|r| - dead_band, 0)."""
     r = np.asarray(r, dtype=float)
-    return np.sign(r) * np.maximum(np.abs(r) - dead_band, 0.0)
+    out = np.abs(r)
+    out -= dead_band
+    np.maximum(out, 0.0, out=out)
+    return np.copysign(out, r, out=out)  # a new array; this runs at every step
 
 
 def admittance_gains_by_group(plant: MultibodyPlant, handles, gains: Mapping[str, float],
@@ -371,13 +374,8 @@ class JointAdmittanceController(LeafSystem):
 
     def CalcDesiredRate(self, residual: np.ndarray) -> np.ndarray:
         """q̇_d = clip(K_a soft_threshold(r), ±max_rate) for an n-entry (joint) residual."""
-        # sign(r) K_a max(|r| - dead band, 0) (K_a >= 0), clipped; in place (every step).
-        r = np.asarray(residual, dtype=float)
-        rate = np.abs(r)
-        rate -= self._dead_band
-        np.maximum(rate, 0.0, out=rate)
+        rate = soft_threshold(residual, self._dead_band)
         rate *= self._gains
-        np.copysign(rate, r, out=rate)
         np.minimum(rate, self._max_rate, out=rate)
         np.maximum(rate, self._neg_max_rate, out=rate)
         return rate

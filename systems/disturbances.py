@@ -544,22 +544,24 @@ class PushSource(LeafSystem):
     def forces_at(self, t: float) -> np.ndarray:
         """(k, 3) world forces of the pushes at time t, N."""
         out = np.zeros((self._k, 3))
-        for i, push in enumerate(self._pushes):
-            magnitude = float(push.profile.value(t))
+        for i, (push, magnitude) in enumerate(zip(self._pushes, self._magnitudes(t))):
             if magnitude != 0.0:
                 out[i] = magnitude * push.direction_W
         return out
 
+    def _magnitudes(self, t: float) -> list[float]:
+        """Each push's profile value at time t, N (plain floats)."""
+        return [float(push.profile.value(t)) for push in self._pushes]
+
     # -- calculations ---------------------------------------------------------------------
 
     def _CalcAppliedForces(self, context: Context, output: AbstractValue) -> None:
-        t = context.get_time()
-        magnitudes = [float(push.profile.value(t)) for push in self._pushes]
+        magnitudes = self._magnitudes(context.get_time())
         if not any(magnitudes):  # no push active (most of an experiment): the zero-force list
             output.set_value(self._template)
             return
         # The plant copies the list: one set of force objects, refilled at each step
-        # (the forces of ``forces_at``, in plain floats: this runs at every step).
+        # (magnitude times direction, as ``forces_at``, without the array: every step).
         for applied, push, magnitude in zip(self._active, self._pushes, magnitudes):
             applied.F_Bq_W = SpatialForce(_ZERO3, magnitude * push.direction_W)
         output.set_value(self._active)

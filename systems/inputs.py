@@ -17,8 +17,8 @@ def check_finite_input(system_name: str, port_name: str, value: np.ndarray) -> N
     One dot product per call (this runs in every system at every step); the indices are
     looked up only when the sum is not finite (an overflowing sum of finite values passes).
     """
-    if type(value) is np.ndarray and value.ndim == 1 and math.isfinite(value.dot(value)):
-        return  # the common case, a vector port's value: no conversion, no copy
+    if _is_finite_vector(value):
+        return
     flat = np.asarray(value, dtype=float).reshape(-1)
     if not math.isfinite(float(flat @ flat)):
         bad = np.flatnonzero(~np.isfinite(flat))
@@ -30,9 +30,15 @@ def eval_finite_input(system_name: str, port, context) -> np.ndarray:
     """``port.Eval(context)``, checked by ``check_finite_input`` (the port's name is looked up
     only when the fast test fails)."""
     value = port.Eval(context)
-    if not (type(value) is np.ndarray and value.ndim == 1 and math.isfinite(value.dot(value))):
+    if not _is_finite_vector(value):
         check_finite_input(system_name, port.get_name(), value)
     return value
+
+
+def _is_finite_vector(value) -> bool:
+    """The common case, a vector port's value: a finite 1-D array, tested with no conversion
+    or copy (one dot product; an overflowing sum of finite values goes to the full check)."""
+    return type(value) is np.ndarray and value.ndim == 1 and math.isfinite(value.dot(value))
 
 
 def positive_number(value, name: str, *, allow_zero: bool = False) -> float:

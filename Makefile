@@ -12,7 +12,7 @@ STAMP := $(VENV)/.installed-stamp
 TCMALLOC = $$(ls /usr/lib/*-linux-gnu/libtcmalloc_minimal.so.4 /usr/lib64/libtcmalloc_minimal.so.4 2>/dev/null | head -n 1)
 RUN = LD_PRELOAD="$(TCMALLOC)$${LD_PRELOAD:+ $$LD_PRELOAD}" $(PY)
 
-.PHONY: demo stand test bench residuals nao contact walk walk-pulled guided arms install clean
+.PHONY: demo push-and-comply standing residual-comparison contact-localization nao-force-observer nao-walk nao-walk-pulled nao-force-guided-walk nao-compliant-arms benchmark test install clean
 
 install: $(STAMP)
 
@@ -26,41 +26,45 @@ $(STAMP): pyproject.toml
 		  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libtcmalloc-minimal4) >/dev/null 2>&1 || true; }
 	@touch $(STAMP)
 
-demo: $(STAMP)
-	$(RUN) -m apps.push_and_comply $(ARGS)
-
-stand: $(STAMP)
-	$(RUN) -m apps.stand $(ARGS)
-
 test: $(STAMP)
 	@command -v chromium >/dev/null 2>&1 || [ "$$(id -u)" != 0 ] || ! command -v apt-get >/dev/null 2>&1 || \
 		{ echo "installing Debian's chromium for the replay browser test"; \
 		  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium) >/dev/null 2>&1 || true; }
 	$(PY) -m pytest -q $(ARGS)
 
-bench: $(STAMP)
-	$(RUN) -m apps.benchmark $(ARGS)
+# The main job (README): the push-and-comply experiment.
+demo: push-and-comply
 
-residuals: $(STAMP)
+# One target per experiment, named as its app (apps/<name>.py) and its diagram.
+push-and-comply: $(STAMP)
+	$(RUN) -m apps.push_and_comply $(ARGS)
+
+standing: $(STAMP)
+	$(RUN) -m apps.standing $(ARGS)
+
+residual-comparison: $(STAMP)
 	$(RUN) -m apps.residual_comparison $(ARGS)
 
-nao: $(STAMP)
-	$(RUN) -m apps.nao_force_observer $(ARGS)
-
-contact: $(STAMP)
+contact-localization: $(STAMP)
 	$(RUN) -m apps.contact_localization $(ARGS)
 
-walk: $(STAMP)
+nao-force-observer: $(STAMP)
+	$(RUN) -m apps.nao_force_observer $(ARGS)
+
+nao-walk: $(STAMP)
 	$(RUN) -m apps.nao_walk $(ARGS)
 
-walk-pulled: $(STAMP)
-	$(RUN) -m apps.nao_walk_with_force $(ARGS)
+nao-walk-pulled: $(STAMP)
+	$(RUN) -m apps.nao_walk_pulled $(ARGS)
 
-guided: $(STAMP)
+nao-force-guided-walk: $(STAMP)
 	$(RUN) -m apps.nao_force_guided_walk $(ARGS)
 
-arms: $(STAMP)
+nao-compliant-arms: $(STAMP)
 	$(RUN) -m apps.nao_compliant_arms $(ARGS)
+
+benchmark: $(STAMP)
+	$(RUN) -m apps.benchmark $(ARGS)
 
 clean:
 	rm -rf $(VENV) out .pytest_cache build *.egg-info

@@ -1,6 +1,6 @@
 """Speed of the floating-base decomposition (Flacco et al. eq. 9, Algorithms 1-2, eq. 13).
 
-Run: ``make bench`` (or ``python -m apps.benchmark``). For each humanoid model it prints the
+Run: ``make benchmark`` (or ``python -m apps.benchmark``). For each humanoid model it prints the
 microseconds per call of
 
 * one ``CalcMassMatrix`` after a new state (``SetPositions`` + ``CalcMassMatrix``): the unit,
@@ -37,8 +37,8 @@ import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
 
 from models import MODEL_NAMES, add_humanoid
-from systems.floating_base import FloatingBaseDynamics
-from systems.residuals import ClassicalResidual, ExternalResidual, InternalResidual, ResidualModel
+from systems.dynamics.floating_base import FloatingBaseDynamics
+from systems.residuals.momentum_residuals import ClassicalResidual, ExternalResidual, InternalResidual, ResidualModel
 
 
 
@@ -172,7 +172,7 @@ def benchmark_force_observer(batches: int = 5, dataset_dir: Path | None = None) 
     Raises:
         apps.replay_nao_dataset.DatasetError: the recording is missing or unreadable.
     """
-    from systems.force_observer import calibrated_normal_force, estimate_virtual_forces
+    from systems.observer.force_observer import calibrated_normal_force, estimate_virtual_forces
 
     from apps.replay_nao_dataset import load_recording, published_dataset_dir
 
@@ -194,8 +194,8 @@ def benchmark_closed_loop(seconds: float = 2.0) -> list[dict]:
     from pydrake.systems.framework import DiagramBuilder
     from pydrake.systems.primitives import ConstantVectorSource
 
-    from diagrams.humanoid_station import add_humanoid_station
-    from diagrams.push_and_comply import PushAndComplyScenario, build_push_and_comply_diagram
+    from diagrams.station.humanoid_station import add_humanoid_station
+    from diagrams.residuals.push_and_comply import PushAndComplyScenario, build_push_and_comply_diagram
 
     scenario = PushAndComplyScenario(
         duration=seconds, push_start=0.0, push_peak_time=0.6 * seconds, push_end=seconds
@@ -252,11 +252,11 @@ def benchmark_contact_localizer(model: str = "hrp4_like", *, calls: int = 100, b
     """One full ContactLocalizer update (line of action, all primitives, buried-point test,
     scores) at a new sensed state, for the lines of 16 random contacts of the study, in us
     and as a ratio to one CalcMassMatrix after a new state measured in the same run (the
-    unit of ``apps.benchmark``). For ``make bench``; the issue's floor is 2 ms."""
+    unit of ``apps.benchmark``). For ``make benchmark``; the issue's floor is 2 ms."""
     from apps.contact_localization import sample_trials
-    from diagrams.contact_study import ContactStudyConfig, build_contact_study_diagram
+    from diagrams.residuals.contact_localization import ContactLocalizationConfig, build_contact_localization_diagram
 
-    _, handles = build_contact_study_diagram(ContactStudyConfig(model=model, noise=False))
+    _, handles = build_contact_localization_diagram(ContactLocalizationConfig(model=model, noise=False))
     plant, localizer = handles.plant, handles.localizer
     x0 = handles.station.initial_state
     nq = plant.num_positions()

@@ -68,10 +68,10 @@ def sample_trials(model: str, trials: int, seed: int) -> list[dict]:
     uniform in [5, 40] N."""
     from pydrake.multibody.tree import BodyIndex
 
-    from diagrams.contact_study import ContactStudyConfig, build_contact_study_diagram
-    from systems.geometry_intersection import inward_direction, sample_surface, surface_areas
+    from diagrams.residuals.contact_localization import ContactLocalizationConfig, build_contact_localization_diagram
+    from systems.residuals.geometry_intersection import inward_direction, sample_surface, surface_areas
 
-    _, handles = build_contact_study_diagram(ContactStudyConfig(model=model, noise=False))
+    _, handles = build_contact_localization_diagram(ContactLocalizationConfig(model=model, noise=False))
     plant, localizer = handles.plant, handles.localizer
     context = plant.CreateDefaultContext()
     plant.SetPositionsAndVelocities(context, handles.station.initial_state)
@@ -144,12 +144,12 @@ def run_trial(spec: dict, model: str = "hrp4_like", push_start: float = 0.5, dur
     from pydrake.multibody.tree import BodyIndex
     from pydrake.systems.analysis import Simulator
 
-    from diagrams.contact_study import ContactStudyConfig, build_contact_study_diagram
+    from diagrams.residuals.contact_localization import ContactLocalizationConfig, build_contact_localization_diagram
 
-    config = ContactStudyConfig(
+    config = ContactLocalizationConfig(
         model=model, push_body=spec["body"], push_point=tuple(spec["point_body"]), push_force=tuple(spec["force_world"]),
         push_start=push_start, push_duration=duration, noise=noise, seed=spec["noise_seed"])
-    diagram, handles = build_contact_study_diagram(config, meshcat)
+    diagram, handles = build_contact_localization_diagram(config, meshcat)
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
     handles.station.set_initial_state(context)
@@ -213,10 +213,10 @@ def run_no_contact(model: str, duration: float, seed: int, noise: bool = True) -
     """A run without contact: the number of OFF->ON switches of the detector."""
     from pydrake.systems.analysis import Simulator
 
-    from diagrams.contact_study import ContactStudyConfig, build_contact_study_diagram
+    from diagrams.residuals.contact_localization import ContactLocalizationConfig, build_contact_localization_diagram
 
-    config = ContactStudyConfig(model=model, push_body=None, noise=noise, seed=seed, log_period=1e-3)
-    diagram, handles = build_contact_study_diagram(config)
+    config = ContactLocalizationConfig(model=model, push_body=None, noise=noise, seed=seed, log_period=1e-3)
+    diagram, handles = build_contact_localization_diagram(config)
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
     handles.station.set_initial_state(context)

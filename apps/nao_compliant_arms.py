@@ -48,15 +48,15 @@ from pydrake.geometry import Meshcat  # noqa: E402
 from pydrake.systems.analysis import Simulator  # noqa: E402
 
 from apps.common import logged_signals, replay_meshcat  # noqa: E402
-from systems.disturbances import SmoothPiecewise  # noqa: E402
-from diagrams.nao_compliant_arms import (  # noqa: E402
+from systems.simulation.disturbances import SmoothPiecewise  # noqa: E402
+from diagrams.observer.nao_compliant_arms import (  # noqa: E402
     build_nao_compliant_arms_diagram,
     hand_pushes,
     identified_motor_constants,
     lean_posture,
 )
-from diagrams.nao_standing import settled_standing_state, wide_stance  # noqa: E402
-from systems.arm_compliance import DEFAULT_STIFFNESS, NAO_ARM_CHAINS  # noqa: E402
+from diagrams.observer.nao_force_observer import settled_standing_state, wide_stance  # noqa: E402
+from systems.observer.arm_compliance import DEFAULT_STIFFNESS, NAO_ARM_CHAINS  # noqa: E402
 
 #: Push per hand, N (along -x: towards the robot), and the schedule, s.
 DEFAULT_FORCE = 1.5
@@ -91,7 +91,7 @@ class Scenario:
 
 def make_scenario(name: str, force: float = DEFAULT_FORCE, lean: float = LEAN_ANGLE) -> Scenario:
     """Scenario ``name`` ("a" or "b") with ``force`` N per hand; ``lean`` is b's hip-roll
-    lean, rad (``diagrams.nao_compliant_arms.lean_posture``)."""
+    lean, rad (``diagrams.observer.nao_compliant_arms.lean_posture``)."""
     if name not in ("a", "b"):
         raise ValueError(f"unknown scenario {name!r}; choose a or b")
     if not (math.isfinite(force) and 0.0 < force <= 4.0):

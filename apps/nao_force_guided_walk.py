@@ -7,7 +7,7 @@ The trigger's input (``--trigger-source``):
 
 * ``joint`` (default): the hands' total force from the arm joints (Sec. 6.4, eqs. 25-27:
   tau_m = K_m (q_d - q) against the walking controller's arm targets, minus the arm rows of
-  the floating-base inverse dynamics, through (J^T)^+; ``systems.arm_compliance``), i.e.
+  the floating-base inverse dynamics, through (J^T)^+; ``systems.observer.arm_compliance``), i.e.
   eq. 28's blend with K1 = 0. Sec. 6.5 is the interaction of Sec. 6.4 (a human holding the
   hands); eq. 28 gives the joint-level estimate the weight of the FSRs that lose contact,
   and a walking robot unloads one foot's four FSRs in every single support. This estimate
@@ -19,7 +19,7 @@ The trigger's input (``--trigger-source``):
   force-rate variance by default). While walking it errs by ~2 N RMS and lags: walking
   backwards it stayed beyond the threshold up to 0.66 s after the push ended (3 steps begun
   after the drop, 4 N, seed 1), and at 3 N it dips below the threshold mid-walk.
-* ``blend``: eq. 28 as in ``diagrams.nao_compliant_arms`` (K1 = K_a / 8, FSRs above 1 N; the
+* ``blend``: eq. 28 as in ``diagrams.observer.nao_compliant_arms`` (K1 = K_a / 8, FSRs above 1 N; the
   observer's estimate read as a force on the hands by ``ObserverHandForce``). With both
   feet down (double support, standing, the closing step's end) K1 = 1: the observer alone,
   with its errors; measured (seed 1) it misses the stop floor too (3 N: 2 steps begun after
@@ -86,16 +86,16 @@ from pydrake.systems.framework import DiagramBuilder  # noqa: E402
 from pydrake.systems.primitives import LogVectorOutput, MatrixGain  # noqa: E402
 
 from apps.common import replay_meshcat  # noqa: E402
-from diagrams.humanoid_station import add_humanoid_station  # noqa: E402
-from diagrams.nao_standing import add_observer_pipeline, nao_observer_parameters  # noqa: E402
-from diagrams.nao_walking import ContactZmp, detect_steps  # noqa: E402
-from diagrams.standing import default_gains  # noqa: E402
-from systems.arm_compliance import (NAO_ARM_CHAINS, ArmExternalForceEstimator, CompliantArmBlender,  # noqa: E402
+from diagrams.station.humanoid_station import add_humanoid_station  # noqa: E402
+from diagrams.observer.nao_force_observer import add_observer_pipeline, nao_observer_parameters  # noqa: E402
+from diagrams.locomotion.nao_walk import ContactZmp, detect_steps  # noqa: E402
+from diagrams.station.standing import default_gains  # noqa: E402
+from systems.observer.arm_compliance import (NAO_ARM_CHAINS, ArmExternalForceEstimator, CompliantArmBlender,  # noqa: E402
                                     JointTorqueFromPositionError, ObserverHandForce)
-from systems.disturbances import Push, PushSource  # noqa: E402
-from systems.force_guided_walking import GUIDED_WALKING, ForceGuidedWalkingController, TriggerParameters  # noqa: E402
-from systems.force_observer import STANDING, WALKING  # noqa: E402
-from systems.walking_pattern import WalkingParameters, smoothstep5  # noqa: E402
+from systems.simulation.disturbances import Push, PushSource  # noqa: E402
+from systems.observer.force_guided_walking import GUIDED_WALKING, ForceGuidedWalkingController, TriggerParameters  # noqa: E402
+from systems.observer.force_observer import STANDING, WALKING  # noqa: E402
+from systems.locomotion.walking_pattern import WalkingParameters, smoothstep5  # noqa: E402
 
 #: Floors of issue 7 (force-guided walking).
 MAX_START_LATENCY = 0.5  # s
@@ -184,7 +184,7 @@ def build_force_guided_diagram(profile: GuidanceProfile, trigger: TriggerParamet
                                noise: bool = True, seed: int = 0, walking: WalkingParameters | None = None,
                                max_steps: int = 20, log_period: float = 0.005, meshcat: Meshcat | None = None,
                                trigger_source: str = DEFAULT_TRIGGER_SOURCE, motor_constants: dict | None = None):
-    """Station + hand pushes + observer pipeline (``diagrams.nao_walk_pulled``'s fixed stance
+    """Station + hand pushes + observer pipeline (``diagrams.observer.nao_walk_pulled``'s fixed stance
     frame F0) + joint-level hand force estimate (eqs. 25-27) + ``ForceGuidedWalkingController``
     fed by ``trigger_source``: "joint" (the hands' total force from eqs. 25-27, i.e. eq. 28
     with K1 = 0) or "observer" (the Kalman observer's virtual F_x). Both are logged.
@@ -223,7 +223,7 @@ def build_force_guided_diagram(profile: GuidanceProfile, trigger: TriggerParamet
 
     # Joint-level estimate of the hands' force (Sec. 6.4, eqs. 25-27) from the arm joints'
     # position errors against the walking controller's own (constant) arm targets; K_m of
-    # eq. 27 = the PD's K_p, what ``systems.arm_compliance.identify_motor_constant``
+    # eq. 27 = the PD's K_p, what ``systems.observer.arm_compliance.identify_motor_constant``
     # identifies on this simulator (4.96-5.00 N m/rad shoulders and elbows, 2.00 wrists).
     names = [n for c in NAO_ARM_CHAINS for n in c.joint_names]
     _, kd = default_gains(plant, humanoid)

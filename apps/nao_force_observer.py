@@ -14,14 +14,14 @@ the Kalman force observer on the Nao-like robot standing under joint position co
   the CoM gives horizontal virtual forces (eqs. 11 and 24).
 
 The robot stands with a slightly wider stance than the nominal one (each hip rolled out by
-0.1 rad, ``diagrams.nao_standing.wide_stance``): the nominal stance's FSR polygon ends 3 cm
+0.1 rad, ``diagrams.observer.nao_force_observer.wide_stance``): the nominal stance's FSR polygon ends 3 cm
 outside each foot's centre (8 cm from the mid-line) and experiment 2 moves the CoP 7 cm
 sideways (eq. 10). Measured in the nominal stance: with the cable at the elbow the robot
 tips over; at the wrist or hand (soft, torque-limited arm) it rocks onto the outer edge of
 the right foot, whose heel FSR passes its 25 N range while the inner FSRs lift off.
 
 Expected values: the virtual force F^ of eq. (11) computed from the applied wrench and the
-true CoM at every sample (``diagrams.nao_standing.VirtualForceTruth``): a force at a point
+true CoM at every sample (``diagrams.observer.nao_force_observer.VirtualForceTruth``): a force at a point
 above or below the CoM, or beside it, creates a moment that moves the ZMP; eq. (11) maps it
 to the equivalent force at the CoM height. Loads are put on and taken off with smooth
 (quintic) ramps, like a hand lowering the mass; ``--ramp`` sets their duration (5 s by
@@ -65,8 +65,8 @@ from pydrake.geometry import Meshcat  # noqa: E402
 from pydrake.systems.analysis import Simulator  # noqa: E402
 
 from apps.common import logged_signals, replay_meshcat  # noqa: E402
-from diagrams.nao_standing import build_nao_standing_diagram, settled_standing_state, wide_stance  # noqa: E402
-from systems.disturbances import Push, SmoothPiecewise  # noqa: E402
+from diagrams.observer.nao_force_observer import build_nao_force_observer_diagram, settled_standing_state, wide_stance  # noqa: E402
+from systems.simulation.disturbances import Push, SmoothPiecewise  # noqa: E402
 
 #: The paper's load: 2.5 lb = 1.13 kg (Sec. 6.2), and g.
 LOAD_MASS = 1.13
@@ -189,14 +189,14 @@ def simulate(experiment: Experiment, *, seed: int = 0, meshcat: Meshcat | None =
         wide: stand in ``wide_stance()`` (default; see the module docstring) or nominally.
 
     Returns:
-        {"signals": logged arrays by logger name plus "t", "handles": NaoStandingHandles,
+        {"signals": logged arrays by logger name plus "t", "handles": NaoForceObserverHandles,
         "wall": wall-clock seconds of the simulation}.
     """
     if meshcat is not None:
         meshcat.Delete()
         meshcat.DeleteRecording()
     posture = wide_stance() if wide else None
-    diagram, handles = build_nao_standing_diagram(experiment.pushes, posture=posture, seed=seed, noise=noise, meshcat=meshcat)
+    diagram, handles = build_nao_force_observer_diagram(experiment.pushes, posture=posture, seed=seed, noise=noise, meshcat=meshcat)
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
     handles.set_initial_state(context, settled_standing_state(posture))

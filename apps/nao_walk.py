@@ -3,7 +3,7 @@ cart-table model, swing-foot trajectories and analytic leg IK give joint targets
 station's joint PD tracks (position control, as on Nao). Issue 7, item 1.
 
 Floors (issue 7): >= 20 steps and >= 1 m forward at a mean speed >= 0.08 m/s without falling.
-Definitions (``diagrams.nao_walking.walking_metrics``): distance = CoM x displacement over the
+Definitions (``diagrams.locomotion.nao_walk.walking_metrics``): distance = CoM x displacement over the
 run; mean speed = CoM x displacement from the first step's start to one step after the last
 touch-down, divided by that time; steps = touch-downs after lift-offs in the contact forces;
 fall = base tilt > 30 deg or base height < 70 % of its initial value; ZMP in support = the
@@ -35,8 +35,8 @@ from pydrake.geometry import Meshcat  # noqa: E402
 from pydrake.systems.analysis import Simulator  # noqa: E402
 
 from apps.common import replay_meshcat  # noqa: E402
-from diagrams.nao_walking import build_nao_walking_diagram, walking_metrics  # noqa: E402
-from systems.walking_pattern import WalkingParameters  # noqa: E402
+from diagrams.locomotion.nao_walk import build_nao_walk_diagram, walking_metrics  # noqa: E402
+from systems.locomotion.walking_pattern import WalkingParameters  # noqa: E402
 
 #: Floors of issue 7 (walking).
 MIN_STEPS = 20
@@ -48,7 +48,7 @@ def simulate(params: WalkingParameters, *, noise: bool = False, seed: int = 0, m
              zmp_correction_passes: int = 1) -> dict:
     """Builds the walking diagram, runs the whole pattern, returns handles, context, metrics
     and wall time."""
-    diagram, handles = build_nao_walking_diagram(params, noise=noise, seed=seed, meshcat=meshcat,
+    diagram, handles = build_nao_walk_diagram(params, noise=noise, seed=seed, meshcat=meshcat,
                                                  zmp_correction_passes=zmp_correction_passes)
     simulator = Simulator(diagram)
     handles.set_initial_state(simulator.get_mutable_context())

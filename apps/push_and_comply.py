@@ -30,7 +30,7 @@ from pydrake.geometry import Meshcat  # noqa: E402
 from pydrake.systems.analysis import Simulator  # noqa: E402
 
 from apps.common import logged_signals, memory_allocator  # noqa: E402
-from diagrams.push_and_comply import (  # noqa: E402
+from diagrams.residuals.push_and_comply import (  # noqa: E402
     RESIDUAL_KINDS,
     PushAndComplyScenario,
     build_push_and_comply_diagram,

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 import scipy.io
 
-from systems.force_observer import STANDING, WALKING, calibrated_normal_force, estimate_virtual_forces
+from systems.observer.force_observer import STANDING, WALKING, calibrated_normal_force, estimate_virtual_forces
 
 #: Files and variables of the published format, with their number of columns.
 DATASET_FILES = {

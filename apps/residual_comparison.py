@@ -31,9 +31,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from pydrake.systems.analysis import Simulator  # noqa: E402
 
-from diagrams.residual_estimation import (  # noqa: E402
-    ResidualEstimationConfig,
-    build_residual_estimation_diagram,
+from diagrams.residuals.residual_comparison import (  # noqa: E402
+    ResidualComparisonConfig,
+    build_residual_comparison_diagram,
     set_initial_state,
 )
 
@@ -75,9 +75,9 @@ def _parse(argv):
     return args
 
 
-def run(config: ResidualEstimationConfig, skip: float = 0.5) -> tuple[dict, dict]:
+def run(config: ResidualComparisonConfig, skip: float = 0.5) -> tuple[dict, dict]:
     """Simulates ``config``; returns (metrics, the logged signals)."""
-    diagram, handles = build_residual_estimation_diagram(config)
+    diagram, handles = build_residual_comparison_diagram(config)
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
     set_initial_state(diagram, context, handles)
@@ -258,7 +258,7 @@ def _print_summary(metrics: dict, out_dir: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     args = _parse(argv)
-    config = ResidualEstimationConfig(
+    config = ResidualComparisonConfig(
         model=args.model, push_body=args.push_body, duration=args.duration, seed=args.seed, noise=not args.no_noise
     )
     try:

@@ -1,7 +1,7 @@
 """An independent Pinocchio model of a Drake floating-base plant (test oracle).
 
 Built from the Drake plant's joints, frames and default spatial inertias, with Pinocchio's
-own kinematics (no code shared with ``systems.floating_base_reference``). Coordinates are
+own kinematics (no code shared with ``systems.dynamics.floating_base_reference``). Coordinates are
 matched BY JOINT NAME through ``model.getJointId(name)``, ``idx_q`` and ``idx_v``.
 
 Joints are added depth first: Pinocchio's CRBA assumes each subtree owns a contiguous block

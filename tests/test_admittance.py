@@ -1,4 +1,4 @@
-"""Tests of systems.admittance.JointAdmittanceController (Flacco et al. 2016, eq. 14)."""
+"""Tests of systems.residuals.admittance.JointAdmittanceController (Flacco et al. 2016, eq. 14)."""
 
 from __future__ import annotations
 
@@ -10,15 +10,15 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
-from diagrams.standing import default_gains
+from diagrams.station.standing import default_gains
 from models import add_humanoid
-from systems.admittance import (
+from systems.residuals.admittance import (
     JointAdmittanceController,
     admittance_gains_by_group,
     joint_position_selector,
     soft_threshold,
 )
-from systems.pd_gravity import PdGravityController, joint_vector_from_names, joints_in_velocity_order
+from systems.simulation.pd_gravity import PdGravityController, joint_vector_from_names, joints_in_velocity_order
 
 T = 1e-3
 LOWER = np.array([-1.0, -0.5, -2.0])
@@ -415,8 +415,8 @@ def test_gains_by_group_accepts_single_joint_names():
     from pydrake.multibody.plant import MultibodyPlant
 
     from models import add_humanoid
-    from systems.admittance import admittance_gains_by_group
-    from systems.pd_gravity import joints_in_velocity_order
+    from systems.residuals.admittance import admittance_gains_by_group
+    from systems.simulation.pd_gravity import joints_in_velocity_order
 
     plant = MultibodyPlant(0.0)
     handles = add_humanoid(plant, "hrp4_like")

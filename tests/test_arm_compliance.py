@@ -11,17 +11,17 @@ from pydrake.multibody.tree import JacobianWrtVariable, MultibodyForces
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from systems.disturbances import SmoothPiecewise
-from diagrams.humanoid_station import add_humanoid_station
-from diagrams.nao_compliant_arms import (
+from systems.simulation.disturbances import SmoothPiecewise
+from diagrams.station.humanoid_station import add_humanoid_station
+from diagrams.observer.nao_compliant_arms import (
     build_nao_compliant_arms_diagram,
     hand_pushes,
     identified_motor_constants,
     motor_constant_identification,
 )
-from diagrams.nao_standing import VirtualForceTruth, full_posture, settled_standing_state, wide_stance
-from diagrams.standing import default_gains
-from systems.arm_compliance import (
+from diagrams.observer.nao_force_observer import VirtualForceTruth, full_posture, settled_standing_state, wide_stance
+from diagrams.station.standing import default_gains
+from systems.observer.arm_compliance import (
     NAO_ARM_CHAINS,
     ArmChain,
     ArmExternalForceEstimator,
@@ -30,7 +30,7 @@ from systems.arm_compliance import (
     JointTorqueFromPositionError,
     ObserverHandForce,
 )
-from systems.pd_gravity import joint_vector_from_names
+from systems.simulation.pd_gravity import joint_vector_from_names
 
 ARM_JOINTS = [n for c in NAO_ARM_CHAINS for n in c.joint_names]
 
@@ -134,7 +134,7 @@ def test_estimator_filter_and_first_sample(station):
 
 
 def test_observer_hand_force_inverts_eq_11(station):
-    """VirtualForceTruth (eq. 11, diagrams.nao_standing) of a force at the hands' mean
+    """VirtualForceTruth (eq. 11, diagrams.observer.nao_force_observer) of a force at the hands' mean
     position, mapped back: the original force, shared by the two hands."""
     plant, humanoid = station.plant, station.humanoid
     dut = ObserverHandForce(plant, humanoid.sole_frames["right"], model_instances=[humanoid.model_instance])

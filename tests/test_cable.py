@@ -11,9 +11,9 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
-from diagrams.humanoid_station import add_humanoid_station
+from diagrams.station.humanoid_station import add_humanoid_station
 from models import add_humanoid, set_standing_state
-from systems.cable import PulleyLoad
+from systems.simulation.cable import PulleyLoad
 
 G = 9.81
 

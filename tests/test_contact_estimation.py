@@ -1,4 +1,4 @@
-"""Tests of systems/contact_estimation.py and systems/geometry_intersection.py.
+"""Tests of systems/residuals/contact_estimation.py and systems/residuals/geometry_intersection.py.
 
 The residual values fed to the systems are computed independently from known forces: the
 world wrench [p x f; f], the internal residual's expected value J^fb^T f from
@@ -19,7 +19,7 @@ from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable, RevoluteJoint
 from pydrake.systems.framework import DiagramBuilder
 
 from models import add_humanoid, set_standing_state
-from systems.contact_estimation import (
+from systems.residuals.contact_estimation import (
     AMBIGUOUS,
     FORCE_TOO_SMALL,
     NO_CONTACT,
@@ -29,9 +29,9 @@ from systems.contact_estimation import (
     ContactForceEstimator,
     ContactLocalizer,
 )
-from systems.disturbances import Push, PushSource, Step
-from systems.floating_base import FloatingBaseDynamics
-from systems.geometry_intersection import (
+from systems.simulation.disturbances import Push, PushSource, Step
+from systems.dynamics.floating_base import FloatingBaseDynamics
+from systems.residuals.geometry_intersection import (
     BOX,
     CAPSULE,
     CYLINDER,

@@ -8,7 +8,7 @@ import json
 import numpy as np
 
 from apps import contact_localization
-from systems.visualization import read_static_html
+from systems.simulation.visualization import read_static_html
 
 
 def test_app_smoke(tmp_path):

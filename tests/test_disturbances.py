@@ -1,4 +1,4 @@
-"""Tests of systems.disturbances: force profiles, Push, and the PushSource LeafSystem.
+"""Tests of systems.simulation.disturbances: force profiles, Push, and the PushSource LeafSystem.
 
 Every expected number is derived independently from Drake (poses, Jacobians, mass matrix,
 spatial momentum) or from closed-form profiles, not from the code under test.
@@ -23,8 +23,8 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput
 
 from models import add_humanoid
-from systems.disturbances import PolynomialRampUpDown, Push, PushSource, Sinusoid, Step
-from systems.floating_base import FloatingBaseDynamics
+from systems.simulation.disturbances import PolynomialRampUpDown, Push, PushSource, Sinusoid, Step
+from systems.dynamics.floating_base import FloatingBaseDynamics
 
 
 # ---------------------------------------------------------------------------------------
@@ -528,7 +528,7 @@ def test_momentum_change_equals_impulse_discrete():
 
 
 def test_smooth_piecewise_profile_through_its_knots():
-    from systems.disturbances import SmoothPiecewise
+    from systems.simulation.disturbances import SmoothPiecewise
 
     profile = SmoothPiecewise((1.0, 2.0, 4.0, 5.0), (0.0, 3.0, 3.0, -1.0))
     t = np.linspace(0.0, 6.0, 601)

@@ -16,7 +16,7 @@ from pydrake.multibody.tree import (
 from random_trees import make_random_floating_tree, random_state
 
 from models import MODEL_NAMES, add_humanoid
-from systems.floating_base import FloatingBaseDynamics
+from systems.dynamics.floating_base import FloatingBaseDynamics
 
 FIELDS = ("H", "F", "I0c", "C_hat", "p_hat", "H_dot", "F_dot", "I0c_dot", "H_fb", "H_fb_dot", "C_fb", "R_WB", "v0")
 

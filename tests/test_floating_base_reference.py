@@ -1,4 +1,4 @@
-"""Tests of the reference floating-base algorithms (systems/floating_base_reference.py).
+"""Tests of the reference floating-base algorithms (systems/dynamics/floating_base_reference.py).
 
 The reference (paper Algorithms 1-2, eqs. 9, 12, 13) is compared with
 
@@ -27,9 +27,9 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from random_trees import make_random_floating_tree, random_state  # noqa: E402
 
-from systems.floating_base import FloatingBaseDynamics  # noqa: E402
-from systems.floating_base_reference import RecursiveFloatingBaseDynamics  # noqa: E402
-from systems.spatial import skew  # noqa: E402
+from systems.dynamics.floating_base import FloatingBaseDynamics  # noqa: E402
+from systems.dynamics.floating_base_reference import RecursiveFloatingBaseDynamics  # noqa: E402
+from systems.common.spatial import skew  # noqa: E402
 
 TOL_DRAKE = 1e-9
 TOL_FD = 1e-6
@@ -448,7 +448,7 @@ def test_spatial_algebra_matches_drake():
     from pydrake.multibody.math import SpatialForce, SpatialVelocity
     from random_trees import random_spatial_inertia, random_transform
 
-    from systems.spatial import crf, crm, force_transform, inverse_motion_transform, plucker, spatial_inertia, transform_inertia
+    from systems.common.spatial import crf, crm, force_transform, inverse_motion_transform, plucker, spatial_inertia, transform_inertia
 
     rng = np.random.default_rng(12)
     for _ in range(5):

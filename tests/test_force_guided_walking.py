@@ -1,4 +1,4 @@
-"""Force-guided walking (systems.force_guided_walking): the trigger of eq. G-1 on hand-made
+"""Force-guided walking (systems.observer.force_guided_walking): the trigger of eq. G-1 on hand-made
 force sequences, the closing-step rule, and the controller alone (no plant simulation) on a
 prescribed force: it starts one debounce after the threshold, stops with the step after the
 one in progress, and its joint targets stay continuous across the switches."""
@@ -13,11 +13,11 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 
-from diagrams.standing import default_gains
+from diagrams.station.standing import default_gains
 from models import add_humanoid, set_standing_state
-from systems.force_guided_walking import (STANDING, STOPPING, WALKING, ForceGuidedWalkingController, ForceTrigger,
+from systems.observer.force_guided_walking import (STANDING, STOPPING, WALKING, ForceGuidedWalkingController, ForceTrigger,
                                           TriggerParameters, stop_step)
-from systems.walking_pattern import Footstep
+from systems.locomotion.walking_pattern import Footstep
 
 
 def _run_trigger(trigger: ForceTrigger, times, forces, walking_direction=None):

@@ -10,7 +10,7 @@ import pytest
 import scipy.io
 
 from apps import replay_nao_dataset
-from systems.force_observer import (
+from systems.observer.force_observer import (
     STANDING,
     LipForceObserver,
     LipObserverParameters,
@@ -161,7 +161,7 @@ def test_clear_errors_for_broken_recordings(dataset, tmp_path, capsys):
 def test_drake_system_matches_the_core_on_real_data(dataset):
     """LipForceObserverSystem, stepped by its own periodic update, equals the numpy core
     (and so the authors' output) on the first 300 samples of a real recording."""
-    from systems.force_observer import LipForceObserverSystem
+    from systems.observer.force_observer import LipForceObserverSystem
 
     data = replay_nao_dataset.load_recording(dataset / "Force_Z_data")
     normal_force = calibrated_normal_force(data["total_force"].sum(axis=1))

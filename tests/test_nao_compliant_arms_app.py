@@ -10,7 +10,7 @@ import pytest
 
 from apps import nao_compliant_arms
 from apps.nao_compliant_arms import DEFAULT_FORCE, make_scenario
-from systems.visualization import read_static_html
+from systems.simulation.visualization import read_static_html
 
 
 @pytest.fixture(scope="module")

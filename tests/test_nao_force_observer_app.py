@@ -9,8 +9,8 @@ import pytest
 
 from apps import nao_force_observer
 from apps.nao_force_observer import LOAD_MASS, make_experiment
-from systems.disturbances import SmoothPiecewise
-from systems.visualization import read_static_html
+from systems.simulation.disturbances import SmoothPiecewise
+from systems.simulation.visualization import read_static_html
 
 
 @pytest.fixture(scope="module")

@@ -1,5 +1,5 @@
-"""The force observer's measurement pipeline (systems.fsr_sensing) and the Nao standing
-diagram (diagrams.nao_standing), checked against physics: weight, static equilibrium,
+"""The force observer's measurement pipeline (systems.observer.fsr_sensing) and the Nao standing
+diagram (diagrams.observer.nao_force_observer), checked against physics: weight, static equilibrium,
 known accelerations, eq. (11); plus the observer core's closed-form Kalman step against
 the textbook matrix form and its convergence on exact LIP data with a 3-D force."""
 
@@ -11,18 +11,18 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
-from diagrams.humanoid_station import add_humanoid_station
-from diagrams.nao_standing import (
+from diagrams.station.humanoid_station import add_humanoid_station
+from diagrams.observer.nao_force_observer import (
     OBSERVER_PERIOD,
     VirtualForceTruth,
-    build_nao_standing_diagram,
+    build_nao_force_observer_diagram,
     settled_standing_state,
     wide_stance,
 )
 from models import add_ground, add_humanoid
-from systems.disturbances import Push
-from systems.force_observer import STANDING, LipForceObserver, transition_matrices
-from systems.fsr_sensing import (
+from systems.simulation.disturbances import Push
+from systems.observer.force_observer import STANDING, LipForceObserver, transition_matrices
+from systems.observer.fsr_sensing import (
     FSR_NAMES,
     FSR_SATURATION,
     CenterOfPressure,
@@ -37,7 +37,7 @@ GRAVITY = 9.81
 @pytest.fixture(scope="module")
 def standing_run():
     """The full diagram, noisy sensors, no push: 2 s from the settled standing state."""
-    diagram, handles = build_nao_standing_diagram(seed=3)
+    diagram, handles = build_nao_force_observer_diagram(seed=3)
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
     handles.set_initial_state(context, settled_standing_state())
@@ -252,10 +252,10 @@ def test_statics_of_a_pushed_robot_match_the_virtual_force():
     """Ground truth against physics: with a steady push the true FSR forces' total
     (eq. 12) and CoP (eq. 13) satisfy eq. (10) with the virtual force of eq. (11) (on
     average over a second: the position-controlled robot keeps swaying by ~0.1 mm)."""
-    from systems.disturbances import SmoothPiecewise
+    from systems.simulation.disturbances import SmoothPiecewise
 
     push = Push("torso", (0.05, 0.0, -0.05), (0.6, 0.0, 0.8), SmoothPiecewise((0.0, 1.0), (0.0, 3.0)))
-    diagram, handles = build_nao_standing_diagram([push], noise=False)
+    diagram, handles = build_nao_force_observer_diagram([push], noise=False)
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
     handles.set_initial_state(context, settled_standing_state())
@@ -341,6 +341,6 @@ def test_observer_converges_to_a_constant_3d_force_on_an_exact_lip():
 
 
 def test_observer_period_is_the_papers():
-    diagram, handles = build_nao_standing_diagram(noise=False)
+    diagram, handles = build_nao_force_observer_diagram(noise=False)
     assert handles.parameters.period == OBSERVER_PERIOD and abs(OBSERVER_PERIOD - 0.0167) < 1e-4
     assert abs(handles.parameters.mass - 5.19) < 1e-9

@@ -1,4 +1,4 @@
-"""Experiment 4 (diagrams.nao_walk_pulled): the fixed-frame measurements and the cable's
+"""Experiment 4 (diagrams.observer.nao_walk_pulled): the fixed-frame measurements and the cable's
 virtual-force truth against hand-computed values, and the app's pulled walk (22 steps, the line
 taut after 0.55 m, ~10-15 s wall) whose walk and observer estimate must meet the issue's
 floors.
@@ -18,11 +18,11 @@ import pytest
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.analysis import Simulator
 
-from diagrams.nao_walk_pulled import CableSetup, CableVirtualForceTruth, build_nao_walk_pulled_diagram, observer_metrics
-from diagrams.nao_walking import walking_metrics
+from diagrams.observer.nao_walk_pulled import CableSetup, CableVirtualForceTruth, build_nao_walk_pulled_diagram, observer_metrics
+from diagrams.locomotion.nao_walk import walking_metrics
 from models import add_humanoid, set_standing_state
-from systems.fsr_sensing import CenterOfPressure, SupportFootCom
-from systems.walking_pattern import WalkingParameters
+from systems.observer.fsr_sensing import CenterOfPressure, SupportFootCom
+from systems.locomotion.walking_pattern import WalkingParameters
 
 G = 9.81
 

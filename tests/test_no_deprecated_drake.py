@@ -53,7 +53,7 @@ def _case_humanoid_station() -> None:
     from pydrake.systems.framework import DiagramBuilder
     from pydrake.systems.primitives import ConstantVectorSource
 
-    from diagrams.humanoid_station import add_humanoid_station
+    from diagrams.station.humanoid_station import add_humanoid_station
 
     for model in ("hrp4_like", "nao_like"):
         builder = DiagramBuilder()
@@ -64,54 +64,54 @@ def _case_humanoid_station() -> None:
 
 
 def _case_standing() -> None:
-    from diagrams.standing import build_standing_diagram, set_initial_state
+    from diagrams.station.standing import build_standing_diagram, set_initial_state
 
     for model in ("hrp4_like", "nao_like"):
         diagram, handles = build_standing_diagram(model, meshcat=_meshcat())
         _simulate(diagram, lambda context: set_initial_state(diagram, context, handles))
 
 
-def _case_residual_estimation() -> None:
-    from diagrams.residual_estimation import ResidualEstimationConfig, build_residual_estimation_diagram, set_initial_state
+def _case_residual_comparison() -> None:
+    from diagrams.residuals.residual_comparison import ResidualComparisonConfig, build_residual_comparison_diagram, set_initial_state
 
-    diagram, handles = build_residual_estimation_diagram(ResidualEstimationConfig(), _meshcat())
+    diagram, handles = build_residual_comparison_diagram(ResidualComparisonConfig(), _meshcat())
     _simulate(diagram, lambda context: set_initial_state(diagram, context, handles))
 
 
 def _case_push_and_comply() -> None:
-    from diagrams.push_and_comply import PushAndComplyScenario, build_push_and_comply_diagram
+    from diagrams.residuals.push_and_comply import PushAndComplyScenario, build_push_and_comply_diagram
 
     for kind in ("internal", "classical"):
         diagram, handles = build_push_and_comply_diagram(PushAndComplyScenario(), kind, _meshcat())
         _simulate(diagram, handles.station.set_initial_state)
 
 
-def _case_contact_study() -> None:
-    from diagrams.contact_study import ContactStudyConfig, build_contact_study_diagram
+def _case_contact_localization() -> None:
+    from diagrams.residuals.contact_localization import ContactLocalizationConfig, build_contact_localization_diagram
 
-    config = ContactStudyConfig(push_body="CHEST_Y_LINK", push_force=(-20.0, 0.0, 0.0), push_start=0.0)
-    diagram, handles = build_contact_study_diagram(config, _meshcat())
+    config = ContactLocalizationConfig(push_body="CHEST_Y_LINK", push_force=(-20.0, 0.0, 0.0), push_start=0.0)
+    diagram, handles = build_contact_localization_diagram(config, _meshcat())
     _simulate(diagram, handles.station.set_initial_state)
 
 
-def _case_nao_standing() -> None:
-    from diagrams.nao_standing import build_nao_standing_diagram, wide_stance
-    from systems.disturbances import Push, SmoothPiecewise
+def _case_nao_force_observer() -> None:
+    from diagrams.observer.nao_force_observer import build_nao_force_observer_diagram, wide_stance
+    from systems.simulation.disturbances import Push, SmoothPiecewise
 
     push = Push("torso", (0.05, 0.0, -0.05), (0.6, 0.0, 0.8), SmoothPiecewise((0.0, 1.0), (0.0, 3.0)))
-    diagram, handles = build_nao_standing_diagram([push], posture=wide_stance(), meshcat=_meshcat())
+    diagram, handles = build_nao_force_observer_diagram([push], posture=wide_stance(), meshcat=_meshcat())
     _simulate(diagram, handles.set_initial_state)
 
 
-def _case_nao_walking() -> None:
-    from diagrams.nao_walking import build_nao_walking_diagram
+def _case_nao_walk() -> None:
+    from diagrams.locomotion.nao_walk import build_nao_walk_diagram
 
-    diagram, handles = build_nao_walking_diagram(meshcat=_meshcat())
+    diagram, handles = build_nao_walk_diagram(meshcat=_meshcat())
     _simulate(diagram, handles.set_initial_state)
 
 
 def _case_nao_walk_pulled() -> None:
-    from diagrams.nao_walk_pulled import build_nao_walk_pulled_diagram
+    from diagrams.observer.nao_walk_pulled import build_nao_walk_pulled_diagram
 
     diagram, handles = build_nao_walk_pulled_diagram(meshcat=_meshcat())
     _simulate(diagram, handles.set_initial_state)
@@ -119,7 +119,7 @@ def _case_nao_walk_pulled() -> None:
 
 def _case_nao_compliant_arms() -> None:
     # Default motor constants: identify_motor_constant() builds and runs its own diagram.
-    from diagrams.nao_compliant_arms import build_nao_compliant_arms_diagram
+    from diagrams.observer.nao_compliant_arms import build_nao_compliant_arms_diagram
 
     diagram, handles = build_nao_compliant_arms_diagram(meshcat=_meshcat())
     _simulate(diagram, handles.set_initial_state)
@@ -127,7 +127,7 @@ def _case_nao_compliant_arms() -> None:
 
 def _case_force_guided_walking() -> None:
     from apps.nao_force_guided_walk import GuidanceProfile, build_force_guided_diagram
-    from systems.force_guided_walking import TriggerParameters
+    from systems.observer.force_guided_walking import TriggerParameters
 
     diagram, handles = build_force_guided_diagram(GuidanceProfile(), TriggerParameters(), meshcat=_meshcat())
     _simulate(diagram, handles["station"].set_initial_state)

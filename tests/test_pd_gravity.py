@@ -1,4 +1,4 @@
-"""Tests of systems.pd_gravity.PdGravityController."""
+"""Tests of systems.simulation.pd_gravity.PdGravityController."""
 
 import numpy as np
 import pytest
@@ -10,7 +10,7 @@ from pydrake.multibody.tree import RevoluteJoint, SpatialInertia
 from pydrake.systems.framework import DiagramBuilder
 
 from models import add_humanoid
-from systems.pd_gravity import (
+from systems.simulation.pd_gravity import (
     PdGravityController,
     joint_vector_from_names,
     joints_in_velocity_order,
@@ -206,7 +206,7 @@ def test_nan_inputs_raise_a_named_error():
 def test_gravity_from_a_shared_residual_model_equals_drakes_gravity():
     """The PD's gravity through the estimators' ResidualModel (F[3:6]^T R_WB^T g) against
     Drake's CalcGravityGeneralizedForces, at random tilted, moving states of HRP-4."""
-    from systems.residuals import ResidualModel
+    from systems.residuals.momentum_residuals import ResidualModel
 
     plant = MultibodyPlant(1e-3)
     add_humanoid(plant, "hrp4_like")
@@ -233,7 +233,7 @@ def test_gravity_from_a_shared_residual_model_equals_drakes_gravity():
 
 
 def test_a_gravity_model_of_another_plant_is_refused():
-    from systems.residuals import ResidualModel
+    from systems.residuals.momentum_residuals import ResidualModel
 
     plant, _ = _chain_plant([0, 1, 2])
     other, _ = _chain_plant([0, 1, 2])

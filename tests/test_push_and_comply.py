@@ -14,8 +14,8 @@ import pytest
 
 from apps import push_and_comply
 from apps.push_and_comply import run_metrics, simulate
-from diagrams.push_and_comply import PushAndComplyScenario, build_push_and_comply_diagram, load_scenario
-from systems.visualization import read_static_html
+from diagrams.residuals.push_and_comply import PushAndComplyScenario, build_push_and_comply_diagram, load_scenario
+from systems.simulation.visualization import read_static_html
 
 SCENARIOS = Path(push_and_comply.__file__).parent / "scenarios"
 

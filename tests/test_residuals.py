@@ -1,4 +1,4 @@
-"""Tests of the momentum residuals (systems/residuals.py) against physics with known answers."""
+"""Tests of the momentum residuals (systems/residuals/momentum_residuals.py) against physics with known answers."""
 
 from __future__ import annotations
 
@@ -14,8 +14,8 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource, LogVectorOutput
 
 from models import MODEL_NAMES, add_humanoid, set_standing_state
-from systems.pd_gravity import PdGravityController
-from systems.residuals import ClassicalResidual, ExternalResidual, InternalResidual, ResidualModel
+from systems.simulation.pd_gravity import PdGravityController
+from systems.residuals.momentum_residuals import ClassicalResidual, ExternalResidual, InternalResidual, ResidualModel
 
 T = 1e-3
 

@@ -1,4 +1,4 @@
-"""Tests of systems.noise and systems.sensors (simulated sensors)."""
+"""Tests of systems.simulation.noise and systems.simulation.sensors (simulated sensors)."""
 
 import re
 
@@ -23,12 +23,12 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
-from diagrams.standing import default_gains
+from diagrams.station.standing import default_gains
 from models import add_ground, add_humanoid, set_standing_state
-from systems.noise import BLOCK_SIZE, NoisyVector, SampledNoise
-from systems.pd_gravity import PdGravityController, joint_vector_from_names
-from systems import sensors as sensor_defaults
-from systems.sensors import (
+from systems.simulation.noise import BLOCK_SIZE, NoisyVector, SampledNoise
+from systems.simulation.pd_gravity import PdGravityController, joint_vector_from_names
+from systems.simulation import sensors as sensor_defaults
+from systems.simulation.sensors import (
     BaseStateEstimator,
     FootForceTorqueSensors,
     JointEncoders,

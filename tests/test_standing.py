@@ -1,6 +1,6 @@
 """Integration test: each humanoid stands 10 s under PD + gravity compensation.
 
-Discrete plant, 1 ms steps, SAP, point contact (diagrams.standing). After the first
+Discrete plant, 1 ms steps, SAP, point contact (diagrams.station.standing). After the first
 second of settling the base must move less than 1 cm and 1 degree, and at the end both
 soles must be flat on the ground with all four spheres of each foot loaded.
 """
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
-from diagrams.standing import build_standing_diagram, set_initial_state, standing_metrics
+from diagrams.station.standing import build_standing_diagram, set_initial_state, standing_metrics
 from models import MODEL_NAMES
 
 DURATION = 10.0  # s

@@ -1,4 +1,4 @@
-"""Tests of systems.visualization: effort markers and force arrows in Meshcat, live and in
+"""Tests of systems.simulation.visualization: effort markers and force arrows in Meshcat, live and in
 the recorded replay (read back from ``Meshcat.StaticHtml()``)."""
 
 import numpy as np
@@ -12,7 +12,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, Sine
 
 from models import add_humanoid
-from systems.visualization import (
+from systems.simulation.visualization import (
     ForceArrows,
     JointEffortOverlay,
     add_effort_visualization,

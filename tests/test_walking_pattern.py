@@ -1,4 +1,4 @@
-"""Walking pattern generator (systems.walking_pattern) and leg IK (systems.leg_ik): preview
+"""Walking pattern generator (systems.locomotion.walking_pattern) and leg IK (systems.locomotion.leg_ik): preview
 control on the cart-table model, footstep plan and swing trajectories, analytic IK against
 Drake's forward kinematics, whole-body targets against Drake's CoM. No simulation here."""
 
@@ -10,8 +10,8 @@ from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.framework import DiagramBuilder
 
 from models import add_humanoid
-from systems.leg_ik import LEG_JOINTS, NaoLegGeometry, leg_fk, leg_ik
-from systems.walking_pattern import (
+from systems.locomotion.leg_ik import LEG_JOINTS, NaoLegGeometry, leg_fk, leg_ik
+from systems.locomotion.walking_pattern import (
     NaoWalkingController,
     WalkingParameters,
     foot_trajectories,
@@ -284,7 +284,7 @@ def test_multibody_zmp_correction(nao):
     """Kajita 2003's second preview pass: the ZMP of the planned whole-body motion (eq. Z-1,
     swing-leg dynamics included) is ~19 mm off the reference with the cart-table CoM, a few
     mm after one pass; standing still it is the CoM's ground projection."""
-    from systems.walking_pattern import multibody_zmp
+    from systems.locomotion.walking_pattern import multibody_zmp
 
     plant, humanoid = nao
     params = WalkingParameters(num_steps=6)

@@ -1,0 +1,433 @@
+"""Experiment 4 of Hawley, Rahem and Suleiman (2019), Sec. 6.3 (Figs. 9-11), in simulation:
+``nao_like`` walks forward while a cable tied to the back of its torso tightens over a
+pulley, lifts a 0.3 kg mass lying on the ground and pulls the robot backwards by ~3 N; the
+Kalman force observer (WALKING preset, eq. 22) estimates the pull from the FSRs, the IMU and
+the encoders.
+
+    NaoWalkingController ─ desired_position ─► PdGravityController ─► MultibodyPlant ◄─┐
+     (open-loop pattern, systems.locomotion.walking_pattern)  (station, 1 kHz)     │ state      │ cable force
+                                                                        ▼            │
+                                            PulleyLoad (truth: force_world, point_world)
+                                                 │ force, point
+                                                 ▼
+    CableVirtualForceTruth (eq. 11, ground plane z = 0 of the stance frame) ─► loggers
+    FsrArray ─► CenterOfPressure ─► zmp, normal_force ┐
+    sensed state ─► SupportFootCom ─► com_position   ├─► LipForceObserverSystem
+    IMU ─► ImuComAcceleration ─────────────► com_acceleration┘    (WALKING, T = 1/60 s)
+
+Frame convention while walking (``origin_W`` of ``CenterOfPressure`` and ``SupportFootCom``): the observer's CoM position
+and ZMP are both expressed in ONE frame F0, world-aligned (x forward, z up), fixed for the
+whole run, with its origin at the right sole frame's origin at t = 0 (on the ground). The
+support foot changes every step, so a frame at the current support foot would make the
+Kalman state x_c jump by a step length at every support switch; F0 does not move, and
+z_c = CoM height above the ground, p = CoP on the ground plane z = 0 of F0, as the LIP/ZMP
+model (eqs. 2-13) needs. Positions come from forward kinematics of the SENSED state
+(encoders + the base estimate of ``systems.simulation.sensors``, which is the truth plus noise: a
+stand-in for the leg odometry a real Nao would use to carry F0 from footprint to footprint;
+without slipping the two agree).
+
+The observer never reads the cable: only the sensors. The ground truth reaches only the
+loggers: ``PulleyLoad.force_world`` (the pull at the waist, the paper's "expected force" in
+Fig. 10) and its virtual force at the CoM (eq. 11, ``CableVirtualForceTruth``).
+
+Cable geometry (``CableSetup``): the line is tied to the back of the torso at the height of
+the walking CoM (so the pull moves the LIP almost as a force at the CoM: eq. 11 adds only
+tau_y / z_c ~ 0), runs backwards to a pulley ``pulley_distance`` behind the attachment,
+``pulley_height`` above the ground and ``lateral_angle_deg`` to the side (the paper's
+alpha ~ 5 deg), then down to the mass on the ground. The slack is chosen from the plan so
+that the line tightens after the torso has walked ``tighten_distance``. The load hangs
+below the pulley, so it can rise at most ``pulley_height``: the pulley is higher than the
+waist (0.55 m vs 0.26 m; the line rises ~7 deg at the start, ~5 deg at the end) and the
+line tightens late enough that the load stays ``min_clearance`` below it
+(checked at construction from the plan).
+
+No feed-forward lean: the backwards pull F_x < 0 at the CoM height shifts the robot's ZMP by
+z_c F_x / (m g) (LIP, eq. 10: about -15 mm for 3 N), and shifting the pattern's CoM
+reference forward by that much (ramped in over one step around the planned lift) was tried
+and measured to make things worse (the code was removed): the default pulled walk ended at 0.997 m instead of 1.128 m, max yaw 55 deg instead of 4 deg, ZMP inside the
+support polygon 65 % instead of 96 % of the time, and the estimate's RMS error is 6.7 N
+(seed 0). The same 15 mm CoM shift without any force makes a 10-step walk fall (5 mm:
+walks, tilt 3.4 deg vs 1.4 deg): this open-loop walk does not tolerate a CoM reference
+moved relative to its ZMP reference by that much. Without the lean the pull is survived
+(tilt 5.2 deg, yaw 4 deg), so it is not needed here. A ZMP-reference shift (the
+force-guided walk's eq. G-3) did not help either.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Rgba
+from pydrake.multibody.plant import ExternallyAppliedSpatialForceMultiplexer, MultibodyPlant
+from pydrake.systems.framework import BasicVector, Context, Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
+
+from diagrams.station.humanoid_station import add_humanoid_station
+from diagrams.observer.nao_force_observer import (OBSERVER_PERIOD, ObserverPipeline, VirtualForceTruth, add_observer_pipeline,
+                                  nao_observer_parameters)
+from diagrams.locomotion.nao_walk import ContactZmp, NaoWalkHandles, add_walking_loggers
+from diagrams.station.standing import default_gains
+from models import HumanoidHandles
+from systems.simulation.cable import PulleyLoad
+from systems.observer.force_observer import WALKING, LipForceObserverSystem, LipObserverParameters
+from systems.observer.fsr_sensing import FsrArray, ImuComAcceleration
+from systems.common.checks import eval_finite_input
+from systems.simulation.visualization import ForceArrows
+from systems.locomotion.walking_pattern import NaoWalkingController, WalkingParameters
+
+#: The paper's lifted mass, kg (m0 ~ 300 g).
+LOAD_MASS = 0.3
+
+
+@dataclass(frozen=True)
+class CableSetup:
+    """Geometry of the cable of Experiment 4 (SI units, world frame, x forward).
+
+    Attributes:
+        load_mass: m0, kg.
+        attachment_back: distance of the attachment point behind the torso origin, m
+            (the torso's back).
+        pulley_distance: horizontal distance from the attachment (at t = 0) back to the
+            pulley, m.
+        pulley_height: height of the pulley above the ground, m.
+        lateral_angle_deg: angle between the line (at t = 0, seen from above) and the -x
+            axis, deg (the paper's alpha ~ 5 deg); the pulley is on the -y side.
+        tighten_distance: forward distance the torso walks (according to the plan) before
+            the line is taut, m (sets the slack).
+        stiffness: the line's stiffness, N/m; damping: N s/m.
+        min_clearance: the planned highest load position must stay this far below the
+            pulley, m.
+    """
+
+    load_mass: float = LOAD_MASS
+    attachment_back: float = 0.05
+    pulley_distance: float = 3.0
+    pulley_height: float = 0.65
+    lateral_angle_deg: float = 5.0
+    tighten_distance: float = 0.55
+    stiffness: float = 2000.0
+    damping: float = 5.0
+    min_clearance: float = 0.08
+
+    def __post_init__(self):
+        for name in ("load_mass", "pulley_distance", "pulley_height", "stiffness"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"CableSetup.{name} must be positive, got {value}")
+        for name in ("attachment_back", "tighten_distance", "damping", "min_clearance"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"CableSetup.{name} must be non-negative, got {value}")
+        if not (0.0 <= self.lateral_angle_deg < 45.0):
+            raise ValueError(f"CableSetup.lateral_angle_deg must be in [0, 45), got {self.lateral_angle_deg}")
+
+
+class CableVirtualForceTruth(LeafSystem):
+    """Ground truth: the virtual force (eq. 11) of the cable's force F applied at A, with the
+    TRUE CoM and the ground plane at ``ground_height`` (F0's z = 0):
+    F^ = [F_x + tau_y / z_c, F_y - tau_x / z_c, F_z], tau = (p_A - p_Cm) x F,
+    z_c = z_Cm - ground_height (``VirtualForceTruth.virtual_force``).
+
+    Inputs:
+        state: the TRUE plant state [q; v].
+        force_world: (3) the force on the robot, N (``PulleyLoad.force_world``).
+        point_world: (3) its point of application A, m (``PulleyLoad.point_world``).
+
+    Outputs:
+        virtual_force: (3) F^, N, world-aligned.
+        com_world: (3) the true CoM, m (to draw the estimate at the CoM).
+    """
+
+    def __init__(self, plant: MultibodyPlant, humanoid: HumanoidHandles, ground_height: float = 0.0):
+        super().__init__()
+        if not math.isfinite(ground_height):
+            raise ValueError(f"CableVirtualForceTruth: ground_height must be finite, got {ground_height}")
+        self._plant = plant
+        self._plant_context = plant.CreateDefaultContext()
+        self._nq = plant.num_positions()
+        self._instances = [humanoid.model_instance]
+        self._ground = float(ground_height)
+        self._state = self.DeclareVectorInputPort("state", plant.num_positions() + plant.num_velocities())
+        self._force = self.DeclareVectorInputPort("force_world", 3)
+        self._point = self.DeclareVectorInputPort("point_world", 3)
+        self.DeclareVectorOutputPort("virtual_force", 3, self._CalcVirtual)
+        self.DeclareVectorOutputPort("com_world", 3, self._CalcCom)
+
+    def _com(self, context: Context) -> np.ndarray:
+        x = eval_finite_input("CableVirtualForceTruth", self._state, context)
+        self._plant.SetPositions(self._plant_context, x[: self._nq])
+        return self._plant.CalcCenterOfMassPositionInWorld(self._plant_context, self._instances)
+
+    def _CalcVirtual(self, context: Context, output: BasicVector) -> None:
+        force = np.asarray(eval_finite_input("CableVirtualForceTruth", self._force, context))
+        if not force.any():
+            output.SetFromVector(np.zeros(3))
+            return
+        point = np.asarray(eval_finite_input("CableVirtualForceTruth", self._point, context))
+        wrench = np.concatenate([np.cross(point, force), force])  # moment about the world origin; force
+        output.SetFromVector(VirtualForceTruth.virtual_force(wrench, self._com(context), self._ground))
+
+    def _CalcCom(self, context: Context, output: BasicVector) -> None:
+        output.SetFromVector(self._com(context))
+
+
+@dataclass
+class NaoWalkPulledHandles(NaoWalkHandles):
+    """``NaoWalkHandles`` (usable by ``diagrams.locomotion.nao_walk.walking_metrics``) plus the
+    pull and the observer.
+
+    Attributes (besides the walking ones):
+        cable: the PulleyLoad; setup: its CableSetup; slack_length: its natural length, m.
+        planned_tighten_time / planned_lift_time: when the plan makes the line taut / the
+            load start rising (quasi-static, from the planned torso motion), s.
+        frame_origin: p_WF0, m.
+        pipeline (``diagrams.observer.nao_force_observer.ObserverPipeline``, F at ``frame_origin``),
+            fsr_array, imu_com_acceleration, observer: its parts; truth: the ground truth.
+        parameters: the observer's parameters (eq. 22 with the model's mass, T = 1/60 s).
+        observer_loggers: loggers at the observer period: ``virtual_force``, ``valid``,
+            ``truth`` (eq. 11), ``cable_force``, ``tension``, ``load_height``, ``zmp``
+            (FSR CoP in F0), ``normal_force`` (f_n^o), ``com_position`` (sensed, F0),
+            ``com_acceleration``, ``fsr_forces`` (read), ``true_fsr_forces``.
+    """
+
+    cable: PulleyLoad | None = None
+    setup: CableSetup | None = None
+    slack_length: float = 0.0
+    planned_tighten_time: float = float("nan")
+    planned_lift_time: float = float("nan")
+    frame_origin: np.ndarray | None = None
+    pipeline: ObserverPipeline | None = None
+    fsr_array: FsrArray | None = None
+    imu_com_acceleration: ImuComAcceleration | None = None
+    observer: LipForceObserverSystem | None = None
+    truth: CableVirtualForceTruth | None = None
+    parameters: LipObserverParameters | None = None
+    observer_loggers: dict | None = None
+
+
+def build_nao_walk_pulled_diagram(
+    parameters: WalkingParameters | None = None,
+    setup: CableSetup | None = None,
+    *,
+    pull: bool = True,
+    noise: bool = True,
+    seed: int = 0,
+    observer_period: float = OBSERVER_PERIOD,
+    log_period: float = 0.005,
+    meshcat: Meshcat | None = None,
+) -> tuple[Diagram, NaoWalkPulledHandles]:
+    """Builds the diagram of the module docstring.
+
+    Args:
+        parameters: walking parameters (default ``WalkingParameters()``: 22 steps of 5 cm).
+        setup: the cable geometry (default ``CableSetup()``).
+        pull: False leaves the cable out (the walk alone, same pipeline: the observer's
+            estimate then measures its own bias while walking).
+        noise, seed: sensor noise (station sensors and FSRs, ``systems.simulation.sensors`` defaults).
+        observer_period: T, s.
+        log_period: period of the walking loggers, s.
+        meshcat: if given, a MeshcatVisualizer, the cable (red arrow of the pull) and the
+            estimated virtual force (blue arrow at the CoM) at 32 Hz.
+
+    Raises:
+        ValueError: bad parameters; a cable geometry that would lift the load into the
+            pulley during the planned walk, or never tighten it.
+    """
+    parameters = parameters if parameters is not None else WalkingParameters()
+    setup = setup if setup is not None else CableSetup()
+    if not (log_period > 0):
+        raise ValueError(f"log_period must be positive, got {log_period}")
+    builder = DiagramBuilder()
+    station = add_humanoid_station(builder, "nao_like", noise=noise, seed=seed)
+    plant, humanoid = station.plant, station.humanoid
+    kp, kd = default_gains(plant, humanoid)
+    q0 = station.initial_state[: plant.num_positions()]
+
+    # The plan first: it fixes the attachment height and the cable's slack.
+    controller = NaoWalkingController(plant, humanoid, parameters, initial_positions=q0, joint_stiffness=kp)
+    torso = controller.trajectory.torso_position  # (K, 3) planned torso origin, world
+    t_plan = controller.pattern.t
+    walk_k = int(np.searchsorted(t_plan, parameters.walk_start))
+    dz = float(controller.pattern.com[walk_k, 2] - torso[walk_k, 2])  # CoM height relative to the torso origin
+    p_BA = np.array([-setup.attachment_back, 0.0, dz])
+    A_plan = torso + p_BA  # the torso stays level with heading 0 in the plan
+    alpha = math.radians(setup.lateral_angle_deg)
+    pulley = np.array([A_plan[0, 0] - setup.pulley_distance * math.cos(alpha),
+                       A_plan[0, 1] - setup.pulley_distance * math.sin(alpha), setup.pulley_height])
+    reach = np.linalg.norm(A_plan - pulley, axis=1)  # |A - P| along the plan
+    d_tight = float(np.interp(A_plan[0, 0] + setup.tighten_distance, A_plan[:, 0], reach))
+    # Natural length: taut (stretch 0) when the load is on the ground and |A - P| = d_tight.
+    cable_length = d_tight + setup.pulley_height
+    stretch_hang = setup.load_mass * parameters.gravity / setup.stiffness
+    lift = reach - d_tight - stretch_hang  # planned load height (quasi-static), m
+    if reach.max() <= d_tight:
+        raise ValueError("CableSetup: the line never tightens during the planned walk "
+                         f"(tighten_distance {setup.tighten_distance} m >= the planned torso travel)")
+    if lift.max() > setup.pulley_height - setup.min_clearance:
+        raise ValueError(f"CableSetup: the load would rise {lift.max():.3f} m, into the pulley at "
+                         f"{setup.pulley_height} m: raise the pulley or tighten later")
+    planned_tighten = float(t_plan[np.argmax(reach >= d_tight)])
+    planned_lift = float(t_plan[np.argmax(lift > 0)])
+
+    builder.AddSystem(controller)
+    controller.set_name("nao_walking_controller")
+    builder.Connect(controller.GetOutputPort("desired_position"), station.desired_position)
+
+    cable = None
+    if pull:
+        cable = builder.AddSystem(PulleyLoad(plant, humanoid.base_body.name(), p_BA, pulley,
+                                             load_mass=setup.load_mass, cable_length=cable_length,
+                                             stiffness=setup.stiffness, damping=setup.damping,
+                                             gravity=parameters.gravity))
+        cable.set_name("pulley_load")
+        builder.Connect(plant.get_state_output_port(), cable.GetInputPort("state"))
+        mux = builder.AddSystem(ExternallyAppliedSpatialForceMultiplexer(1))
+        mux.set_name("applied_force_mux")
+        builder.Connect(cable.GetOutputPort("applied_spatial_forces"), mux.get_input_port(0))
+        builder.Connect(mux.get_output_port(), plant.get_applied_spatial_force_input_port())
+
+    contact_zmp = builder.AddSystem(ContactZmp(plant, humanoid))
+    contact_zmp.set_name("contact_zmp")
+    builder.Connect(plant.get_contact_results_output_port(), contact_zmp.GetInputPort("contact_results"))
+
+    # Observer pipeline: sensors only.
+    context0 = plant.CreateDefaultContext()
+    plant.SetPositions(context0, q0)
+    origin = humanoid.sole_frames["right"].CalcPoseInWorld(context0).translation()
+    standing = nao_observer_parameters(plant, humanoid.model_instance, period=observer_period)
+    obs_params = dataclasses.replace(WALKING, mass=standing.mass, gravity=standing.gravity, period=standing.period)
+    pipeline = add_observer_pipeline(builder, station, origin_W=origin, noise=noise, seed=seed, parameters=obs_params)
+    fsr, acc, observer = pipeline.fsr_array, pipeline.imu_com_acceleration, pipeline.observer
+
+    truth = builder.AddSystem(CableVirtualForceTruth(plant, humanoid, ground_height=float(origin[2])))
+    truth.set_name("cable_virtual_force_truth")
+    builder.Connect(plant.get_state_output_port(), truth.GetInputPort("state"))
+    if cable is not None:
+        builder.Connect(cable.GetOutputPort("force_world"), truth.GetInputPort("force_world"))
+        builder.Connect(cable.GetOutputPort("point_world"), truth.GetInputPort("point_world"))
+    else:
+        zero = builder.AddSystem(ConstantVectorSource(np.zeros(3)))
+        builder.Connect(zero.get_output_port(), truth.GetInputPort("force_world"))
+        builder.Connect(zero.get_output_port(), truth.GetInputPort("point_world"))
+
+    loggers = add_walking_loggers(builder, plant, controller, contact_zmp, log_period)
+    T = obs_params.period
+    observer_loggers = {
+        "virtual_force": LogVectorOutput(observer.GetOutputPort("virtual_force"), builder, T),
+        "valid": LogVectorOutput(observer.GetOutputPort("valid"), builder, T),
+        "truth": LogVectorOutput(truth.GetOutputPort("virtual_force"), builder, T),
+        "zmp": LogVectorOutput(pipeline.center_of_pressure.GetOutputPort("zmp"), builder, T),
+        "normal_force": LogVectorOutput(pipeline.center_of_pressure.GetOutputPort("normal_force"), builder, T),
+        "com_position": LogVectorOutput(pipeline.support_foot_com.GetOutputPort("com_position"), builder, T),
+        "com_acceleration": LogVectorOutput(acc.GetOutputPort("com_acceleration"), builder, T),
+        "fsr_forces": LogVectorOutput(fsr.GetOutputPort("fsr_forces"), builder, T),
+        "true_fsr_forces": LogVectorOutput(fsr.GetOutputPort("true_fsr_forces"), builder, T),
+    }
+    if cable is not None:
+        for name in ("force_world", "tension", "load_height"):
+            observer_loggers["cable_" + name if name == "force_world" else name] = LogVectorOutput(
+                cable.GetOutputPort(name), builder, T)
+    for name, logger in observer_loggers.items():
+        logger.set_name(f"log_observer_{name}")
+
+    visualizer = None
+    if meshcat is not None:
+        visualizer = MeshcatVisualizer.AddToBuilder(
+            builder, station.scene_graph, meshcat, MeshcatVisualizerParams(publish_period=1.0 / 32.0))
+        if cable is not None:
+            arrows = builder.AddSystem(ForceArrows(meshcat, 1, path="cable_force", newtons_per_meter=20.0))
+            arrows.set_name("cable_force_arrow")
+            builder.Connect(cable.GetOutputPort("force_world"), arrows.get_force_world_input_port())
+            builder.Connect(cable.GetOutputPort("point_world"), arrows.get_point_world_input_port())
+        estimate = builder.AddSystem(ForceArrows(meshcat, 1, path="estimated_virtual_force", newtons_per_meter=20.0,
+                                                 rgba=Rgba(0.1, 0.3, 0.9, 0.9), min_force=0.3))
+        estimate.set_name("estimated_force_arrow")
+        builder.Connect(observer.GetOutputPort("virtual_force"), estimate.get_force_world_input_port())
+        builder.Connect(truth.GetOutputPort("com_world"), estimate.get_point_world_input_port())
+
+    diagram = builder.Build()
+    diagram.set_name("nao_walk_pulled")
+    return diagram, NaoWalkPulledHandles(
+        station=station, controller=controller, contact_zmp=contact_zmp, loggers=loggers,
+        meshcat_visualizer=visualizer, cable=cable, setup=setup, slack_length=cable_length,
+        planned_tighten_time=planned_tighten, planned_lift_time=planned_lift, frame_origin=origin,
+        pipeline=pipeline, fsr_array=fsr, imu_com_acceleration=acc, observer=observer, truth=truth,
+        parameters=obs_params, observer_loggers=observer_loggers)
+
+
+def observer_metrics(handles: NaoWalkPulledHandles, root_context: Context, *, settle_time: float = 1.0) -> dict:
+    """Exp. 4 metrics from the observer loggers (ground truth only here).
+
+    The evaluation window ("the mass hangs and the robot walks steadily"): from
+    ``settle_time`` after the load leaves the ground (measured, ``load_height`` > 1 mm) to the
+    planned last touch-down (``walk_end``), restricted to samples where the load hangs.
+    The estimate of sample k is logged at t_{k+1} (observer timing, ``diagrams.observer.nao_force_observer``):
+    it is compared with the truth logged one sample earlier.
+
+    Returns:
+        dict with ``window_s`` [t0, t1], ``window_samples``, ``true_pull_x_mean_N`` (cable
+        force, mean over the window), ``true_virtual_x_mean_N`` (eq. 11), the estimate's
+        ``estimated_x_mean_N``, ``mean_error_x_N`` (estimate - cable pull), ``rms_error_x_N``
+        (sample by sample vs the cable pull), the same vs the virtual force, y and z
+        components, ``estimated_x_mean_before_pull_N`` (walking, line slack: the bias), and
+        ``signals``.
+    """
+    logs = {name: lg.FindLog(root_context) for name, lg in handles.observer_loggers.items()}
+    t = logs["virtual_force"].sample_times()
+    est = logs["virtual_force"].data().T
+    truth = logs["truth"].data().T
+    # Align: estimate at t_{k+1} is for the inputs at t_k.
+    est_k = np.vstack([est[1:], est[-1:]])
+    out: dict = {}
+    params = handles.controller.parameters
+    walk_end = params.walk_end
+    cable = logs.get("cable_force_world")
+    pull = cable.data().T if cable is not None else np.zeros_like(truth)
+    signals = {"t": t, "estimate": est_k, "virtual_truth": truth, "pull": pull,
+               "normal_force": logs["normal_force"].data()[0], "valid": logs["valid"].data()[0]}
+    if "load_height" in logs:
+        height = logs["load_height"].data()[0]
+        tension = logs["tension"].data()[0]
+        signals.update(load_height=height, tension=tension)
+        lifted = height > 1e-3
+        t_lift = float(t[np.argmax(lifted)]) if lifted.any() else float("nan")
+        out["measured_lift_time_s"] = t_lift
+        out["max_load_height_m"] = float(height.max())
+        window = lifted & (t >= t_lift + settle_time) & (t <= walk_end)
+    else:
+        window = (t >= params.walk_start + settle_time) & (t <= walk_end)
+    before = (t >= params.walk_start + settle_time) & (t < handles.planned_tighten_time) & (np.linalg.norm(pull, axis=1) == 0)
+    k = np.flatnonzero(window)
+    out["window_s"] = [float(t[k[0]]), float(t[k[-1]])] if k.size else [float("nan")] * 2
+    out["window_samples"] = int(k.size)
+    if k.size:
+        for i, axis in enumerate("xyz"):
+            out[f"true_pull_{axis}_mean_N"] = float(pull[k, i].mean())
+            out[f"true_virtual_{axis}_mean_N"] = float(truth[k, i].mean())
+            out[f"estimated_{axis}_mean_N"] = float(est_k[k, i].mean())
+            out[f"mean_error_{axis}_N"] = float(est_k[k, i].mean() - pull[k, i].mean())
+            out[f"rms_error_{axis}_N"] = float(np.sqrt(np.mean((est_k[k, i] - pull[k, i]) ** 2)))
+            out[f"rms_error_{axis}_vs_virtual_N"] = float(np.sqrt(np.mean((est_k[k, i] - truth[k, i]) ** 2)))
+        out["estimated_x_std_N"] = float(est_k[k, 0].std())
+        out["valid_fraction_in_window"] = float(signals["valid"][k].mean())
+    if before.any():
+        out["estimated_x_mean_before_pull_N"] = float(est_k[before, 0].mean())
+        out["estimated_x_rms_before_pull_N"] = float(np.sqrt(np.mean(est_k[before, 0] ** 2)))
+    fsr = logs["fsr_forces"].data()
+    true_fsr = logs["true_fsr_forces"].data()
+    if k.size:
+        # What the FSRs miss in the window (saturation at 25 N, noise clipped at 0), N.
+        out["fsr_missing_force_mean_N"] = float((true_fsr[:, k].sum(axis=0) - fsr[:, k].sum(axis=0)).mean())
+        out["fsr_saturated_fraction"] = float(np.mean(np.any(true_fsr[:, k] > handles.fsr_array.saturation, axis=0)))
+    out["normal_force_range_N"] = [float(np.percentile(signals["normal_force"][t > 0.1], 1)),
+                                   float(np.percentile(signals["normal_force"][t > 0.1], 99))]
+    out["signals"] = signals
+    out["window_mask"] = window
+    return out
+
+
+__all__ = ["CableSetup", "CableVirtualForceTruth", "LOAD_MASS", "NaoWalkPulledHandles",
+           "build_nao_walk_pulled_diagram", "observer_metrics"]

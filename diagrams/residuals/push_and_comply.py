@@ -1,0 +1,229 @@
+"""Push-and-comply diagram (Flacco et al. 2016, Sec. IV, Figs. 5-6): the humanoid is pushed
+down on both shoulders and complies through a joint admittance controller (eq. 14) driven
+by a residual, the classical one (eq. 7) or the internal one (eq. 11).
+
+    PushSource ─► MultibodyPlant (+ ground) ─► sensors ─► residual ─► JointAdmittanceController
+        ▲ truth        ▲ actuation                │          (eq. 14: q_d = q + K_a r T)
+        └── loggers    └── PdGravityController ◄──┴── sensed state     │ desired_position
+                                   ▲ desired_position ◄────────────────┘
+
+Scenarios are YAML files loaded into ``PushAndComplyScenario`` with
+``pydrake.common.yaml.yaml_load_typed``; the default is the paper's.
+"""
+
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydrake.common.yaml import yaml_load_typed
+from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams
+from pydrake.systems.framework import Diagram, DiagramBuilder
+from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
+
+from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station
+from systems.residuals.admittance import JointAdmittanceController, admittance_gains_by_group, joint_position_selector
+from systems.simulation.disturbances import PolynomialRampUpDown, Push, PushSource
+from systems.residuals.momentum_residuals import ClassicalResidual, InternalResidual
+
+RESIDUAL_KINDS = ("internal", "classical")
+
+
+@dataclass
+class PushAndComplyScenario:
+    """The experiment's settings (SI units). Defaults: the paper's scenario, Sec. IV.
+
+    Attributes:
+        model: the humanoid (``hrp4_like``).
+        duration: s (15 s in the paper).
+        push_start, push_peak_time, push_end: the polynomial force profile's times, s
+            (5, 8.5 and 12 s in the paper).
+        push_peak_force: N on each shoulder. The paper uses 5 N with ideal sensors; with the
+            default sensor noise the knee effort of a 5 N push (0.06 N m peak in the
+            floating-base model) is within 4 sigma of the residual's noise (0.016 N m RMS),
+            so an admittance gain that bends the knees also drifts on noise alone; 20 N
+            (about 5 % of the robot's weight per shoulder) gives a 4x larger signal.
+        push_direction: world direction of both forces (downward in the paper).
+        push_point: the point of each shoulder body that is pushed, in its frame, m.
+        residual_gain: K of the residual, 1/s.
+        admittance_gains: K_a per joint group of ``HumanoidHandles.joint_groups`` (legs, torso,
+            head, arms, hands) or per joint name, rad / (N m s).
+        dead_band: residual dead band of the admittance controller, N m (about the
+            residual's noise level, so that noise alone does not move the robot).
+        max_rate: joint velocity limit of the admittance controller, rad/s.
+        integrate_from: "measured" (eq. 14 as printed: q_d = q + K_a r T) or "desired"
+            (q_d integrates K_a r). With "measured" the PD keeps no stiffness, and a robot
+            whose gravity compensation ignores the ground reaction collapses under its own
+            weight (measured: the knees buckle); "desired" keeps the posture's stiffness.
+        noise: sensor noise on (the defaults of ``systems.simulation.sensors``).
+        seed: sensor noise seed.
+        contact_approximation: the plant's discrete contact approximation ("sap", "similar"
+            or "lagged", see ``diagrams.station.humanoid_station``); Drake's SAP by default.
+        log_period: loggers' sampling period, s.
+    """
+
+    model: str = "hrp4_like"
+    duration: float = 15.0
+    push_start: float = 5.0
+    push_peak_time: float = 8.5
+    push_end: float = 12.0
+    push_peak_force: float = 20.0
+    push_direction: list[float] = dataclasses.field(default_factory=lambda: [0.0, 0.0, -1.0])
+    push_point: list[float] = dataclasses.field(default_factory=lambda: [0.0, 0.0, 0.0])
+    residual_gain: float = 35.0
+    admittance_gains: dict[str, float] = dataclasses.field(
+        default_factory=lambda: {
+            "legs": 0.19,
+            "torso": 0.1,
+            "arms": 0.3,
+            "head": 0.0,
+            "hands": 0.0,
+            "R_ANKLE_P": 1.0,
+            "L_ANKLE_P": 1.0,
+        }
+    )
+    dead_band: float = 0.02
+    max_rate: float = 0.5
+    integrate_from: str = "desired"
+    noise: bool = True
+    seed: int = 0
+    contact_approximation: str = "sap"
+    log_period: float = 0.01
+
+
+def load_scenario(path: str | Path | None) -> PushAndComplyScenario:
+    """The scenario in the YAML file ``path`` (missing keys keep their defaults), or the
+    default scenario when ``path`` is None.
+
+    Raises:
+        ValueError: an unreadable file or a malformed scenario (the message says which).
+    """
+    if path is None:
+        return PushAndComplyScenario()
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"scenario file '{path}' does not exist")
+    try:
+        return yaml_load_typed(schema=PushAndComplyScenario, filename=str(path), defaults=PushAndComplyScenario())
+    except Exception as error:  # Drake's YAML reader raises RuntimeError with details
+        raise ValueError(f"could not read the scenario file '{path}': {error}") from error
+
+
+@dataclass
+class PushAndComplyHandles:
+    """What ``build_push_and_comply_diagram`` created."""
+
+    station: HumanoidStation
+    residual_kind: str
+    residual: ClassicalResidual | InternalResidual
+    admittance: JointAdmittanceController
+    push_source: PushSource
+    loggers: dict[str, VectorLogSink]
+    meshcat_visualizer: MeshcatVisualizer | None
+    overlay: dict | None
+
+
+def build_push_and_comply_diagram(
+    scenario: PushAndComplyScenario, residual_kind: str, meshcat: Meshcat | None = None
+) -> tuple[Diagram, PushAndComplyHandles]:
+    """Builds the closed loop of the module docstring with the ``residual_kind`` residual
+    ("internal" or "classical") driving the admittance controller.
+
+    Raises:
+        ValueError: an unknown residual kind, model or joint group; bad scenario values.
+    """
+    if residual_kind not in RESIDUAL_KINDS:
+        raise ValueError(f"unknown residual '{residual_kind}'; choose one of {RESIDUAL_KINDS}")
+    if not (0.0 <= scenario.push_start < scenario.push_peak_time < scenario.push_end <= scenario.duration):
+        raise ValueError("the scenario needs 0 <= push_start < push_peak_time < push_end <= duration")
+    builder = DiagramBuilder()
+    station = add_humanoid_station(
+        builder, scenario.model, noise=scenario.noise, seed=scenario.seed,
+        contact_approximation=scenario.contact_approximation,
+    )
+    plant, humanoid = station.plant, station.humanoid
+    if humanoid is None:
+        raise ValueError("push-and-comply needs one of the humanoid models (its shoulders and joint groups)")
+
+    # Two downward forces on the shoulders, polynomial profile (the paper's Sec. IV).
+    profile = PolynomialRampUpDown(scenario.push_peak_force, scenario.push_start, scenario.push_peak_time, scenario.push_end)
+    pushes = [
+        Push(body.name(), np.asarray(scenario.push_point, float), np.asarray(scenario.push_direction, float), profile)
+        for body in (humanoid.shoulder_bodies["right"], humanoid.shoulder_bodies["left"])
+    ]
+    push_source = builder.AddSystem(PushSource(plant, pushes))
+    push_source.set_name("push_source")
+    builder.Connect(push_source.GetOutputPort("applied_spatial_forces"), plant.get_applied_spatial_force_input_port())
+    builder.Connect(plant.get_state_output_port(), push_source.GetInputPort("state"))
+
+    # The residual, from the sensors only.
+    residual_type = InternalResidual if residual_kind == "internal" else ClassicalResidual
+    residual = builder.AddSystem(
+        residual_type(plant, scenario.residual_gain, known_wrench_frames=station.known_wrench_frames, model=station.dynamics_model)
+    )
+    residual.set_name(f"{residual_kind}_residual")
+    builder.Connect(station.sensed_state, residual.GetInputPort("state"))
+    builder.Connect(station.measured_torque, residual.GetInputPort("measured_torque"))
+    if station.known_wrenches is not None:
+        builder.Connect(station.known_wrenches, residual.GetInputPort("known_wrenches"))
+
+    # Joint admittance (eq. 14) on the measured joint positions.
+    gains = admittance_gains_by_group(plant, humanoid, scenario.admittance_gains)
+    admittance = builder.AddSystem(
+        JointAdmittanceController(
+            plant,
+            gains,
+            residual_includes_base=(residual_kind == "classical"),
+            dead_band=scenario.dead_band,
+            max_rate=scenario.max_rate,
+            integrate_from=scenario.integrate_from,
+        )
+    )
+    admittance.set_name("joint_admittance_controller")
+    measured_position = builder.AddSystem(joint_position_selector(plant))
+    builder.Connect(station.sensed_state, measured_position.get_input_port())
+    builder.Connect(residual.GetOutputPort("residual"), admittance.GetInputPort("residual"))
+    builder.Connect(measured_position.get_output_port(), admittance.GetInputPort("measured_position"))
+    builder.Connect(admittance.GetOutputPort("desired_position"), station.desired_position)
+
+    log = scenario.log_period
+    loggers = {
+        "state": LogVectorOutput(plant.get_state_output_port(), builder, log),
+        "residual": LogVectorOutput(residual.GetOutputPort("residual"), builder, log),
+        "tau_c_real": LogVectorOutput(push_source.GetOutputPort("tau_c_real"), builder, log),
+        "desired_position": LogVectorOutput(admittance.GetOutputPort("desired_position"), builder, log),
+        "force_world": LogVectorOutput(push_source.GetOutputPort("force_world"), builder, log),
+    }
+    visualizer = overlay = None
+    if meshcat is not None:
+        from systems.simulation.visualization import add_effort_visualization
+
+        # 32 Hz, the replay's frame rate: publishing faster only costs simulation time.
+        visualizer = MeshcatVisualizer.AddToBuilder(
+            builder, station.scene_graph, meshcat, MeshcatVisualizerParams(publish_period=1.0 / 32.0)
+        )
+        overlay = add_effort_visualization(
+            builder,
+            plant,
+            meshcat,
+            residual.GetOutputPort("residual"),
+            plant.get_state_output_port(),
+            list(station.topology.joints),
+            max_effort=2.0,
+            force_port=push_source.GetOutputPort("force_world"),
+            point_port=push_source.GetOutputPort("point_world"),
+            includes_base=(residual_kind == "classical"),
+        )
+    diagram = builder.Build()
+    diagram.set_name(f"push_and_comply_{residual_kind}")
+    return diagram, PushAndComplyHandles(
+        station=station,
+        residual_kind=residual_kind,
+        residual=residual,
+        admittance=admittance,
+        push_source=push_source,
+        loggers=loggers,
+        meshcat_visualizer=visualizer,
+        overlay=overlay,
+    )

@@ -1,0 +1,249 @@
+"""The humanoid station shared by the experiment diagrams: a discrete MultibodyPlant (1 ms,
+SAP, point contact) with the robot (and flat ground for the humanoids), the robot's sensors
+and its PD + gravity-compensation joint controller, whose ``desired_position`` input the
+caller connects (a constant posture, or an admittance controller).
+
+For ``hrp4_like`` and ``nao_like`` the robot stands on flat ground with its simulated sensors
+(``systems.simulation.sensors``); any other floating-base model (an SDFormat or URDF path) floats in zero
+gravity with no ground, and its "sensed" state is the true state (no sensor suite).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydrake.geometry import SceneGraph
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
+from pydrake.systems.framework import Context, DiagramBuilder, InputPort, OutputPort
+from pydrake.systems.primitives import MatrixGain, ZeroOrderHold
+
+from diagrams.station.standing import default_gains
+from models import (
+    MODEL_NAMES,
+    HumanoidHandles,
+    add_ground,
+    add_humanoid,
+    point_contact_scene_graph_config,
+    set_standing_state,
+)
+from systems.simulation.pd_gravity import PdGravityController
+from systems.residuals.momentum_residuals import ResidualModel
+from systems.simulation.sensors import SensorHandles, add_sensors
+from systems.common.topology import FloatingBaseTopology, floating_base_topology
+
+
+#: Drake's discrete contact approximations the station accepts (``MultibodyPlantConfig``),
+#: all solved by SAP. TAMSI is refused: Drake deprecated it (removal on or after 2026-09-01).
+CONTACT_APPROXIMATIONS = ("sap", "similar", "lagged")
+
+
+@dataclass
+class HumanoidStation:
+    """What ``add_humanoid_station`` added.
+
+    Attributes:
+        plant, scene_graph: the finalized plant and its SceneGraph.
+        humanoid: the robot's handles, or None for a model loaded from a file.
+        topology: the plant's floating-base topology (joints in v[6:] order).
+        controller: the PdGravityController; its ``desired_position`` input is NOT connected.
+        desired_position: that input port.
+        sensors: the sensor suite, or None (model from a file).
+        sensed_state: output port of the sensed [q; v] (the true state without sensors).
+        measured_torque: output port of the motor torques, v[6:] order.
+        known_wrench_frames: the F/T sensor frames (empty without F/T sensors).
+        known_wrenches: output port of their wrenches, or None.
+        initial_state: the plant's initial [q; v] (standing, or the posture held in space).
+        q_hold: the initial joint positions, v[6:] order, rad.
+        sensed_state_hold: the ZeroOrderHold between the sensors and the PD (humanoids), or
+            None. Its held sample is set by ``set_initial_state``: call it before
+            ``Simulator.Initialize``.
+        dynamics_model: the ``ResidualModel`` whose gravity the PD uses (humanoids), or
+            None. Give it to the diagram's residuals (``model=``): the PD reads the
+            sample they evaluated one step earlier, so the dynamics at each sensed state
+            are computed once for the PD and all residuals.
+    """
+
+    plant: MultibodyPlant
+    scene_graph: SceneGraph
+    humanoid: HumanoidHandles | None
+    topology: FloatingBaseTopology
+    controller: PdGravityController
+    desired_position: InputPort
+    sensors: SensorHandles | None
+    sensed_state: OutputPort
+    measured_torque: OutputPort
+    known_wrench_frames: tuple
+    known_wrenches: OutputPort | None
+    initial_state: np.ndarray
+    q_hold: np.ndarray
+    sensed_state_hold: ZeroOrderHold | None = None
+    dynamics_model: ResidualModel | None = None
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return tuple(j.name() for j in self.topology.joints)
+
+    def set_initial_state(self, root_context: Context, state: np.ndarray | None = None) -> None:
+        """Puts the robot in ``state`` ([q; v], default ``initial_state``) in the diagram's
+        ``root_context``, and the PD's held sensor sample at that state (noise-free: the
+        first reading). Use this rather than setting the plant's state alone: a hold left
+        at zero makes the PD raise a ValueError at the first step.
+
+        Raises:
+            ValueError: ``state`` of the wrong size or not finite.
+        """
+        x = self.initial_state if state is None else np.asarray(state, dtype=float).reshape(-1)
+        if x.shape != self.initial_state.shape or not np.isfinite(x).all():
+            raise ValueError(f"set_initial_state: state must be {self.initial_state.size} finite numbers [q; v]")
+        self.plant.SetPositionsAndVelocities(self.plant.GetMyMutableContextFromRoot(root_context), x)
+        if self.sensed_state_hold is not None:
+            self.sensed_state_hold.GetMyMutableContextFromRoot(root_context).SetDiscreteState(x)
+
+
+def add_humanoid_station(
+    builder: DiagramBuilder,
+    model: str,
+    *,
+    time_step: float = 1e-3,
+    noise: bool = True,
+    seed: int = 0,
+    contact_approximation: str = "sap",
+) -> HumanoidStation:
+    """Adds the station of the module docstring to ``builder``.
+
+    Args:
+        model: ``hrp4_like``, ``nao_like`` or a path to a floating-base SDFormat/URDF file.
+        time_step: the plant's discrete step, s.
+        contact_approximation: the discrete contact solver, one of
+            ``CONTACT_APPROXIMATIONS`` (Drake's ``discrete_contact_approximation``): "sap"
+            (default, Drake's convex solver), "similar" or "lagged". Drake's TAMSI solver
+            is deprecated and refused.
+        noise, seed: the sensors' noise (defaults of ``systems.simulation.sensors``) and its seed.
+
+    Raises:
+        ValueError: an unknown or unreadable model, a model without a floating base, an
+            unknown contact approximation.
+    """
+    if contact_approximation == "tamsi":
+        raise ValueError(
+            "contact approximation 'tamsi': Drake deprecated the TAMSI solver (removal on or after "
+            f"2026-09-01); choose one of {CONTACT_APPROXIMATIONS}"
+        )
+    if contact_approximation not in CONTACT_APPROXIMATIONS:
+        raise ValueError(
+            f"unknown contact approximation {contact_approximation!r}; choose one of {CONTACT_APPROXIMATIONS}"
+        )
+    plant, scene_graph = AddMultibodyPlant(
+        MultibodyPlantConfig(time_step=time_step, discrete_contact_approximation=contact_approximation,
+                             contact_model="point"),
+        point_contact_scene_graph_config(),
+        builder,
+    )
+    humanoid = _load(plant, scene_graph, model)
+    plant.Finalize()
+    topology = floating_base_topology(plant)  # clear ValueError for a model without a floating base
+
+    context = plant.CreateDefaultContext()
+    if humanoid is not None:
+        set_standing_state(plant, context, humanoid)
+        kp, kd = default_gains(plant, humanoid)
+    else:
+        _set_posture_inside_limits(plant, context, topology)
+        kp, kd = _generic_gains(plant, context, time_step)
+    initial_state = plant.GetPositionsAndVelocities(context)
+    q_hold = np.array([initial_state[j.position_start()] for j in topology.joints])
+
+    # Humanoids: gravity from the dynamics model the estimators share (see HumanoidStation).
+    dynamics_model = ResidualModel(plant) if humanoid is not None else None
+    controller = builder.AddSystem(PdGravityController(plant, kp, kd, gravity_model=dynamics_model))
+    controller.set_name("pd_gravity_controller")
+    builder.Connect(controller.GetOutputPort("actuation"), plant.get_actuation_input_port())
+    if humanoid is not None:
+        sensors = add_sensors(builder, plant, humanoid, noise=noise, seed=seed)
+        sensed_state, measured_torque = sensors.state, sensors.measured_torque
+        known_frames, known_wrenches = tuple(sensors.ft_frames), sensors.ft_wrenches
+    else:
+        sensors = None
+        sensed_state = plant.get_state_output_port()
+        # The torque the motors applied over the last step, in joint order (v[6:]).
+        to_joint_torque = builder.AddSystem(MatrixGain(plant.MakeActuationMatrix()[6:, :]))
+        builder.Connect(plant.get_net_actuation_output_port(), to_joint_torque.get_input_port())
+        measured_torque = to_joint_torque.get_output_port()
+        known_frames, known_wrenches = (), None
+    sensed_state_hold = None
+    if sensors is not None:
+        # One sensor reading per step, shared by the PD and the estimators. In a discrete
+        # MultibodyPlant diagram Drake evaluates the plant's actuation input (the PD and,
+        # through it, the whole Python sensor chain) before the plant's step, and the other
+        # periodic updates (residuals, admittance) after it, at the same time stamp, on the
+        # new state. Without a hold the sensor chain would run twice per step on two states;
+        # with it the chain runs once, in the update pass, and the PD reads at t_k + T the
+        # sample the estimators saw at t_k: the same plant state x(t_k + T), so the closed
+        # loop is unchanged (bit for bit without noise; measured), at ~9 % less time per step.
+        sensed_state_hold = builder.AddSystem(ZeroOrderHold(time_step, len(initial_state)))
+        sensed_state_hold.set_name("sensed_state_hold")
+        builder.Connect(sensed_state, sensed_state_hold.get_input_port())
+        builder.Connect(sensed_state_hold.get_output_port(), controller.GetInputPort("state"))
+    else:
+        builder.Connect(sensed_state, controller.GetInputPort("state"))
+    return HumanoidStation(
+        plant=plant,
+        scene_graph=scene_graph,
+        humanoid=humanoid,
+        topology=topology,
+        controller=controller,
+        desired_position=controller.GetInputPort("desired_position"),
+        sensors=sensors,
+        sensed_state=sensed_state,
+        measured_torque=measured_torque,
+        known_wrench_frames=known_frames,
+        known_wrenches=known_wrenches,
+        initial_state=initial_state,
+        q_hold=q_hold,
+        sensed_state_hold=sensed_state_hold,
+        dynamics_model=dynamics_model,
+    )
+
+
+def _load(plant: MultibodyPlant, scene_graph: SceneGraph, model: str) -> HumanoidHandles | None:
+    if model in MODEL_NAMES:
+        handles = add_humanoid(plant, model, scene_graph=scene_graph)
+        add_ground(plant)
+        return handles
+    path = Path(model)
+    if not path.is_file():
+        raise ValueError(f"--model: '{model}' is neither one of {MODEL_NAMES} nor a readable model file")
+    try:
+        Parser(plant).AddModels(str(path))
+    except Exception as error:  # Drake's parser raises RuntimeError with its own message
+        raise ValueError(f"could not parse the model file '{path}': {error}") from error
+    plant.mutable_gravity_field().set_gravity_vector([0.0, 0.0, 0.0])
+    return None
+
+
+def _set_posture_inside_limits(plant: MultibodyPlant, context: Context, topology) -> None:
+    """Default joint positions, moved to the middle of the range where 0 is within 0.05 of a
+    joint limit (a limit's constraint force would be an unmodelled external effort)."""
+    for joint in topology.joints:
+        lower, upper = joint.position_lower_limits()[0], joint.position_upper_limits()[0]
+        value = plant.GetPositions(context)[joint.position_start()]
+        if not (lower + 0.05 <= value <= upper - 0.05):
+            middle = 0.5 * (lower + upper) if np.isfinite(lower) and np.isfinite(upper) else value
+            q = plant.GetPositions(context)
+            q[joint.position_start()] = middle
+            plant.SetPositions(context, q)
+
+
+def _generic_gains(plant: MultibodyPlant, context: Context, period: float) -> tuple[np.ndarray, np.ndarray]:
+    """PD gains for any robot, from its joint-space inertia H_fb at the posture: kd = 0.2 H/T
+    and kp = 10 kd keep the explicit 1 kHz PD stable (kd T / H well below 2)."""
+    from systems.dynamics.floating_base import FloatingBaseDynamics
+
+    x = plant.GetPositionsAndVelocities(context)
+    nq = plant.num_positions()
+    inertia = np.diag(FloatingBaseDynamics(plant).compute(x[:nq], x[nq:]).H_fb)
+    kd = 0.2 * inertia / period
+    return 10.0 * kd, kd

@@ -1,0 +1,244 @@
+"""Standing diagram: a humanoid on the ground under PD + gravity compensation.
+
+    ConstantVectorSource(q_nominal) ─► PdGravityController ─► MultibodyPlant (+ ground)
+                                            ▲ state                │
+                                            └──────────────────────┤─► state logger
+                                                                   └─► SceneGraph ─► Meshcat (optional)
+
+The plant is discrete (default 1 ms) with SAP and point contact, as measured in
+DESIGN.md; the feet touch the ground through four small spheres each.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.geometry import Meshcat, MeshcatVisualizer, SceneGraph
+from pydrake.multibody.plant import (
+    AddMultibodyPlant,
+    MultibodyPlant,
+    MultibodyPlantConfig,
+)
+from pydrake.systems.framework import Context, Diagram, DiagramBuilder
+from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
+
+from models import (
+    MODEL_NAMES,
+    HumanoidHandles,
+    add_ground,
+    add_humanoid,
+    point_contact_scene_graph_config,
+    set_standing_state,
+)
+from systems.simulation.pd_gravity import PdGravityController, joint_vector_from_names
+
+#: Default PD gains per joint group: (kp [N m/rad], kd [N m s/rad]). Chosen so that the
+#: explicit 1 kHz PD is well inside its stability limit (kd·dt / reflected inertia < 0.3)
+#: while the stance legs carry the body weight with < ~1° static error (gravity
+#: compensation only covers the free-floating robot's own joint gravity, not the
+#: body weight supported through the feet).
+DEFAULT_GAINS = {
+    "hrp4_like": {
+        "legs": (3000.0, 30.0),
+        "torso": (1500.0, 20.0),
+        "head": (50.0, 1.0),
+        "arms": (200.0, 4.0),
+        "wrists": (50.0, 1.0),
+        "hands": (10.0, 0.2),
+    },
+    "nao_like": {
+        "legs": (40.0, 0.4),
+        "torso": (40.0, 0.4),
+        "head": (5.0, 0.05),
+        "arms": (5.0, 0.05),
+        "wrists": (2.0, 0.02),
+        "hands": (1.0, 0.01),
+    },
+}
+
+
+@dataclass
+class StandingHandles:
+    """What build_standing_diagram() created.
+
+    Attributes:
+        plant: the MultibodyPlant (discrete, SAP, point contact).
+        scene_graph: its SceneGraph.
+        humanoid: the robot's HumanoidHandles.
+        controller: the PdGravityController.
+        state_logger: VectorLogSink of the plant state [q; v].
+        q_desired: the constant desired joint positions (v[6:] order), rad.
+        meshcat_visualizer: the MeshcatVisualizer, or None.
+    """
+
+    plant: MultibodyPlant
+    scene_graph: SceneGraph
+    humanoid: HumanoidHandles
+    controller: PdGravityController
+    state_logger: VectorLogSink
+    q_desired: np.ndarray
+    meshcat_visualizer: MeshcatVisualizer | None = None
+
+
+def default_gains(plant: MultibodyPlant, humanoid: HumanoidHandles) -> tuple[np.ndarray, np.ndarray]:
+    """Per-joint default (kp, kd) arrays in v[6:] order for the humanoid's model."""
+    table = DEFAULT_GAINS[humanoid.name]
+    kp, kd = {}, {}
+    for group in ("legs", "torso", "head", "arms", "hands"):
+        for j in humanoid.joint_groups[group]:
+            key = "wrists" if ("WRIST" in j.upper()) else group
+            kp[j], kd[j] = table[key]
+    return (joint_vector_from_names(plant, kp), joint_vector_from_names(plant, kd))
+
+
+def build_standing_diagram(
+    model_name: str,
+    *,
+    time_step: float = 1e-3,
+    meshcat: Meshcat | None = None,
+    kp=None,
+    kd=None,
+    state_log_period: float = 0.01,
+) -> tuple[Diagram, StandingHandles]:
+    """Builds the standing diagram for one humanoid.
+
+    Args:
+        model_name: one of models.MODEL_NAMES.
+        time_step: plant discrete time step, s.
+        meshcat: if given, a MeshcatVisualizer is added.
+        kp: PD stiffness, N m/rad, scalar or per joint (v[6:] order); default per model
+            (DEFAULT_GAINS).
+        kd: PD damping, N m s/rad, scalar or per joint; default per model.
+        state_log_period: period of the state logger, s.
+
+    Returns:
+        (diagram, StandingHandles).
+    """
+    if model_name not in MODEL_NAMES:
+        raise ValueError(f"unknown humanoid model {model_name!r}; valid names: {MODEL_NAMES}")
+    builder = DiagramBuilder()
+    config = MultibodyPlantConfig(
+        time_step=time_step, discrete_contact_approximation="sap", contact_model="point")
+    plant, scene_graph = AddMultibodyPlant(config, point_contact_scene_graph_config(), builder)
+    humanoid = add_humanoid(plant, model_name, scene_graph=scene_graph)
+    add_ground(plant)
+    plant.Finalize()
+
+    kp_default, kd_default = default_gains(plant, humanoid)
+    controller = builder.AddSystem(PdGravityController(
+        plant, kp_default if kp is None else kp, kd_default if kd is None else kd))
+    controller.set_name("pd_gravity_controller")
+    q_desired = joint_vector_from_names(plant, humanoid.nominal_posture)
+    source = builder.AddSystem(ConstantVectorSource(q_desired))
+    source.set_name("desired_position")
+    builder.Connect(source.get_output_port(), controller.get_desired_position_input_port())
+    builder.Connect(plant.get_state_output_port(), controller.get_state_input_port())
+    builder.Connect(controller.get_output_port(), plant.get_actuation_input_port())
+    logger = LogVectorOutput(plant.get_state_output_port(), builder, state_log_period)
+    logger.set_name("state_logger")
+    visualizer = None
+    if meshcat is not None:
+        visualizer = MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)
+    diagram = builder.Build()
+    diagram.set_name(f"standing_{model_name}")
+    return diagram, StandingHandles(plant, scene_graph, humanoid, controller, logger,
+                                    q_desired, visualizer)
+
+
+def set_initial_state(diagram: Diagram, context: Context, handles: StandingHandles) -> None:
+    """Puts the robot in its nominal posture, both soles on the ground, at rest."""
+    plant_context = handles.plant.GetMyMutableContextFromRoot(context)
+    set_standing_state(handles.plant, plant_context, handles.humanoid)
+
+
+# ---------------------------------------------------------------------------------------
+# Measurements shared by the standing test and apps.standing.
+# ---------------------------------------------------------------------------------------
+
+
+def foot_sphere_normal_forces(plant: MultibodyPlant, plant_context: Context,
+                              humanoid: HumanoidHandles) -> dict[str, np.ndarray]:
+    """Ground normal force (world z, N) on each foot contact sphere, FSR order.
+
+    Reads the plant's contact results (point contact); a sphere without contact reads 0.
+    """
+    results = plant.get_contact_results_output_port().Eval(plant_context)
+    where = {g: (side, i) for side, ids in humanoid.fsr_geometries.items()
+             for i, g in enumerate(ids)}
+    out = {side: np.zeros(len(ids)) for side, ids in humanoid.fsr_geometries.items()}
+    for c in range(results.num_point_pair_contacts()):
+        info = results.point_pair_contact_info(c)
+        pair = info.point_pair()
+        f_on_B = info.contact_force()
+        if pair.id_B in where:
+            side, i = where[pair.id_B]
+            out[side][i] += f_on_B[2]
+        elif pair.id_A in where:
+            side, i = where[pair.id_A]
+            out[side][i] -= f_on_B[2]
+    return out
+
+
+@dataclass
+class StandingMetrics:
+    """Summary of a standing run (see standing_metrics())."""
+
+    base_drift_m: float  # max |p_WB(t) - p_WB(t_settle)| for t >= t_settle, m
+    base_drift_rad: float  # max rotation angle of R_WB(t_settle)^T R_WB(t), rad
+    sole_tilt_rad: dict  # final angle between each sole's z and world z, rad
+    sole_height_m: dict  # final height of each sole frame origin, m
+    sphere_forces_N: dict  # final normal force per foot sphere, N
+    fell: bool
+
+    @property
+    def min_sphere_force_N(self) -> float:
+        return float(min(f.min() for f in self.sphere_forces_N.values()))
+
+    @property
+    def feet_flat(self) -> bool:
+        return (max(self.sole_tilt_rad.values()) < np.radians(1.0)
+                and max(abs(h) for h in self.sole_height_m.values()) < 1e-3
+                and self.min_sphere_force_N > 0.0)
+
+
+def standing_metrics(handles: StandingHandles, context: Context, settle_time: float = 1.0
+                     ) -> StandingMetrics:
+    """Base drift after ``settle_time`` from the state log, and the final foot contact."""
+    plant = handles.plant
+    plant_context = plant.GetMyContextFromRoot(context)
+    log = handles.state_logger.FindLog(context)
+    t, x = log.sample_times(), log.data()
+    base = handles.humanoid.base_body
+    q_start = base.floating_positions_start()
+    keep = t >= settle_time - 1e-9
+    quats = x[q_start:q_start + 4, keep]
+    pos = x[q_start + 4:q_start + 7, keep]
+    drift_m, drift_rad = 0.0, 0.0
+    if pos.shape[1] > 0:
+        drift_m = float(np.max(np.linalg.norm(pos - pos[:, :1], axis=0)))
+        q0 = quats[:, 0] / np.linalg.norm(quats[:, 0])
+        dots = np.abs(q0 @ (quats / np.linalg.norm(quats, axis=0)))
+        drift_rad = float(np.max(2.0 * np.arccos(np.clip(dots, -1.0, 1.0))))
+    tilt, height = {}, {}
+    for side, frame in handles.humanoid.sole_frames.items():
+        X = frame.CalcPoseInWorld(plant_context)
+        tilt[side] = float(np.arccos(np.clip(X.rotation().matrix()[2, 2], -1.0, 1.0)))
+        height[side] = float(X.translation()[2])
+    forces = foot_sphere_normal_forces(plant, plant_context, handles.humanoid)
+    z_base = plant.EvalBodyPoseInWorld(plant_context, base).translation()[2]
+    z_base0 = x[q_start + 6, 0] if x.shape[1] else z_base
+    fell = bool(z_base < 0.7 * z_base0 or drift_m > 0.10 or drift_rad > np.radians(20))
+    return StandingMetrics(drift_m, drift_rad, tilt, height, forces, fell)
+
+
+__all__ = [
+    "DEFAULT_GAINS",
+    "StandingHandles",
+    "StandingMetrics",
+    "build_standing_diagram",
+    "default_gains",
+    "foot_sphere_normal_forces",
+    "set_initial_state",
+    "standing_metrics",
+]

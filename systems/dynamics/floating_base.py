@@ -1,0 +1,189 @@
+"""Floating-base decomposition of a humanoid's dynamics: Flacco et al. (2016) eq. (9).
+
+``FloatingBaseDynamics(plant, implementation)`` computes, at a state (q, v) in Drake's
+coordinates, the paper's H, F, I0c, C^, p^0c (Algorithm 1), their time derivatives
+(Algorithm 2), the floating inertia H^fb, its derivative (eq. 13), the floating bias C^fb,
+and the floating Jacobian J^fb of a point (eq. 12). Two implementations give the same numbers:
+
+* ``"fast"``: Drake's C++ kernels (mass matrix, bias term, gravity, Jacobians) plus the
+  derivative of the mass matrix along the joint velocities by a central difference of two
+  extra mass matrices, vectorised numpy, no per-body Python loop.
+* ``"reference"``: the paper's recursive Algorithms 1-2 in spatial-vector algebra
+  (``systems.dynamics.floating_base_reference``), a faithful and slower O(n depth) implementation.
+
+Coordinates of the outputs: see ``systems.dynamics.floating_base_terms`` (the paper's base frame F0
+for F, I0c, p^ and the base velocity; joint order = the plant's ``v[6:]``). The floating
+Jacobian is returned in world coordinates.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import Frame, JacobianWrtVariable
+
+from systems.dynamics.floating_base_terms import FloatingBaseTerms, reduce_to_floating_terms
+from systems.dynamics.base_state import checked_state, quaternion_to_rotation
+from systems.common.topology import floating_base_topology, uniform_gravity
+
+IMPLEMENTATIONS = ("fast", "reference")
+
+#: Length of the configuration-space step of the mass-matrix central difference [rad or m].
+#: Truncation error ~ step^2, rounding error ~ 1e-16 / step: 1e-5 balances both (~1e-10).
+MASS_MATRIX_DERIVATIVE_STEP = 1e-5
+
+class DrakeFloatingBaseDynamics:
+    """The ``"fast"`` implementation: Drake's mass matrix, bias and gravity kernels.
+
+    F0-expressed H, F and I0c depend only on the joint positions, so the mass matrix is
+    evaluated with the base at the world origin with identity rotation (there Drake's
+    world-aligned base coordinates coincide with F0's). Its time derivative along the
+    motion is the directional derivative along the joint velocities, taken by a central
+    difference of two more mass matrices (relative error ~1e-10). The bias at the same
+    identity pose with the base velocity expressed in F0 is Drake's C v in F0; gravity and
+    the change to Featherstone's base acceleration are added through M (see ``compute``).
+    """
+
+    def __init__(self, plant: MultibodyPlant, derivative_step: float = MASS_MATRIX_DERIVATIVE_STEP):
+        self.topology = floating_base_topology(plant)
+        self._plant = plant
+        self._n = self.topology.num_joints
+        self._step = float(derivative_step)
+        # Context at the identity base pose: mass matrices and bias in F0.
+        self._context_F0 = plant.CreateDefaultContext()
+        # Context at the true base pose: Jacobians in the world.
+        self._context_W = plant.CreateDefaultContext()
+        self._gravity_W = uniform_gravity(plant)
+        R_WP = self.topology.free_joint.frame_on_parent().CalcPoseInWorld(self._context_W).rotation().matrix()
+        self._R_WP = None if np.array_equal(R_WP, np.eye(3)) else R_WP
+        self._sizes = (plant.num_positions(), plant.num_velocities())
+        self._q_F0 = plant.GetPositions(self._context_F0).copy()
+        self._q_F0[:7] = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+
+    def _mass_matrix_F0(self, q_joints: np.ndarray) -> np.ndarray:
+        self._q_F0[7:] = q_joints
+        self._plant.SetPositions(self._context_F0, self._q_F0)
+        return self._plant.CalcMassMatrix(self._context_F0)
+
+    def compute(self, q: np.ndarray, v: np.ndarray) -> FloatingBaseTerms:
+        """The decomposition of eq. (9) at (q, v), in the coordinates of ``FloatingBaseTerms``."""
+        plant, n = self._plant, self._n
+        q, v = checked_state(plant, q, v, self._sizes)
+        # Drake's free joint gives the pose of F0 (its child frame M) in its parent frame P,
+        # which is fixed in the world (usually the world frame itself), and velocities
+        # expressed in P.
+        R_PB = quaternion_to_rotation(q[:4])
+        R_WB = R_PB if self._R_WP is None else self._R_WP @ R_PB
+        v0 = (v[:6].reshape(2, 3) @ R_PB).reshape(6)  # [R_PB^T w_PB_P; R_PB^T v_PBo_P]
+        q_joints, qdot = q[7:], v[6:]
+
+        # Mass matrix derivative along the joint motion (the only thing F0 blocks depend on).
+        speed = math.sqrt(float(qdot @ qdot))
+        if speed > 0.0:
+            h = self._step / speed
+            dq = h * qdot
+            M_dot = self._mass_matrix_F0(q_joints + dq)
+            M_dot -= self._mass_matrix_F0(q_joints - dq)
+            M_dot *= 0.5 / h
+        else:
+            M_dot = np.zeros((6 + n, 6 + n))
+
+        M = self._mass_matrix_F0(q_joints)
+        v_F0 = v.copy()
+        v_F0[:6] = v0
+        plant.SetVelocities(self._context_F0, v_F0)
+        Cv = plant.CalcBiasTerm(self._context_F0)
+        # Paper's bias C v + g in F0 coordinates (Algorithm 1). Two facts make it cheap:
+        # * uniform gravity's generalized force is M[:, 3:6] g_B (the base's translational
+        #   columns of M are m J_com^T), with g_B the gravity expressed in F0;
+        # * Featherstone's base acceleration (derivative of F0 coordinates) differs from
+        #   Drake's world-aligned one by [0; w_B x v_B], adding M[:, 3:6] (w_B x v_B).
+        # Together they are Algorithm 1's fictitious base acceleration a_0^vp = -a_g.
+        wx, wy, wz, vx, vy, vz = v0.tolist()
+        gx, gy, gz = (self._gravity_W @ R_WB).tolist()
+        a_fictitious = np.array((wy * vz - wz * vy - gx, wz * vx - wx * vz - gy, wx * vy - wy * vx - gz))
+        bias = Cv + M[:, 3:6] @ a_fictitious
+
+        return reduce_to_floating_terms(
+            H=M[6:, 6:],
+            F=M[:6, 6:],
+            I0c=M[:6, :6],
+            C_hat=bias[6:],
+            p_hat=bias[:6],
+            H_dot=M_dot[6:, 6:],
+            F_dot=M_dot[:6, 6:],
+            I0c_dot=M_dot[:6, :6],
+            R_WB=R_WB,
+            v0=v0,
+        )
+
+    def floating_jacobian(
+        self, q: np.ndarray, frame: Frame, p_FoP: np.ndarray, *, spatial: bool = False
+    ) -> np.ndarray:
+        """J^fb of point P fixed in ``frame``, in world coordinates (eq. 12: tau = J^fb^T f_W).
+
+        Args:
+            q: the plant's positions.
+            frame: a frame of the plant; P is fixed in it.
+            p_FoP: position of P in ``frame`` [m].
+            spatial: False for the (3, n) Jacobian of a force at P; True for the (6, n)
+                Jacobian of a wrench [moment about P; force], both in world coordinates.
+        """
+        plant = self._plant
+        q, _ = checked_state(plant, q, np.zeros(plant.num_velocities()))
+        p_FoP = np.asarray(p_FoP, dtype=float).reshape(3)
+        plant.SetPositions(self._context_W, q)
+        world = plant.world_frame()
+        if spatial:
+            J = plant.CalcJacobianSpatialVelocity(self._context_W, JacobianWrtVariable.kV, frame, p_FoP, world, world)
+        else:
+            J = plant.CalcJacobianTranslationalVelocity(
+                self._context_W, JacobianWrtVariable.kV, frame, p_FoP, world, world
+            )
+        M = plant.CalcMassMatrix(self._context_W)
+        # Coordinate-invariant elimination of the base: J_j - J_b M_bb^-1 M_bj.
+        return J[:, 6:] - J[:, :6] @ np.linalg.solve(M[:6, :6], M[:6, 6:])
+
+
+class FloatingBaseDynamics:
+    """Floating-base decomposition (paper eq. 9, Algorithms 1-2, eq. 13) of a Drake plant.
+
+    The plant must be finalized and have exactly one floating base (a quaternion free
+    joint) and otherwise only 1-DoF (revolute, prismatic) and weld joints; anything else
+    raises ``ValueError`` at construction (see ``systems.common.topology``).
+
+    Args:
+        plant: the robot's finalized MultibodyPlant (its own contexts are created here).
+        implementation: ``"fast"`` (Drake kernels) or ``"reference"`` (the paper's
+            recursive algorithms).
+    """
+
+    def __init__(self, plant: MultibodyPlant, implementation: str = "fast"):
+        if implementation not in IMPLEMENTATIONS:
+            raise ValueError(f"unknown implementation '{implementation}'; choose one of {IMPLEMENTATIONS}")
+        self.implementation = implementation
+        if implementation == "fast":
+            self._impl = DrakeFloatingBaseDynamics(plant)
+        else:
+            from systems.dynamics.floating_base_reference import RecursiveFloatingBaseDynamics
+
+            self._impl = RecursiveFloatingBaseDynamics(plant)
+        self.topology = floating_base_topology(plant)
+        self.plant = plant
+
+    @property
+    def num_joints(self) -> int:
+        """n, the number of joint velocities (nv - 6)."""
+        return self.topology.num_joints
+
+    def compute(self, q: np.ndarray, v: np.ndarray) -> FloatingBaseTerms:
+        """All terms of eq. (9) and their derivatives at (q, v) (Drake's coordinates in)."""
+        return self._impl.compute(q, v)
+
+    def floating_jacobian(
+        self, q: np.ndarray, frame: Frame, p_FoP: np.ndarray, *, spatial: bool = False
+    ) -> np.ndarray:
+        """J^fb (3 x n, or 6 x n with ``spatial``) of a point fixed in ``frame``, world coordinates."""
+        return self._impl.floating_jacobian(q, frame, p_FoP, spatial=spatial)

@@ -1,0 +1,889 @@
+"""Where and how hard: contact force estimation, contact detection and single-contact
+localization from the residuals of Flacco, Paolillo, Kheddar (2016), Secs. V-VI.
+
+* ``ContactForceEstimator``: forces at contact points from the residuals, three modes:
+  ``"external"`` eq. (19), the single unknown contact's force from the external residual;
+  ``"stacked"`` eq. (20), k known contact points from the external AND internal residuals
+  by a (weighted, optionally damped) pseudo-inverse; ``"classical"`` eq. (15), the
+  pseudo-inverse of the classical residual (the baseline).
+* ``ContactDetector``: contact / no contact from the residuals' Mahalanobis norms with
+  thresholds from the sensor noise (chi-square quantiles) and hysteresis; time of detection.
+* ``ContactLocalizer``: Sec. VI and Fig. 9: the line of action of the estimated force
+  (eq. 22), its entry points into the robot's collision primitives, and the candidate whose
+  predicted joint effort J^fb,T f_hat (eq. 12) best matches the internal residual.
+* ``predicted_residual_covariances``: the noise of the internal and external residuals
+  predicted from the sensor noise (what the detector's default thresholds come from).
+
+Conventions (as ``systems.residuals.momentum_residuals``): joint vectors in the plant's v[6:] order (the free
+joint's velocities first); ``external_wrench_world`` = [moment about the WORLD origin, N m;
+force, N], world frame; ``residual`` (internal) = n = nv - 6 joint efforts, N m; the
+classical residual = nv entries, [moment about the F0 origin; force] in F0, then joints.
+A point force f at p on body B has the world wrench [p x f; f], the classical residual
+J^T f = [R_WF0^T (p - p_F0) x f; R_WF0^T f; J_j^T f] and the internal residual
+J^fb,T f with J^fb = J_j - J_b M_bb^-1 M_bj (eq. 12, ``FloatingBaseDynamics``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from pydrake.geometry import SceneGraph, SceneGraphInspector
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable, RigidBody
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem, ValueProducer
+from scipy.stats import chi2
+
+from systems.simulation import sensors as _sensors
+from systems.residuals.geometry_intersection import (
+    RobotGeometry,
+    line_intersections,
+    outward_normals,
+    signed_distances,
+)
+from systems.common.checks import eval_finite_input, positive_number
+from systems.common.topology import floating_base_topology
+
+DEFAULT_PERIOD = 1e-3  # s
+
+__all__ = [
+    "ContactDetector",
+    "ContactForceEstimator",
+    "ContactLocalizer",
+    "LocalizationResult",
+    "STATUS_REASONS",
+    "predicted_residual_covariances",
+]
+
+
+# ---------------------------------------------------------------------------------------
+# Shared kinematics: Jacobians and the floating-base elimination at one sensed q.
+# ---------------------------------------------------------------------------------------
+
+
+def _skew(p: np.ndarray) -> np.ndarray:
+    x, y, z = p
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    ax, ay, az = a.tolist()
+    bx, by, bz = b.tolist()
+    return np.array((ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx))
+
+
+class _Kinematics:
+    """A private plant context at the sensed positions: body poses, translational Jacobians,
+    the base elimination A = M_bb^-1 M_bj (computed once per q), F0's pose."""
+
+    def __init__(self, plant: MultibodyPlant, who: str):
+        if not plant.is_finalized():
+            raise ValueError(f"{who}: the plant must be finalized")
+        self.topology = floating_base_topology(plant)  # ValueError without a floating base
+        if self.topology.free_joint.velocity_start() != 0 or self.topology.free_joint.position_start() != 0:
+            raise ValueError(f"{who}: the free joint's coordinates must come first (q[:7], v[:6])")
+        self.plant = plant
+        self.context = plant.CreateDefaultContext()
+        self.nq, self.nv = plant.num_positions(), plant.num_velocities()
+        self.n = self.nv - 6
+        self._q_key: bytes | None = None
+        self._A: np.ndarray | None = None
+        self._world = plant.world_frame()
+
+    def set_positions(self, q: np.ndarray) -> None:
+        key = q.tobytes()
+        if key != self._q_key:
+            self.plant.SetPositions(self.context, q)
+            self._q_key = key
+            self._A = None
+
+    def elimination(self) -> np.ndarray:
+        """A = M_bb^-1 M_bj (6 x n) at the current q: J^fb = J_j - J_b A."""
+        if self._A is None:
+            M = self.plant.CalcMassMatrix(self.context)
+            self._A = np.linalg.solve(M[:6, :6], M[:6, 6:])
+        return self._A
+
+    def jacobian(self, body: RigidBody, p_BoP_B: np.ndarray) -> np.ndarray:
+        """(3, nv) translational Jacobian of point P of ``body`` w.r.t. v, world."""
+        return self.plant.CalcJacobianTranslationalVelocity(
+            self.context, JacobianWrtVariable.kV, body.body_frame(), p_BoP_B, self._world, self._world
+        )
+
+    def floating_jacobian(self, body: RigidBody, p_BoP_B: np.ndarray) -> np.ndarray:
+        """(3, n) J^fb of point P (eq. 12): tau = J^fb^T f_W."""
+        J = self.jacobian(body, p_BoP_B)
+        return J[:, 6:] - J[:, :6] @ self.elimination()
+
+    def body_pose(self, body: RigidBody) -> np.ndarray:
+        return self.plant.EvalBodyPoseInWorld(self.context, body).GetAsMatrix34()
+
+    def base_pose(self) -> np.ndarray:
+        return self.topology.base_frame.CalcPoseInWorld(self.context).GetAsMatrix34()
+
+
+def _resolve_body(plant: MultibodyPlant, body, who: str) -> RigidBody:
+    if isinstance(body, RigidBody):
+        if int(body.index()) >= plant.num_bodies() or plant.get_body(body.index()).name() != body.name():
+            raise ValueError(f"{who}: body '{body.name()}' does not belong to this plant")
+        resolved = plant.get_body(body.index())
+    elif isinstance(body, str):
+        if not plant.HasBodyNamed(body):
+            raise ValueError(f"{who}: unknown body '{body}'")
+        resolved = plant.GetBodyByName(body)
+    elif isinstance(body, (int, np.integer, BodyIndex)):
+        index = int(body)
+        if not 0 <= index < plant.num_bodies():
+            raise ValueError(f"{who}: body index {index} out of range [0, {plant.num_bodies()})")
+        resolved = plant.get_body(BodyIndex(index))
+    else:
+        raise ValueError(f"{who}: a body must be a RigidBody, a name or an index, got {type(body).__name__}")
+    if resolved.index() == plant.world_body().index():
+        raise ValueError(f"{who}: the world body cannot carry a contact of the robot")
+    return resolved
+
+
+def _weights(value, size: int, what: str) -> np.ndarray:
+    w = np.asarray(value, dtype=float)
+    if w.ndim == 0:
+        w = np.full(size, float(w))
+    if w.shape != (size,) or not np.all(np.isfinite(w)) or np.any(w < 0.0):
+        raise ValueError(f"{what} must be a non-negative scalar or {size} non-negative finite numbers, got shape {w.shape}")
+    return w
+
+
+# ---------------------------------------------------------------------------------------
+# ContactForceEstimator: eqs. (15), (19), (20).
+# ---------------------------------------------------------------------------------------
+
+
+class ContactForceEstimator(LeafSystem):
+    """Forces at contact points from the momentum residuals (paper Sec. V).
+
+    Modes:
+
+    * ``"external"``, eq. (19): one unknown contact; its force is the force part of the
+      external residual, f_1 = r_ext,f (world). Needs no contact point.
+    * ``"stacked"``, eq. (20): k known points (body B_c, p_c): solve
+      [[p_1 x .. p_k x], [1 .. 1], [J^fb_1^T .. J^fb_k^T]] [f_1; ..; f_k] = [r_ext; r_int]
+      (top: the world wrench about the world origin; bottom: eq. 12) in the least-squares
+      sense with weights W = diag(external_weight (6), internal_weight (n)) (the paper
+      suggests weighting the residuals by their different noise, Sec. V) and Tikhonov
+      damping: f = (A^T W^2 A + damping^2 I)^-1 A^T W^2 b; with damping 0 the minimum-norm
+      weighted pseudo-inverse (W A)^# W b.
+    * ``"classical"``, eq. (15): f = [J_1^T .. J_k^T]^# r with J_c the Jacobian of model
+      (8) (base velocity = F0's twist in F0), i.e. J_c^T f = [R^T (p_c - p_F0) x f; R^T f;
+      J_j,c^T f], weights ``classical_weight`` (nv), same damping.
+
+    Inputs (by mode):
+        ``state`` (stacked, classical): the sensed [q; v] (only q is used).
+        ``external_wrench_world`` (external, stacked): ExternalResidual's output, 6.
+        ``residual`` (stacked: InternalResidual's, n; classical: ClassicalResidual's, nv).
+        ``contact_points`` (stacked, classical, when no points are given at construction):
+            4 k numbers, [body index, p_x, p_y, p_z] per contact, p in the body frame, m.
+
+    Outputs (direct feedthrough, no state: a static map of the residuals, solved once per
+    change of the inputs and cached):
+        ``contact_forces_world``: 3 k, the forces f_c in world, N.
+        ``fit_error``: 1, ||W (A f - b)||, the weighted mismatch (0 when the points explain
+            the residuals exactly; large when the assumed points are wrong). 0 in mode
+            ``"external"``.
+
+    Args:
+        plant: finalized floating-base plant (free joint coordinates first).
+        mode: "external", "stacked" or "classical".
+        contact_points: (body, p_B) pairs (body: RigidBody, name or index; p_B: 3 numbers,
+            m), or None to read them from the ``contact_points`` port.
+        num_contacts: k when the points come from the port (default 1).
+        external_weight, internal_weight, classical_weight: per-residual weights (scalar or
+            per entry), dimensionless relative weights; e.g. 1 / noise std.
+        damping: Tikhonov damping, >= 0 (N m per N units of the weighted rows).
+
+    Raises:
+        ValueError: unknown mode, unknown body or world body, wrong sizes, negative weights.
+    """
+
+    MODES = ("external", "stacked", "classical")
+
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        mode: str,
+        contact_points: Sequence[tuple] | None = None,
+        *,
+        num_contacts: int | None = None,
+        external_weight=1.0,
+        internal_weight=1.0,
+        classical_weight=1.0,
+        damping: float = 0.0,
+    ):
+        super().__init__()
+        who = self._who = "ContactForceEstimator"
+        if mode not in self.MODES:
+            raise ValueError(f"{who}: unknown mode {mode!r}; choose one of {self.MODES}")
+        self._mode = mode
+        self._kin = _Kinematics(plant, who)
+        nq, nv, n = self._kin.nq, self._kin.nv, self._kin.n
+        self._damping = float(damping)
+        if not math.isfinite(self._damping) or self._damping < 0.0:
+            raise ValueError(f"{who}: damping must be a non-negative number, got {damping}")
+        if contact_points is not None:
+            points = []
+            for i, item in enumerate(contact_points):
+                try:
+                    body, p = item
+                except (TypeError, ValueError):
+                    raise ValueError(f"{who}: contact_points[{i}] must be a (body, point) pair") from None
+                p = np.asarray(p, dtype=float).reshape(-1)
+                if p.shape != (3,) or not np.all(np.isfinite(p)):
+                    raise ValueError(f"{who}: contact_points[{i}] point must be 3 finite numbers")
+                points.append((_resolve_body(plant, body, who), p))
+            if not points:
+                raise ValueError(f"{who}: contact_points is empty")
+            if num_contacts is not None and num_contacts != len(points):
+                raise ValueError(f"{who}: num_contacts={num_contacts} but {len(points)} contact points given")
+            self._points = tuple(points)
+            k = len(points)
+        else:
+            self._points = None
+            if num_contacts is not None and (int(num_contacts) != num_contacts or num_contacts < 1):
+                raise ValueError(f"{who}: num_contacts must be a positive integer, got {num_contacts}")
+            k = 1 if num_contacts is None else int(num_contacts)
+        if mode == "external" and k != 1:
+            raise ValueError(f"{who}: mode 'external' (eq. 19) estimates exactly one contact, got {k}")
+        self._k = k
+        self._w_ext = _weights(external_weight, 6, f"{who}: external_weight")
+        self._w_int = _weights(internal_weight, n, f"{who}: internal_weight")
+        self._w_cls = _weights(classical_weight, nv, f"{who}: classical_weight")
+
+        self._state_port = self._wrench_port = self._residual_port = self._points_port = None
+        if mode in ("stacked", "classical"):
+            self._state_port = self.DeclareVectorInputPort("state", nq + nv)
+        if mode in ("external", "stacked"):
+            self._wrench_port = self.DeclareVectorInputPort("external_wrench_world", 6)
+        if mode == "stacked":
+            self._residual_port = self.DeclareVectorInputPort("residual", n)
+        if mode == "classical":
+            self._residual_port = self.DeclareVectorInputPort("residual", nv)
+        if mode != "external" and self._points is None:
+            self._points_port = self.DeclareVectorInputPort("contact_points", 4 * k)
+        # One solve per input change, shared by both outputs: [f (3 k); fit error].
+        self._solution = self.DeclareCacheEntry(
+            "forces and fit error",
+            ValueProducer(allocate=lambda: AbstractValue.Make(np.zeros(3 * k + 1)), calc=self._CalcSolution),
+            prerequisites_of_calc={self.all_input_ports_ticket()})
+        self.DeclareVectorOutputPort("contact_forces_world", 3 * k, self._CalcForces, {self.all_input_ports_ticket()})
+        self.DeclareVectorOutputPort("fit_error", 1, self._CalcFitError, {self.all_input_ports_ticket()})
+
+    @property
+    def mode(self) -> str:
+        return self._mode
+
+    @property
+    def num_contacts(self) -> int:
+        return self._k
+
+    def _contact_points(self, context: Context) -> list[tuple[RigidBody, np.ndarray]]:
+        if self._points is not None:
+            return list(self._points)
+        raw = eval_finite_input(self._who, self._points_port, context).reshape(self._k, 4)
+        plant = self._kin.plant
+        out = []
+        for i, row in enumerate(raw):
+            if row[0] != round(row[0]):
+                raise ValueError(f"{self._who}: input 'contact_points' entry {i}: body index {row[0]} is not an integer")
+            out.append((_resolve_body(plant, int(round(row[0])), f"{self._who}: input 'contact_points' entry {i}"), row[1:].copy()))
+        return out
+
+    def system_matrix(self, q: np.ndarray, points: Sequence[tuple[RigidBody, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+        """(A, w): the linear map from the stacked forces [f_1; ..; f_k] (world) to the
+        residuals this mode reads, and the row weights. Mode "stacked": (6 + n) rows;
+        "classical": nv rows."""
+        kin = self._kin
+        kin.set_positions(q)
+        k = len(points)
+        if self._mode == "stacked":
+            A = np.zeros((6 + kin.n, 3 * k))
+            E = kin.elimination()
+            for c, (body, p_B) in enumerate(points):
+                X = kin.body_pose(body)
+                p_W = X[:, :3] @ p_B + X[:, 3]
+                J = kin.jacobian(body, p_B)
+                A[:3, 3 * c : 3 * c + 3] = _skew(p_W)
+                A[3:6, 3 * c : 3 * c + 3] = np.eye(3)
+                A[6:, 3 * c : 3 * c + 3] = (J[:, 6:] - J[:, :6] @ E).T
+            return A, np.concatenate((self._w_ext, self._w_int))
+        # classical, model (8)
+        X_WF0 = kin.base_pose()
+        R, p_F0 = X_WF0[:, :3], X_WF0[:, 3]
+        A = np.zeros((kin.nv, 3 * k))
+        for c, (body, p_B) in enumerate(points):
+            X = kin.body_pose(body)
+            p_W = X[:, :3] @ p_B + X[:, 3]
+            J = kin.jacobian(body, p_B)
+            A[:3, 3 * c : 3 * c + 3] = R.T @ _skew(p_W - p_F0)
+            A[3:6, 3 * c : 3 * c + 3] = R.T
+            A[6:, 3 * c : 3 * c + 3] = J[:, 6:].T
+        return A, self._w_cls
+
+    def solve(self, A: np.ndarray, w: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, float]:
+        """Weighted, damped least squares (see the class docstring): (f, ||W (A f - b)||)."""
+        WA, Wb = w[:, None] * A, w * b
+        if self._damping > 0.0:
+            H = WA.T @ WA + self._damping**2 * np.eye(A.shape[1])
+            f = np.linalg.solve(H, WA.T @ Wb)
+        else:
+            f = np.linalg.lstsq(WA, Wb, rcond=None)[0]
+        return f, float(np.linalg.norm(WA @ f - Wb))
+
+    def _estimate(self, context: Context) -> tuple[np.ndarray, float]:
+        if self._mode == "external":
+            w = eval_finite_input(self._who, self._wrench_port, context)
+            return np.array(w[3:]), 0.0
+        x = eval_finite_input(self._who, self._state_port, context)
+        r = eval_finite_input(self._who, self._residual_port, context)
+        if self._mode == "stacked":
+            b = np.concatenate((eval_finite_input(self._who, self._wrench_port, context), r))
+        else:
+            b = np.asarray(r)
+        A, w = self.system_matrix(x[: self._kin.nq], self._contact_points(context))
+        return self.solve(A, w, b)
+
+    def _CalcSolution(self, context: Context, value: AbstractValue) -> None:
+        f, fit = self._estimate(context)
+        value.set_value(np.concatenate((f, [fit])))
+
+    def _CalcForces(self, context: Context, output: BasicVector) -> None:
+        output.SetFromVector(self._solution.Eval(context)[:-1])
+
+    def _CalcFitError(self, context: Context, output: BasicVector) -> None:
+        output.SetFromVector(self._solution.Eval(context)[-1:])
+
+
+# ---------------------------------------------------------------------------------------
+# Residual noise predicted from the sensor noise; ContactDetector.
+# ---------------------------------------------------------------------------------------
+
+
+def predicted_residual_covariances(
+    plant: MultibodyPlant,
+    *,
+    internal_gain: float,
+    external_gain: float,
+    period: float = DEFAULT_PERIOD,
+    q: np.ndarray | None = None,
+    known_wrench_frames: Sequence = (),
+    encoder_velocity_std: float = _sensors.ENCODER_VELOCITY_NOISE_STD,
+    base_angular_velocity_std: float = _sensors.BASE_ANGULAR_VELOCITY_NOISE_STD,
+    base_linear_velocity_std: float = _sensors.BASE_LINEAR_VELOCITY_NOISE_STD,
+    torque_std: float = _sensors.MOTOR_TORQUE_NOISE_STD,
+    ft_force_std: float = _sensors.FT_FORCE_NOISE_STD,
+    ft_moment_std: float = _sensors.FT_MOMENT_NOISE_STD,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Steady-state noise covariances of the internal residual (n x n, N^2 m^2) and of the
+    external residual's force in the world (3 x 3, N^2), predicted from the sensor noise.
+
+    Model (systems.residuals.momentum_residuals' discrete observer, gain K, period T, white sensor noise held
+    over T): the residual obeys r_k = (1 - K T) r_{k-1} + K (dp_k - dp_{k-1}) - K T du_k,
+    with dp the momentum noise and du the noise of the measured rates. Its steady variance
+    is K^2 Cov(dp) 2 / (2 - K T) + (K T)^2 Cov(du) / (1 - (1 - K T)^2).
+
+    * internal: dp = H^fb dqdot (encoder velocity noise); du = motor torque noise plus the
+      F/T noise through J^fb^T of the sensor frames (eq. 10).
+    * external: dp = I0c dv0 + F dqdot (base velocity estimate and encoders, F0); du = the
+      F/T force noise summed over the sensors. Rotated to world with the base orientation
+      at ``q``.
+
+    The sensed base orientation noise (gravity direction) and quantisation are neglected.
+
+    Args:
+        plant: finalized floating-base plant.
+        internal_gain, external_gain: the residual gains K, 1/s.
+        period: T, s.
+        q: positions where the inertias are evaluated (default: the plant's default).
+        known_wrench_frames: the F/T sensor frames (Frame objects).
+        *_std: the sensor noise standard deviations (defaults: ``systems.simulation.sensors``).
+    """
+    from systems.dynamics.floating_base import FloatingBaseDynamics
+
+    kin = _Kinematics(plant, "predicted_residual_covariances")
+    if q is None:
+        q = plant.GetPositions(kin.context)
+    q = np.asarray(q, dtype=float)
+    terms = FloatingBaseDynamics(plant).compute(q, np.zeros(plant.num_velocities()))
+    T = positive_number(period, "period")
+    n = kin.n
+    cov_qdot = encoder_velocity_std**2 * np.eye(n)
+
+    def steady(K: float, cov_p: np.ndarray, cov_u: np.ndarray) -> np.ndarray:
+        KT = K * T
+        return K**2 * cov_p * 2.0 / (2.0 - KT) + KT**2 * cov_u / (1.0 - (1.0 - KT) ** 2)
+
+    # Internal.
+    cov_p_int = terms.H_fb @ cov_qdot @ terms.H_fb.T
+    cov_u_int = torque_std**2 * np.eye(n)
+    kin.set_positions(q)
+    cov_w = np.diag([ft_moment_std**2] * 3 + [ft_force_std**2] * 3)
+    world = plant.world_frame()
+    E = kin.elimination()
+    for frame in known_wrench_frames:
+        J = plant.CalcJacobianSpatialVelocity(kin.context, JacobianWrtVariable.kV, frame, np.zeros(3), world, world)
+        Jfb = J[:, 6:] - J[:, :6] @ E
+        cov_u_int += Jfb.T @ cov_w @ Jfb
+    cov_int = steady(positive_number(internal_gain, "internal_gain"), cov_p_int, cov_u_int)
+    # External (F0), force block, then world.
+    cov_v0 = np.diag([base_angular_velocity_std**2] * 3 + [base_linear_velocity_std**2] * 3)
+    cov_p_ext = terms.I0c @ cov_v0 @ terms.I0c.T + terms.F @ cov_qdot @ terms.F.T
+    cov_u_ext = np.zeros((6, 6))
+    cov_u_ext[3:, 3:] = len(known_wrench_frames) * ft_force_std**2 * np.eye(3)
+    cov_ext = steady(positive_number(external_gain, "external_gain"), cov_p_ext, cov_u_ext)[3:, 3:]
+    R = terms.R_WB
+    return cov_int, R @ cov_ext @ R.T
+
+
+class ContactDetector(LeafSystem):
+    """Contact / no contact from the residuals (paper Secs. III, V: a residual that leaves
+    its noise band means an unknown external force), with hysteresis.
+
+    Test statistics (squared Mahalanobis norms, chi-square distributed without contact if
+    the noise is Gaussian with the given covariances):
+        s_ext = r_ext,f^T S_ext^-1 r_ext,f   (3 dof; the external residual's force, world)
+        s_int = r_int^T S_int^-1 r_int       (n dof; the internal residual)
+    Contact switches ON when s_ext > chi2.isf(p_on, 3) or s_int > chi2.isf(p_on, n) for
+    ``on_samples`` consecutive updates, and OFF when both stay below chi2.isf(p_off, dof)
+    for ``release_time`` seconds.
+
+    Defaults from the sensor noise: when the covariances are not given they come from
+    ``predicted_residual_covariances`` with the default noise of ``systems.simulation.sensors`` and
+    the residual gains; p_on = 1e-9 per update and per test (about one false alarm in
+    16 days at 1 kHz for Gaussian noise; a margin against the non-Gaussian tails of real
+    noise), p_off = 1e-2. E.g. on ``hrp4_like`` with K = 35/s: the external force noise is
+    about 0.28 N per axis, so s_ext's threshold 44.8 means about 1.9 N; a 5 N push is then
+    detected ~14 ms after it starts by the external test alone, usually sooner by the
+    internal one.
+
+    Inputs:
+        ``external_wrench_world`` (6): ExternalResidual's output (the force part is used).
+        ``residual`` (n): InternalResidual's output.
+    State (discrete): [detected (0/1), detection time (s, -1 before the first detection),
+        consecutive samples above, time since both went below (s), s_ext, s_int].
+    Outputs:
+        ``contact_detected`` (1): 1.0 in contact, else 0.0.
+        ``detection_time`` (1): time of the most recent OFF->ON switch, s; -1 if none yet.
+        ``test_statistics`` (2): [s_ext, s_int] of the last update (dimensionless).
+
+    The residuals are read at the update time; in a diagram where they too update at that
+    time the detector sees the values of the previous update (one period of delay).
+
+    Args:
+        plant: finalized floating-base plant.
+        internal_gain, external_gain: the residuals' gains K, 1/s (for the defaults).
+        covariance_internal: n x n (or n stds as a vector), N^2 m^2 (N m); None: predicted.
+        covariance_external_force: 3 x 3 (or 3 stds), world, N^2 (N); None: predicted.
+        known_wrench_frames: the F/T frames (for the predicted covariances).
+        nominal_positions: q for the predicted covariances (default: plant's default).
+        false_alarm_probability: p_on. release_probability: p_off.
+        on_samples: consecutive updates above threshold to switch on (default 1).
+        release_time: s below the off thresholds to switch off (default 0.02).
+        period: update period, s.
+        use_external, use_internal: which tests to run.
+    """
+
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        *,
+        internal_gain: float = 35.0,
+        external_gain: float = 35.0,
+        covariance_internal=None,
+        covariance_external_force=None,
+        known_wrench_frames: Sequence = (),
+        nominal_positions: np.ndarray | None = None,
+        false_alarm_probability: float = 1e-9,
+        release_probability: float = 1e-2,
+        on_samples: int = 1,
+        release_time: float = 0.02,
+        period: float = DEFAULT_PERIOD,
+        use_external: bool = True,
+        use_internal: bool = True,
+    ):
+        super().__init__()
+        who = self._who = "ContactDetector"
+        kin = _Kinematics(plant, who)
+        n = kin.n
+        if not (use_external or use_internal):
+            raise ValueError(f"{who}: at least one of use_external, use_internal must be True")
+        for name, p in (("false_alarm_probability", false_alarm_probability), ("release_probability", release_probability)):
+            if not 0.0 < float(p) < 1.0:
+                raise ValueError(f"{who}: {name} must be in (0, 1), got {p}")
+        if not float(release_probability) > float(false_alarm_probability):
+            raise ValueError(f"{who}: release_probability must exceed false_alarm_probability (hysteresis)")
+        if int(on_samples) != on_samples or on_samples < 1:
+            raise ValueError(f"{who}: on_samples must be a positive integer, got {on_samples}")
+        self._period = positive_number(period, f"{who}: period")
+        self._release_time = float(release_time)
+        if not math.isfinite(self._release_time) or self._release_time < 0.0:
+            raise ValueError(f"{who}: release_time must be >= 0, got {release_time}")
+        self._on_samples = int(on_samples)
+        if covariance_internal is None or covariance_external_force is None:
+            cov_int, cov_ext = predicted_residual_covariances(
+                plant, internal_gain=internal_gain, external_gain=external_gain, period=self._period,
+                q=nominal_positions, known_wrench_frames=known_wrench_frames)
+            if covariance_internal is None:
+                covariance_internal = cov_int
+            if covariance_external_force is None:
+                covariance_external_force = cov_ext
+        self._L_int = self._whitener(covariance_internal, n, "covariance_internal")
+        self._L_ext = self._whitener(covariance_external_force, 3, "covariance_external_force")
+        self._use = (bool(use_external), bool(use_internal))
+        self._on = (chi2.isf(false_alarm_probability, 3), chi2.isf(false_alarm_probability, n))
+        self._off = (chi2.isf(release_probability, 3), chi2.isf(release_probability, n))
+
+        self._wrench_port = self.DeclareVectorInputPort("external_wrench_world", 6)
+        self._residual_port = self.DeclareVectorInputPort("residual", n)
+        self._state_index = self.DeclareDiscreteState(np.array([0.0, -1.0, 0.0, 0.0, 0.0, 0.0]))
+        self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._Update)
+        self.DeclareVectorOutputPort("contact_detected", 1, lambda c, o: o.SetFromVector(self._s(c)[:1]), {self.xd_ticket()})
+        self.DeclareVectorOutputPort("detection_time", 1, lambda c, o: o.SetFromVector(self._s(c)[1:2]), {self.xd_ticket()})
+        self.DeclareVectorOutputPort("test_statistics", 2, lambda c, o: o.SetFromVector(self._s(c)[4:6]), {self.xd_ticket()})
+
+    def _whitener(self, cov, size: int, name: str) -> np.ndarray:
+        """W with W^T W = cov^-1 (inverse Cholesky factor), from a covariance or stds."""
+        c = np.asarray(cov, dtype=float)
+        if c.shape == (size,):
+            c = np.diag(c**2)
+        if c.shape != (size, size) or not np.all(np.isfinite(c)):
+            raise ValueError(f"{self._who}: {name} must be {size} stds or a {size}x{size} covariance, got shape {c.shape}")
+        c = 0.5 * (c + c.T)
+        try:
+            L = np.linalg.cholesky(c)
+        except np.linalg.LinAlgError:
+            raise ValueError(f"{self._who}: {name} must be positive definite") from None
+        return np.linalg.inv(L)
+
+    @property
+    def thresholds(self) -> dict:
+        """The chi-square thresholds: {"on": (ext, int), "off": (ext, int)}."""
+        return {"on": self._on, "off": self._off}
+
+    def statistics(self, wrench: np.ndarray, residual: np.ndarray) -> tuple[float, float]:
+        """(s_ext, s_int) of the class docstring."""
+        z_ext = self._L_ext @ np.asarray(wrench)[3:]
+        z_int = self._L_int @ np.asarray(residual)
+        return float(z_ext @ z_ext), float(z_int @ z_int)
+
+    def _s(self, context: Context) -> np.ndarray:
+        return context.get_discrete_state(self._state_index).get_value()
+
+    def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
+        w = eval_finite_input(self._who, self._wrench_port, context)
+        r = eval_finite_input(self._who, self._residual_port, context)
+        detected, t_detect, above, below_time, _, _ = self._s(context)
+        s = self.statistics(w, r)
+        use = self._use
+        is_above = any(u and si > th for u, si, th in zip(use, s, self._on))
+        is_below = all((not u) or si < th for u, si, th in zip(use, s, self._off))
+        t = context.get_time()
+        if detected < 0.5:
+            above = above + 1.0 if is_above else 0.0
+            if above >= self._on_samples:
+                detected, t_detect, below_time = 1.0, t, 0.0
+        else:
+            above = 0.0
+            below_time = below_time + self._period if is_below else 0.0
+            if below_time >= self._release_time - 1e-12 and is_below:
+                detected, below_time = 0.0, 0.0
+        discrete_state.set_value(self._state_index, [detected, t_detect, above, below_time, s[0], s[1]])
+
+
+# ---------------------------------------------------------------------------------------
+# ContactLocalizer: Sec. VI, eq. (22), Fig. 9.
+# ---------------------------------------------------------------------------------------
+
+VALID, NO_CONTACT, FORCE_TOO_SMALL, NO_INTERSECTION, AMBIGUOUS = 0, 1, 2, 3, 4
+STATUS_REASONS = {
+    VALID: "valid",
+    NO_CONTACT: "no contact detected",
+    FORCE_TOO_SMALL: "estimated force too small for a line of action",
+    NO_INTERSECTION: "the line of action does not enter the robot's surface",
+    AMBIGUOUS: "ambiguous: another link explains the internal residual about as well",
+}
+
+
+@dataclass
+class LocalizationResult:
+    """One localization (see ``ContactLocalizer``). Units: m, N, N m.
+
+    Attributes:
+        status: VALID, NO_CONTACT, FORCE_TOO_SMALL, NO_INTERSECTION or AMBIGUOUS.
+        body_index: plant BodyIndex of the chosen link, -1 if none.
+        point_W: the contact point (zeros if none).
+        force_W: the force estimate r_ext,f (eq. 19).
+        score: ||W (J^fb^T f - r_int)|| of the chosen candidate (inf if none).
+        runner_up_score: the best score on another link (inf if none).
+        line_point_W: the line's point closest to the world origin (eq. 22), zeros if none.
+        candidates: (body index, point_W, score, l) of every surface entry point kept.
+    """
+
+    status: int
+    body_index: int = -1
+    point_W: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    force_W: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    score: float = math.inf
+    runner_up_score: float = math.inf
+    line_point_W: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    candidates: list = field(default_factory=list)
+
+    @property
+    def reason(self) -> str:
+        return STATUS_REASONS[self.status]
+
+    @property
+    def valid(self) -> bool:
+        return self.status == VALID
+
+
+class ContactLocalizer(LeafSystem):
+    """Single unknown contact: its link, point and force (paper Sec. VI, Fig. 9).
+
+    Each update:
+
+    1. f_hat = r_ext,f and m = r_ext,m (moment about the world origin) from
+       ``external_wrench_world`` (eq. 19). Since m = p x f for a force f at p, the line of
+       action is l(s) = (f x m) / |f|^2 + s f / |f| (eq. 22; (f x m)/|f|^2 is its point
+       closest to the world origin).
+    2. The line is intersected with every collision primitive of the candidate links at the
+       sensed pose (``systems.residuals.geometry_intersection``, vectorised). Of each primitive only
+       the ENTRY point is kept: there the force points into the surface (f . n < 0).
+       Entry points buried deeper than ``surface_tolerance`` inside another link's
+       primitive are not on the robot's surface and are dropped.
+    3. Each candidate c on link B_c gets the score ||W (J^fb_c^T f_hat - r_int)|| (eq. 12;
+       W = diag(score_weights)). All points of a line on the same link give the same J^T f
+       (the moment of a line about any axis does not depend on the point), so links are
+       ranked by score and, on the best link, the first entry along f is taken (the pusher
+       comes from outside, against f).
+    4. Status: NO_CONTACT when ``contact_detected`` is 0; FORCE_TOO_SMALL when |f_hat| <
+       ``min_force``; NO_INTERSECTION without candidates; AMBIGUOUS when another link's
+       best score is within ``ambiguity_margin`` of the best; else VALID. Degenerate inputs
+       never raise (only NaN/inf inputs do, as everywhere in this package).
+
+    Averaging: after the contact has been detected for ``settle_time`` (the residuals'
+    first-order rise, a few 1/K), the localizer averages its inputs (residuals and state)
+    from then on (running mean, or an exponential window of ``averaging_time_constant``):
+    a momentum residual's noise is dominated by the white momentum noise times K, which
+    the mean removes, while a steady contact's wrench is constant. Before that it uses
+    the latest inputs. The mean is reset when the contact ends.
+
+    Inputs:
+        ``state`` (nq + nv): sensed [q; v].
+        ``external_wrench_world`` (6): ExternalResidual's output.
+        ``residual`` (n): InternalResidual's output.
+        ``contact_detected`` (1): ContactDetector's output (only if ``use_detector``).
+    State (discrete): the averaging [active, count, onset time, mean wrench (6), mean
+        residual (n), mean q (nq)] and the result [status, body, point (3), force (3),
+        score, runner-up].
+    Outputs:
+        ``contact_body`` (1): BodyIndex of the link, -1 if none.
+        ``contact_point_world`` (3), m. ``contact_force_world`` (3), N.
+        ``score`` (1), ``runner_up_score`` (1): N m (inf when there is none).
+        ``valid`` (1): 1.0 if status is VALID. ``status`` (1): the code (STATUS_REASONS).
+
+    Args:
+        plant: finalized floating-base plant.
+        scene_graph: its SceneGraph (or a SceneGraphInspector): the collision shapes.
+        bodies: candidate links (RigidBody, names or indices); default every body with a
+            collision geometry except ``exclude_bodies``.
+        exclude_bodies: links never considered (e.g. the soles below F/T sensors: a force
+            there is part of the measured wrench and invisible to the residuals).
+        period: update period, s.
+        use_detector: declare the ``contact_detected`` input.
+        min_force: N (default 1.0, about 3.5 times the external force noise at K = 35/s).
+        settle_time: s after detection before averaging (default 0.1 = 3.5/K at K = 35/s).
+        averaging_time_constant: s, None for a plain running mean (default).
+        ambiguity_margin: N m (default 0.01, about 5 std of the averaged internal residual's
+            norm difference on hrp4_like).
+        surface_tolerance: m (default 0.01).
+        score_weights: n weights (default 1): e.g. 1 / internal residual noise std.
+        skip_unsupported_shapes: ignore meshes etc. instead of raising.
+    """
+
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        scene_graph: SceneGraph | SceneGraphInspector,
+        *,
+        bodies: Sequence | None = None,
+        exclude_bodies: Sequence = (),
+        period: float = DEFAULT_PERIOD,
+        use_detector: bool = True,
+        min_force: float = 1.0,
+        settle_time: float = 0.1,
+        averaging_time_constant: float | None = None,
+        ambiguity_margin: float = 0.01,
+        surface_tolerance: float = 0.01,
+        score_weights=1.0,
+        skip_unsupported_shapes: bool = False,
+    ):
+        super().__init__()
+        who = self._who = "ContactLocalizer"
+        self._kin = kin = _Kinematics(plant, who)
+        inspector = scene_graph.model_inspector() if isinstance(scene_graph, SceneGraph) else scene_graph
+        if not isinstance(inspector, SceneGraphInspector):
+            raise ValueError(f"{who}: scene_graph must be a SceneGraph or SceneGraphInspector")
+        excluded = {int(_resolve_body(plant, b, who).index()) for b in exclude_bodies}
+        if bodies is None:
+            candidates = [plant.get_body(BodyIndex(i)) for i in range(1, plant.num_bodies())]
+            candidates = [b for b in candidates if plant.GetCollisionGeometriesForBody(b)]
+        else:
+            candidates = [_resolve_body(plant, b, who) for b in bodies]
+        candidates = [b for b in candidates if int(b.index()) not in excluded]
+        if not candidates:
+            raise ValueError(f"{who}: no candidate link left")
+        self._geometry = RobotGeometry.from_plant(plant, inspector, candidates, skip_unsupported=skip_unsupported_shapes)
+        self._bodies = [plant.get_body(BodyIndex(int(i))) for i in self._geometry.bodies]
+        self._period = positive_number(period, f"{who}: period")
+        self._min_force = positive_number(min_force, f"{who}: min_force")
+        self._settle_time = float(settle_time)
+        if not math.isfinite(self._settle_time) or self._settle_time < 0.0:
+            raise ValueError(f"{who}: settle_time must be >= 0")
+        self._tau = None if averaging_time_constant is None else positive_number(averaging_time_constant, f"{who}: averaging_time_constant")
+        self._margin = float(ambiguity_margin)
+        self._tolerance = float(surface_tolerance)
+        if not (math.isfinite(self._margin) and self._margin >= 0.0 and math.isfinite(self._tolerance) and self._tolerance >= 0.0):
+            raise ValueError(f"{who}: ambiguity_margin and surface_tolerance must be non-negative")
+        n, nq, nv = kin.n, kin.nq, kin.nv
+        self._score_w = _weights(score_weights, n, f"{who}: score_weights")
+        self._same_body = self._geometry.body_indices[:, None] == self._geometry.body_indices[None, :]
+
+        self._state_port = self.DeclareVectorInputPort("state", nq + nv)
+        self._wrench_port = self.DeclareVectorInputPort("external_wrench_world", 6)
+        self._residual_port = self.DeclareVectorInputPort("residual", n)
+        self._detected_port = self.DeclareVectorInputPort("contact_detected", 1) if use_detector else None
+        # Averaging state: [active, count, onset], mean wrench, mean residual, mean q.
+        self._avg_index = self.DeclareDiscreteState(3 + 6 + n + nq)
+        result0 = np.array([NO_CONTACT, -1, 0, 0, 0, 0, 0, 0, np.inf, np.inf], dtype=float)
+        self._result_index = self.DeclareDiscreteState(result0)
+        self._n, self._nq = n, nq
+        self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._Update)
+        ticket = {self.xd_ticket()}
+        for name, lo, hi in (("contact_body", 1, 2), ("contact_point_world", 2, 5), ("contact_force_world", 5, 8),
+                             ("score", 8, 9), ("runner_up_score", 9, 10), ("status", 0, 1)):
+            self.DeclareVectorOutputPort(name, hi - lo, lambda c, o, lo=lo, hi=hi: o.SetFromVector(self._r(c)[lo:hi]), ticket)
+        self.DeclareVectorOutputPort("valid", 1, lambda c, o: o.SetFromVector([float(self._r(c)[0] == VALID)]), ticket)
+
+    # -- public ---------------------------------------------------------------------------
+    @property
+    def geometry(self) -> RobotGeometry:
+        return self._geometry
+
+    @property
+    def candidate_bodies(self) -> list[RigidBody]:
+        return list(self._bodies)
+
+    def localize(self, q: np.ndarray, wrench_W: np.ndarray, residual: np.ndarray) -> LocalizationResult:
+        """Steps 1-4 of the class docstring for one (q, external wrench, internal residual),
+        contact assumed detected. Never raises for finite inputs of the right sizes."""
+        wrench_W = np.asarray(wrench_W, dtype=float)
+        m, f = wrench_W[:3], wrench_W[3:]
+        f2 = float(f @ f)
+        if not f2 >= self._min_force**2:
+            return LocalizationResult(FORCE_TOO_SMALL, force_W=f.copy())
+        fn = math.sqrt(f2)
+        d = f / fn
+        p0 = _cross(f, m) / f2  # eq. (22)
+        kin, geo = self._kin, self._geometry
+        kin.set_positions(np.asarray(q, dtype=float))
+        X_WB = np.array([kin.body_pose(b) for b in self._bodies])
+        R_WG, p_WG = geo.world_poses(X_WB)
+        o_G = np.einsum("gji,gj->gi", R_WG, p0 - p_WG)
+        d_G = np.einsum("gji,j->gi", R_WG, d)
+        l_in, _, hit = line_intersections(o_G, d_G, geo.kinds, geo.params, geo.planes)
+        index = np.flatnonzero(hit & np.isfinite(l_in))
+        if index.size:
+            pts_G = o_G[index] + l_in[index, None] * d_G[index]
+            normals = outward_normals(pts_G, geo.kinds[index], geo.params[index], geo.planes[index])
+            inward = np.einsum("ij,ij->i", normals, d_G[index]) < -1e-9  # f . n < 0
+            index = index[inward]
+        if index.size:
+            pts_W = p0 + l_in[index, None] * d
+            # Buried in another link's primitive?  (m, g) signed distances.
+            rel = pts_W[:, None, :] - p_WG[None, :, :]
+            local = np.einsum("gji,mgj->mgi", R_WG, rel)
+            sd = signed_distances(local, geo.kinds, geo.params, geo.planes)
+            sd[self._same_body[index]] = np.inf
+            index = index[sd.min(axis=1) >= -self._tolerance]
+        if index.size == 0:
+            return LocalizationResult(NO_INTERSECTION, force_W=f.copy(), line_point_W=p0)
+        pts_W = p0 + l_in[index, None] * d
+        body_of = geo.body_indices[index]
+        r = np.asarray(residual, dtype=float)
+        E = kin.elimination()
+        scores = np.empty(index.size)
+        for b in np.unique(body_of):
+            rows = np.flatnonzero(body_of == b)
+            body = self._bodies[int(np.searchsorted(geo.bodies, b))]
+            X = X_WB[int(np.searchsorted(geo.bodies, b))]
+            p_B = X[:, :3].T @ (pts_W[rows[0]] - X[:, 3])
+            J = kin.jacobian(body, p_B)
+            g = J.T @ f
+            tau = g[6:] - E.T @ g[:6]  # J^fb^T f (eq. 12)
+            scores[rows] = float(np.linalg.norm(self._score_w * (tau - r)))
+        order = np.lexsort((l_in[index], scores))
+        best = order[0]
+        others = scores[body_of != body_of[best]]
+        runner_up = float(others.min()) if others.size else math.inf
+        status = AMBIGUOUS if runner_up - scores[best] < self._margin else VALID
+        candidates = [(int(body_of[i]), pts_W[i].copy(), float(scores[i]), float(l_in[index[i]])) for i in order]
+        return LocalizationResult(
+            status, int(body_of[best]), pts_W[best].copy(), f.copy(), float(scores[best]), runner_up, p0, candidates
+        )
+
+    def estimate(self, context: Context) -> LocalizationResult:
+        """The localization stored in ``context``'s state (without candidates)."""
+        s = self._r(context)
+        return LocalizationResult(int(s[0]), int(s[1]), s[2:5].copy(), s[5:8].copy(), float(s[8]), float(s[9]))
+
+    # -- system -----------------------------------------------------------------------------
+    def _r(self, context: Context) -> np.ndarray:
+        return context.get_discrete_state(self._result_index).get_value()
+
+    def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
+        who = self._who
+        x = eval_finite_input(who, self._state_port, context)
+        w = eval_finite_input(who, self._wrench_port, context)
+        r = eval_finite_input(who, self._residual_port, context)
+        q = x[: self._nq]
+        detected = True
+        if self._detected_port is not None:
+            detected = float(eval_finite_input(who, self._detected_port, context)[0]) > 0.5
+        avg = np.array(context.get_discrete_state(self._avg_index).get_value())
+        n = self._n
+        t = context.get_time()
+        if not detected:
+            avg[:3] = 0.0
+            discrete_state.set_value(self._avg_index, avg)
+            discrete_state.set_value(self._result_index, self._pack(LocalizationResult(NO_CONTACT, force_W=np.array(w[3:]))))
+            return
+        if avg[0] < 0.5:
+            avg[:3] = (1.0, 0.0, t)
+        if t - avg[2] >= self._settle_time - 1e-12:
+            avg[1] += 1.0
+            alpha = 1.0 / avg[1]
+            if self._tau is not None:
+                alpha = max(alpha, self._period / self._tau)
+            sample = np.concatenate((w, r, q))
+            avg[3:] += alpha * (sample - avg[3:])
+            w, r = avg[3:9], avg[9 : 9 + n]
+            q = avg[9 + n :].copy()
+            q[:4] /= np.linalg.norm(q[:4])  # the mean of nearby unit quaternions, renormalised
+        discrete_state.set_value(self._avg_index, avg)
+        discrete_state.set_value(self._result_index, self._pack(self.localize(q, w, r)))
+
+    @staticmethod
+    def _pack(result: LocalizationResult) -> np.ndarray:
+        return np.concatenate((
+            [float(result.status), float(result.body_index)], result.point_W, result.force_W,
+            [result.score, result.runner_up_score]))

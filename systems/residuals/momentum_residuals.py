@@ -1,0 +1,602 @@
+"""Momentum residuals of Flacco, Paolillo, Kheddar (2016) as Drake systems.
+
+* ``ClassicalResidual``: eq. (7) applied to the virtual-joint model (8), size nv.
+* ``InternalResidual``: eq. (11) with the known-force torques of eq. (10), size n = nv - 6;
+  it estimates the true joint effort of the unknown external forces, tau_c,real (eq. 12).
+* ``ExternalResidual``: eq. (16); it estimates the total unknown external wrench on the
+  floating base, eq. (17), reported in the base frame and in the world.
+
+All three are discrete-time momentum observers (what runs on a real robot). At each update
+k (period T) they read the momentum p_k of the sensed state, the model's momentum rate a_k
+(M_dot nu - bias: a smooth function of the state), and the measured generalized forces u_k:
+the motor torques minus friction and the known wrenches, as a sensor reports them at t_k,
+i.e. averaged over the last period (t_{k-1}, t_k] (a motor-current or F/T sample; on a
+discrete Drake plant, its net actuation and reaction forces of the last step). Then
+
+    I_k = I_{k-1}^+ + T/2 a_k + T u_k,    r_k = K (p_k - I_k),    I_k^+ = I_k + T/2 a_k + T r_k,
+
+with I_0 = p_0, so r_0 = 0. The trapezoidal rule on a_k makes the integral second-order
+accurate for a continuously moving robot. Since the true momentum obeys
+p_k = p_{k-1} + T (mean rate + u_k + tau_ext), the residual is the first-order filter
+r_k = (1 - K T) r_{k-1} + K T tau_ext of the unknown external effort (time constant about
+1/K). K T must be in (0, 1).
+
+The timing matters in a closed loop: a torque read at t_k that the motors will apply over
+the NEXT period would differ from the applied one by K_p times the change of the PD target
+within the period, and an admittance loop driven by the residual (eq. 14) would feed that
+error back into itself.
+
+Model and coordinates (see ``systems.dynamics.floating_base_terms``): the base velocity is the
+paper's v0 in the base frame F0, so the generalized momentum of model (8) is
+M_F0 [v0; qdot] with M_F0 = [[I0c, F], [F^T, H]], and its rate is
+M_F0_dot [v0; qdot] - [p^; C^] + generalized forces. That is eq. (7)'s
+tau_m + C^T qdot - g, written with M_dot - C = C^T, which costs no O(n^2) Christoffel
+symbols. The classical residual's base entries are therefore [moment about the F0 origin;
+force] in F0, and its joint entries J_j^T f are the same as for any other choice of virtual
+joints.
+
+Inputs (shared names):
+
+* ``state``: the plant's [q; v] as estimated from sensors (never the simulator's truth).
+* ``measured_torque`` (classical and internal only): the motor torques in the plant's
+  joint-velocity order v[6:], N m (N for prismatic joints), WITHOUT friction compensation:
+  the friction model tau_mu = D qdot (viscous, ``joint_damping``) is applied inside, so that
+  tau_m = tau - tau_mu + tau_bar_c as in the paper.
+* ``known_wrenches``: 6 numbers per frame of ``known_wrench_frames`` (the F/T sensors), the
+  measured wrench that the environment applies to the robot, [moment about the frame origin;
+  force], expressed in the world, N m and N.
+
+The external residual does not use the motor torques (the paper's point in Sec. V), so it
+has no ``measured_torque`` input.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import Frame, JacobianWrtVariable
+from pydrake.systems.framework import Context, DiscreteValues, LeafSystem
+
+from systems.dynamics.floating_base import DrakeFloatingBaseDynamics, FloatingBaseDynamics
+from systems.dynamics.floating_base_terms import FloatingBaseTerms
+from systems.common.checks import eval_finite_input
+from systems.common.topology import uniform_gravity
+
+#: Default update period of the residuals [s].
+DEFAULT_PERIOD = 1e-3
+
+
+class ResidualModel:
+    """The dynamics the residuals need at one sensed state, computed once per state.
+
+    Several residual systems can share one ``ResidualModel`` (pass it as ``model=``): the
+    floating-base decomposition and the Jacobians of the known-wrench frames are then
+    computed once per update for all of them.
+
+    Args:
+        plant: the robot's finalized plant (any plant ``FloatingBaseDynamics`` accepts).
+        implementation: ``"fast"`` or ``"reference"`` (see ``FloatingBaseDynamics``).
+    """
+
+    def __init__(self, plant: MultibodyPlant, implementation: str = "fast"):
+        self.plant = plant
+        self.dynamics = FloatingBaseDynamics(plant, implementation)
+        self.num_joints = self.dynamics.num_joints
+        self.joints = self.dynamics.topology.joints
+        self.num_positions = plant.num_positions()
+        self.num_velocities = plant.num_velocities()
+        self.joint_velocity_start = 6
+        impl = self.dynamics._impl
+        if isinstance(impl, DrakeFloatingBaseDynamics):
+            # After compute(q, v) its F0 context holds q's joints at the identity base pose.
+            self._context_F0 = impl._context_F0
+            self._context_is_current = True
+        else:
+            self._context_F0 = plant.CreateDefaultContext()
+            self._context_is_current = False
+        self._q_F0 = plant.GetPositions(self._context_F0).copy()
+        self._q_F0[:7] = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+        free_parent = self.dynamics.topology.free_joint.frame_on_parent()
+        X_WP = free_parent.CalcPoseInWorld(plant.CreateDefaultContext())
+        self._p_WP = X_WP.translation().copy()
+        self._R_WP = X_WP.rotation().matrix().copy()
+        self._gravity_W = uniform_gravity(plant)
+        self._key: bytes | None = None
+        self._terms: FloatingBaseTerms | None = None
+        self._jacobians: dict[int, np.ndarray] = {}
+        self._known_cache: dict = {}
+
+    def check_frames(self, frames: Sequence[Frame | str]) -> tuple[Frame, ...]:
+        """See ``check_wrench_frames``."""
+        return check_wrench_frames(self.plant, frames)
+
+    def evaluate(self, x: np.ndarray) -> FloatingBaseTerms:
+        """The floating-base terms at the sensed state x = [q; v] (cached per state)."""
+        key = x.tobytes()
+        if key != self._key:
+            nq = self.num_positions
+            self._terms = self.dynamics.compute(x[:nq], x[nq:])
+            self._jacobians = {}
+            self._known_cache = {}
+            self._key = key
+            if not self._context_is_current:
+                self._q_F0[7:] = x[7:nq]
+                self.plant.SetPositions(self._context_F0, self._q_F0)
+        return self._terms
+
+    def gravity_joint_torques(self, x: np.ndarray) -> np.ndarray:
+        """The joint entries (v[6:] order) of Drake's generalized gravity force tau_g
+        (``CalcGravityGeneralizedForces``) at the state x = [q; v], N m.
+
+        Uniform gravity's generalized force is M[:, 3:6] g (the base's translational columns
+        of the mass matrix are m J_com^T); in F0 coordinates its joint entries are
+        F[3:6]^T g_B with g_B = R_WB^T g_W. Free when x is the state of the last
+        ``evaluate`` (a PD controller reading the sample the residuals evaluated one step
+        earlier shares their mass matrix instead of computing gravity again).
+        """
+        terms = self.evaluate(x)
+        return terms.F[3:6].T @ (self._gravity_W @ terms.R_WB)
+
+    def spatial_jacobian_F0(self, frame: Frame) -> np.ndarray:
+        """(6, nv) Jacobian of ``frame``'s origin w.r.t. [v0; qdot], expressed in F0, rows
+        [angular; linear]: J^T [m; f] (wrench at the frame origin, in F0) is the wrench's
+        generalized force (base rows: [moment about the F0 origin; force] in F0). Valid for
+        the state of the last ``evaluate``."""
+        J = self._jacobians.get(int(frame.index()))
+        if J is None:
+            world = self.plant.world_frame()
+            J = self.plant.CalcJacobianSpatialVelocity(
+                self._context_F0, JacobianWrtVariable.kV, frame, np.zeros(3), world, world
+            )
+            self._jacobians[int(frame.index())] = J
+        return J
+
+    def known_wrench_forces(
+        self, terms: FloatingBaseTerms, frames: Sequence[Frame], wrenches_W: np.ndarray, frames_key=None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Generalized forces of measured wrenches (F/T sensors) at the last evaluated state.
+
+        Args:
+            terms: the result of ``evaluate`` for this state.
+            frames: the frames at whose origins the wrenches act.
+            wrenches_W: (6 k,) [moment about the frame origin; force] per frame, in world.
+            frames_key: a hashable that identifies ``frames`` (their indices by default).
+
+        Returns:
+            (w_F0, tau_joints): their sum as a base wrench in F0 about the F0 origin
+            ([moment; force], the paper's f_bar_sum of eq. 16), and their joint torques
+            J_j^T w (the joint part of the classical model's generalized force). Cached:
+            residuals sharing this model with the same frames and wrenches reuse it.
+        """
+        if frames_key is None:
+            frames_key = tuple(int(f.index()) for f in frames)
+        key = (frames_key, wrenches_W.tobytes())
+        cached = self._known_cache.get(key)
+        if cached is not None:
+            return cached
+        R_WB = terms.R_WB
+        generalized = np.zeros(self.num_velocities)
+        for i, frame in enumerate(frames):
+            # Rotate [m; f] into F0 (the Jacobian is expressed in F0, at the frame origin).
+            w_B = (wrenches_W[6 * i : 6 * i + 6].reshape(2, 3) @ R_WB).reshape(6)
+            generalized += self.spatial_jacobian_F0(frame).T @ w_B
+        result = (generalized[:6], generalized[6:])
+        self._known_cache[key] = result
+        return result
+
+    def base_wrench_to_world(self, terms: FloatingBaseTerms, x: np.ndarray, w_F0: np.ndarray) -> np.ndarray:
+        """[moment about the F0 origin; force] in F0 -> [moment about the world origin; force]
+        in world."""
+        moment_W, force_W = w_F0.reshape(2, 3) @ terms.R_WB.T  # rows: R m, R f
+        px, py, pz = (self._p_WP + self._R_WP @ x[4:7]).tolist()
+        fx, fy, fz = force_W.tolist()
+        shift = np.array((py * fz - pz * fy, pz * fx - px * fz, px * fy - py * fx))  # p_WBo x f
+        return np.concatenate((moment_W + shift, force_W))
+
+
+def check_wrench_frames(plant: MultibodyPlant, frames: Sequence[Frame | str]) -> tuple[Frame, ...]:
+    """Resolves frame names and checks that each frame is on a moving body of the plant.
+
+    Raises:
+        ValueError: an unknown frame name, a frame of another plant, or a frame fixed to
+            the world.
+    """
+    resolved = []
+    for frame in frames:
+        if isinstance(frame, str):
+            if not plant.HasFrameNamed(frame):
+                raise ValueError(f"known wrench frame '{frame}' is not a frame of the plant")
+            frame = plant.GetFrameByName(frame)
+        if not isinstance(frame, Frame):
+            raise ValueError(f"known wrench frames must be Frame objects or names, got {type(frame).__name__}")
+        if int(frame.index()) >= plant.num_frames() or plant.get_frame(frame.index()).name() != frame.name() or (
+            plant.get_frame(frame.index()).body().name() != frame.body().name()
+        ):
+            raise ValueError(f"known wrench frame '{frame.name()}' does not belong to this plant")
+        if frame.body().index() == plant.world_body().index():
+            raise ValueError(f"known wrench frame '{frame.name()}' is fixed to the world, not to the robot")
+        resolved.append(frame)
+    return tuple(resolved)
+
+
+class FixedBaseModel:
+    """The dynamics of a fixed-base robot (no floating base) for the classical residual,
+    the original De Luca et al. momentum observer that eq. (7) recalls: M(q) qdot,
+    M_dot qdot (central difference of M along qdot) and the bias C qdot - tau_g, all from
+    Drake. Joint velocities are the whole v; known wrenches map through J^T.
+    """
+
+    def __init__(self, plant: MultibodyPlant, derivative_step: float = 1e-5):
+        for index in plant.GetJointIndices():
+            joint = plant.get_joint(index)
+            if joint.num_velocities() > 1 or joint.type_name() == "quaternion_floating":
+                raise ValueError(
+                    f"joint '{joint.name()}' ({joint.type_name()}) is not a 1-DoF joint: the fixed-base "
+                    "classical residual needs revolute or prismatic joints only"
+                )
+        self.plant = plant
+        self.num_positions = plant.num_positions()
+        self.num_velocities = plant.num_velocities()
+        self.num_joints = plant.num_velocities()
+        self.joint_velocity_start = 0
+        self.joints = tuple(
+            sorted(
+                (plant.get_joint(i) for i in plant.GetJointIndices() if plant.get_joint(i).num_velocities() == 1),
+                key=lambda j: j.velocity_start(),
+            )
+        )
+        self._step = derivative_step
+        self._context = plant.CreateDefaultContext()
+        self._key: bytes | None = None
+        self._value = None
+
+    def check_frames(self, frames: Sequence[Frame | str]) -> tuple[Frame, ...]:
+        return check_wrench_frames(self.plant, frames)
+
+    def evaluate(self, x: np.ndarray):
+        """(M, M_dot qdot - (C qdot - tau_g)) at x = [q; qdot] (cached per state)."""
+        key = x.tobytes()
+        if key != self._key:
+            plant, context, nq = self.plant, self._context, self.num_positions
+            q, qdot = x[:nq], x[nq:]
+            speed = float(np.linalg.norm(qdot))
+            M_dot_qdot = np.zeros(self.num_velocities)
+            if speed > 0.0:
+                h = self._step / speed
+                plant.SetPositions(context, q + h * qdot)
+                M_dot_qdot = plant.CalcMassMatrix(context) @ qdot
+                plant.SetPositions(context, q - h * qdot)
+                M_dot_qdot = (M_dot_qdot - plant.CalcMassMatrix(context) @ qdot) / (2.0 * h)
+            plant.SetPositions(context, q)
+            plant.SetVelocities(context, qdot)
+            M = plant.CalcMassMatrix(context)
+            bias = plant.CalcBiasTerm(context) - plant.CalcGravityGeneralizedForces(context)
+            self._value = (M, M_dot_qdot - bias)
+            self._key = key
+        return self._value
+
+    def known_wrench_forces(self, terms, frames: Sequence[Frame], wrenches_W: np.ndarray):
+        """(None, J^T w): generalized forces of wrenches [moment about the frame origin; force]
+        in world, at the last evaluated state."""
+        world = self.plant.world_frame()
+        tau = np.zeros(self.num_velocities)
+        for i, frame in enumerate(frames):
+            J = self.plant.CalcJacobianSpatialVelocity(
+                self._context, JacobianWrtVariable.kV, frame, np.zeros(3), world, world
+            )
+            tau += J.T @ wrenches_W[6 * i : 6 * i + 6]
+        return None, tau
+
+
+class _MomentumResidual(LeafSystem):
+    """Common machinery: ports, discrete state, the observer update (see module docstring)."""
+
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        gain,
+        period: float,
+        known_wrench_frames: Sequence[Frame | str],
+        *,
+        size: int,
+        uses_torque: bool,
+        joint_damping,
+        model: ResidualModel | None,
+        implementation: str,
+    ):
+        super().__init__()
+        if not plant.is_finalized():
+            raise ValueError(f"{type(self).__name__}: the plant must be finalized")
+        self._model = model if model is not None else ResidualModel(plant, implementation)
+        if self._model.plant is not plant:
+            raise ValueError(f"{type(self).__name__}: the shared ResidualModel was built for another plant")
+        period = float(period)
+        if not np.isfinite(period) or period <= 0.0:
+            raise ValueError(f"{type(self).__name__}: period must be a positive number of seconds, got {period}")
+        self._period = period
+        self._size = size
+        self._gain = _vector_parameter(gain, size, f"{type(self).__name__}: gain")
+        if np.any(self._gain <= 0.0) or np.any(self._gain * period >= 1.0):
+            raise ValueError(
+                f"{type(self).__name__}: each gain K must satisfy 0 < K T < 1 (T = {period} s), "
+                f"got K in [{self._gain.min()}, {self._gain.max()}] 1/s"
+            )
+        self._frames = self._model.check_frames(known_wrench_frames)
+        self._frames_key = tuple(int(f.index()) for f in self._frames)
+        n = self._model.num_joints
+        nx = self._model.num_positions + self._model.num_velocities
+        self._num_positions = self._model.num_positions
+        self._qdot_start = self._model.num_positions + self._model.joint_velocity_start
+        if uses_torque:
+            if joint_damping is None:
+                joint_damping = _plant_joint_damping(self._model)
+            self._damping = _vector_parameter(joint_damping, n, f"{type(self).__name__}: joint_damping")
+            if np.any(self._damping < 0.0):
+                raise ValueError(f"{type(self).__name__}: joint_damping must be non-negative")
+
+        self._state_port = self.DeclareVectorInputPort("state", nx)
+        self._torque_port = self.DeclareVectorInputPort("measured_torque", n) if uses_torque else None
+        self._wrench_port = self.DeclareVectorInputPort("known_wrenches", 6 * len(self._frames))
+        # Discrete state: [initialised flag], momentum integral I, residual r.
+        self._flag_index = self.DeclareDiscreteState(1)
+        self._integral_index = self.DeclareDiscreteState(size)
+        self._residual_index = self.DeclareDiscreteState(size)
+        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._Update)
+
+    # -- subclass hooks -------------------------------------------------------------------
+    def _momentum_and_rates(self, terms, x, tau_m, known) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(momentum p, model rate a, measured generalized forces u) at one sensed state."""
+        raise NotImplementedError  # pragma: no cover - abstract
+
+    # -- helpers --------------------------------------------------------------------------
+    @property
+    def model(self) -> ResidualModel:
+        """The (possibly shared) dynamics model."""
+        return self._model
+
+    @property
+    def known_wrench_frames(self) -> tuple[Frame, ...]:
+        return self._frames
+
+    def _checked_input(self, port, context: Context) -> np.ndarray:
+        return eval_finite_input(type(self).__name__, port, context)
+
+    def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
+        x = self._checked_input(self._state_port, context)
+        terms = self._model.evaluate(x)
+        tau_m = None
+        if self._torque_port is not None:
+            qdot = x[self._qdot_start :]
+            tau_m = self._checked_input(self._torque_port, context) - self._damping * qdot
+        known = None
+        if self._frames:
+            wrenches = self._checked_input(self._wrench_port, context)
+            known = self._model.known_wrench_forces(terms, self._frames, wrenches, self._frames_key)
+        momentum, model_rate, measured_rate = self._momentum_and_rates(terms, x, tau_m, known)
+
+        half_step = 0.5 * self._period * model_rate
+        initialised = context.get_discrete_state(self._flag_index).get_value()[0] > 0.5
+        if initialised:
+            integral = (
+                context.get_discrete_state(self._integral_index).get_value() + half_step + self._period * measured_rate
+            )
+            residual = self._gain * (momentum - integral)
+        else:  # First update: I_0 = p_0, so that r_0 = 0 (no measured period yet).
+            integral = momentum
+            residual = np.zeros(self._size)
+        discrete_state.set_value(self._flag_index, [1.0])
+        discrete_state.set_value(self._integral_index, integral + half_step + self._period * residual)
+        discrete_state.set_value(self._residual_index, residual)
+        self._after_update(discrete_state, terms, x, residual)
+
+    def _after_update(self, discrete_state: DiscreteValues, terms, x, residual) -> None:
+        """Hook for subclasses that keep more discrete state."""
+
+    def _residual(self, context: Context) -> np.ndarray:
+        return context.get_discrete_state(self._residual_index).get_value()
+
+    def _declare_residual_output(self) -> None:
+        """The ``residual`` output port (classical and internal residuals): the discrete
+        state group itself, copied by Drake without a Python call."""
+        self.DeclareStateOutputPort("residual", self._residual_index)
+
+
+class ClassicalResidual(_MomentumResidual):
+    """Classical momentum residual, paper eq. (7), on the virtual-joint model (8).
+
+    On a plant without a floating base (a fixed-base arm) it is eq. (7) itself, the
+    residual of De Luca et al.: r ~ tau_c = J^T f, size nv, no base entries.
+
+    r ~ tau_c of model (8): the generalized force of the unknown external forces with the
+    base treated as 6 virtual joints. Its joint entries are J_j^T f, the fixed-base
+    Jacobian transposed: a push on a shoulder loads only the joints between the contact and
+    the base, never the legs (the paper's negative result, Sec. II-C).
+
+    Inputs: ``state`` (nq + nv), ``measured_torque`` (n), ``known_wrenches`` (6 per frame).
+    State: discrete, [flag; momentum integral (nv); residual (nv)], updated every ``period``.
+    Output: ``residual`` (nv): [base moment about the F0 origin, base force, both in F0;
+    joint efforts in v[6:] order], N m and N.
+
+    Args:
+        plant: finalized floating-base plant (see ``FloatingBaseDynamics``).
+        gain: K, scalar or nv-vector, 1/s; 0 < K period < 1.
+        period: update period T, s (default 1 ms).
+        known_wrench_frames: frames (or names) of the F/T sensors, in ``known_wrenches`` order.
+        joint_damping: viscous friction model D (scalar or n-vector, N m s/rad), subtracted
+            inside (tau_mu = D qdot); default: the plant's joint damping.
+        model: a ``ResidualModel`` shared with other residuals of the same plant.
+        implementation: ``"fast"`` or ``"reference"`` dynamics, when ``model`` is None.
+    """
+
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        gain,
+        period: float = DEFAULT_PERIOD,
+        known_wrench_frames: Sequence[Frame | str] = (),
+        *,
+        joint_damping=None,
+        model: ResidualModel | FixedBaseModel | None = None,
+        implementation: str = "fast",
+    ):
+        if model is None and plant.is_finalized() and not _has_free_joint(plant):
+            model = FixedBaseModel(plant)  # the fixed-base arm: eq. (7) as in De Luca et al.
+        super().__init__(
+            plant,
+            gain,
+            period,
+            known_wrench_frames,
+            size=plant.num_velocities(),
+            uses_torque=True,
+            joint_damping=joint_damping,
+            model=model,
+            implementation=implementation,
+        )
+        self._declare_residual_output()
+
+    def _momentum_and_rates(self, terms, x, tau_m, known):
+        if isinstance(self._model, FixedBaseModel):
+            M, rate = terms
+            qdot = x[self._qdot_start :]
+            if known is not None:
+                tau_m = tau_m + known[1]
+            return M @ qdot, rate, tau_m
+        v0, qdot = terms.v0, x[self._qdot_start :]
+        momentum = np.concatenate((terms.I0c @ v0 + terms.F @ qdot, terms.F.T @ v0 + terms.H @ qdot))
+        model_rate = np.concatenate(
+            (
+                terms.I0c_dot @ v0 + terms.F_dot @ qdot - terms.p_hat,
+                terms.F_dot.T @ v0 + terms.H_dot @ qdot - terms.C_hat,
+            )
+        )
+        measured = np.zeros(self._size)
+        measured[6:] = tau_m
+        if known is not None:
+            measured[:6] += known[0]
+            measured[6:] += known[1]
+        return momentum, model_rate, measured
+
+
+
+class InternalResidual(_MomentumResidual):
+    """Internal (floating-base) residual, paper eq. (11), with tau_bar_c of eq. (10).
+
+    r_int ~ tau_c,real = sum_c J^fb_c^T f_c (eq. 12): the true joint effort of the unknown
+    external forces, legs included.
+
+    Inputs: ``state`` (nq + nv), ``measured_torque`` (n), ``known_wrenches`` (6 per frame).
+    State: discrete, [flag; momentum integral (n); residual (n)], updated every ``period``.
+    Output: ``residual`` (n), joint efforts in v[6:] order, N m (N for prismatic joints).
+
+    Args: as ``ClassicalResidual``, with ``gain`` a scalar or an n-vector.
+    """
+
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        gain,
+        period: float = DEFAULT_PERIOD,
+        known_wrench_frames: Sequence[Frame | str] = (),
+        *,
+        joint_damping=None,
+        model: ResidualModel | None = None,
+        implementation: str = "fast",
+    ):
+        super().__init__(
+            plant,
+            gain,
+            period,
+            known_wrench_frames,
+            size=plant.num_velocities() - 6,
+            uses_torque=True,
+            joint_damping=joint_damping,
+            model=model,
+            implementation=implementation,
+        )
+        self._declare_residual_output()
+
+    def _momentum_and_rates(self, terms, x, tau_m, known):
+        qdot = x[self._qdot_start :]
+        momentum = terms.H_fb @ qdot
+        model_rate = terms.H_fb_dot @ qdot - terms.C_fb
+        measured = tau_m
+        if known is not None:
+            w_F0, tau_joints = known
+            measured = tau_m + tau_joints - terms.I0c_inv_F.T @ w_F0  # tau_bar_c = J^fb^T w (eq. 10)
+        return momentum, model_rate, measured
+
+
+
+class ExternalResidual(_MomentumResidual):
+    """External (floating-base) residual, paper eq. (16).
+
+    r_ext ~ sum_c 0X*_ref f_c (eq. 17): the total unknown external wrench on the robot,
+    about the base origin, in the base frame F0. It needs no motor torques.
+
+    Inputs: ``state`` (nq + nv), ``known_wrenches`` (6 per frame).
+    State: discrete, [flag; momentum integral (6); residual (6); residual in world (6)],
+    updated every ``period``.
+    Outputs:
+        ``external_wrench_base``: [moment about the F0 origin; force], in F0, N m and N.
+        ``external_wrench_world``: the same wrench as [moment about the world origin;
+        force], in world (rotated with the sensed base pose).
+
+    Args: as ``ClassicalResidual`` without ``joint_damping``; ``gain`` scalar or 6-vector.
+    """
+
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        gain,
+        period: float = DEFAULT_PERIOD,
+        known_wrench_frames: Sequence[Frame | str] = (),
+        *,
+        model: ResidualModel | None = None,
+        implementation: str = "fast",
+    ):
+        super().__init__(
+            plant,
+            gain,
+            period,
+            known_wrench_frames,
+            size=6,
+            uses_torque=False,
+            joint_damping=None,
+            model=model,
+            implementation=implementation,
+        )
+        # The world-frame wrench uses the sensed base pose of the same update.
+        self._world_index = self.DeclareDiscreteState(6)
+        self.DeclareStateOutputPort("external_wrench_base", self._residual_index)
+        self.DeclareStateOutputPort("external_wrench_world", self._world_index)
+
+    def _momentum_and_rates(self, terms, x, tau_m, known):
+        v0, qdot = terms.v0, x[self._qdot_start :]
+        momentum = terms.I0c @ v0 + terms.F @ qdot
+        model_rate = terms.I0c_dot @ v0 + terms.F_dot @ qdot - terms.p_hat
+        return momentum, model_rate, (np.zeros(6) if known is None else known[0])
+
+    def _after_update(self, discrete_state: DiscreteValues, terms, x, residual) -> None:
+        discrete_state.set_value(self._world_index, self._model.base_wrench_to_world(terms, x, residual))
+
+
+def _has_free_joint(plant: MultibodyPlant) -> bool:
+    return any(plant.get_joint(i).num_velocities() == 6 for i in plant.GetJointIndices())
+
+
+def _vector_parameter(value, size: int, what: str) -> np.ndarray:
+    array = np.asarray(value, dtype=float)
+    if array.ndim == 0:
+        array = np.full(size, float(array))
+    if array.shape != (size,):
+        raise ValueError(f"{what} must be a scalar or have {size} entries, got shape {array.shape}")
+    if not np.isfinite(array).all():
+        raise ValueError(f"{what} must be finite")
+    return array
+
+
+def _plant_joint_damping(model: ResidualModel | FixedBaseModel) -> np.ndarray:
+    """The plant's viscous joint damping per joint, v[6:] order (N m s/rad)."""
+    return np.array([float(j.default_damping()) for j in model.joints])

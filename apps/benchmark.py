@@ -203,8 +203,7 @@ def benchmark_closed_loop(seconds: float = 2.0) -> list[dict]:
 
     def station_only():
         builder = DiagramBuilder()
-        station = add_humanoid_station(builder, scenario.model, noise=True, seed=0,
-                                       contact_approximation=scenario.contact_approximation)
+        station = add_humanoid_station(builder, scenario.model, plant_config=scenario.plant_config, noise=True, seed=0)
         posture = builder.AddSystem(ConstantVectorSource(station.q_hold))
         builder.Connect(posture.get_output_port(), station.desired_position)
         return builder.Build(), station, None

@@ -6,7 +6,8 @@ residual moves the joints in the direction of the effort the residual sees. The 
 runs twice: with the classical residual (eq. 7: it only feels the chest) and with the
 internal residual (eq. 11: it feels the legs too, and the robot bends as if sitting down).
 
-Run: ``python -m apps.push_and_comply [--headless] [--out DIR] [--scenario FILE] [--seed N]``.
+Run: ``python -m apps.push_and_comply [--headless] [--out DIR] [--scenario FILE] [--scenario-text YAML]
+[--seed N]``.
 Writes to ``DIR/push_and_comply/``: ``internal.html`` and ``classical.html`` (self-contained
 Meshcat replays: red spheres at the joints grow with the residual's effort, red arrows are
 the pushes), ``joint_trajectories.png``, ``residual_vs_true_effort.png`` and
@@ -16,120 +17,59 @@ the pushes), ``joint_trajectories.png``, ``residual_vs_true_effort.png`` and
 from __future__ import annotations
 
 import argparse
-import json
-import sys
-import time
+
+import matplotlib.pyplot as plt
+import numpy as np
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from pydrake.geometry import Meshcat  # noqa: E402
-from pydrake.systems.analysis import Simulator  # noqa: E402
-
-from apps.common import logged_signals, memory_allocator  # noqa: E402
-from diagrams.residuals.push_and_comply import (  # noqa: E402
+from apps.runner import (
+    experiment_parser,
+    logged_signals,
+    memory_allocator,
+    output_folder,
+    print_written,
+    replay_meshcat,
+    run_app,
+    save_replay,
+    scenario_from_args,
+    simulate,
+    write_metrics,
+)
+from diagrams.residuals.push_and_comply import (
     RESIDUAL_KINDS,
     PushAndComplyScenario,
     build_push_and_comply_diagram,
-    load_scenario,
+    push_and_comply_metrics,
 )
 
 #: Joints plotted (the paper's Figs. 5-6 discuss knees, hips, ankles and chest pitch).
 PLOTTED_JOINTS = ("R_KNEE_P", "L_KNEE_P", "R_HIP_P", "L_HIP_P", "R_ANKLE_P", "L_ANKLE_P", "CHEST_P")
-#: A run counts as upright while the pelvis keeps this fraction of its height and tilts less.
-UPRIGHT_HEIGHT_FRACTION = 0.7
-UPRIGHT_MAX_TILT_DEG = 30.0
 
 
 def _parse(argv):
-    parser = argparse.ArgumentParser(prog="python -m apps.push_and_comply", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--headless", action="store_true", help="no live Meshcat URL (the replays are still written)")
-    parser.add_argument("--out", type=Path, default=Path("out"), help="output folder (default out)")
-    parser.add_argument("--scenario", type=Path, default=None, help="YAML scenario (default: the built-in one)")
+    parser = experiment_parser("apps.push_and_comply", __doc__, replay=False)
     parser.add_argument("--seed", type=int, default=None, help="sensor noise seed (overrides the scenario's)")
     parser.add_argument("--runs", nargs="+", choices=RESIDUAL_KINDS, default=list(RESIDUAL_KINDS), help=argparse.SUPPRESS)
     return parser.parse_args(argv)
 
 
-def simulate(
-    scenario: PushAndComplyScenario, kind: str, meshcat: Meshcat | None, *, progress: bool = True, live: bool = True
-) -> dict:
-    """Runs one closed loop; returns the logged signals and the wall time. With ``meshcat``
-    the run is recorded for the replay, and shown live too when ``live`` (a headless run
-    records without sending each frame to the live view)."""
-    if meshcat is not None:
-        meshcat.Delete()
-        meshcat.DeleteRecording()
+def run_once(scenario: PushAndComplyScenario, kind: str, meshcat, *, progress: bool = True, live: bool = True) -> dict:
+    """One closed loop with the ``kind`` residual: its logged signals, handles and metrics.
+    With ``meshcat`` the run is recorded for the replay (and shown live when ``live``)."""
     diagram, handles = build_push_and_comply_diagram(scenario, kind, meshcat)
-    simulator = Simulator(diagram)
-    context = simulator.get_mutable_context()
-    handles.station.set_initial_state(context)
-    if meshcat is not None:
-        meshcat.SetCameraPose(camera_in_world=[1.6, -1.6, 1.2], target_in_world=[0.0, 0.0, 0.7])
-        meshcat.StartRecording(frames_per_second=32.0, set_visualizations_while_recording=live)
-    simulator.Initialize()
-    start = time.perf_counter()
-    t, step = 0.0, 0.5
-    while t < scenario.duration - 1e-9:
-        t = min(t + step, scenario.duration)
-        simulator.AdvanceTo(t)
-        if progress:
-            print(f"\r  {kind:9s} {t:5.1f} / {scenario.duration:.1f} s simulated", end="", flush=True)
-    wall = time.perf_counter() - start
-    if progress:
-        print(f"  ({wall:.1f} s wall, real-time factor {scenario.duration / wall:.2f})")
-    if meshcat is not None:
-        meshcat.StopRecording()
-        meshcat.PublishRecording()
-    signals = logged_signals(handles.loggers, context, "state")
-    return {"signals": signals, "handles": handles, "wall": wall}
-
-
-def run_metrics(scenario: PushAndComplyScenario, run: dict) -> dict:
-    """The metrics of one run (see the module docstring of the README)."""
-    handles, s = run["handles"], run["signals"]
-    station = handles.station
-    plant, humanoid = station.plant, station.humanoid
-    t, x = s["t"], s["state"]
-    names = station.joint_names
-    q = np.array([x[j.position_start()] for j in station.topology.joints])
-    reference = int(np.searchsorted(t, scenario.push_start))  # posture when the push begins
-    displacement = q - q[:, [reference]]
-    max_displacement_deg = {n: float(np.degrees(np.abs(displacement[k, reference:]).max())) for k, n in enumerate(names)}
-    knees = [n for n in names if "KNEE" in n.upper()]
-    flexion = {n: float(np.degrees(displacement[names.index(n), reference:].max())) for n in knees}
-
-    context = plant.CreateDefaultContext()
-    com_z, pelvis_z, tilt_deg, soles = [], [], [], {side: [] for side in humanoid.sole_frames}
-    for k in range(reference, x.shape[1]):
-        plant.SetPositionsAndVelocities(context, x[:, k])
-        com_z.append(plant.CalcCenterOfMassPositionInWorld(context)[2])
-        X_WB = humanoid.base_body.EvalPoseInWorld(context)
-        pelvis_z.append(X_WB.translation()[2])
-        tilt_deg.append(np.degrees(np.arccos(np.clip(X_WB.rotation().matrix()[2, 2], -1.0, 1.0))))
-        for side, frame in humanoid.sole_frames.items():
-            soles[side].append(frame.CalcPoseInWorld(context).translation())
-    com_z, pelvis_z = np.array(com_z), np.array(pelvis_z)
-    slip = {side: float(np.linalg.norm(np.array(p)[:, :2] - np.array(p)[0, :2], axis=1).max()) for side, p in soles.items()}
-    upright = bool(pelvis_z.min() > UPRIGHT_HEIGHT_FRACTION * pelvis_z[0] and max(tilt_deg) < UPRIGHT_MAX_TILT_DEG)
-    return {
-        "residual": handles.residual_kind,
-        "knee_pitch_flexion_deg": min(flexion.values()) if flexion else None,
-        "knee_pitch_flexion_per_knee_deg": flexion,
-        "joints_moved_over_1deg": int(sum(v > 1.0 for v in max_displacement_deg.values())),
-        "com_height_drop_m": float(com_z[0] - com_z.min()),
-        "pelvis_height_drop_m": float(pelvis_z[0] - pelvis_z.min()),
-        "max_foot_slip_m": max(slip.values()),
-        "foot_slip_m": slip,
-        "max_base_tilt_deg": float(max(tilt_deg)),
-        "upright": upright,
-        "real_time_factor": scenario.duration / run["wall"],
-        "wall_time_s": run["wall"],
-        "max_joint_displacement_deg": max_displacement_deg,
-    }
+    run = simulate(
+        diagram,
+        scenario.duration,
+        set_initial_state=handles.station.set_initial_state,
+        simulator_config=scenario.simulator_config,
+        meshcat=meshcat,
+        live=live,
+        camera=([1.6, -1.6, 1.2], [0.0, 0.0, 0.7]),
+        label=kind if progress else None,
+    )
+    signals = logged_signals(handles.loggers, run.context, "state")
+    metrics = push_and_comply_metrics(scenario, handles, signals, run.wall_time_s)
+    return {"signals": signals, "handles": handles, "wall": run.wall_time_s, "metrics": metrics}
 
 
 def _plot(out_dir: Path, scenario: PushAndComplyScenario, runs: dict) -> None:
@@ -203,39 +143,29 @@ def _print_table(metrics: dict) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     args = _parse(argv)
-    try:
-        scenario = load_scenario(args.scenario)
-    except ValueError as error:
-        print(f"push_and_comply: error: {error}", file=sys.stderr)
-        return 2
-    if args.seed is not None:
-        scenario.seed = args.seed
-    out_dir = args.out / "push_and_comply"
-    out_dir.mkdir(parents=True, exist_ok=True)
-    meshcat = Meshcat()
-    if not args.headless:
-        print(f"Meshcat (live view): {meshcat.web_url()}")
-    print(
-        f"push and comply: {scenario.model}, {scenario.push_peak_force:g} N down on each shoulder from "
-        f"{scenario.push_start:g} s (peak {scenario.push_peak_time:g} s, off {scenario.push_end:g} s), {scenario.duration:g} s"
-    )
-    runs, metrics = {}, {}
-    try:
+
+    def body() -> int:
+        scenario = scenario_from_args(PushAndComplyScenario, args, seed=args.seed)
+        out_dir = output_folder(args, "push_and_comply")
+        meshcat = replay_meshcat(True, args.headless)
+        print(
+            f"push and comply: {scenario.model}, {scenario.push_peak_force:g} N down on each shoulder from "
+            f"{scenario.push_start:g} s (peak {scenario.push_peak_time:g} s, off {scenario.push_end:g} s), "
+            f"{scenario.duration:g} s"
+        )
+        runs, metrics = {}, {}
         for kind in args.runs:
-            runs[kind] = simulate(scenario, kind, meshcat, live=not args.headless)
-            (out_dir / f"{kind}.html").write_text(meshcat.StaticHtml())
-            metrics[kind] = run_metrics(scenario, runs[kind])
-    except ValueError as error:
-        print(f"\npush_and_comply: error: {error}", file=sys.stderr)
-        return 2
-    _plot(out_dir, scenario, runs)
-    metrics["scenario"] = {k: v for k, v in vars(scenario).items()}
-    metrics["memory_allocator"] = memory_allocator()
-    (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2))
-    _print_table({k: v for k, v in metrics.items() if k in RESIDUAL_KINDS})
-    print(f"memory allocator: {metrics['memory_allocator']} (make preloads tcmalloc when installed; see BENCHMARKS.md)")
-    print(f"wrote {out_dir}: " + ", ".join(sorted(p.name for p in out_dir.iterdir())))
-    return 0
+            runs[kind] = run_once(scenario, kind, meshcat, live=not args.headless)
+            save_replay(meshcat, out_dir / f"{kind}.html")
+            metrics[kind] = runs[kind]["metrics"]
+        _plot(out_dir, scenario, runs)
+        write_metrics(out_dir, metrics, scenario)
+        _print_table(metrics)
+        print(f"memory allocator: {memory_allocator()} (make preloads tcmalloc when installed; see BENCHMARKS.md)")
+        print_written(out_dir)
+        return 0
+
+    return run_app("push_and_comply", body)
 
 
 if __name__ == "__main__":

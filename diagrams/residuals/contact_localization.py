@@ -23,11 +23,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, Rgba, SceneGraph
-from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.plant import MultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.framework import BasicVector, Context, Diagram, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
-from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station
+from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station, default_plant_config
 from systems.residuals.contact_estimation import ContactDetector, ContactLocalizer
 from systems.simulation.disturbances import Push, PushSource, Step
 from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual, ResidualModel
@@ -50,7 +50,8 @@ class ContactLocalizationConfig:
         push_duration: s.
         noise: sensor noise on (systems.simulation.sensors defaults) or off. seed: its seed.
         internal_gain, external_gain: residual gains K, 1/s.
-        time_step: plant step, s. period: residual/detector/localizer period, s.
+        plant_config: Drake's plant configuration (default: 1 ms steps, point contact, SAP).
+        period: residual/detector/localizer period, s.
         settle_time: the localizer's wait after detection before averaging, s.
         log_period: period of the loggers (detector and localizer outputs, truth), s.
     """
@@ -65,7 +66,7 @@ class ContactLocalizationConfig:
     seed: int = 0
     internal_gain: float = 35.0
     external_gain: float = 35.0
-    time_step: float = 1e-3
+    plant_config: MultibodyPlantConfig = field(default_factory=default_plant_config)
     period: float = 1e-3
     settle_time: float = 0.1
     log_period: float = 1e-3
@@ -121,7 +122,7 @@ def build_contact_localization_diagram(
     if config.push_duration <= 0 or config.push_start < 0 or config.log_period <= 0:
         raise ValueError("push_duration and log_period must be positive, push_start non-negative")
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, config.model, time_step=config.time_step, noise=config.noise, seed=config.seed)
+    station = add_humanoid_station(builder, config.model, plant_config=config.plant_config, noise=config.noise, seed=config.seed)
     if station.humanoid is None or not station.known_wrench_frames:
         raise ValueError(f"the contact study needs a humanoid with foot F/T sensors (hrp4_like), got {config.model!r}")
     plant = station.plant

@@ -17,17 +17,22 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from pydrake.common.yaml import yaml_load_typed
+from pydrake.multibody.plant import MultibodyPlantConfig
+from pydrake.systems.analysis import SimulatorConfig
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
-from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station
+from diagrams.scenarios import load_scenario as _load_scenario
+from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station, default_plant_config
 from systems.residuals.admittance import JointAdmittanceController, admittance_gains_by_group, joint_position_selector
 from systems.simulation.disturbances import PolynomialRampUpDown, Push, PushSource
 from systems.residuals.momentum_residuals import ClassicalResidual, InternalResidual
 
 RESIDUAL_KINDS = ("internal", "classical")
+#: A run counts as upright while the pelvis keeps this fraction of its height and tilts less.
+UPRIGHT_HEIGHT_FRACTION = 0.7
+UPRIGHT_MAX_TILT_DEG = 30.0
 
 
 @dataclass
@@ -58,9 +63,12 @@ class PushAndComplyScenario:
             weight (measured: the knees buckle); "desired" keeps the posture's stiffness.
         noise: sensor noise on (the defaults of ``systems.simulation.sensors``).
         seed: sensor noise seed.
-        contact_approximation: the plant's discrete contact approximation ("sap", "similar"
-            or "lagged", see ``diagrams.station.humanoid_station``); Drake's SAP by default.
         log_period: loggers' sampling period, s.
+        plant_config: Drake's ``MultibodyPlantConfig`` (default: 1 ms steps, point contact,
+            SAP; its ``discrete_contact_approximation`` may be "sap", "similar" or "lagged",
+            see ``diagrams.station.humanoid_station``).
+        simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``); the plant
+            is discrete, so only ``target_realtime_rate`` and the publishing matter.
     """
 
     model: str = "hrp4_like"
@@ -88,26 +96,20 @@ class PushAndComplyScenario:
     integrate_from: str = "desired"
     noise: bool = True
     seed: int = 0
-    contact_approximation: str = "sap"
     log_period: float = 0.01
+    plant_config: MultibodyPlantConfig = dataclasses.field(default_factory=default_plant_config)
+    simulator_config: SimulatorConfig = dataclasses.field(default_factory=SimulatorConfig)
 
 
-def load_scenario(path: str | Path | None) -> PushAndComplyScenario:
-    """The scenario in the YAML file ``path`` (missing keys keep their defaults), or the
-    default scenario when ``path`` is None.
+def load_scenario(path: str | Path | None = None, text: str | None = None) -> PushAndComplyScenario:
+    """The default scenario overridden by the YAML file ``path`` and the YAML text ``text``
+    (missing keys keep their defaults; see ``diagrams.scenarios``).
 
     Raises:
-        ValueError: an unreadable file or a malformed scenario (the message says which).
+        ScenarioError (a ValueError): an unreadable file or a malformed scenario (the message
+            says which).
     """
-    if path is None:
-        return PushAndComplyScenario()
-    path = Path(path)
-    if not path.is_file():
-        raise ValueError(f"scenario file '{path}' does not exist")
-    try:
-        return yaml_load_typed(schema=PushAndComplyScenario, filename=str(path), defaults=PushAndComplyScenario())
-    except Exception as error:  # Drake's YAML reader raises RuntimeError with details
-        raise ValueError(f"could not read the scenario file '{path}': {error}") from error
+    return _load_scenario(PushAndComplyScenario, filename=path, text=text)
 
 
 @dataclass
@@ -139,8 +141,7 @@ def build_push_and_comply_diagram(
         raise ValueError("the scenario needs 0 <= push_start < push_peak_time < push_end <= duration")
     builder = DiagramBuilder()
     station = add_humanoid_station(
-        builder, scenario.model, noise=scenario.noise, seed=scenario.seed,
-        contact_approximation=scenario.contact_approximation,
+        builder, scenario.model, plant_config=scenario.plant_config, noise=scenario.noise, seed=scenario.seed
     )
     plant, humanoid = station.plant, station.humanoid
     if humanoid is None:
@@ -227,3 +228,51 @@ def build_push_and_comply_diagram(
         meshcat_visualizer=visualizer,
         overlay=overlay,
     )
+
+
+def push_and_comply_metrics(
+    scenario: PushAndComplyScenario, handles: PushAndComplyHandles, s: dict, wall_time_s: float
+) -> dict:
+    """The metrics of one run, from its logged signals ``s`` (``logged_signals``: "t" and
+    the loggers of ``handles``): knee flexion and joints moved from the posture at the push's
+    start, CoM and pelvis height drop, foot slip, base tilt, whether it stayed upright, and
+    the real-time factor of a run that took ``wall_time_s`` s."""
+    station = handles.station
+    plant, humanoid = station.plant, station.humanoid
+    t, x = s["t"], s["state"]
+    names = station.joint_names
+    q = np.array([x[j.position_start()] for j in station.topology.joints])
+    reference = int(np.searchsorted(t, scenario.push_start))  # posture when the push begins
+    displacement = q - q[:, [reference]]
+    max_displacement_deg = {n: float(np.degrees(np.abs(displacement[k, reference:]).max())) for k, n in enumerate(names)}
+    knees = [n for n in names if "KNEE" in n.upper()]
+    flexion = {n: float(np.degrees(displacement[names.index(n), reference:].max())) for n in knees}
+
+    context = plant.CreateDefaultContext()
+    com_z, pelvis_z, tilt_deg, soles = [], [], [], {side: [] for side in humanoid.sole_frames}
+    for k in range(reference, x.shape[1]):
+        plant.SetPositionsAndVelocities(context, x[:, k])
+        com_z.append(plant.CalcCenterOfMassPositionInWorld(context)[2])
+        X_WB = humanoid.base_body.EvalPoseInWorld(context)
+        pelvis_z.append(X_WB.translation()[2])
+        tilt_deg.append(np.degrees(np.arccos(np.clip(X_WB.rotation().matrix()[2, 2], -1.0, 1.0))))
+        for side, frame in humanoid.sole_frames.items():
+            soles[side].append(frame.CalcPoseInWorld(context).translation())
+    com_z, pelvis_z = np.array(com_z), np.array(pelvis_z)
+    slip = {side: float(np.linalg.norm(np.array(p)[:, :2] - np.array(p)[0, :2], axis=1).max()) for side, p in soles.items()}
+    upright = bool(pelvis_z.min() > UPRIGHT_HEIGHT_FRACTION * pelvis_z[0] and max(tilt_deg) < UPRIGHT_MAX_TILT_DEG)
+    return {
+        "residual": handles.residual_kind,
+        "knee_pitch_flexion_deg": min(flexion.values()) if flexion else None,
+        "knee_pitch_flexion_per_knee_deg": flexion,
+        "joints_moved_over_1deg": int(sum(v > 1.0 for v in max_displacement_deg.values())),
+        "com_height_drop_m": float(com_z[0] - com_z.min()),
+        "pelvis_height_drop_m": float(pelvis_z[0] - pelvis_z.min()),
+        "max_foot_slip_m": max(slip.values()),
+        "foot_slip_m": slip,
+        "max_base_tilt_deg": float(max(tilt_deg)),
+        "upright": upright,
+        "real_time_factor": scenario.duration / wall_time_s,
+        "wall_time_s": wall_time_s,
+        "max_joint_displacement_deg": max_displacement_deg,
+    }

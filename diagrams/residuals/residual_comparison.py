@@ -16,15 +16,15 @@ path) floats in zero gravity with no ground, holding its default posture.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, SceneGraph
-from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.plant import MultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
-from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station
+from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station, default_plant_config
 from models import HumanoidHandles
 from systems.simulation.disturbances import Push, PushSource, Sinusoid
 from systems.residuals.momentum_residuals import ClassicalResidual, ExternalResidual, InternalResidual, ResidualModel
@@ -53,7 +53,7 @@ class ResidualComparisonConfig:
             (omega/K = 1.8 % at 0.1 Hz) against the default sensor noise.
         noise: sensor noise on (the sensors' documented defaults) or off.
         seed: sensor noise seed.
-        time_step: the plant's discrete step, s.
+        plant_config: Drake's plant configuration (default: 1 ms steps, point contact, SAP).
         period: the residuals' update period, s.
         log_period: the loggers' sampling period, s.
     """
@@ -71,7 +71,7 @@ class ResidualComparisonConfig:
     external_gain: float = 35.0
     noise: bool = True
     seed: int = 0
-    time_step: float = 1e-3
+    plant_config: MultibodyPlantConfig = field(default_factory=default_plant_config)
     period: float = 1e-3
     log_period: float = 5e-3
 
@@ -107,7 +107,7 @@ def build_residual_comparison_diagram(
     if config.duration <= 0 or config.push_frequency < 0 or config.log_period <= 0:
         raise ValueError("duration and log_period must be positive, push_frequency non-negative")
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, config.model, time_step=config.time_step, noise=config.noise, seed=config.seed)
+    station = add_humanoid_station(builder, config.model, plant_config=config.plant_config, noise=config.noise, seed=config.seed)
     plant, humanoid = station.plant, station.humanoid
     builder.Connect(
         builder.AddSystem(ConstantVectorSource(station.q_hold)).get_output_port(), station.desired_position

@@ -40,6 +40,11 @@ from systems.common.topology import FloatingBaseTopology, floating_base_topology
 CONTACT_APPROXIMATIONS = ("sap", "similar", "lagged")
 
 
+def default_plant_config() -> MultibodyPlantConfig:
+    """The station's plant: discrete, 1 ms steps, point contact, Drake's SAP solver."""
+    return MultibodyPlantConfig(time_step=1e-3, discrete_contact_approximation="sap", contact_model="point")
+
+
 @dataclass
 class HumanoidStation:
     """What ``add_humanoid_station`` added.
@@ -107,26 +112,31 @@ def add_humanoid_station(
     builder: DiagramBuilder,
     model: str,
     *,
-    time_step: float = 1e-3,
+    plant_config: MultibodyPlantConfig | None = None,
     noise: bool = True,
     seed: int = 0,
-    contact_approximation: str = "sap",
 ) -> HumanoidStation:
     """Adds the station of the module docstring to ``builder``.
 
     Args:
         model: ``hrp4_like``, ``nao_like`` or a path to a floating-base SDFormat/URDF file.
-        time_step: the plant's discrete step, s.
-        contact_approximation: the discrete contact solver, one of
-            ``CONTACT_APPROXIMATIONS`` (Drake's ``discrete_contact_approximation``): "sap"
-            (default, Drake's convex solver), "similar" or "lagged". Drake's TAMSI solver
-            is deprecated and refused.
+        plant_config: Drake's plant configuration (default ``default_plant_config()``: 1 ms
+            steps, point contact, SAP). Its ``time_step`` is the plant's discrete step, s,
+            and its ``discrete_contact_approximation`` one of ``CONTACT_APPROXIMATIONS``:
+            "sap" (Drake's convex solver), "similar" or "lagged". Drake's TAMSI solver is
+            deprecated and refused; the station's geometry is made for point contact.
         noise, seed: the sensors' noise (defaults of ``systems.simulation.sensors``) and its seed.
 
     Raises:
         ValueError: an unknown or unreadable model, a model without a floating base, an
             unknown contact approximation.
     """
+    plant_config = default_plant_config() if plant_config is None else plant_config
+    contact_approximation = plant_config.discrete_contact_approximation
+    if not plant_config.time_step > 0.0:
+        raise ValueError(f"plant_config.time_step must be positive (a discrete plant), got {plant_config.time_step}")
+    if plant_config.contact_model != "point":
+        raise ValueError(f"plant_config.contact_model {plant_config.contact_model!r}: the station uses point contact ('point')")
     if contact_approximation == "tamsi":
         raise ValueError(
             "contact approximation 'tamsi': Drake deprecated the TAMSI solver (removal on or after "
@@ -136,9 +146,9 @@ def add_humanoid_station(
         raise ValueError(
             f"unknown contact approximation {contact_approximation!r}; choose one of {CONTACT_APPROXIMATIONS}"
         )
+    time_step = plant_config.time_step
     plant, scene_graph = AddMultibodyPlant(
-        MultibodyPlantConfig(time_step=time_step, discrete_contact_approximation=contact_approximation,
-                             contact_model="point"),
+        plant_config,
         point_contact_scene_graph_config(),
         builder,
     )

@@ -1,0 +1,220 @@
+"""The one runner every app uses: its command line (``--scenario FILE``, ``--scenario-text
+YAML``, ``--out DIR``, ``--headless``, ``--no-replay``), the scenario loading, the simulation
+with progress and Meshcat recording, the replay files, ``metrics.json``, and the errors.
+
+An app is then what is particular to its experiment: its scenario type and diagram (in
+``diagrams/``), its metrics (next to the diagram), its plots and its printed table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+from pydrake.geometry import Meshcat
+from pydrake.systems.analysis import ApplySimulatorConfig, Simulator, SimulatorConfig
+from pydrake.systems.framework import Context, Diagram
+
+from diagrams.scenarios import ScenarioError, load_scenario, scenario_as_dict
+
+#: The folder every app writes into, as ``DIR/<experiment>/`` (``--out DIR``).
+DEFAULT_OUT = Path("out")
+
+
+def memory_allocator() -> str:
+    """"tcmalloc" when the process runs with tcmalloc preloaded (``make`` does it when the
+    library is installed: Drake's SAP solver then takes less time per step), else "system"."""
+    return "tcmalloc" if "tcmalloc" in os.environ.get("LD_PRELOAD", "") else "system"
+
+
+def experiment_parser(module: str, doc: str | None, *, replay: bool = True) -> argparse.ArgumentParser:
+    """The arguments every app shares; the app adds its own. ``module`` is the app's module
+    name (``apps.<experiment>``), ``doc`` its docstring (the first paragraph is the
+    description)."""
+    parser = argparse.ArgumentParser(prog=f"python -m {module}", description=(doc or "").split("\n\n")[0])
+    parser.add_argument("--scenario", type=Path, default=None, metavar="FILE",
+                        help="YAML scenario file (apps/scenarios/); missing keys keep their defaults")
+    parser.add_argument("--scenario-text", default=None, metavar="YAML",
+                        help="YAML overrides applied after --scenario, e.g. --scenario-text 'seed: 3'")
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT,
+                        help=f"output folder; the app writes into OUT/<experiment>/ (default {DEFAULT_OUT})")
+    parser.add_argument("--headless", action="store_true",
+                        help="no live Meshcat URL (the replays are still written)")
+    if replay:
+        parser.add_argument("--no-replay", action="store_true", help="skip the Meshcat replays (faster)")
+    return parser
+
+
+def scenario_from_args(schema: type, args: argparse.Namespace, defaults: Any = None, **overrides: Any) -> Any:
+    """The scenario of ``--scenario`` and ``--scenario-text`` over ``defaults`` (or
+    ``schema()``); then each keyword in ``overrides`` whose value is not None replaces that
+    field (an app's shorthand options such as ``--seed``).
+
+    Raises:
+        ScenarioError: see ``diagrams.scenarios.load_scenario``; an override of an unknown field.
+    """
+    scenario = load_scenario(schema, filename=args.scenario, text=args.scenario_text, defaults=defaults)
+    for name, value in overrides.items():
+        if value is None:
+            continue
+        if not hasattr(scenario, name):
+            raise ScenarioError(f"{schema.__name__} has no field '{name}'")
+        setattr(scenario, name, value)
+    return scenario
+
+
+def output_folder(args: argparse.Namespace, experiment: str) -> Path:
+    """``OUT/<experiment>/``, created."""
+    folder = Path(args.out) / experiment
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
+
+
+def replay_meshcat(enabled: bool, headless: bool) -> Meshcat | None:
+    """A Meshcat for recording the replays (None when replays are off); prints its live URL
+    unless ``headless``."""
+    if not enabled:
+        return None
+    meshcat = Meshcat()
+    if not headless:
+        print(f"Meshcat (live view): {meshcat.web_url()}")
+    return meshcat
+
+
+@dataclass
+class SimulationRun:
+    """A finished simulation: its simulator and root context (the loggers' logs are in it),
+    the simulated time, s, and the wall time it took, s."""
+
+    simulator: Simulator
+    context: Context
+    duration: float
+    wall_time_s: float
+
+    @property
+    def real_time_factor(self) -> float:
+        return self.duration / self.wall_time_s if self.wall_time_s > 0 else math.inf
+
+
+def simulate(
+    diagram: Diagram,
+    duration: float,
+    *,
+    set_initial_state: Callable[[Context], None] | None = None,
+    simulator_config: SimulatorConfig | None = None,
+    meshcat: Meshcat | None = None,
+    live: bool = True,
+    camera: tuple[list[float], list[float]] | None = None,
+    label: str | None = None,
+    progress_step: float = 0.5,
+) -> SimulationRun:
+    """Simulates ``diagram`` for ``duration`` s.
+
+    ``set_initial_state(root_context)`` sets the initial state before ``Initialize``. With
+    ``meshcat`` the run is recorded (32 frames per second) for a replay, and shown live too
+    when ``live`` (a headless run records without sending each frame to the live view); the
+    recording is published at the end (``save_replay`` writes it). ``camera`` is
+    (camera_in_world, target_in_world). With a ``label`` the progress is printed every
+    ``progress_step`` simulated seconds, then the wall time and the real-time factor.
+    """
+    if not duration > 0.0:
+        raise ValueError(f"the simulated duration must be positive, got {duration}")
+    if meshcat is not None:
+        meshcat.Delete()
+        meshcat.DeleteRecording()
+    simulator = Simulator(diagram)
+    if simulator_config is not None:
+        ApplySimulatorConfig(simulator_config, simulator)
+    context = simulator.get_mutable_context()
+    if set_initial_state is not None:
+        set_initial_state(context)
+    if meshcat is not None:
+        if camera is not None:
+            meshcat.SetCameraPose(camera_in_world=camera[0], target_in_world=camera[1])
+        meshcat.StartRecording(frames_per_second=32.0, set_visualizations_while_recording=live)
+    simulator.Initialize()
+    start = time.perf_counter()
+    if label is None:
+        simulator.AdvanceTo(duration)
+    else:
+        t = 0.0
+        while t < duration - 1e-9:
+            t = min(t + progress_step, duration)
+            simulator.AdvanceTo(t)
+            print(f"\r  {label:9s} {t:5.1f} / {duration:.1f} s simulated", end="", flush=True)
+    wall = time.perf_counter() - start
+    run = SimulationRun(simulator, context, duration, wall)
+    if label is not None:
+        print(f"  ({wall:.1f} s wall, real-time factor {run.real_time_factor:.2f})")
+    if meshcat is not None:
+        meshcat.StopRecording()
+        meshcat.PublishRecording()
+    return run
+
+
+def logged_signals(loggers: dict, context: Context, time_from: str) -> dict:
+    """{name: (size, samples) array} of every logger's log in ``context``, plus ``"t"``, the
+    sample times of the logger ``time_from`` (all loggers of one rate share them)."""
+    logs = {name: logger.FindLog(context) for name, logger in loggers.items()}
+    signals = {name: log.data() for name, log in logs.items()}
+    signals["t"] = logs[time_from].sample_times()
+    return signals
+
+
+def save_replay(meshcat: Meshcat | None, path: Path) -> Path | None:
+    """Writes the published recording of ``meshcat`` as a self-contained HTML file."""
+    if meshcat is None:
+        return None
+    path.write_text(meshcat.StaticHtml())
+    return path
+
+
+def write_metrics(folder: Path, metrics: dict, scenario: Any = None) -> Path:
+    """``folder/metrics.json``: ``metrics``, plus the scenario (every field) and the memory
+    allocator the run used."""
+    payload = dict(metrics)
+    if scenario is not None:
+        payload["scenario"] = scenario_as_dict(scenario)
+    payload.setdefault("memory_allocator", memory_allocator())
+    path = folder / "metrics.json"
+    path.write_text(json.dumps(payload, indent=2, allow_nan=True, default=float))
+    return path
+
+
+def print_written(folder: Path) -> None:
+    print(f"wrote {folder}: " + ", ".join(sorted(p.name for p in folder.iterdir())))
+
+
+def run_app(name: str, body: Callable[[], int | None]) -> int:
+    """Runs an app's ``body``; a ``ValueError`` (bad scenario, bad option, bad input data)
+    becomes ``<name>: error: <message>`` on stderr and exit code 2, never a traceback."""
+    try:
+        return int(body() or 0)
+    except ValueError as error:
+        print(f"\n{name}: error: {error}", file=sys.stderr)
+        return 2
+
+
+__all__ = [
+    "DEFAULT_OUT",
+    "ScenarioError",
+    "SimulationRun",
+    "experiment_parser",
+    "logged_signals",
+    "memory_allocator",
+    "output_folder",
+    "print_written",
+    "replay_meshcat",
+    "run_app",
+    "save_replay",
+    "scenario_from_args",
+    "simulate",
+    "write_metrics",
+]

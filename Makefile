@@ -10,6 +10,9 @@ STAMP := $(VENV)/.installed-stamp
 # step (BENCHMARKS.md). The apps use it when it is installed; `make install` installs it
 # when run as root with apt-get. The tests run on the system allocator.
 TCMALLOC = $$(ls /usr/lib/*-linux-gnu/libtcmalloc_minimal.so.4 /usr/lib64/libtcmalloc_minimal.so.4 2>/dev/null | head -n 1)
+# The apps write their plots to files: matplotlib's file backend unless the caller chose one.
+MPLBACKEND ?= Agg
+export MPLBACKEND
 RUN = LD_PRELOAD="$(TCMALLOC)$${LD_PRELOAD:+ $$LD_PRELOAD}" $(PY)
 
 .PHONY: demo push-and-comply standing residual-comparison contact-localization nao-force-observer nao-walk nao-walk-pulled nao-force-guided-walk nao-compliant-arms benchmark test install clean

@@ -106,7 +106,7 @@ class NaoCompliantArmsHandles:
         pushes, push_source: the pushes and their source (truth to loggers only).
         posture_schedule: the nominal posture source.
         fsr_array, center_of_pressure, support_foot_com, imu_com_acceleration, observer:
-            the observer pipeline (``diagrams.observer.nao_force_observer``'s).
+            the observer pipeline (``diagrams.observer.nao_sensing.add_observer_pipeline``).
         observer_hand_force: ObserverHandForce.
         joint_torque: JointTorqueFromPositionError (eq. 27).
         joint_estimator: ArmExternalForceEstimator (eqs. 25-26).

@@ -747,7 +747,7 @@ def fit_motor_constants(
     E, T = np.array(errors), np.array(torques)
     denominator = np.sum(E * E, axis=0)
     if np.any(denominator < 1e-12):
-        raise ValueError("identify_motor_constant: a joint is not moved by any load; add loads")
+        raise ValueError("fit_motor_constants: a joint is not moved by any load; add loads")
     km = -np.sum(E * T, axis=0) / denominator
     residual = float(np.sqrt(np.mean((km * E + T) ** 2)))
     return MotorConstantIdentification(tuple(_joint_names(resolved)), km, E, T, residual)

@@ -41,6 +41,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from diagrams.residuals.contact_localization import MAX_ANGLE_DEG, MAX_FORCE, MIN_FORCE, sample_trials  # noqa: E402
+
 FLOORS = {
     "detection_rate": (">=", 0.99),
     "median_detection_delay_s": ("<=", 0.020),
@@ -52,62 +54,6 @@ FLOORS = {
     "median_angle_error_deg": ("<=", 5.0),
     "median_localizer_update_ms": ("<=", 2.0),
 }
-
-MIN_FORCE, MAX_FORCE, MAX_ANGLE_DEG = 5.0, 40.0, 60.0
-
-
-# ---------------------------------------------------------------------------------------
-# Trial sampling (main process, deterministic from the seed).
-# ---------------------------------------------------------------------------------------
-
-
-def sample_trials(model: str, trials: int, seed: int) -> list[dict]:
-    """Random contacts at the standing pose: link uniform over the candidate links, point
-    uniform (by area) on the link's collision surface but not inside another link's
-    primitive (the outer surface), direction within 60 deg of the inward normal, magnitude
-    uniform in [5, 40] N."""
-    from pydrake.multibody.tree import BodyIndex
-
-    from diagrams.residuals.contact_localization import ContactLocalizationConfig, build_contact_localization_diagram
-    from systems.residuals.geometry_intersection import inward_direction, sample_surface, surface_areas
-
-    _, handles = build_contact_localization_diagram(ContactLocalizationConfig(model=model, noise=False))
-    plant, localizer = handles.plant, handles.localizer
-    context = plant.CreateDefaultContext()
-    plant.SetPositionsAndVelocities(context, handles.station.initial_state)
-    geo = localizer.geometry
-    X_WB = np.array([plant.EvalBodyPoseInWorld(context, b).GetAsMatrix34() for b in localizer.candidate_bodies])
-    R_WG, p_WG = geo.world_poses(X_WB)
-    areas = surface_areas(geo.kinds, geo.params)
-    links = np.unique(geo.body_indices)
-    specs = []
-    for i in range(trials):
-        rng = np.random.default_rng([seed, i])
-        for _ in range(1000):
-            link = rng.choice(links)
-            rows = np.flatnonzero(geo.body_indices == link)
-            g = rng.choice(rows, p=areas[rows] / areas[rows].sum())
-            p_G, n_G = sample_surface(geo.kinds[g], geo.params[g], rng)
-            p_W = R_WG[g] @ p_G + p_WG[g]
-            if geo.outside_other_links(p_W, R_WG, p_WG, link) and p_W[2] > 0.02:  # outer surface, above the ground
-                break
-        body = plant.get_body(BodyIndex(int(link)))
-        n_W = R_WG[g] @ n_G
-        X = X_WB[int(np.searchsorted(geo.bodies, link))]
-        p_B = X[:, :3].T @ (p_W - X[:, 3])
-        force = rng.uniform(MIN_FORCE, MAX_FORCE) * inward_direction(n_W, rng, MAX_ANGLE_DEG)
-        specs.append({
-            "trial": i,
-            "body": body.name(),
-            "body_index": int(link),
-            "geometry": geo.names[g],
-            "point_body": p_B.tolist(),
-            "point_world_nominal": p_W.tolist(),
-            "force_world": force.tolist(),
-            "noise_seed": (seed * 100003 + i) % (2**31 - 1),
-        })
-    return specs
-
 
 # ---------------------------------------------------------------------------------------
 # One trial (worker process).

@@ -8,6 +8,7 @@ import json
 import numpy as np
 
 from apps import contact_localization
+from diagrams.residuals.contact_localization import sample_trials
 from systems.simulation.visualization import read_static_html
 
 
@@ -39,7 +40,7 @@ def test_app_smoke(tmp_path):
 
 
 def test_sampled_contacts_are_on_the_outer_surface_and_within_the_cone():
-    specs = contact_localization.sample_trials("hrp4_like", 5, seed=0)
+    specs = sample_trials("hrp4_like", 5, seed=0)
     assert len({s["body"] for s in specs}) > 1
     for s in specs:
         f = np.asarray(s["force_world"])

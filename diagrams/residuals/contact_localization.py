@@ -25,10 +25,12 @@ import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, Rgba, SceneGraph
 from pydrake.multibody.plant import MultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.framework import BasicVector, Context, Diagram, DiagramBuilder, LeafSystem
+from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
 from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station, default_plant_config
 from systems.residuals.contact_estimation import ContactDetector, ContactLocalizer
+from systems.residuals.geometry_intersection import inward_direction, sample_surface, surface_areas
 from systems.simulation.disturbances import Push, PushSource, Step
 from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual, ResidualModel
 from systems.simulation.visualization import ForceArrows
@@ -202,3 +204,56 @@ def build_contact_localization_diagram(
         plant=plant, scene_graph=station.scene_graph, station=station, push_source=push_source, model=model,
         internal=internal, external=external, detector=detector, localizer=localizer, excluded_bodies=excluded,
         loggers=loggers, meshcat_visualizer=visualizer)
+
+
+#: The random contacts of the localization study (``sample_trials``): force magnitude, N,
+#: and the largest angle between the force and the surface's inward normal, deg.
+MIN_FORCE, MAX_FORCE, MAX_ANGLE_DEG = 5.0, 40.0, 60.0
+
+
+def sample_trials(model: str, trials: int, seed: int) -> list[dict]:
+    """Random contacts at the standing pose: link uniform over the candidate links, point
+    uniform (by area) on the link's collision surface but not inside another link's
+    primitive (the outer surface), direction within 60 deg of the inward normal, magnitude
+    uniform in [5, 40] N. Deterministic from ``seed`` (trial i draws from
+    ``default_rng([seed, i])``); builds the diagram once, does not simulate.
+
+    Returns one dict per trial: ``trial``, ``body``, ``body_index``, ``geometry``,
+    ``point_body`` (m, body frame), ``point_world_nominal`` (m), ``force_world`` (N),
+    ``noise_seed``."""
+    _, handles = build_contact_localization_diagram(ContactLocalizationConfig(model=model, noise=False))
+    plant, localizer = handles.plant, handles.localizer
+    context = plant.CreateDefaultContext()
+    plant.SetPositionsAndVelocities(context, handles.station.initial_state)
+    geo = localizer.geometry
+    X_WB = np.array([plant.EvalBodyPoseInWorld(context, b).GetAsMatrix34() for b in localizer.candidate_bodies])
+    R_WG, p_WG = geo.world_poses(X_WB)
+    areas = surface_areas(geo.kinds, geo.params)
+    links = np.unique(geo.body_indices)
+    specs = []
+    for i in range(trials):
+        rng = np.random.default_rng([seed, i])
+        for _ in range(1000):
+            link = rng.choice(links)
+            rows = np.flatnonzero(geo.body_indices == link)
+            g = rng.choice(rows, p=areas[rows] / areas[rows].sum())
+            p_G, n_G = sample_surface(geo.kinds[g], geo.params[g], rng)
+            p_W = R_WG[g] @ p_G + p_WG[g]
+            if geo.outside_other_links(p_W, R_WG, p_WG, link) and p_W[2] > 0.02:  # outer surface, above the ground
+                break
+        body = plant.get_body(BodyIndex(int(link)))
+        n_W = R_WG[g] @ n_G
+        X = X_WB[int(np.searchsorted(geo.bodies, link))]
+        p_B = X[:, :3].T @ (p_W - X[:, 3])
+        force = rng.uniform(MIN_FORCE, MAX_FORCE) * inward_direction(n_W, rng, MAX_ANGLE_DEG)
+        specs.append({
+            "trial": i,
+            "body": body.name(),
+            "body_index": int(link),
+            "geometry": geo.names[g],
+            "point_body": p_B.tolist(),
+            "point_world_nominal": p_W.tolist(),
+            "force_world": force.tolist(),
+            "noise_seed": (seed * 100003 + i) % (2**31 - 1),
+        })
+    return specs

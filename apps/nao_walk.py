@@ -10,55 +10,47 @@ fall = base tilt > 30 deg or base height < 70 % of its initial value; ZMP in sup
 ZMP from the contact forces inside the convex hull of the contact spheres of the feet that
 the plan has on the ground (at their actual poses).
 
-Run: ``python -m apps.nao_walk [--steps N] [--step-length L] [--step-duration T]
-[--double-support-ratio R] [--swing-height H] [--com-height Z] [--zmp-correction-passes K]
-[--noise] [--seed S]
-[--out DIR] [--headless] [--no-replay]``. Writes to DIR (default ``out/nao_walk``):
-``metrics.json``, ``walk_top.png`` (top view: footprints, ZMP, CoM), ``walk_time.png``
-(x / y of ZMP and CoM vs their references, foot normal forces, base tilt) and
-``walk.html`` (self-contained Meshcat replay).
+Run: ``python -m apps.nao_walk [--scenario FILE] [--scenario-text YAML] [--steps N]
+[--step-length L] [--step-duration T] [--double-support-ratio R] [--swing-height H]
+[--com-height Z] [--zmp-correction-passes K] [--noise] [--seed S] [--out DIR] [--headless]
+[--no-replay]``: the scenario is ``diagrams.locomotion.nao_walk.NaoWalkScenario``
+(``apps/scenarios/nao_walk_default.yaml`` lists every field); the shorthand options override
+its fields. Writes to ``DIR/nao_walk/`` (default ``out/nao_walk/``): ``metrics.json``,
+``walk_top.png`` (top view: footprints, ZMP, CoM), ``walk_time.png`` (x / y of ZMP and CoM vs
+their references, foot normal forces, base tilt) and ``walk.html`` (self-contained Meshcat
+replay).
 """
 
 from __future__ import annotations
 
-import argparse
-import json
-import sys
-import time
 from pathlib import Path
 
-import matplotlib
+import matplotlib.pyplot as plt
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-from pydrake.geometry import Meshcat  # noqa: E402
-from pydrake.systems.analysis import Simulator  # noqa: E402
+from apps.common import plot_walking_time
+from apps.runner import (
+    experiment_parser,
+    output_folder,
+    print_written,
+    replace_fields,
+    replay_meshcat,
+    run_app,
+    save_replay,
+    scenario_from_args,
+    simulate,
+    write_metrics,
+)
+from diagrams.locomotion.nao_walk import NaoWalkScenario, build_nao_walk_diagram, nao_walk_metrics
 
-from apps.common import plot_walking_time, replay_meshcat  # noqa: E402
-from diagrams.locomotion.nao_walk import build_nao_walk_diagram, walking_floors, walking_metrics  # noqa: E402
-from systems.locomotion.walking_pattern import WalkingParameters  # noqa: E402
 
-
-def simulate(params: WalkingParameters, *, noise: bool = False, seed: int = 0, meshcat: Meshcat | None = None,
-             zmp_correction_passes: int = 1) -> dict:
-    """Builds the walking diagram, runs the whole pattern, returns handles, context, metrics
-    and wall time."""
-    diagram, handles = build_nao_walk_diagram(params, noise=noise, seed=seed, meshcat=meshcat,
-                                                 zmp_correction_passes=zmp_correction_passes)
-    simulator = Simulator(diagram)
-    handles.set_initial_state(simulator.get_mutable_context())
-    if meshcat is not None:
-        meshcat.SetCameraPose(camera_in_world=[0.6, -1.2, 0.6], target_in_world=[0.4, 0.0, 0.2])
-        meshcat.StartRecording(frames_per_second=32.0)
-    simulator.Initialize()
-    start = time.perf_counter()
-    simulator.AdvanceTo(handles.controller.duration)
-    wall = time.perf_counter() - start
-    if meshcat is not None:
-        meshcat.StopRecording()
-        meshcat.PublishRecording()
-    metrics = walking_metrics(handles, simulator.get_context())
-    return {"handles": handles, "context": simulator.get_context(), "metrics": metrics, "wall": wall}
+def run_scenario(scenario: NaoWalkScenario, meshcat=None, *, live: bool = True) -> dict:
+    """Builds the walking diagram, runs the whole pattern; returns the handles and the
+    metrics (``nao_walk_metrics``, with their signals)."""
+    diagram, handles = build_nao_walk_diagram(scenario, meshcat=meshcat)
+    run = simulate(diagram, handles.controller.duration, set_initial_state=handles.set_initial_state,
+                   simulator_config=scenario.simulator_config, meshcat=meshcat, live=live,
+                   camera=([0.6, -1.2, 0.6], [0.4, 0.0, 0.2]))
+    return {"handles": handles, "metrics": nao_walk_metrics(scenario, handles, run.context, run.wall_time_s)}
 
 
 def plot_top(path: Path, run: dict) -> None:
@@ -92,76 +84,54 @@ def plot_top(path: Path, run: dict) -> None:
 
 
 def _parse(argv):
-    d = WalkingParameters()
-    parser = argparse.ArgumentParser(prog="python -m apps.nao_walk", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--steps", type=int, default=d.num_steps, help=f"number of steps (default {d.num_steps})")
-    parser.add_argument("--step-length", type=float, default=d.step_length, help=f"m (default {d.step_length})")
-    parser.add_argument("--step-duration", type=float, default=d.step_duration, help=f"s (default {d.step_duration})")
-    parser.add_argument("--double-support-ratio", type=float, default=d.double_support_ratio,
-                        help=f"(default {d.double_support_ratio})")
-    parser.add_argument("--swing-height", type=float, default=d.swing_height, help=f"m (default {d.swing_height})")
-    parser.add_argument("--com-height", type=float, default=d.com_height, help=f"m (default {d.com_height})")
-    parser.add_argument("--zmp-correction-passes", type=int, default=1,
+    parser = experiment_parser("apps.nao_walk", __doc__)
+    parser.add_argument("--steps", type=int, default=None, help="number of steps (walking.num_steps)")
+    parser.add_argument("--step-length", type=float, default=None, help="m (walking.step_length)")
+    parser.add_argument("--step-duration", type=float, default=None, help="s (walking.step_duration)")
+    parser.add_argument("--double-support-ratio", type=float, default=None, help="(walking.double_support_ratio)")
+    parser.add_argument("--swing-height", type=float, default=None, help="m (walking.swing_height)")
+    parser.add_argument("--com-height", type=float, default=None, help="m (walking.com_height)")
+    parser.add_argument("--zmp-correction-passes", type=int, default=None,
                         help="passes of the multibody ZMP correction (Kajita 2003; 0 = cart-table only; default 1)")
     parser.add_argument("--noise", action="store_true", help="sensor noise on (the PD reads the noisy sensed state)")
-    parser.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
-    parser.add_argument("--out", type=Path, default=Path("out") / "nao_walk", help="output folder (default out/nao_walk)")
-    parser.add_argument("--headless", action="store_true", help="no live Meshcat URL (the replay is still written)")
-    parser.add_argument("--no-replay", action="store_true", help="skip the Meshcat replay (faster)")
+    parser.add_argument("--seed", type=int, default=None, help="noise seed (default 0)")
     return parser.parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> int:
     args = _parse(argv)
-    try:
-        if args.seed < 0:
-            raise ValueError(f"--seed must be non-negative, got {args.seed}")
-        if args.zmp_correction_passes < 0:
-            raise ValueError(f"--zmp-correction-passes must be >= 0, got {args.zmp_correction_passes}")
-        params = WalkingParameters(num_steps=args.steps, step_length=args.step_length,
-                                   step_duration=args.step_duration, double_support_ratio=args.double_support_ratio,
-                                   swing_height=args.swing_height, com_height=args.com_height)
-    except ValueError as error:
-        print(f"nao_walk: error: {error}", file=sys.stderr)
-        return 2
-    out = args.out
-    out.mkdir(parents=True, exist_ok=True)
-    meshcat = replay_meshcat(not args.no_replay, args.headless)
-    print(f"walking {params.num_steps} steps of {params.step_length} m, {params.step_duration} s each "
-          f"({params.duration:.1f} s simulated) ...", flush=True)
-    try:
-        run = simulate(params, noise=args.noise, seed=args.seed, meshcat=meshcat,
-                       zmp_correction_passes=args.zmp_correction_passes)
-    except ValueError as error:  # unreachable steps, joint limits
-        print(f"nao_walk: error: {error}", file=sys.stderr)
-        return 2
-    m = run["metrics"]
-    if meshcat is not None:
-        (out / "walk.html").write_text(meshcat.StaticHtml())
-    plot_top(out / "walk_top.png", run)
-    plot_walking_time(out / "walk_time.png", run)
-    checks = walking_floors(m)
-    summary = {k: v for k, v in m.items() if k != "signals"}
-    summary.update({
-        "floors": checks,
-        "meets_floors": all(checks.values()),
-        "wall_time_s": run["wall"],
-        "real_time_factor": m["duration_s"] / run["wall"],
-        "parameters": {k: getattr(params, k) for k in params.__dataclass_fields__},
-        "zmp_correction_passes": args.zmp_correction_passes,
-        "noise": args.noise,
-        "seed": args.seed,
-    })
-    (out / "metrics.json").write_text(json.dumps(summary, indent=2))
-    print(f"  distance {m['distance_m']:.3f} m, mean speed {m['mean_speed_mps']:.3f} m/s, steps "
-          f"{m['steps_detected']}/{m['steps_planned']}, {'upright' if m['upright'] else 'FELL'} (max tilt "
-          f"{m['max_base_tilt_deg']:.1f} deg), ZMP in support {100 * m['zmp_in_support_fraction']:.1f} % "
-          f"(5th-percentile margin {1000 * m['zmp_margin_p05_m']:.1f} mm; in the loaded feet's polygon "
-          f"{1000 * m['zmp_loaded_margin_p05_m']:.1f} mm)")
-    print(f"  {run['wall']:.1f} s wall (real-time factor {summary['real_time_factor']:.2f}); floors "
-          f"{'met' if summary['meets_floors'] else 'MISSED: ' + ', '.join(k for k, v in checks.items() if not v)}")
-    print(f"wrote {out}: " + ", ".join(sorted(p.name for p in out.iterdir())))
-    return 0
+
+    def body() -> int:
+        scenario = scenario_from_args(NaoWalkScenario, args, zmp_correction_passes=args.zmp_correction_passes,
+                                      noise=True if args.noise else None, seed=args.seed)
+        scenario.walking = replace_fields(
+            scenario.walking, num_steps=args.steps, step_length=args.step_length, step_duration=args.step_duration,
+            double_support_ratio=args.double_support_ratio, swing_height=args.swing_height,
+            com_height=args.com_height)
+        scenario.check()
+        out = output_folder(args, "nao_walk")
+        meshcat = replay_meshcat(not args.no_replay, args.headless)
+        params = scenario.walking
+        print(f"walking {params.num_steps} steps of {params.step_length} m, {params.step_duration} s each "
+              f"({params.duration:.1f} s simulated) ...", flush=True)
+        run = run_scenario(scenario, meshcat, live=not args.headless)
+        m = run["metrics"]
+        save_replay(meshcat, out / "walk.html")
+        plot_top(out / "walk_top.png", run)
+        plot_walking_time(out / "walk_time.png", run)
+        write_metrics(out, {k: v for k, v in m.items() if k != "signals"}, scenario)
+        checks = m["floors"]
+        print(f"  distance {m['distance_m']:.3f} m, mean speed {m['mean_speed_mps']:.3f} m/s, steps "
+              f"{m['steps_detected']}/{m['steps_planned']}, {'upright' if m['upright'] else 'FELL'} (max tilt "
+              f"{m['max_base_tilt_deg']:.1f} deg), ZMP in support {100 * m['zmp_in_support_fraction']:.1f} % "
+              f"(5th-percentile margin {1000 * m['zmp_margin_p05_m']:.1f} mm; in the loaded feet's polygon "
+              f"{1000 * m['zmp_loaded_margin_p05_m']:.1f} mm)")
+        print(f"  {m['wall_time_s']:.1f} s wall (real-time factor {m['real_time_factor']:.2f}); floors "
+              f"{'met' if m['meets_floors'] else 'MISSED: ' + ', '.join(k for k, v in checks.items() if not v)}")
+        print_written(out)
+        return 0
+
+    return run_app("nao_walk", body)
 
 
 if __name__ == "__main__":

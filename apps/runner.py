@@ -9,6 +9,7 @@ An app is then what is particular to its experiment: its scenario type and diagr
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -68,6 +69,20 @@ def scenario_from_args(schema: type, args: argparse.Namespace, defaults: Any = N
             raise ScenarioError(f"{schema.__name__} has no field '{name}'")
         setattr(scenario, name, value)
     return scenario
+
+
+def replace_fields(config: Any, **overrides: Any) -> Any:
+    """A copy of the dataclass ``config`` (e.g. a scenario's nested ``walking``) with each
+    keyword in ``overrides`` whose value is not None replacing that field (an app's
+    shorthand options); ``dataclasses.replace`` runs the type's own checks again.
+
+    Raises:
+        ScenarioError: an override of an unknown field.
+    """
+    for name in overrides:
+        if not hasattr(config, name):
+            raise ScenarioError(f"{type(config).__name__} has no field '{name}'")
+    return dataclasses.replace(config, **{name: value for name, value in overrides.items() if value is not None})
 
 
 def output_folder(args: argparse.Namespace, experiment: str) -> Path:
@@ -211,6 +226,7 @@ __all__ = [
     "memory_allocator",
     "output_folder",
     "print_written",
+    "replace_fields",
     "replay_meshcat",
     "run_app",
     "save_replay",

@@ -2,20 +2,30 @@
 contact forces, the step detector, and apps.nao_walk's full floor run (22 steps, ~7 s wall)."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
 from apps import nao_walk
-from diagrams.locomotion.nao_walk import build_nao_walk_diagram, detect_steps, signed_distance_to_polygon, walking_metrics
+from diagrams.locomotion.nao_walk import (
+    NaoWalkScenario,
+    build_nao_walk_diagram,
+    detect_steps,
+    signed_distance_to_polygon,
+    walking_metrics,
+)
+from diagrams.scenarios import ScenarioError, load_scenario, scenario_as_dict
 from systems.locomotion.walking_pattern import WalkingParameters
+
+SCENARIOS = Path(__file__).resolve().parents[1] / "apps" / "scenarios"
 
 
 @pytest.fixture(scope="module")
 def short_walk():
     params = WalkingParameters(num_steps=6, final_wait=0.5)
-    diagram, handles = build_nao_walk_diagram(params)
+    diagram, handles = build_nao_walk_diagram(NaoWalkScenario(walking=params))
     simulator = Simulator(diagram)
     handles.set_initial_state(simulator.get_mutable_context())
     simulator.Initialize()
@@ -67,8 +77,8 @@ def test_signed_distance_to_polygon():
 
 
 def test_app_full_walk_meets_the_floors(tmp_path):
-    out = tmp_path / "walk"
-    assert nao_walk.main(["--out", str(out), "--headless", "--no-replay"]) == 0
+    assert nao_walk.main(["--out", str(tmp_path), "--headless", "--no-replay"]) == 0
+    out = tmp_path / "nao_walk"
     m = json.loads((out / "metrics.json").read_text())
     assert m["meets_floors"] and all(m["floors"].values())
     assert m["steps_detected"] >= 20 and m["distance_m"] >= 1.0 and m["mean_speed_mps"] >= 0.08 and not m["fell"]
@@ -94,7 +104,7 @@ def test_contact_zmp_moves_by_the_static_moment_of_a_pull():
     direction = np.array([-np.cos(angle), 0.0, np.sin(angle)])
     push = Push("torso", [0.0, 0.0, -0.05], direction, Step(3.0, 0.1))
     params = WalkingParameters(num_steps=1, initial_wait=3.0)  # still: lowered by 1.5 s, first step at 3 s
-    diagram, handles = build_nao_walk_diagram(params, pushes=[push])
+    diagram, handles = build_nao_walk_diagram(NaoWalkScenario(walking=params), pushes=[push])
     simulator = Simulator(diagram)
     handles.set_initial_state(simulator.get_mutable_context())
     simulator.Initialize()
@@ -117,9 +127,29 @@ def test_contact_zmp_moves_by_the_static_moment_of_a_pull():
 
 
 def test_app_writes_a_meshcat_replay(tmp_path):
-    out = tmp_path / "replay"
-    assert nao_walk.main(["--out", str(out), "--headless", "--steps", "1"]) == 0
+    assert nao_walk.main(["--out", str(tmp_path), "--headless", "--steps", "1"]) == 0
+    out = tmp_path / "nao_walk"
     html = (out / "walk.html").read_text()
     assert len(html) > 100_000 and "meshcat" in html.lower()
     m = json.loads((out / "metrics.json").read_text())
     assert m["steps_detected"] == 1 and not m["fell"] and not m["meets_floors"]
+
+
+def test_scenario_file_text_and_unknown_keys():
+    """apps/scenarios/nao_walk_default.yaml lists every field at its default; YAML text
+    overrides nested fields; an unknown key is an error that names it."""
+    default = scenario_as_dict(NaoWalkScenario())
+    assert scenario_as_dict(load_scenario(NaoWalkScenario, filename=SCENARIOS / "nao_walk_default.yaml")) == default
+    scenario = load_scenario(NaoWalkScenario, filename=SCENARIOS / "nao_walk_default.yaml",
+                             text="seed: 3\nwalking: {num_steps: 4}\nplant_config: {time_step: 0.002}")
+    assert scenario.seed == 3 and scenario.walking.num_steps == 4 and scenario.plant_config.time_step == 0.002
+    assert scenario.walking.step_length == WalkingParameters().step_length
+    with pytest.raises(ScenarioError, match="walk_speed"):
+        load_scenario(NaoWalkScenario, text="walking: {walk_speed: 1.0}")
+    with pytest.raises(ScenarioError, match="stepz"):
+        load_scenario(NaoWalkScenario, text="stepz: 3")
+
+
+def test_app_rejects_a_bad_scenario(tmp_path, capsys):
+    assert nao_walk.main(["--out", str(tmp_path), "--no-replay", "--scenario-text", "walking: {com_height: 0.5}"]) == 2
+    assert "com_height" in capsys.readouterr().err

@@ -12,19 +12,19 @@ The walking controller plays a precomputed open-loop pattern (ZMP preview contro
 (ground truth for the metrics; no estimator reads it).
 """
 
-from __future__ import annotations
-
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams
-from pydrake.multibody.plant import ContactResults, MultibodyPlant
+from pydrake.multibody.plant import ContactResults, MultibodyPlant, MultibodyPlantConfig
+from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import BasicVector, Context, Diagram, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
-from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station
+from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station, default_plant_config
 from diagrams.station.standing import default_gains
 from models import HumanoidHandles
 from systems.simulation.disturbances import Push, PushSource
@@ -132,44 +132,75 @@ def add_walking_loggers(builder: DiagramBuilder, plant: MultibodyPlant, controll
     return loggers
 
 
-def build_nao_walk_diagram(
-    parameters: WalkingParameters | None = None,
-    *,
-    noise: bool = False,
-    seed: int = 0,
-    stiffness_compensation: bool = True,
-    velocity_lead: bool = False,
-    zmp_correction_passes: int = 1,
-    pushes: Sequence[Push] = (),
-    log_period: float = 0.005,
-    meshcat: Meshcat | None = None,
-) -> tuple[Diagram, NaoWalkHandles]:
-    """Builds the diagram of the module docstring.
+@dataclass
+class NaoWalkScenario:
+    """The walking experiment's settings (SI units; ``diagrams.scenarios``). Defaults: the
+    issue-7 walk (22 steps of 5 cm, 0.5 s each).
 
-    Args:
-        parameters: walking parameters (default ``WalkingParameters()``).
-        noise, seed: the station's sensor noise (the PD reads the sensed state).
+    Attributes:
+        walking: the walking pattern (``systems.locomotion.walking_pattern.WalkingParameters``).
+        zmp_correction_passes: passes of Kajita 2003's multibody ZMP correction
+            (``systems.locomotion.walking_pattern.correct_for_multibody_zmp``; 0 = cart-table
+            CoM only).
         stiffness_compensation: add the static joint deflection under the planned ground
-            reaction to the targets (``systems.locomotion.walking_pattern.stiffness_compensation``, with
-            the station's PD gains ``diagrams.station.standing.default_gains``).
+            reaction to the targets (``systems.locomotion.walking_pattern.stiffness_compensation``,
+            with the station's PD gains ``diagrams.station.standing.default_gains``).
         velocity_lead: with ``stiffness_compensation``, also lead the targets by
             K_p^-1 K_d q_dot_ref (eq. W-3), since the PD damps towards zero velocity. Off by
-            default: measured, it does not help (22 steps at 0.05 m / 0.5 s: 1.054 m instead
-            of 1.067 m; 0.4 s steps: falls instead of finishing).
-        zmp_correction_passes: passes of Kajita 2003's multibody ZMP correction
-            (``systems.locomotion.walking_pattern.correct_for_multibody_zmp``; 0 = cart-table CoM only).
+            default (it does not help: BENCHMARKS.md).
+        noise, seed: the station's sensor noise (the PD reads the sensed state) and its seed.
+        log_period: period of every logger, s.
+        plant_config: Drake's ``MultibodyPlantConfig`` (default: 1 ms steps, point contact, SAP).
+        simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``).
+    """
+
+    walking: WalkingParameters = dataclasses.field(default_factory=WalkingParameters)
+    zmp_correction_passes: int = 1
+    stiffness_compensation: bool = True
+    velocity_lead: bool = False
+    noise: bool = False
+    seed: int = 0
+    log_period: float = 0.005
+    plant_config: MultibodyPlantConfig = dataclasses.field(default_factory=default_plant_config)
+    simulator_config: SimulatorConfig = dataclasses.field(default_factory=SimulatorConfig)
+
+    def check(self) -> None:
+        """Raises ValueError on a bad value (the message names it)."""
+        self.walking.check()
+        if self.seed < 0:
+            raise ValueError(f"seed must be non-negative, got {self.seed}")
+        if self.zmp_correction_passes < 0:
+            raise ValueError(f"zmp_correction_passes must be >= 0, got {self.zmp_correction_passes}")
+        if not (self.log_period > 0):
+            raise ValueError(f"log_period must be positive, got {self.log_period}")
+
+
+def build_nao_walk_diagram(
+    scenario: NaoWalkScenario | None = None,
+    *,
+    pushes: Sequence[Push] = (),
+    meshcat: Meshcat | None = None,
+) -> tuple[Diagram, NaoWalkHandles]:
+    """Builds the diagram of the module docstring for ``scenario`` (default
+    ``NaoWalkScenario()``).
+
+    Args:
         pushes: external forces on the robot (``systems.simulation.disturbances.Push``), e.g. a pull
             on the waist; none by default (then no PushSource is added).
-        log_period: period of every logger, s.
         meshcat: if given, a MeshcatVisualizer (32 Hz) is added.
 
     Raises:
-        ValueError: bad parameters (see ``WalkingParameters`` and ``NaoWalkingController``).
+        ValueError: bad parameters (see ``NaoWalkScenario.check``, ``WalkingParameters`` and
+            ``NaoWalkingController``).
     """
-    if not (log_period > 0):
-        raise ValueError(f"log_period must be positive, got {log_period}")
+    scenario = scenario if scenario is not None else NaoWalkScenario()
+    scenario.check()
+    parameters, log_period = scenario.walking, scenario.log_period
+    stiffness_compensation, velocity_lead = scenario.stiffness_compensation, scenario.velocity_lead
+    zmp_correction_passes = scenario.zmp_correction_passes
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, "nao_like", noise=noise, seed=seed)
+    station = add_humanoid_station(builder, "nao_like", plant_config=scenario.plant_config, noise=scenario.noise,
+                                   seed=scenario.seed)
     plant, humanoid = station.plant, station.humanoid
     kp, kd = default_gains(plant, humanoid)
     controller = builder.AddSystem(NaoWalkingController(
@@ -396,5 +427,28 @@ def walking_floors(metrics: dict) -> dict:
     }
 
 
-__all__ = ["ContactZmp", "walking_floors", "MIN_NORMAL_FORCE", "detect_steps", "NaoWalkHandles", "add_walking_loggers", "build_nao_walk_diagram",
+def nao_walk_metrics(scenario: NaoWalkScenario, handles: NaoWalkHandles, root_context: Context,
+                     wall_time_s: float) -> dict:
+    """The app's metrics: ``walking_metrics`` (with its ``signals``), the floors
+    (``walking_floors``, ``meets_floors``), the wall time and real-time factor, and the
+    scenario's walking parameters, ZMP correction passes, noise and seed."""
+    m = walking_metrics(handles, root_context)
+    checks = walking_floors(m)
+    params = scenario.walking
+    m.update({
+        "floors": checks,
+        "meets_floors": all(checks.values()),
+        "wall_time_s": wall_time_s,
+        "real_time_factor": m["duration_s"] / wall_time_s,
+        "parameters": dataclasses.asdict(params),
+        "zmp_correction_passes": scenario.zmp_correction_passes,
+        "noise": scenario.noise,
+        "seed": scenario.seed,
+    })
+    return m
+
+
+__all__ = ["ContactZmp", "walking_floors", "MIN_NORMAL_FORCE", "detect_steps", "NaoWalkHandles", "NaoWalkScenario",
+           "add_walking_loggers", "build_nao_walk_diagram",
+           "nao_walk_metrics",
            "signed_distance_to_polygon", "walking_metrics"]

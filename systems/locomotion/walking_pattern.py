@@ -57,8 +57,6 @@ and interpolated linearly in time by ``NaoWalkingController``.
 Units: SI (m, s, rad) throughout.
 """
 
-from __future__ import annotations
-
 import math
 from dataclasses import dataclass
 
@@ -92,9 +90,11 @@ def _bump(s: np.ndarray) -> np.ndarray:
     return 64.0 * (s * (1.0 - s)) ** 3
 
 
-@dataclass(frozen=True)
+@dataclass
 class WalkingParameters:
-    """Parameters of the walking pattern (all SI).
+    """Parameters of the walking pattern (all SI). A plain dataclass, so that a scenario can
+    nest it (``diagrams.scenarios``); ``check()`` repeats ``__post_init__``'s checks on
+    loaded values.
 
     Attributes:
         step_length: forward distance between consecutive footprints, m (negative walks
@@ -138,6 +138,10 @@ class WalkingParameters:
     gravity: float = 9.81
 
     def __post_init__(self):
+        self.check()
+
+    def check(self) -> None:
+        """Raises ValueError on a bad value (the message names it)."""
         for name in ("step_length", "step_width", "step_duration", "double_support_ratio", "swing_height",
                      "com_height", "zmp_offset_x", "zmp_offset_y", "initial_wait", "final_wait", "preview_time",
                      "sample_period", "zmp_weight", "jerk_weight", "gravity"):

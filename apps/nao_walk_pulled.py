@@ -10,76 +10,60 @@ touch-down), the mean estimated F_x within 0.5 N of the true pull (the cable for
 component, mean over the same samples) and the RMS error (sample by sample) <= 1.5 N. The
 virtual force of eq. 11 (what the LIP observer estimates by construction) is reported too.
 
-Run: ``python -m apps.nao_walk_pulled [--steps N] [--seed S] [--no-noise]
-[--no-pull] [--out DIR] [--headless] [--no-replay]``. Writes to DIR (default
-``out/nao_walk_pulled``): ``metrics.json`` (walking and observer metrics, floors),
-``force_xy.png`` / ``force_z.png`` (Fig. 10 a/b: estimated F_x, F_y, F_z vs the pull and the
-virtual force), ``normal_force.png`` (Fig. 11: f_n^o), ``load.png`` (tension and load
-height), ``walk_time.png`` (ZMP/CoM, foot forces, tilt/yaw) and ``walk_pulled.html``
-(self-contained Meshcat replay: the robot, the cable force in red, the estimate in blue).
+Run: ``python -m apps.nao_walk_pulled [--scenario FILE] [--scenario-text YAML] [--steps N]
+[--seed S] [--no-noise] [--no-pull] [--tighten-distance D] [--out DIR] [--headless]
+[--no-replay]``: the scenario is ``diagrams.observer.nao_walk_pulled.NaoWalkPulledScenario``
+(``apps/scenarios/nao_walk_pulled_default.yaml`` lists every field); the shorthand options
+override its fields (``--steps`` without ``--tighten-distance`` scales the cable's
+``tighten_distance`` by the number of steps, keeping its share of the walk). Writes to
+``DIR/nao_walk_pulled/`` (default ``out/nao_walk_pulled/``): ``metrics.json`` (walking and
+observer metrics, floors), ``force_xy.png`` / ``force_z.png`` (Fig. 10 a/b: estimated F_x,
+F_y, F_z vs the pull and the virtual force), ``normal_force.png`` (Fig. 11: f_n^o),
+``load.png`` (tension and load height), ``walk_time.png`` (ZMP/CoM, foot forces, tilt/yaw)
+and ``walk_pulled.html`` (self-contained Meshcat replay: the robot, the cable force in red,
+the estimate in blue).
 """
 
 from __future__ import annotations
 
-import argparse
-import json
-import sys
-import time
 from pathlib import Path
 
-import matplotlib
+import matplotlib.pyplot as plt
+from pydrake.geometry import Meshcat, Rgba, Sphere
+from pydrake.math import RigidTransform
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-from pydrake.geometry import Meshcat  # noqa: E402
-from pydrake.systems.analysis import Simulator  # noqa: E402
+from apps.common import plot_walking_time
+from apps.runner import (
+    experiment_parser,
+    output_folder,
+    print_written,
+    replace_fields,
+    replay_meshcat,
+    run_app,
+    save_replay,
+    scenario_from_args,
+    simulate,
+    write_metrics,
+)
+from diagrams.observer.nao_walk_pulled import NaoWalkPulledScenario, build_nao_walk_pulled_diagram, nao_walk_pulled_metrics
+from systems.locomotion.walking_pattern import WalkingParameters
 
-from apps.common import plot_walking_time, replay_meshcat  # noqa: E402
-from diagrams.observer.nao_walk_pulled import CableSetup, build_nao_walk_pulled_diagram, observer_metrics  # noqa: E402
-from diagrams.locomotion.nao_walk import walking_floors, walking_metrics  # noqa: E402
-from systems.locomotion.walking_pattern import WalkingParameters  # noqa: E402
 
-#: Floors of issue 7, Exp. 4.
-MAX_MEAN_ERROR_X = 0.5  # N
-MAX_RMS_ERROR_X = 1.5  # N
+def run_scenario(scenario: NaoWalkPulledScenario, meshcat: Meshcat | None = None, *, live: bool = True) -> dict:
+    """Builds the diagram, runs the whole pattern; returns the handles and the metrics
+    (``nao_walk_pulled_metrics``, with their signals)."""
+    diagram, handles = build_nao_walk_pulled_diagram(scenario, meshcat=meshcat)
 
-
-def simulate(params: WalkingParameters, setup: CableSetup | None = None, *, pull: bool = True,
-             noise: bool = True, seed: int = 0, meshcat: Meshcat | None = None) -> dict:
-    """Builds the diagram, runs the whole pattern, returns handles, context, metrics, wall time."""
-    diagram, handles = build_nao_walk_pulled_diagram(params, setup, pull=pull, noise=noise,
-                                                     seed=seed, meshcat=meshcat)
-    simulator = Simulator(diagram)
-    handles.set_initial_state(simulator.get_mutable_context())
-    if meshcat is not None:
-        meshcat.SetCameraPose(camera_in_world=[0.2, -1.6, 0.7], target_in_world=[0.2, 0.0, 0.2])
-        if handles.cable is not None:  # the pulley and the line's fixed run (drawn once)
-            from pydrake.geometry import Rgba, Sphere
-            from pydrake.math import RigidTransform
+    def set_initial_state(root_context) -> None:
+        handles.set_initial_state(root_context)
+        if meshcat is not None and handles.cable is not None:  # the pulley (drawn once)
             meshcat.SetObject("pulley", Sphere(0.02), Rgba(0.2, 0.2, 0.2, 1.0))
             meshcat.SetTransform("pulley", RigidTransform(handles.cable.pulley))
-        meshcat.StartRecording(frames_per_second=32.0)
-    simulator.Initialize()
-    start = time.perf_counter()
-    simulator.AdvanceTo(handles.controller.duration)
-    wall = time.perf_counter() - start
-    if meshcat is not None:
-        meshcat.StopRecording()
-        meshcat.PublishRecording()
-    context = simulator.get_context()
-    return {"handles": handles, "context": context, "walking": walking_metrics(handles, context),
-            "observer": observer_metrics(handles, context), "wall": wall}
 
-
-def floors(run: dict, pull: bool = True) -> dict:
-    """The issue's floors, each True/False (the Exp. 4 ones only with the pull)."""
-    checks = {k + "_with_pull" if pull else k: v for k, v in walking_floors(run["walking"]).items()}
-    o = run["observer"]
-    if pull:
-        ok = o.get("window_samples", 0) > 0
-        checks["mean_Fx_error_le_0.5N"] = bool(ok and abs(o["mean_error_x_N"]) <= MAX_MEAN_ERROR_X)
-        checks["rms_Fx_error_le_1.5N"] = bool(ok and o["rms_error_x_N"] <= MAX_RMS_ERROR_X)
-    return checks
+    run = simulate(diagram, handles.controller.duration, set_initial_state=set_initial_state,
+                   simulator_config=scenario.simulator_config, meshcat=meshcat, live=live,
+                   camera=([0.2, -1.6, 0.7], [0.2, 0.0, 0.2]))
+    return {"handles": handles, **nao_walk_pulled_metrics(scenario, handles, run.context, run.wall_time_s)}
 
 
 def _shade(ax, o: dict) -> None:
@@ -157,92 +141,61 @@ def plot_load(out: Path, run: dict) -> None:
 
 
 def _parse(argv):
-    d = WalkingParameters()
-    parser = argparse.ArgumentParser(prog="python -m apps.nao_walk_pulled", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--steps", type=int, default=d.num_steps, help=f"number of steps (default {d.num_steps})")
-    parser.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    parser = experiment_parser("apps.nao_walk_pulled", __doc__)
+    parser.add_argument("--steps", type=int, default=None, help="number of steps (walking.num_steps, default 22)")
+    parser.add_argument("--seed", type=int, default=None, help="noise seed (default 0)")
     parser.add_argument("--no-noise", action="store_true", help="ideal sensors (default: the sensors' noise on)")
     parser.add_argument("--no-pull", action="store_true", help="walk without the cable (observer bias while walking)")
     parser.add_argument("--tighten-distance", type=float, default=None,
-                        help="torso travel before the line is taut, m (default: CableSetup's, scaled to --steps)")
-    parser.add_argument("--out", type=Path, default=Path("out") / "nao_walk_pulled",
-                        help="output folder (default out/nao_walk_pulled)")
-    parser.add_argument("--headless", action="store_true", help="no live Meshcat URL (the replay is still written)")
-    parser.add_argument("--no-replay", action="store_true", help="skip the Meshcat replay (faster)")
+                        help="torso travel before the line is taut, m (cable.tighten_distance; default: the "
+                             "scenario's, scaled to --steps)")
     return parser.parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> int:
     args = _parse(argv)
-    pull = not args.no_pull
-    try:
-        if args.seed < 0:
-            raise ValueError(f"--seed must be non-negative, got {args.seed}")
-        params = WalkingParameters(num_steps=args.steps)
-        default = CableSetup()
-        if args.tighten_distance is not None:
-            tighten = args.tighten_distance
-        else:  # keep the default's share of the walk before the line is taut
-            tighten = default.tighten_distance * (args.steps - 1) / (WalkingParameters().num_steps - 1)
-        setup = CableSetup(tighten_distance=tighten)
-    except ValueError as error:
-        print(f"nao_walk_pulled: error: {error}", file=sys.stderr)
-        return 2
-    out = args.out
-    out.mkdir(parents=True, exist_ok=True)
-    meshcat = replay_meshcat(not args.no_replay, args.headless)
-    print(f"walking {params.num_steps} steps of {params.step_length} m ({params.duration:.1f} s simulated)"
-          f"{' pulled by a 0.3 kg load over a pulley' if pull else ' without the cable'} ...", flush=True)
-    try:
-        run = simulate(params, setup, pull=pull, noise=not args.no_noise, seed=args.seed,
-                       meshcat=meshcat)
-    except ValueError as error:
-        print(f"nao_walk_pulled: error: {error}", file=sys.stderr)
-        return 2
-    if meshcat is not None:
-        (out / "walk_pulled.html").write_text(meshcat.StaticHtml())
-    plot_forces(out, run)
-    plot_normal_force(out, run)
-    plot_load(out, run)
-    plot_walking_time(out / "walk_time.png", {"metrics": run["walking"]})
-    checks = floors(run, pull)
-    h = run["handles"]
-    w = {k: v for k, v in run["walking"].items() if k != "signals"}
-    o = {k: v for k, v in run["observer"].items() if k not in ("signals", "window_mask")}
-    summary = {
-        "walking": w,
-        "observer": o,
-        "floors": checks,
-        "meets_floors": all(checks.values()),
-        "cable": ({"pulley_world_m": h.cable.pulley.tolist(), "natural_length_m": h.slack_length,
-                   "planned_tighten_time_s": h.planned_tighten_time, "planned_lift_time_s": h.planned_lift_time,
-                   **{k: getattr(h.setup, k) for k in h.setup.__dataclass_fields__}} if h.cable is not None else None),
-        "observer_parameters": {"mass": h.parameters.mass, "period": h.parameters.period,
-                                "jerk_variance": h.parameters.jerk_variance,
-                                "force_rate_variance": h.parameters.force_rate_variance,
-                                "R_z": h.parameters.R_z, "R_xy": h.parameters.R_xy, "preset": "WALKING (eq. 22)"},
-        "frame": "F0: world-aligned, origin at the right sole at t = 0 (fixed for the run)",
-        "noise": not args.no_noise,
-        "seed": args.seed,
-        "wall_time_s": run["wall"],
-        "real_time_factor": w["duration_s"] / run["wall"],
-        "walking_parameters": {k: getattr(params, k) for k in params.__dataclass_fields__},
-    }
-    (out / "metrics.json").write_text(json.dumps(summary, indent=2))
-    print(f"  walk: {w['steps_detected']}/{w['steps_planned']} steps, {w['distance_m']:.3f} m, mean speed "
-          f"{w['mean_speed_mps']:.3f} m/s, {'upright' if w['upright'] else 'FELL'} (max tilt "
-          f"{w['max_base_tilt_deg']:.1f} deg, max |yaw| {w['max_abs_yaw_deg']:.1f} deg)")
-    if pull and o.get("window_samples", 0):
-        print(f"  load lifted at {o['measured_lift_time_s']:.2f} s (up to {o['max_load_height_m']:.3f} m); window "
-              f"{o['window_s'][0]:.2f}-{o['window_s'][1]:.2f} s: pull F_x {o['true_pull_x_mean_N']:.3f} N "
-              f"(virtual {o['true_virtual_x_mean_N']:.3f} N), estimated {o['estimated_x_mean_N']:.3f} N "
-              f"(mean error {o['mean_error_x_N']:+.3f} N, RMS {o['rms_error_x_N']:.3f} N); F_y "
-              f"{o['true_pull_y_mean_N']:.3f} vs {o['estimated_y_mean_N']:.3f} N; F_z {o['true_pull_z_mean_N']:.3f} "
-              f"vs {o['estimated_z_mean_N']:.3f} N")
-    print(f"  {run['wall']:.1f} s wall (real-time factor {summary['real_time_factor']:.2f}); floors "
-          f"{'met' if summary['meets_floors'] else 'MISSED: ' + ', '.join(k for k, v in checks.items() if not v)}")
-    print(f"wrote {out}: " + ", ".join(sorted(p.name for p in out.iterdir())))
-    return 0
+
+    def body() -> int:
+        scenario = scenario_from_args(NaoWalkPulledScenario, args, seed=args.seed,
+                                      noise=False if args.no_noise else None, pull=False if args.no_pull else None)
+        tighten = args.tighten_distance
+        if tighten is None and args.steps is not None:  # keep the cable's share of the walk before the line is taut
+            tighten = scenario.cable.tighten_distance * (args.steps - 1) / (WalkingParameters().num_steps - 1)
+        scenario.walking = replace_fields(scenario.walking, num_steps=args.steps)
+        scenario.cable = replace_fields(scenario.cable, tighten_distance=tighten)
+        scenario.check()
+        out = output_folder(args, "nao_walk_pulled")
+        meshcat = replay_meshcat(not args.no_replay, args.headless)
+        params, pull = scenario.walking, scenario.pull
+        print(f"walking {params.num_steps} steps of {params.step_length} m ({params.duration:.1f} s simulated)"
+              f"{' pulled by a 0.3 kg load over a pulley' if pull else ' without the cable'} ...", flush=True)
+        run = run_scenario(scenario, meshcat, live=not args.headless)
+        save_replay(meshcat, out / "walk_pulled.html")
+        plot_forces(out, run)
+        plot_normal_force(out, run)
+        plot_load(out, run)
+        plot_walking_time(out / "walk_time.png", {"metrics": run["walking"]})
+        summary = {k: v for k, v in run.items() if k != "handles"}
+        w = summary["walking"] = {k: v for k, v in run["walking"].items() if k != "signals"}
+        o = summary["observer"] = {k: v for k, v in run["observer"].items() if k not in ("signals", "window_mask")}
+        write_metrics(out, summary, scenario)
+        checks = summary["floors"]
+        print(f"  walk: {w['steps_detected']}/{w['steps_planned']} steps, {w['distance_m']:.3f} m, mean speed "
+              f"{w['mean_speed_mps']:.3f} m/s, {'upright' if w['upright'] else 'FELL'} (max tilt "
+              f"{w['max_base_tilt_deg']:.1f} deg, max |yaw| {w['max_abs_yaw_deg']:.1f} deg)")
+        if pull and o.get("window_samples", 0):
+            print(f"  load lifted at {o['measured_lift_time_s']:.2f} s (up to {o['max_load_height_m']:.3f} m); window "
+                  f"{o['window_s'][0]:.2f}-{o['window_s'][1]:.2f} s: pull F_x {o['true_pull_x_mean_N']:.3f} N "
+                  f"(virtual {o['true_virtual_x_mean_N']:.3f} N), estimated {o['estimated_x_mean_N']:.3f} N "
+                  f"(mean error {o['mean_error_x_N']:+.3f} N, RMS {o['rms_error_x_N']:.3f} N); F_y "
+                  f"{o['true_pull_y_mean_N']:.3f} vs {o['estimated_y_mean_N']:.3f} N; F_z {o['true_pull_z_mean_N']:.3f} "
+                  f"vs {o['estimated_z_mean_N']:.3f} N")
+        print(f"  {summary['wall_time_s']:.1f} s wall (real-time factor {summary['real_time_factor']:.2f}); floors "
+              f"{'met' if summary['meets_floors'] else 'MISSED: ' + ', '.join(k for k, v in checks.items() if not v)}")
+        print_written(out)
+        return 0
+
+    return run_app("nao_walk_pulled", body)
 
 
 if __name__ == "__main__":

@@ -12,19 +12,28 @@ dominated by that transient and the mean error is 0.68 N (measured, seed 0), abo
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.analysis import Simulator
 
-from diagrams.observer.nao_walk_pulled import CableSetup, CableVirtualForceTruth, build_nao_walk_pulled_diagram, observer_metrics
+from diagrams.observer.nao_walk_pulled import (
+    CableSetup,
+    CableVirtualForceTruth,
+    NaoWalkPulledScenario,
+    build_nao_walk_pulled_diagram,
+    observer_metrics,
+)
+from diagrams.scenarios import ScenarioError, load_scenario, scenario_as_dict
 from diagrams.locomotion.nao_walk import walking_metrics
 from models import add_humanoid, set_standing_state
 from systems.observer.fsr_sensing import CenterOfPressure, SupportFootCom
 from systems.locomotion.walking_pattern import WalkingParameters
 
 G = 9.81
+SCENARIOS = Path(__file__).resolve().parents[1] / "apps" / "scenarios"
 
 
 @pytest.fixture(scope="module")
@@ -93,16 +102,19 @@ def test_bad_cable_setups_are_refused():
         CableSetup(lateral_angle_deg=60.0)
     # A low pulley: the load would be lifted into it.
     with pytest.raises(ValueError, match="into the pulley"):
-        build_nao_walk_pulled_diagram(WalkingParameters(num_steps=12), CableSetup(pulley_height=0.3, tighten_distance=0.05),
-                                      noise=False)
+        build_nao_walk_pulled_diagram(NaoWalkPulledScenario(
+            walking=WalkingParameters(num_steps=12), cable=CableSetup(pulley_height=0.3, tighten_distance=0.05),
+            noise=False))
     with pytest.raises(ValueError, match="never tightens"):
-        build_nao_walk_pulled_diagram(WalkingParameters(num_steps=4), CableSetup(tighten_distance=0.5), noise=False)
+        build_nao_walk_pulled_diagram(NaoWalkPulledScenario(
+            walking=WalkingParameters(num_steps=4), cable=CableSetup(tighten_distance=0.5), noise=False))
 
 
 @pytest.fixture(scope="module")
 def pulled_walk():
     """The app's configuration (defaults), sensor noise on, seed 0, no replay."""
-    diagram, handles = build_nao_walk_pulled_diagram(WalkingParameters(), CableSetup(), noise=True, seed=0)
+    diagram, handles = build_nao_walk_pulled_diagram(NaoWalkPulledScenario(
+        walking=WalkingParameters(), cable=CableSetup(), noise=True, seed=0))
     simulator = Simulator(diagram)  # Build() refused any algebraic loop
     handles.set_initial_state(simulator.get_mutable_context())
     simulator.Initialize()
@@ -134,3 +146,30 @@ def test_observer_meets_the_exp4_floors(pulled_walk):
     assert o["rms_error_x_N"] <= 1.5
     # Before the line is taut the walking robot's estimate is ~0 (no false pull).
     assert abs(o["estimated_x_mean_before_pull_N"]) < 0.3
+
+
+def test_scenario_file_text_and_unknown_keys():
+    """apps/scenarios/nao_walk_pulled_default.yaml lists every field at its default; YAML text
+    overrides nested fields; an unknown key is an error that names it; a loaded bad value is
+    refused by the builder."""
+    default = scenario_as_dict(NaoWalkPulledScenario())
+    path = SCENARIOS / "nao_walk_pulled_default.yaml"
+    assert scenario_as_dict(load_scenario(NaoWalkPulledScenario, filename=path)) == default
+    scenario = load_scenario(NaoWalkPulledScenario, filename=path, text="pull: false\ncable: {stiffness: 1500.0}")
+    assert not scenario.pull and scenario.cable.stiffness == 1500.0 and scenario.cable.pulley_height == 0.65
+    with pytest.raises(ScenarioError, match="pulley_hieght"):
+        load_scenario(NaoWalkPulledScenario, text="cable: {pulley_hieght: 1.0}")
+    with pytest.raises(ValueError, match="lateral_angle_deg"):
+        build_nao_walk_pulled_diagram(load_scenario(NaoWalkPulledScenario, text="cable: {lateral_angle_deg: 60.0}"))
+
+
+def test_app_short_walk_without_pull(tmp_path):
+    """The app on a short walk without the cable writes OUT/nao_walk_pulled/."""
+    import json
+
+    from apps import nao_walk_pulled
+
+    assert nao_walk_pulled.main(["--out", str(tmp_path), "--headless", "--no-replay", "--steps", "2", "--no-pull",
+                                 "--no-noise"]) == 0
+    m = json.loads((tmp_path / "nao_walk_pulled" / "metrics.json").read_text())
+    assert m["walking"]["steps_planned"] == 2 and m["cable"] is None and m["scenario"]["pull"] is False

@@ -53,22 +53,21 @@ moved relative to its ZMP reference by that much. Without the lean the pull is s
 force-guided walk's eq. G-3) did not help either.
 """
 
-from __future__ import annotations
-
 import dataclasses
 import math
 from dataclasses import dataclass
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Rgba
-from pydrake.multibody.plant import ExternallyAppliedSpatialForceMultiplexer, MultibodyPlant
+from pydrake.multibody.plant import ExternallyAppliedSpatialForceMultiplexer, MultibodyPlant, MultibodyPlantConfig
+from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import BasicVector, Context, Diagram, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
-from diagrams.station.humanoid_station import add_humanoid_station
+from diagrams.station.humanoid_station import add_humanoid_station, default_plant_config
 from diagrams.observer.nao_force_observer import VirtualForceTruth
 from diagrams.observer.nao_sensing import OBSERVER_PERIOD, ObserverPipeline, add_observer_pipeline, nao_observer_parameters
-from diagrams.locomotion.nao_walk import ContactZmp, NaoWalkHandles, add_walking_loggers
+from diagrams.locomotion.nao_walk import ContactZmp, NaoWalkHandles, add_walking_loggers, walking_floors, walking_metrics
 from diagrams.station.standing import default_gains
 from models import HumanoidHandles
 from systems.simulation.cable import PulleyLoad
@@ -82,9 +81,11 @@ from systems.locomotion.walking_pattern import NaoWalkingController, WalkingPara
 LOAD_MASS = 0.3
 
 
-@dataclass(frozen=True)
+@dataclass
 class CableSetup:
-    """Geometry of the cable of Experiment 4 (SI units, world frame, x forward).
+    """Geometry of the cable of Experiment 4 (SI units, world frame, x forward). A plain
+    dataclass, so that a scenario can nest it; ``check()`` repeats ``__post_init__``'s
+    checks on loaded values.
 
     Attributes:
         load_mass: m0, kg.
@@ -113,6 +114,10 @@ class CableSetup:
     min_clearance: float = 0.08
 
     def __post_init__(self):
+        self.check()
+
+    def check(self) -> None:
+        """Raises ValueError on a bad value (the message names it)."""
         for name in ("load_mass", "pulley_distance", "pulley_height", "stiffness"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
@@ -208,27 +213,54 @@ class NaoWalkPulledHandles(NaoWalkHandles):
     observer_loggers: dict | None = None
 
 
-def build_nao_walk_pulled_diagram(
-    parameters: WalkingParameters | None = None,
-    setup: CableSetup | None = None,
-    *,
-    pull: bool = True,
-    noise: bool = True,
-    seed: int = 0,
-    observer_period: float = OBSERVER_PERIOD,
-    log_period: float = 0.005,
-    meshcat: Meshcat | None = None,
-) -> tuple[Diagram, NaoWalkPulledHandles]:
-    """Builds the diagram of the module docstring.
+@dataclass
+class NaoWalkPulledScenario:
+    """Experiment 4's settings (SI units; ``diagrams.scenarios``). Defaults: the issue-7 walk
+    (22 steps of 5 cm) with the default cable, sensor noise on.
 
-    Args:
-        parameters: walking parameters (default ``WalkingParameters()``: 22 steps of 5 cm).
-        setup: the cable geometry (default ``CableSetup()``).
+    Attributes:
+        walking: the walking pattern (``systems.locomotion.walking_pattern.WalkingParameters``).
+        cable: the cable geometry (``CableSetup``).
         pull: False leaves the cable out (the walk alone, same pipeline: the observer's
             estimate then measures its own bias while walking).
-        noise, seed: sensor noise (station sensors and FSRs, ``systems.simulation.sensors`` defaults).
+        noise, seed: sensor noise (station sensors and FSRs, ``systems.simulation.sensors``
+            defaults) and its seed.
         observer_period: T, s.
         log_period: period of the walking loggers, s.
+        plant_config: Drake's ``MultibodyPlantConfig`` (default: 1 ms steps, point contact, SAP).
+        simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``).
+    """
+
+    walking: WalkingParameters = dataclasses.field(default_factory=WalkingParameters)
+    cable: CableSetup = dataclasses.field(default_factory=CableSetup)
+    pull: bool = True
+    noise: bool = True
+    seed: int = 0
+    observer_period: float = OBSERVER_PERIOD
+    log_period: float = 0.005
+    plant_config: MultibodyPlantConfig = dataclasses.field(default_factory=default_plant_config)
+    simulator_config: SimulatorConfig = dataclasses.field(default_factory=SimulatorConfig)
+
+    def check(self) -> None:
+        """Raises ValueError on a bad value (the message names it)."""
+        self.walking.check()
+        self.cable.check()
+        if self.seed < 0:
+            raise ValueError(f"seed must be non-negative, got {self.seed}")
+        for name in ("observer_period", "log_period"):
+            if not (getattr(self, name) > 0):
+                raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
+
+
+def build_nao_walk_pulled_diagram(
+    scenario: NaoWalkPulledScenario | None = None,
+    *,
+    meshcat: Meshcat | None = None,
+) -> tuple[Diagram, NaoWalkPulledHandles]:
+    """Builds the diagram of the module docstring for ``scenario`` (default
+    ``NaoWalkPulledScenario()``).
+
+    Args:
         meshcat: if given, a MeshcatVisualizer, the cable (red arrow of the pull) and the
             estimated virtual force (blue arrow at the CoM) at 32 Hz.
 
@@ -236,12 +268,12 @@ def build_nao_walk_pulled_diagram(
         ValueError: bad parameters; a cable geometry that would lift the load into the
             pulley during the planned walk, or never tighten it.
     """
-    parameters = parameters if parameters is not None else WalkingParameters()
-    setup = setup if setup is not None else CableSetup()
-    if not (log_period > 0):
-        raise ValueError(f"log_period must be positive, got {log_period}")
+    scenario = scenario if scenario is not None else NaoWalkPulledScenario()
+    scenario.check()
+    parameters, setup, pull = scenario.walking, scenario.cable, scenario.pull
+    noise, seed, observer_period, log_period = scenario.noise, scenario.seed, scenario.observer_period, scenario.log_period
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, "nao_like", noise=noise, seed=seed)
+    station = add_humanoid_station(builder, "nao_like", plant_config=scenario.plant_config, noise=noise, seed=seed)
     plant, humanoid = station.plant, station.humanoid
     kp, kd = default_gains(plant, humanoid)
     q0 = station.initial_state[: plant.num_positions()]
@@ -429,5 +461,53 @@ def observer_metrics(handles: NaoWalkPulledHandles, root_context: Context, *, se
     return out
 
 
-__all__ = ["CableSetup", "CableVirtualForceTruth", "LOAD_MASS", "NaoWalkPulledHandles",
-           "build_nao_walk_pulled_diagram", "observer_metrics"]
+#: Floors of issue 7, Exp. 4.
+MAX_MEAN_ERROR_X = 0.5  # N
+MAX_RMS_ERROR_X = 1.5  # N
+
+
+def pulled_floors(walking: dict, observer: dict, pull: bool = True) -> dict:
+    """The issue's floors on ``walking_metrics`` and ``observer_metrics``, each True/False
+    (the Exp. 4 ones only with the pull)."""
+    checks = {k + "_with_pull" if pull else k: v for k, v in walking_floors(walking).items()}
+    if pull:
+        ok = observer.get("window_samples", 0) > 0
+        checks["mean_Fx_error_le_0.5N"] = bool(ok and abs(observer["mean_error_x_N"]) <= MAX_MEAN_ERROR_X)
+        checks["rms_Fx_error_le_1.5N"] = bool(ok and observer["rms_error_x_N"] <= MAX_RMS_ERROR_X)
+    return checks
+
+
+def nao_walk_pulled_metrics(scenario: NaoWalkPulledScenario, handles: NaoWalkPulledHandles, root_context: Context,
+                            wall_time_s: float) -> dict:
+    """The app's metrics: ``walking`` (``walking_metrics``) and ``observer``
+    (``observer_metrics``), both with their signals, the floors (``pulled_floors``), the
+    cable as built, the observer's parameters, the frame, noise, seed, the wall time and
+    real-time factor, and the walking parameters."""
+    h = handles
+    w = walking_metrics(h, root_context)
+    o = observer_metrics(h, root_context)
+    checks = pulled_floors(w, o, scenario.pull)
+    return {
+        "walking": w,
+        "observer": o,
+        "floors": checks,
+        "meets_floors": all(checks.values()),
+        "cable": ({"pulley_world_m": h.cable.pulley.tolist(), "natural_length_m": h.slack_length,
+                   "planned_tighten_time_s": h.planned_tighten_time, "planned_lift_time_s": h.planned_lift_time,
+                   **dataclasses.asdict(h.setup)} if h.cable is not None else None),
+        "observer_parameters": {"mass": h.parameters.mass, "period": h.parameters.period,
+                                "jerk_variance": h.parameters.jerk_variance,
+                                "force_rate_variance": h.parameters.force_rate_variance,
+                                "R_z": h.parameters.R_z, "R_xy": h.parameters.R_xy, "preset": "WALKING (eq. 22)"},
+        "frame": "F0: world-aligned, origin at the right sole at t = 0 (fixed for the run)",
+        "noise": scenario.noise,
+        "seed": scenario.seed,
+        "wall_time_s": wall_time_s,
+        "real_time_factor": w["duration_s"] / wall_time_s,
+        "walking_parameters": dataclasses.asdict(scenario.walking),
+    }
+
+
+__all__ = ["CableSetup", "CableVirtualForceTruth", "LOAD_MASS", "MAX_MEAN_ERROR_X", "MAX_RMS_ERROR_X", "NaoWalkPulledHandles",
+           "NaoWalkPulledScenario", "build_nao_walk_pulled_diagram", "nao_walk_pulled_metrics", "observer_metrics",
+           "pulled_floors"]

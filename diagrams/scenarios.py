@@ -55,6 +55,30 @@ def load_scenario(
     return scenario
 
 
+#: Fields that, where a scenario has them, must be positive (s).
+POSITIVE_FIELDS = ("duration", "log_period", "observer_period")
+
+
+def check_common_fields(scenario: Any) -> None:
+    """The checks every scenario shares: each nested dataclass with a ``check()`` method
+    (e.g. ``WalkingParameters``) runs it (YAML loading sets fields without running
+    ``__post_init__``), ``seed`` is non-negative and the ``POSITIVE_FIELDS`` it has are
+    positive.
+
+    Raises:
+        ValueError: a bad value (the message names it).
+    """
+    for field in dataclasses.fields(scenario):
+        value = getattr(scenario, field.name)
+        if dataclasses.is_dataclass(value) and callable(getattr(value, "check", None)):
+            value.check()
+    if getattr(scenario, "seed", 0) < 0:
+        raise ValueError(f"seed must be non-negative, got {scenario.seed}")
+    for name in POSITIVE_FIELDS:
+        if hasattr(scenario, name) and not getattr(scenario, name) > 0:
+            raise ValueError(f"{name} must be positive, got {getattr(scenario, name)}")
+
+
 def scenario_as_dict(scenario: Any) -> dict:
     """The scenario as plain YAML data (nested Drake config types included), e.g. for a
     ``metrics.json``; ``load_scenario(type(s), text=yaml.dump(scenario_as_dict(s)))``
@@ -69,4 +93,4 @@ def scenario_as_yaml(scenario: Any) -> str:
     return yaml_dump_typed(scenario)
 
 
-__all__ = ["ScenarioError", "load_scenario", "scenario_as_dict", "scenario_as_yaml"]
+__all__ = ["POSITIVE_FIELDS", "ScenarioError", "check_common_fields", "load_scenario", "scenario_as_dict", "scenario_as_yaml"]

@@ -204,8 +204,8 @@ def test_app_guided_by_the_hands_starts_and_stops_at_the_threshold(tmp_path):
 
     from apps import nao_force_guided_walk
 
-    out = tmp_path / "guided"
-    assert nao_force_guided_walk.main(["--out", str(out), "--headless", "--no-replay", "--seed", "1"]) == 0
+    assert nao_force_guided_walk.main(["--out", str(tmp_path), "--headless", "--no-replay", "--seed", "1"]) == 0
+    out = tmp_path / "nao_force_guided_walk"
     m = json.loads((out / "metrics.json").read_text())
     assert m["trigger_source"] == "joint" and m["force_N"] == 3.0
     forward, backward = m["episodes"]
@@ -232,9 +232,9 @@ def test_app_without_force_does_not_start(tmp_path):
 
     from apps import nao_force_guided_walk
 
-    out = tmp_path / "quiet"
-    assert nao_force_guided_walk.main(["--out", str(out), "--headless", "--no-replay", "--seed", "2",
+    assert nao_force_guided_walk.main(["--out", str(tmp_path), "--headless", "--no-replay", "--seed", "2",
                                        "--force", "0"]) == 0
+    out = tmp_path / "nao_force_guided_walk"
     m = json.loads((out / "metrics.json").read_text())
     assert m["episodes"] == [] and m["false_starts_s"] == []
     assert not [e for e in m["events"] if e[1] == "start"]
@@ -242,8 +242,30 @@ def test_app_without_force_does_not_start(tmp_path):
 
 
 def test_app_refuses_an_unknown_trigger_source():
-    from diagrams.observer.nao_force_guided_walk import build_force_guided_diagram
-    from systems.observer.hand_guidance import GuidanceProfile
+    from diagrams.observer.nao_force_guided_walk import NaoForceGuidedWalkScenario, build_force_guided_diagram
 
     with pytest.raises(ValueError, match="trigger_source"):
-        build_force_guided_diagram(GuidanceProfile(), TriggerParameters(), trigger_source="fsr")
+        build_force_guided_diagram(NaoForceGuidedWalkScenario(trigger_source="fsr"))
+
+
+def test_scenario_file_text_and_unknown_keys(capsys):
+    """apps/scenarios/nao_force_guided_walk_default.yaml lists every field at its default;
+    YAML text overrides nested fields; an unknown key is an error that names it; the app
+    refuses a force below the threshold."""
+    from pathlib import Path
+
+    from apps import nao_force_guided_walk
+    from diagrams.observer.nao_force_guided_walk import NaoForceGuidedWalkScenario
+    from diagrams.scenarios import ScenarioError, load_scenario, scenario_as_dict
+
+    path = Path(__file__).resolve().parents[1] / "apps" / "scenarios" / "nao_force_guided_walk_default.yaml"
+    assert scenario_as_dict(load_scenario(NaoForceGuidedWalkScenario, filename=path)) == \
+        scenario_as_dict(NaoForceGuidedWalkScenario())
+    scenario = load_scenario(NaoForceGuidedWalkScenario, filename=path,
+                             text="trigger: {threshold: 1.0}\nepisodes: [[1.0, 3.0, -1.0]]")
+    assert scenario.trigger.threshold == 1.0 and scenario.trigger.stop_debounce == 0.05
+    assert scenario.profile().plateaus == ((1.0, 3.0, -3.0),)
+    with pytest.raises(ScenarioError, match="treshold"):
+        load_scenario(NaoForceGuidedWalkScenario, text="trigger: {treshold: 1.0}")
+    assert nao_force_guided_walk.main(["--no-replay", "--force", "1.0"]) == 2
+    assert "threshold" in capsys.readouterr().err

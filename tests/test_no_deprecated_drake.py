@@ -128,11 +128,14 @@ def _case_nao_compliant_arms() -> None:
 
 
 def _case_force_guided_walking() -> None:
-    from diagrams.observer.nao_force_guided_walk import build_force_guided_diagram
-    from systems.observer.hand_guidance import GuidanceProfile
+    from diagrams.observer.nao_force_guided_walk import NaoForceGuidedWalkScenario, build_force_guided_diagram
     from systems.observer.force_guided_walking import TriggerParameters
+    from systems.observer.force_observer import WALKING
 
-    diagram, handles = build_force_guided_diagram(GuidanceProfile(), TriggerParameters(), meshcat=_meshcat())
+    # GuidanceProfile()'s 5 N episodes, TriggerParameters()'s threshold, the walking preset.
+    scenario = NaoForceGuidedWalkScenario(force=5.0, trigger=TriggerParameters(), preset="walking",
+                                          force_rate_variance=WALKING.force_rate_variance)
+    diagram, handles = build_force_guided_diagram(scenario, meshcat=_meshcat())
     _simulate(diagram, handles["station"].set_initial_state)
 
 

@@ -24,6 +24,7 @@ from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import BasicVector, Context, Diagram, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
+from diagrams.scenarios import check_common_fields
 from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station, default_plant_config
 from diagrams.station.standing import default_gains
 from models import HumanoidHandles
@@ -166,13 +167,9 @@ class NaoWalkScenario:
 
     def check(self) -> None:
         """Raises ValueError on a bad value (the message names it)."""
-        self.walking.check()
-        if self.seed < 0:
-            raise ValueError(f"seed must be non-negative, got {self.seed}")
+        check_common_fields(self)
         if self.zmp_correction_passes < 0:
             raise ValueError(f"zmp_correction_passes must be >= 0, got {self.zmp_correction_passes}")
-        if not (self.log_period > 0):
-            raise ValueError(f"log_period must be positive, got {self.log_period}")
 
 
 def build_nao_walk_diagram(

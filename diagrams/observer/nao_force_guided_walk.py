@@ -13,24 +13,26 @@ Every estimate reads sensor outputs and the controller's own commands only; the 
 force reaches the loggers only.
 """
 
-from __future__ import annotations
-
 import dataclasses
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams
+from pydrake.multibody.plant import MultibodyPlantConfig
+from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput, MatrixGain
 
 from diagrams.locomotion.nao_walk import ContactZmp, detect_steps
 from diagrams.observer.nao_sensing import add_observer_pipeline, nao_observer_parameters
-from diagrams.station.humanoid_station import add_humanoid_station
+from diagrams.scenarios import check_common_fields
+from diagrams.station.humanoid_station import add_humanoid_station, default_plant_config
 from diagrams.station.standing import default_gains
 from systems.locomotion.walking_pattern import WalkingParameters
 from systems.observer.arm_compliance import (NAO_ARM_CHAINS, ArmExternalForceEstimator, CompliantArmBlender,
                                              JointTorqueFromPositionError, ObserverHandForce)
-from systems.observer.force_guided_walking import ForceGuidedWalkingController, TriggerParameters
+from systems.observer.force_guided_walking import GUIDED_WALKING, ForceGuidedWalkingController, TriggerParameters
 from systems.observer.force_observer import STANDING, WALKING
 from systems.simulation.disturbances import Push, PushSource
 from systems.observer.hand_guidance import GuidanceProfile, ScaledProfile
@@ -51,32 +53,99 @@ EDGE_MARGIN = 0.4
 HAND_BODIES = ("l_gripper", "r_gripper")
 
 
-def build_force_guided_diagram(profile: GuidanceProfile, trigger: TriggerParameters, *, preset: str = "walking",
-                               force_rate_variance: float | None = None,
-                               noise: bool = True, seed: int = 0, walking: WalkingParameters | None = None,
-                               max_steps: int = 20, log_period: float = 0.005, meshcat: Meshcat | None = None,
-                               trigger_source: str = DEFAULT_TRIGGER_SOURCE,
+@dataclass
+class NaoForceGuidedWalkScenario:
+    """The force-guided walk's settings (SI units; ``diagrams.scenarios``). Defaults: the
+    app's (BENCHMARKS.md: 3 N on the hands moves the ZMP ~1.3 cm; 4 N pushing backwards for
+    3 s while the robot walks backwards breaks its gait up).
+
+    Attributes:
+        force: total guidance force on the hands, N (0: no force, the false-start check).
+        episodes: the guidance episodes [t_on, t_off, sign of the force] (s, s, +1 forwards /
+            -1 backwards); each a plateau of ``force`` with ``ramp`` s edges
+            (``systems.observer.hand_guidance.GuidanceProfile``).
+        ramp: the plateaus' edges, s.
+        duration: simulated time, s.
+        trigger_source: the trigger's input, one of ``TRIGGER_SOURCES`` (module docstring).
+        trigger: the trigger of eq. G-1 (threshold on the estimated F_x, N; debounces, s).
+        preset: the observer's covariances, "walking" (eq. 22) or "standing" (eq. 21). The
+            paper does not give them for Sec. 6.5; its walking preset lags ~0.5 s behind a
+            force step, too slow for the start floor; eq. 21 with a 10x larger force-rate
+            variance follows within ~0.2 s (only with the "observer" and "blend" sources).
+        force_rate_variance: sigma^2 of the force's second derivative (eq. 17), (N/s^2)^2
+            (the paper's presets: 1e3).
+        walking: the walking segments' parameters (``GUIDED_WALKING``).
+        max_steps: steps of one walking segment at most.
+        noise, seed: sensor noise and its seed.
+        log_period: period of every logger, s.
+        plant_config: Drake's ``MultibodyPlantConfig`` (default: 1 ms steps, point contact, SAP).
+        simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``).
+    """
+
+    force: float = 3.0
+    episodes: list[list[float]] = dataclasses.field(default_factory=lambda: [[1.5, 5.5, 1.0], [7.5, 10.5, -1.0]])
+    ramp: float = 0.2
+    duration: float = 12.7
+    trigger_source: str = DEFAULT_TRIGGER_SOURCE
+    trigger: TriggerParameters = dataclasses.field(default_factory=lambda: TriggerParameters(threshold=1.5))
+    preset: str = "standing"
+    force_rate_variance: float = 1e4
+    walking: WalkingParameters = dataclasses.field(default_factory=lambda: dataclasses.replace(GUIDED_WALKING))
+    max_steps: int = 20
+    noise: bool = True
+    seed: int = 0
+    log_period: float = 0.005
+    plant_config: MultibodyPlantConfig = dataclasses.field(default_factory=default_plant_config)
+    simulator_config: SimulatorConfig = dataclasses.field(default_factory=SimulatorConfig)
+
+    def check(self) -> None:
+        """Raises ValueError on a bad value (the message names it)."""
+        check_common_fields(self)
+        if not (self.force > self.trigger.threshold or self.force == 0.0):
+            raise ValueError(f"force ({self.force} N) must exceed the trigger's threshold ({self.trigger.threshold} N),"
+                             " or be 0")
+        if self.preset not in ("walking", "standing"):
+            raise ValueError(f"preset must be 'walking' or 'standing', got {self.preset!r}")
+        if self.trigger_source not in TRIGGER_SOURCES:
+            raise ValueError(f"trigger_source must be one of {TRIGGER_SOURCES}, got {self.trigger_source!r}")
+        if any(len(episode) != 3 for episode in self.episodes):
+            raise ValueError(f"each episode is [t_on, t_off, sign], got {self.episodes}")
+
+    def profile(self) -> GuidanceProfile:
+        """The applied force on the hands (total F_x): ``force`` on every episode; none
+        with ``force`` 0."""
+        if self.force == 0.0:
+            return GuidanceProfile(plateaus=(), ramp=self.ramp)
+        return GuidanceProfile(plateaus=tuple((t_on, t_off, sign * self.force) for t_on, t_off, sign in self.episodes),
+                               ramp=self.ramp)
+
+
+def build_force_guided_diagram(scenario: NaoForceGuidedWalkScenario | None = None, *, meshcat: Meshcat | None = None,
                                motor_constants: dict | None = None) -> tuple[Diagram, dict]:
-    """Station + hand pushes (``profile``: the total F_x, half per hand) + observer pipeline
-    (``diagrams.observer.nao_sensing``, in ``diagrams.observer.nao_walk_pulled``'s fixed stance
-    frame F0) + joint-level hand force estimate (eqs. 25-27) + ``ForceGuidedWalkingController``
-    fed by ``trigger_source``: "joint" (the hands' total force from eqs. 25-27, i.e. eq. 28
-    with K1 = 0) or "observer" (the Kalman observer's virtual F_x). Both are logged.
-    ``motor_constants``: {arm joint: K_m} of eq. 27 (default: the PD's K_p).
+    """Station + hand pushes (``scenario.profile()``: the total F_x, half per hand) + observer
+    pipeline (``diagrams.observer.nao_sensing``, in ``diagrams.observer.nao_walk_pulled``'s
+    fixed stance frame F0) + joint-level hand force estimate (eqs. 25-27) +
+    ``ForceGuidedWalkingController`` fed by ``scenario.trigger_source``: "joint" (the hands'
+    total force from eqs. 25-27, i.e. eq. 28 with K1 = 0), "observer" (the Kalman observer's
+    virtual F_x) or "blend" (eq. 28). All three are logged. ``motor_constants``: {arm joint:
+    K_m} of eq. 27 (default: the PD's K_p).
 
     Returns the diagram and a dict of handles: ``station``, ``controller``, ``loggers``
     (VectorLogSinks every ``log_period`` s, read by ``guided_metrics``), ``parameters`` (the
     observer's), ``push_source``.
 
     Raises:
-        ValueError: an unknown ``preset`` or ``trigger_source``.
+        ValueError: a bad scenario (``NaoForceGuidedWalkScenario.check``), e.g. an unknown
+            ``preset`` or ``trigger_source``.
     """
-    if preset not in ("walking", "standing"):
-        raise ValueError(f"preset must be 'walking' or 'standing', got {preset!r}")
-    if trigger_source not in TRIGGER_SOURCES:
-        raise ValueError(f"trigger_source must be one of {TRIGGER_SOURCES}, got {trigger_source!r}")
+    scenario = scenario if scenario is not None else NaoForceGuidedWalkScenario()
+    scenario.check()
+    profile, trigger, preset, trigger_source = scenario.profile(), scenario.trigger, scenario.preset, scenario.trigger_source
+    noise, seed, walking, max_steps, log_period = (scenario.noise, scenario.seed, scenario.walking, scenario.max_steps,
+                                                   scenario.log_period)
+    force_rate_variance = scenario.force_rate_variance
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, "nao_like", noise=noise, seed=seed)
+    station = add_humanoid_station(builder, "nao_like", plant_config=scenario.plant_config, noise=noise, seed=seed)
     plant, humanoid = station.plant, station.humanoid
     kp, _ = default_gains(plant, humanoid)
     q0 = station.initial_state[: plant.num_positions()]
@@ -252,6 +321,28 @@ def guided_metrics(handles: dict, context, profile: GuidanceProfile, trigger: Tr
                         "tilt": tilt}}
 
 
+def force_guided_walk_metrics(scenario: NaoForceGuidedWalkScenario, handles: dict, context,
+                              wall_time_s: float) -> dict:
+    """The app's metrics: ``guided_metrics`` (with its ``signals``), the wall and simulated
+    time, the floors per episode (start within 0.5 s, stop within one step, moved in the
+    force's direction), no false start, no fall, and the scenario's threshold, force,
+    trigger source, preset, noise, seed and walking parameters."""
+    m = guided_metrics(handles, context, scenario.profile(), scenario.trigger)
+    m["wall_time_s"] = wall_time_s
+    m["simulated_s"] = context.get_time()
+    checks = {}
+    for i, e in enumerate(m["episodes"]):
+        checks[f"episode{i}_start_within_0.5s"] = e["start_ok"]
+        checks[f"episode{i}_stop_within_one_step"] = e["stop_ok"]
+        checks[f"episode{i}_moved_in_force_direction"] = e["moved_in_force_direction"]
+    checks["no_false_start"] = not m["false_starts_s"]
+    checks["no_fall"] = not m["fell"]
+    m.update(floors=checks, meets_floors=all(checks.values()), threshold_N=scenario.trigger.threshold,
+             force_N=scenario.force, trigger_source=scenario.trigger_source, preset=scenario.preset,
+             noise=scenario.noise, seed=scenario.seed, walking_parameters=dataclasses.asdict(scenario.walking))
+    return m
+
+
 __all__ = [
     "DEFAULT_TRIGGER_SOURCE",
     "EDGE_MARGIN",
@@ -259,7 +350,9 @@ __all__ = [
     "JOINT_FILTER_TIME_CONSTANT",
     "MAX_START_LATENCY",
     "MAX_STEPS_AFTER_DROP",
+    "NaoForceGuidedWalkScenario",
     "TRIGGER_SOURCES",
     "build_force_guided_diagram",
+    "force_guided_walk_metrics",
     "guided_metrics",
 ]

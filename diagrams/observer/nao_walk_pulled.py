@@ -64,6 +64,7 @@ from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import BasicVector, Context, Diagram, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
+from diagrams.scenarios import check_common_fields
 from diagrams.station.humanoid_station import add_humanoid_station, default_plant_config
 from diagrams.observer.nao_force_observer import VirtualForceTruth
 from diagrams.observer.nao_sensing import OBSERVER_PERIOD, ObserverPipeline, add_observer_pipeline, nao_observer_parameters
@@ -243,13 +244,7 @@ class NaoWalkPulledScenario:
 
     def check(self) -> None:
         """Raises ValueError on a bad value (the message names it)."""
-        self.walking.check()
-        self.cable.check()
-        if self.seed < 0:
-            raise ValueError(f"seed must be non-negative, got {self.seed}")
-        for name in ("observer_period", "log_period"):
-            if not (getattr(self, name) > 0):
-                raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
+        check_common_fields(self)
 
 
 def build_nao_walk_pulled_diagram(

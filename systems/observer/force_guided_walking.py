@@ -56,8 +56,6 @@ the simulation waits) and kept in a list on the system; the discrete state holds
 numbers (mode, direction, indices into that list, times). Units: SI.
 """
 
-from __future__ import annotations
-
 import math
 from dataclasses import dataclass, replace
 
@@ -82,9 +80,10 @@ GUIDED_WALKING = WalkingParameters(initial_wait=0.2, final_wait=0.3, zmp_offset_
 STANDING, WALKING, STOPPING = 0, 1, 2
 
 
-@dataclass(frozen=True)
+@dataclass
 class TriggerParameters:
-    """Force trigger of eq. G-1.
+    """Force trigger of eq. G-1. A plain dataclass, so that a scenario can nest it;
+    ``check()`` repeats ``__post_init__``'s checks on loaded values.
 
     Attributes:
         threshold: T_on, N (> 0).
@@ -98,6 +97,10 @@ class TriggerParameters:
     stop_debounce: float = 0.05
 
     def __post_init__(self):
+        self.check()
+
+    def check(self) -> None:
+        """Raises ValueError on a bad value (the message names it)."""
         if not (math.isfinite(self.threshold) and self.threshold > 0):
             raise ValueError(f"TriggerParameters.threshold must be positive, got {self.threshold}")
         for name in ("start_debounce", "stop_debounce"):

@@ -1,6 +1,6 @@
-"""Plots shared by several apps. (The apps' runner is ``apps.runner``; ``logged_signals``,
-``memory_allocator`` and ``replay_meshcat`` are re-exported here for the apps not yet moved
-to it.)"""
+"""Plots shared by several apps: ``plot_walking_time`` (nao_walk, nao_walk_pulled). (The apps'
+runner is ``apps.runner``; ``logged_signals``, ``memory_allocator`` and ``replay_meshcat`` are
+re-exported here for the apps not yet moved to it: nao_force_observer and nao_compliant_arms.)"""
 
 from __future__ import annotations
 

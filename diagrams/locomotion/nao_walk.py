@@ -148,7 +148,7 @@ class NaoWalkScenario:
             with the station's PD gains ``diagrams.station.standing.default_gains``).
         velocity_lead: with ``stiffness_compensation``, also lead the targets by
             K_p^-1 K_d q_dot_ref (eq. W-3), since the PD damps towards zero velocity. Off by
-            default (it does not help: BENCHMARKS.md).
+            default (it does not help: BENCHMARKS.md, "Walking: variants tried").
         noise, seed: the station's sensor noise (the PD reads the sensed state) and its seed.
         log_period: period of every logger, s.
         plant_config: Drake's ``MultibodyPlantConfig`` (default: 1 ms steps, point contact, SAP).

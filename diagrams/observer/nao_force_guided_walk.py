@@ -76,6 +76,8 @@ class NaoForceGuidedWalkScenario:
             (the paper's presets: 1e3).
         walking: the walking segments' parameters (``GUIDED_WALKING``).
         max_steps: steps of one walking segment at most.
+        max_lean: bound of eq. G-3's ZMP offset change, m (0, the default, disables the lean;
+            ``systems.observer.force_guided_walking``).
         noise, seed: sensor noise and its seed.
         log_period: period of every logger, s.
         plant_config: Drake's ``MultibodyPlantConfig`` (default: 1 ms steps, point contact, SAP).
@@ -92,6 +94,7 @@ class NaoForceGuidedWalkScenario:
     force_rate_variance: float = 1e4
     walking: WalkingParameters = dataclasses.field(default_factory=lambda: dataclasses.replace(GUIDED_WALKING))
     max_steps: int = 20
+    max_lean: float = 0.0
     noise: bool = True
     seed: int = 0
     log_period: float = 0.005
@@ -150,7 +153,8 @@ def build_force_guided_diagram(scenario: NaoForceGuidedWalkScenario | None = Non
     kp, _ = default_gains(plant, humanoid)
     q0 = station.initial_state[: plant.num_positions()]
     controller = builder.AddSystem(ForceGuidedWalkingController(
-        plant, humanoid, walking, trigger, initial_positions=q0, joint_stiffness=kp, max_steps=max_steps))
+        plant, humanoid, walking, trigger, initial_positions=q0, joint_stiffness=kp, max_steps=max_steps,
+        max_lean=scenario.max_lean))
     controller.set_name("force_guided_walking_controller")
     builder.Connect(controller.GetOutputPort("desired_position"), station.desired_position)
     pushes = [Push(body, np.zeros(3), np.array([1.0, 0.0, 0.0]), ScaledProfile(profile, 0.5)) for body in HAND_BODIES]

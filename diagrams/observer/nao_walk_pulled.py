@@ -41,16 +41,8 @@ waist (0.55 m vs 0.26 m; the line rises ~7 deg at the start, ~5 deg at the end) 
 line tightens late enough that the load stays ``min_clearance`` below it
 (checked at construction from the plan).
 
-No feed-forward lean: the backwards pull F_x < 0 at the CoM height shifts the robot's ZMP by
-z_c F_x / (m g) (LIP, eq. 10: about -15 mm for 3 N), and shifting the pattern's CoM
-reference forward by that much (ramped in over one step around the planned lift) was tried
-and measured to make things worse (the code was removed): the default pulled walk ended at 0.997 m instead of 1.128 m, max yaw 55 deg instead of 4 deg, ZMP inside the
-support polygon 65 % instead of 96 % of the time, and the estimate's RMS error is 6.7 N
-(seed 0). The same 15 mm CoM shift without any force makes a 10-step walk fall (5 mm:
-walks, tilt 3.4 deg vs 1.4 deg): this open-loop walk does not tolerate a CoM reference
-moved relative to its ZMP reference by that much. Without the lean the pull is survived
-(tilt 5.2 deg, yaw 4 deg), so it is not needed here. A ZMP-reference shift (the
-force-guided walk's eq. G-3) did not help either.
+No feed-forward lean for the expected pull (tried, measured worse, removed: BENCHMARKS.md,
+"Walking: variants tried").
 """
 
 import dataclasses

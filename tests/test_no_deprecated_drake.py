@@ -72,9 +72,9 @@ def _case_standing() -> None:
 
 
 def _case_residual_comparison() -> None:
-    from diagrams.residuals.residual_comparison import ResidualComparisonConfig, build_residual_comparison_diagram, set_initial_state
+    from diagrams.residuals.residual_comparison import ResidualComparisonScenario, build_residual_comparison_diagram, set_initial_state
 
-    diagram, handles = build_residual_comparison_diagram(ResidualComparisonConfig(), _meshcat())
+    diagram, handles = build_residual_comparison_diagram(ResidualComparisonScenario(), _meshcat())
     _simulate(diagram, lambda context: set_initial_state(diagram, context, handles))
 
 

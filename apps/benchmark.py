@@ -19,7 +19,7 @@ station alone (plant with contact, sensors, PD + gravity; constant posture), the
 the same with Meshcat recording its replay: microseconds of wall and CPU time per step and
 the real-time factor; the Kalman force observer's throughput on a real Nao recording (the
 authors' ``Force_Y_data``, shipped in ``data/hawley2019-nao``; ``HCO_SHARED_DIR`` moves it, see
-``apps.replay_nao_dataset``: a missing recording stops the run with an error naming the
+``systems.observer.nao_dataset``: a missing recording stops the run with an error naming the
 path); and one update of the contact localizer (Flacco et al. Sec. VI) on ``hrp4_like``.
 """
 
@@ -167,14 +167,14 @@ def benchmark_residual_update(name: str, *, calls: int = 200, batches: int = 7) 
 def benchmark_force_observer(batches: int = 5, dataset_dir: Path | None = None) -> dict:
     """Samples per second of the Kalman force observer core on a real Nao recording (the
     authors' Force_Y_data, shipped in data/hawley2019-nao; ``dataset_dir`` defaults to
-    ``apps.replay_nao_dataset.published_dataset_dir()``).
+    ``systems.observer.nao_dataset.published_dataset_dir()``).
 
     Raises:
-        apps.replay_nao_dataset.DatasetError: the recording is missing or unreadable.
+        systems.observer.nao_dataset.DatasetError: the recording is missing or unreadable.
     """
     from systems.observer.force_observer import calibrated_normal_force, estimate_virtual_forces
 
-    from apps.replay_nao_dataset import load_recording, published_dataset_dir
+    from systems.observer.nao_dataset import load_recording, published_dataset_dir
 
     dataset = (published_dataset_dir() if dataset_dir is None else Path(dataset_dir)) / "Force_Y_data"
     data = load_recording(dataset)
@@ -315,7 +315,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="simulated seconds per closed-loop timing (0 skips them)")
     parser.add_argument("--json", type=Path, help="also write the results to this JSON file")
     args = parser.parse_args(argv)
-    from apps.replay_nao_dataset import DatasetError, published_dataset_dir
+    from systems.observer.nao_dataset import DatasetError, published_dataset_dir
 
     try:  # before the long timings: a missing recording is an error, not a skipped figure
         dataset_dir = published_dataset_dir()

@@ -52,10 +52,10 @@ from systems.simulation.disturbances import SmoothPiecewise  # noqa: E402
 from diagrams.observer.nao_compliant_arms import (  # noqa: E402
     build_nao_compliant_arms_diagram,
     hand_pushes,
-    identified_motor_constants,
     lean_posture,
 )
-from diagrams.observer.nao_force_observer import settled_standing_state, wide_stance  # noqa: E402
+from diagrams.observer.calibration import identified_motor_constants, settle_standing_state  # noqa: E402
+from diagrams.observer.nao_force_observer import wide_stance  # noqa: E402
 from systems.observer.arm_compliance import DEFAULT_STIFFNESS, NAO_ARM_CHAINS  # noqa: E402
 
 #: Push per hand, N (along -x: towards the robot), and the schedule, s.
@@ -117,7 +117,7 @@ def simulate(scenario: Scenario, *, seed: int = 0, meshcat: Meshcat | None = Non
         meshcat=meshcat)
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
-    handles.set_initial_state(context, settled_standing_state(wide_stance()))
+    handles.set_initial_state(context, settle_standing_state(wide_stance()))
     if meshcat is not None:
         meshcat.SetCameraPose(camera_in_world=[0.8, -0.8, 0.5], target_in_world=[0.0, 0.0, 0.25])
         meshcat.StartRecording(frames_per_second=32.0)

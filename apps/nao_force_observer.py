@@ -65,7 +65,8 @@ from pydrake.geometry import Meshcat  # noqa: E402
 from pydrake.systems.analysis import Simulator  # noqa: E402
 
 from apps.common import logged_signals, replay_meshcat  # noqa: E402
-from diagrams.observer.nao_force_observer import build_nao_force_observer_diagram, settled_standing_state, wide_stance  # noqa: E402
+from diagrams.observer.calibration import settle_standing_state  # noqa: E402
+from diagrams.observer.nao_force_observer import build_nao_force_observer_diagram, wide_stance  # noqa: E402
 from systems.simulation.disturbances import Push, SmoothPiecewise  # noqa: E402
 
 #: The paper's load: 2.5 lb = 1.13 kg (Sec. 6.2), and g.
@@ -199,7 +200,7 @@ def simulate(experiment: Experiment, *, seed: int = 0, meshcat: Meshcat | None =
     diagram, handles = build_nao_force_observer_diagram(experiment.pushes, posture=posture, seed=seed, noise=noise, meshcat=meshcat)
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
-    handles.set_initial_state(context, settled_standing_state(posture))
+    handles.set_initial_state(context, settle_standing_state(posture))
     if meshcat is not None:
         meshcat.SetCameraPose(camera_in_world=[0.9, -0.9, 0.6], target_in_world=[0.0, 0.0, 0.25])
         meshcat.StartRecording(frames_per_second=32.0)

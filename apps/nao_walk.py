@@ -34,14 +34,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 from pydrake.geometry import Meshcat  # noqa: E402
 from pydrake.systems.analysis import Simulator  # noqa: E402
 
-from apps.common import replay_meshcat  # noqa: E402
-from diagrams.locomotion.nao_walk import build_nao_walk_diagram, walking_metrics  # noqa: E402
+from apps.common import plot_walking_time, replay_meshcat  # noqa: E402
+from diagrams.locomotion.nao_walk import build_nao_walk_diagram, walking_floors, walking_metrics  # noqa: E402
 from systems.locomotion.walking_pattern import WalkingParameters  # noqa: E402
-
-#: Floors of issue 7 (walking).
-MIN_STEPS = 20
-MIN_DISTANCE = 1.0  # m
-MIN_SPEED = 0.08  # m/s
 
 
 def simulate(params: WalkingParameters, *, noise: bool = False, seed: int = 0, meshcat: Meshcat | None = None,
@@ -64,16 +59,6 @@ def simulate(params: WalkingParameters, *, noise: bool = False, seed: int = 0, m
         meshcat.PublishRecording()
     metrics = walking_metrics(handles, simulator.get_context())
     return {"handles": handles, "context": simulator.get_context(), "metrics": metrics, "wall": wall}
-
-
-def floors(metrics: dict) -> dict:
-    """The issue's walking floors, each True/False."""
-    return {
-        "steps_ge_20": metrics["steps_detected"] >= MIN_STEPS,
-        "distance_ge_1m": metrics["distance_m"] >= MIN_DISTANCE,
-        "mean_speed_ge_0.08": metrics["mean_speed_mps"] >= MIN_SPEED,
-        "no_fall": not metrics["fell"],
-    }
 
 
 def plot_top(path: Path, run: dict) -> None:
@@ -103,39 +88,6 @@ def plot_top(path: Path, run: dict) -> None:
     ax.set_title("nao_like walking: footprints (FSR polygons), ZMP and CoM", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
-    plt.close(fig)
-
-
-def plot_time(path: Path, run: dict) -> None:
-    """x and y of ZMP / CoM vs references, foot normal forces with the planned contact, base
-    tilt."""
-    s = run["metrics"]["signals"]
-    t = s["t"]
-    fig, axes = plt.subplots(4, 1, figsize=(10, 9), sharex=True)
-    for i, axis in enumerate("xy"):
-        ax = axes[i]
-        ax.plot(t, s["zmp"][:, i], color="tab:red", lw=0.6, label="ZMP")
-        ax.plot(t, s["zmp_reference"][:, i], "--", color="k", lw=0.8, label="ZMP ref")
-        ax.plot(t, s["com_reference"][:, i], color="tab:green", lw=1.2, label="CoM ref")
-        ax.plot(t, s["com"][:, i], ":", color="tab:blue", lw=1.5, label="CoM")
-        ax.set_ylabel(f"{axis} [m]")
-        ax.grid(True, alpha=0.3)
-    axes[0].legend(fontsize=7, ncol=4)
-    ax = axes[2]
-    for i, (side, color) in enumerate((("left", "tab:blue"), ("right", "tab:orange"))):
-        ax.plot(t, s["foot_normal_forces"][:, i], color=color, lw=0.8, label=f"{side} foot")
-        ax.fill_between(t, 0, 60 * s["planned_contact"][:, i], color=color, alpha=0.08, step="mid")
-    ax.set_ylabel("normal force [N]")
-    ax.legend(fontsize=7)
-    ax.grid(True, alpha=0.3)
-    axes[3].plot(t, s["tilt_deg"], color="k", lw=0.8, label="base tilt")
-    axes[3].plot(t, s["yaw_deg"], color="tab:purple", lw=0.8, label="base yaw")
-    axes[3].set_ylabel("angle [deg]")
-    axes[3].set_xlabel("time [s] (shaded: planned contact)")
-    axes[3].legend(fontsize=7)
-    axes[3].grid(True, alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
@@ -187,8 +139,8 @@ def main(argv: list[str] | None = None) -> int:
     if meshcat is not None:
         (out / "walk.html").write_text(meshcat.StaticHtml())
     plot_top(out / "walk_top.png", run)
-    plot_time(out / "walk_time.png", run)
-    checks = floors(m)
+    plot_walking_time(out / "walk_time.png", run)
+    checks = walking_floors(m)
     summary = {k: v for k, v in m.items() if k != "signals"}
     summary.update({
         "floors": checks,

@@ -34,11 +34,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 from pydrake.geometry import Meshcat  # noqa: E402
 from pydrake.systems.analysis import Simulator  # noqa: E402
 
-from apps.common import replay_meshcat  # noqa: E402
-from apps.nao_walk import floors as walking_floors  # noqa: E402
-from apps.nao_walk import plot_time  # noqa: E402
+from apps.common import plot_walking_time, replay_meshcat  # noqa: E402
 from diagrams.observer.nao_walk_pulled import CableSetup, build_nao_walk_pulled_diagram, observer_metrics  # noqa: E402
-from diagrams.locomotion.nao_walk import walking_metrics  # noqa: E402
+from diagrams.locomotion.nao_walk import walking_floors, walking_metrics  # noqa: E402
 from systems.locomotion.walking_pattern import WalkingParameters  # noqa: E402
 
 #: Floors of issue 7, Exp. 4.
@@ -206,7 +204,7 @@ def main(argv: list[str] | None = None) -> int:
     plot_forces(out, run)
     plot_normal_force(out, run)
     plot_load(out, run)
-    plot_time(out / "walk_time.png", {"metrics": run["walking"]})
+    plot_walking_time(out / "walk_time.png", {"metrics": run["walking"]})
     checks = floors(run, pull)
     h = run["handles"]
     w = {k: v for k, v in run["walking"].items() if k != "signals"}

@@ -16,10 +16,9 @@ from diagrams.station.humanoid_station import add_humanoid_station
 from diagrams.observer.nao_compliant_arms import (
     build_nao_compliant_arms_diagram,
     hand_pushes,
-    identified_motor_constants,
-    motor_constant_identification,
 )
-from diagrams.observer.nao_force_observer import VirtualForceTruth, full_posture, settled_standing_state, wide_stance
+from diagrams.observer.calibration import identified_motor_constants, motor_constant_identification, settle_standing_state
+from diagrams.observer.nao_force_observer import VirtualForceTruth, full_posture, wide_stance
 from diagrams.station.standing import default_gains
 from systems.observer.arm_compliance import (
     NAO_ARM_CHAINS,
@@ -49,7 +48,7 @@ def _gains(station):
 def _moving_state(station, rng):
     """The settled stance with random joint angles offsets and velocities (base included)."""
     plant = station.plant
-    x = settled_standing_state(wide_stance()).copy()
+    x = settle_standing_state(wide_stance()).copy()
     nq = plant.num_positions()
     x[nq:] = 0.3 * rng.standard_normal(plant.num_velocities())
     for n in ARM_JOINTS:
@@ -118,7 +117,7 @@ def test_estimator_filter_and_first_sample(station):
     plant = station.plant
     dut = ArmExternalForceEstimator(plant, period=0.01, filter_time_constant=0.1)
     context = dut.CreateDefaultContext()
-    x = settled_standing_state(wide_stance()).copy()
+    x = settle_standing_state(wide_stance()).copy()
     x[plant.num_positions():] = 0.0
     tau_m = np.linspace(-0.2, 0.3, len(ARM_JOINTS))
     dut.GetInputPort("motor_torque").FixValue(context, tau_m)
@@ -139,7 +138,7 @@ def test_observer_hand_force_inverts_eq_11(station):
     plant, humanoid = station.plant, station.humanoid
     dut = ObserverHandForce(plant, humanoid.sole_frames["right"], model_instances=[humanoid.model_instance])
     context = dut.CreateDefaultContext()
-    x = settled_standing_state(wide_stance())
+    x = settle_standing_state(wide_stance())
     ctx = plant.CreateDefaultContext()
     plant.SetPositionsAndVelocities(ctx, x)
     p_hand = np.mean([plant.GetBodyByName(c.hand_body).EvalPoseInWorld(ctx).translation() for c in NAO_ARM_CHAINS],
@@ -191,7 +190,7 @@ def test_controller_targets_and_ik_follow_eq_29(station):
     km = 5.0
     dut = HandComplianceController(plant, q_nominal, stiffness=50.0, motor_constants=km, ik_iterations=3)
     context = dut.CreateDefaultContext()
-    x = settled_standing_state(wide_stance()).copy()
+    x = settle_standing_state(wide_stance()).copy()
     yaw, pitch = 0.4, 0.1
     R = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]]) @ np.array(
         [[np.cos(pitch), 0, np.sin(pitch)], [0, 1, 0], [-np.sin(pitch), 0, np.cos(pitch)]])
@@ -238,7 +237,7 @@ def test_compliance_moves_the_hands_by_f_over_k():
         hand_pushes(profile), noise=False, constant_k1=0.0, motor_constants=dict(identified_motor_constants()))
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
-    handles.set_initial_state(context, settled_standing_state(wide_stance()))
+    handles.set_initial_state(context, settle_standing_state(wide_stance()))
     simulator.AdvanceTo(2.5)
     plant = handles.station.plant
     ctx = plant.GetMyContextFromRoot(context)
@@ -295,7 +294,7 @@ def test_bad_parameters_and_nan_inputs(station):
     torque = JointTorqueFromPositionError(plant, 5.0)
     context = torque.CreateDefaultContext()
     torque.GetInputPort("desired_position").FixValue(context, np.zeros(len(station.joint_names)))
-    x = settled_standing_state(wide_stance()).copy()
+    x = settle_standing_state(wide_stance()).copy()
     x[-1] = np.inf
     torque.GetInputPort("state").FixValue(context, x)
     with pytest.raises(ValueError, match="JointTorqueFromPositionError: input 'state' has NaN or inf"):
@@ -303,6 +302,6 @@ def test_bad_parameters_and_nan_inputs(station):
     controller = HandComplianceController(plant, joint_vector_from_names(plant, station.humanoid.nominal_posture))
     context = controller.CreateDefaultContext()
     controller.GetInputPort("hand_forces").FixValue(context, [np.nan] + [0.0] * 5)
-    controller.GetInputPort("state").FixValue(context, settled_standing_state(wide_stance()))
+    controller.GetInputPort("state").FixValue(context, settle_standing_state(wide_stance()))
     with pytest.raises(ValueError, match="HandComplianceController: input 'hand_forces'"):
         controller.EvalUniquePeriodicDiscreteUpdate(context)

@@ -242,8 +242,8 @@ def test_app_without_force_does_not_start(tmp_path):
 
 
 def test_app_refuses_an_unknown_trigger_source():
-    from apps import nao_force_guided_walk
+    from diagrams.observer.nao_force_guided_walk import build_force_guided_diagram
+    from systems.observer.hand_guidance import GuidanceProfile
 
     with pytest.raises(ValueError, match="trigger_source"):
-        nao_force_guided_walk.build_force_guided_diagram(nao_force_guided_walk.GuidanceProfile(), TriggerParameters(),
-                                                         trigger_source="fsr")
+        build_force_guided_diagram(GuidanceProfile(), TriggerParameters(), trigger_source="fsr")

@@ -10,6 +10,7 @@ import pytest
 import scipy.io
 
 from apps import replay_nao_dataset
+from systems.observer import nao_dataset
 from systems.observer.force_observer import (
     STANDING,
     LipForceObserver,
@@ -18,19 +19,19 @@ from systems.observer.force_observer import (
     transition_matrices,
 )
 
-RECORDINGS = replay_nao_dataset.RECORDINGS
+RECORDINGS = nao_dataset.RECORDINGS
 
 
 @pytest.fixture(scope="module")
 def dataset() -> Path:
     """The authors' recordings (shipped in data/hawley2019-nao): a missing folder fails the
     real-data tests with an error naming the path, it never skips them."""
-    return replay_nao_dataset.published_dataset_dir()
+    return nao_dataset.published_dataset_dir()
 
 
 def test_published_recordings_ship_with_the_repository(monkeypatch):
-    monkeypatch.delenv(replay_nao_dataset.DATA_DIR_VARIABLE, raising=False)
-    directory = replay_nao_dataset.published_dataset_dir()
+    monkeypatch.delenv(nao_dataset.DATA_DIR_VARIABLE, raising=False)
+    directory = nao_dataset.published_dataset_dir()
     assert directory == Path(__file__).resolve().parents[1] / "data" / "hawley2019-nao"
     for name in RECORDINGS:
         assert sorted(p.name for p in (directory / name).iterdir()) == [
@@ -41,20 +42,20 @@ def test_published_recordings_ship_with_the_repository(monkeypatch):
 
 
 def test_environment_variable_points_at_other_recordings_or_fails_clearly(monkeypatch, tmp_path):
-    variable = replay_nao_dataset.DATA_DIR_VARIABLE
+    variable = nao_dataset.DATA_DIR_VARIABLE
     mine = tmp_path / "datasets" / "hawley2019-nao"
     for name in RECORDINGS:
-        shutil.copytree(replay_nao_dataset.BUNDLED_DATASET_DIR / name, mine / name)
+        shutil.copytree(nao_dataset.BUNDLED_DATASET_DIR / name, mine / name)
     monkeypatch.setenv(variable, str(tmp_path))
-    assert replay_nao_dataset.published_dataset_dir() == mine
+    assert nao_dataset.published_dataset_dir() == mine
 
     shutil.rmtree(mine / "Force_Z_data")
-    with pytest.raises(replay_nao_dataset.DatasetError, match=re.escape(f"'{mine / 'Force_Z_data'}' is not a folder") + f".*{variable}"):
-        replay_nao_dataset.published_dataset_dir()
+    with pytest.raises(nao_dataset.DatasetError, match=re.escape(f"'{mine / 'Force_Z_data'}' is not a folder") + f".*{variable}"):
+        nao_dataset.published_dataset_dir()
 
     monkeypatch.setenv(variable, str(tmp_path / "nowhere"))
-    with pytest.raises(replay_nao_dataset.DatasetError, match=re.escape(f"'{tmp_path / 'nowhere' / 'datasets' / 'hawley2019-nao'}' is not a folder")):
-        replay_nao_dataset.published_dataset_dir()
+    with pytest.raises(nao_dataset.DatasetError, match=re.escape(f"'{tmp_path / 'nowhere' / 'datasets' / 'hawley2019-nao'}' is not a folder")):
+        nao_dataset.published_dataset_dir()
 
 
 @pytest.mark.parametrize("name", RECORDINGS)
@@ -78,7 +79,7 @@ def test_estimates_the_papers_loads_on_real_data(name, expected, axis, dataset):
     """While loaded (the load's main component past 80 % of its expected value), every
     component's median is within 1.0 N of the paper's expected virtual force (eq. 24; the
     issue's floor is 1.5 N; measured: at most 0.89 N off)."""
-    forces = replay_nao_dataset.replay(dataset / name)
+    forces = nao_dataset.replay(dataset / name)
     loaded = forces[np.abs(forces[:, axis]) > 0.8 * abs(expected[axis])]
     assert len(loaded) > 100
     np.testing.assert_array_less(np.abs(np.median(loaded, axis=0) - np.array(expected)), 1.0)
@@ -136,26 +137,26 @@ def test_clear_errors_for_broken_recordings(dataset, tmp_path, capsys):
 
     recording = _copy(dataset, tmp_path / "b")
     scipy.io.savemat(recording / "ZMP.mat", {"zmp_wrong": np.zeros((5, 2))})
-    with pytest.raises(replay_nao_dataset.DatasetError, match="no variable 'ZMP'"):
-        replay_nao_dataset.load_recording(recording)
+    with pytest.raises(nao_dataset.DatasetError, match="no variable 'ZMP'"):
+        nao_dataset.load_recording(recording)
 
     recording = _copy(dataset, tmp_path / "c")
     acc = scipy.io.loadmat(recording / "Acc.mat")["acc"][:-3]
     scipy.io.savemat(recording / "Acc.mat", {"acc": acc})
-    with pytest.raises(replay_nao_dataset.DatasetError, match="different lengths"):
-        replay_nao_dataset.load_recording(recording)
+    with pytest.raises(nao_dataset.DatasetError, match="different lengths"):
+        nao_dataset.load_recording(recording)
 
     recording = _copy(dataset, tmp_path / "d")
     com = scipy.io.loadmat(recording / "CoM_Pos.mat")["Xc_Yc_Zc"]
     com[[4, 9]] = np.nan
     scipy.io.savemat(recording / "CoM_Pos.mat", {"Xc_Yc_Zc": com})
-    with pytest.raises(replay_nao_dataset.DatasetError, match="NaN or inf in rows 5, 10"):
-        replay_nao_dataset.load_recording(recording)
+    with pytest.raises(nao_dataset.DatasetError, match="NaN or inf in rows 5, 10"):
+        nao_dataset.load_recording(recording)
 
     recording = _copy(dataset, tmp_path / "e")
     (recording / "total_force.mat").write_bytes(b"not a mat file")
-    with pytest.raises(replay_nao_dataset.DatasetError, match="cannot read"):
-        replay_nao_dataset.load_recording(recording)
+    with pytest.raises(nao_dataset.DatasetError, match="cannot read"):
+        nao_dataset.load_recording(recording)
 
 
 def test_drake_system_matches_the_core_on_real_data(dataset):
@@ -163,7 +164,7 @@ def test_drake_system_matches_the_core_on_real_data(dataset):
     (and so the authors' output) on the first 300 samples of a real recording."""
     from systems.observer.force_observer import LipForceObserverSystem
 
-    data = replay_nao_dataset.load_recording(dataset / "Force_Z_data")
+    data = nao_dataset.load_recording(dataset / "Force_Z_data")
     normal_force = calibrated_normal_force(data["total_force"].sum(axis=1))
     reference = np.loadtxt(dataset / "Force_Z_data" / "reference_F.csv", delimiter=",")
     system = LipForceObserverSystem()

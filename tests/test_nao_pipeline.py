@@ -12,13 +12,9 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
 from diagrams.station.humanoid_station import add_humanoid_station
-from diagrams.observer.nao_force_observer import (
-    OBSERVER_PERIOD,
-    VirtualForceTruth,
-    build_nao_force_observer_diagram,
-    settled_standing_state,
-    wide_stance,
-)
+from diagrams.observer.calibration import settle_standing_state
+from diagrams.observer.nao_force_observer import VirtualForceTruth, build_nao_force_observer_diagram, wide_stance
+from diagrams.observer.nao_sensing import OBSERVER_PERIOD
 from models import add_ground, add_humanoid
 from systems.simulation.disturbances import Push
 from systems.observer.force_observer import STANDING, LipForceObserver, transition_matrices
@@ -40,7 +36,7 @@ def standing_run():
     diagram, handles = build_nao_force_observer_diagram(seed=3)
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
-    handles.set_initial_state(context, settled_standing_state())
+    handles.set_initial_state(context, settle_standing_state())
     simulator.AdvanceTo(2.0)
     logs = {name: logger.FindLog(context).data() for name, logger in handles.loggers.items()}
     return handles, logs
@@ -88,7 +84,7 @@ def _station_with(builder_hook, duration=0.2, posture_state=None):
     diagram = builder.Build()
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
-    station.set_initial_state(context, settled_standing_state() if posture_state is None else posture_state)
+    station.set_initial_state(context, settle_standing_state() if posture_state is None else posture_state)
     simulator.AdvanceTo(duration)
     return station, extra, context
 
@@ -136,7 +132,7 @@ def test_cop_equals_the_force_weighted_sphere_positions():
     documented positions the system uses): one reading on one FSR puts the CoP there;
     both feet's readings average by force."""
     plant, handles, sg_inspector = _plant_with_nao()
-    x = settled_standing_state(wide_stance())
+    x = settle_standing_state(wide_stance())
     cop = CenterOfPressure(plant, handles, support_foot="left")
     context = cop.CreateDefaultContext()
     cop.GetInputPort("state").FixValue(context, x)
@@ -182,7 +178,7 @@ def test_imu_acceleration_is_projected_to_world_and_gravity_compensated():
 
 def test_support_foot_com_is_the_com_relative_to_the_sole_in_world_axes():
     plant, handles, _ = _plant_with_nao()
-    x = settled_standing_state()
+    x = settle_standing_state()
     plant_context = plant.CreateDefaultContext()
     plant.SetPositionsAndVelocities(plant_context, x)
     p_WCm = plant.CalcCenterOfMassPositionInWorld(plant_context)
@@ -219,13 +215,13 @@ def test_bad_inputs_and_arguments_give_clear_errors():
 
     cop = CenterOfPressure(plant, handles)
     context = cop.CreateDefaultContext()
-    cop.GetInputPort("state").FixValue(context, settled_standing_state())
+    cop.GetInputPort("state").FixValue(context, settle_standing_state())
     cop.GetInputPort("fsr_forces").FixValue(context, [1.0, 2.0, np.nan, 4.0, 5.0, 6.0, 7.0, 8.0])
     with pytest.raises(ValueError, match="CenterOfPressure: input 'fsr_forces' has NaN or inf at indices \\[2\\]"):
         cop.GetOutputPort("zmp").Eval(context)
     acc = ImuComAcceleration(plant, handles.imu_frame)
     context = acc.CreateDefaultContext()
-    x = settled_standing_state().copy()
+    x = settle_standing_state().copy()
     x[5] = np.inf
     acc.GetInputPort("state").FixValue(context, x)
     acc.GetInputPort("linear_acceleration").FixValue(context, [0.0, 0.0, 9.81])
@@ -258,7 +254,7 @@ def test_statics_of_a_pushed_robot_match_the_virtual_force():
     diagram, handles = build_nao_force_observer_diagram([push], noise=False)
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
-    handles.set_initial_state(context, settled_standing_state())
+    handles.set_initial_state(context, settle_standing_state())
     simulator.AdvanceTo(3.0)
     plant = handles.station.plant
     mass = plant.CalcTotalMass(plant.CreateDefaultContext())

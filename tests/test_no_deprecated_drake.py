@@ -118,15 +118,18 @@ def _case_nao_walk_pulled() -> None:
 
 
 def _case_nao_compliant_arms() -> None:
-    # Default motor constants: identify_motor_constant() builds and runs its own diagram.
+    # The identified motor constants: identify_motor_constant() builds and runs its own diagram.
+    from diagrams.observer.calibration import identified_motor_constants
     from diagrams.observer.nao_compliant_arms import build_nao_compliant_arms_diagram
 
-    diagram, handles = build_nao_compliant_arms_diagram(meshcat=_meshcat())
+    diagram, handles = build_nao_compliant_arms_diagram(motor_constants=dict(identified_motor_constants()),
+                                                        meshcat=_meshcat())
     _simulate(diagram, handles.set_initial_state)
 
 
 def _case_force_guided_walking() -> None:
-    from apps.nao_force_guided_walk import GuidanceProfile, build_force_guided_diagram
+    from diagrams.observer.nao_force_guided_walk import build_force_guided_diagram
+    from systems.observer.hand_guidance import GuidanceProfile
     from systems.observer.force_guided_walking import TriggerParameters
 
     diagram, handles = build_force_guided_diagram(GuidanceProfile(), TriggerParameters(), meshcat=_meshcat())

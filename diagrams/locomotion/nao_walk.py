@@ -379,5 +379,22 @@ def walking_metrics(handles: NaoWalkHandles, root_context: Context) -> dict:
     }
 
 
-__all__ = ["ContactZmp", "MIN_NORMAL_FORCE", "detect_steps", "NaoWalkHandles", "add_walking_loggers", "build_nao_walk_diagram",
+#: Floors of issue 7 (walking; ``walking_floors``).
+MIN_STEPS = 20
+MIN_DISTANCE = 1.0  # m
+MIN_SPEED = 0.08  # m/s
+
+
+def walking_floors(metrics: dict) -> dict:
+    """The issue's walking floors on ``walking_metrics``' result, each True/False: >= 20 steps,
+    >= 1 m, >= 0.08 m/s mean speed, no fall."""
+    return {
+        "steps_ge_20": metrics["steps_detected"] >= MIN_STEPS,
+        "distance_ge_1m": metrics["distance_m"] >= MIN_DISTANCE,
+        "mean_speed_ge_0.08": metrics["mean_speed_mps"] >= MIN_SPEED,
+        "no_fall": not metrics["fell"],
+    }
+
+
+__all__ = ["ContactZmp", "walking_floors", "MIN_NORMAL_FORCE", "detect_steps", "NaoWalkHandles", "add_walking_loggers", "build_nao_walk_diagram",
            "signed_distance_to_polygon", "walking_metrics"]

@@ -16,8 +16,7 @@ commanded joint positions; the pushes' truth goes to loggers only. Rates: plant 
 
 from __future__ import annotations
 
-import functools
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,13 +26,8 @@ from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
 from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station
 from diagrams.station.standing import default_gains
-from diagrams.observer.nao_force_observer import (
-    OBSERVER_PERIOD,
-    VirtualForceTruth,
-    add_observer_pipeline,
-    full_posture,
-    wide_stance,
-)
+from diagrams.observer.nao_force_observer import VirtualForceTruth, full_posture, wide_stance
+from diagrams.observer.nao_sensing import OBSERVER_PERIOD, add_observer_pipeline
 from systems.observer.arm_compliance import (
     DEFAULT_PERIOD,
     DEFAULT_STIFFNESS,
@@ -43,9 +37,7 @@ from systems.observer.arm_compliance import (
     CompliantArmBlender,
     HandComplianceController,
     JointTorqueFromPositionError,
-    MotorConstantIdentification,
     ObserverHandForce,
-    identify_motor_constant,
 )
 from systems.simulation.disturbances import Push, PushSource
 from systems.observer.force_observer import LipForceObserverSystem
@@ -105,17 +97,6 @@ def lean_posture(delta: float, posture: dict[str, float] | None = None) -> dict[
     return out
 
 
-@functools.lru_cache(maxsize=1)
-def motor_constant_identification() -> MotorConstantIdentification:
-    """``identify_motor_constant()`` with its defaults, run once per process (~3 s)."""
-    return identify_motor_constant()
-
-
-def identified_motor_constants() -> tuple[tuple[str, float], ...]:
-    """K_m of the arm joints, (name, N m/rad) pairs, from ``motor_constant_identification``."""
-    return tuple(motor_constant_identification().as_dict().items())
-
-
 @dataclass
 class NaoCompliantArmsHandles:
     """What ``build_nao_compliant_arms_diagram`` created.
@@ -125,7 +106,7 @@ class NaoCompliantArmsHandles:
         pushes, push_source: the pushes and their source (truth to loggers only).
         posture_schedule: the nominal posture source.
         fsr_array, center_of_pressure, support_foot_com, imu_com_acceleration, observer:
-            the observer pipeline (``diagrams.observer.nao_force_observer``'s).
+            the observer pipeline (``diagrams.observer.nao_sensing.add_observer_pipeline``).
         observer_hand_force: ObserverHandForce.
         joint_torque: JointTorqueFromPositionError (eq. 27).
         joint_estimator: ArmExternalForceEstimator (eqs. 25-26).
@@ -171,7 +152,7 @@ def build_nao_compliant_arms_diagram(
     posture: dict[str, float] | None = None,
     posture_knots: Sequence[tuple[float, dict[str, float]]] = (),
     stiffness: float = DEFAULT_STIFFNESS,
-    motor_constants: dict[str, float] | None = None,
+    motor_constants: Mapping[str, float] | None = None,
     compensate_deflection: bool = True,
     constant_k1: float | None = None,
     fsr_threshold: float = FSR_CONTACT_THRESHOLD,
@@ -193,7 +174,9 @@ def build_nao_compliant_arms_diagram(
         posture_knots: optional (time, posture overrides) knots of a scripted posture change
             (e.g. ``lean_posture``); the posture is ``posture`` before the first knot.
         stiffness: k of eq. (29), N/m.
-        motor_constants: {joint: K_m}, N m/rad (default: ``identify_motor_constant()``).
+        motor_constants: {joint: K_m}, N m/rad, required: e.g.
+            ``dict(diagrams.observer.calibration.identified_motor_constants())`` (a
+            calibration run the caller makes; this builder does not simulate).
         compensate_deflection: the controller offsets q_d by K_m^-1 J^T F (see
             ``HandComplianceController``).
         constant_k1: None for eq. (28)'s K1 = K_a / K_t, else a constant.
@@ -207,6 +190,9 @@ def build_nao_compliant_arms_diagram(
         log_period: s.
         meshcat: adds a visualizer and force arrows (red: applied, blue: blended estimate).
     """
+    if motor_constants is None:
+        raise ValueError("build_nao_compliant_arms_diagram: motor_constants is required ({arm joint: K_m}, N m/rad): "
+                         "pass dict(diagrams.observer.calibration.identified_motor_constants()) or your own")
     builder = DiagramBuilder()
     station = add_humanoid_station(builder, "nao_like", noise=noise, seed=seed)
     plant, humanoid = station.plant, station.humanoid
@@ -223,8 +209,6 @@ def build_nao_compliant_arms_diagram(
     schedule = builder.AddSystem(PostureSchedule(times, np.array(postures)))
     schedule.set_name("posture_schedule")
 
-    if motor_constants is None:
-        motor_constants = dict(identified_motor_constants())
     names = [n for c in NAO_ARM_CHAINS for n in c.joint_names]
     _, kd = default_gains(plant, humanoid)  # the station's PD gains (v[6:] order)
     kd_by_name = dict(zip(station.joint_names, kd.tolist()))
@@ -338,7 +322,5 @@ __all__ = [
     "PostureSchedule",
     "build_nao_compliant_arms_diagram",
     "hand_pushes",
-    "identified_motor_constants",
     "lean_posture",
-    "motor_constant_identification",
 ]

@@ -25,44 +25,24 @@ absorb it within ~0.3 s (< 0.2 N on F_z, measured).
 
 from __future__ import annotations
 
-import dataclasses
-import functools
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Rgba
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import BasicVector, Context, Diagram, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
+from diagrams.observer.nao_sensing import OBSERVER_PERIOD, add_observer_pipeline
 from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station
-from models import HumanoidHandles, set_standing_state
+from models import HumanoidHandles
 from systems.simulation.disturbances import Push, PushSource
-from systems.observer.force_observer import STANDING, LipForceObserverSystem, LipObserverParameters
-from systems.observer.fsr_sensing import FSR_NOISE_STD, CenterOfPressure, FsrArray, ImuComAcceleration, SupportFootCom
+from systems.observer.force_observer import LipForceObserverSystem, LipObserverParameters
+from systems.observer.fsr_sensing import CenterOfPressure, FsrArray, ImuComAcceleration, SupportFootCom
 from systems.common.checks import eval_finite_input
 from systems.simulation.pd_gravity import joint_vector_from_names
-from systems.simulation.sensors import SEEDS_PER_CALL
 from systems.simulation.visualization import ForceArrows
-
-#: The observer's sampling period on the simulated robot, s (the paper's 16.7 ms, 60 Hz).
-OBSERVER_PERIOD = 1.0 / 60.0
-#: Seed offset of the FSR noise within ``systems.simulation.sensors``' per-seed block (0-4 are used).
-FSR_SEED_OFFSET = 5
-
-
-def nao_observer_parameters(plant: MultibodyPlant, instance=None, *, period: float = OBSERVER_PERIOD) -> LipObserverParameters:
-    """The paper's standing parameters (eq. 21) with the robot's model mass and gravity and
-    the period ``period``: the robot knows its own mass from its model (5.19 kg for
-    ``nao_like``, the paper's M_c)."""
-    context = plant.CreateDefaultContext()
-    mass = plant.CalcTotalMass(context) if instance is None else plant.CalcTotalMass(context, [instance])
-    gravity = float(-plant.gravity_field().gravity_vector()[2])
-    return dataclasses.replace(STANDING, mass=float(mass), gravity=gravity, period=float(period))
-
 
 class VirtualForceTruth(LeafSystem):
     """Ground-truth virtual force (paper eq. 11) of the applied external wrench.
@@ -171,76 +151,10 @@ class NaoForceObserverHandles:
 
     def set_initial_state(self, root_context: Context, state: np.ndarray | None = None) -> None:
         """Puts the robot in ``state`` ([q; v] of the plant; default: the station's standing
-        state in the nominal posture; better ``settled_standing_state(posture)``) in the
+        state in the nominal posture; better
+        ``diagrams.observer.calibration.settle_standing_state(posture)``) in the
         diagram's root context."""
         self.station.set_initial_state(root_context, state)
-
-
-@dataclass
-class ObserverPipeline:
-    """What ``add_observer_pipeline`` added (sensors to observer, paper Fig. 4)."""
-
-    fsr_array: FsrArray
-    center_of_pressure: CenterOfPressure
-    support_foot_com: SupportFootCom
-    imu_com_acceleration: ImuComAcceleration
-    parameters: LipObserverParameters
-    observer: LipForceObserverSystem
-
-
-def add_observer_pipeline(
-    builder: DiagramBuilder,
-    station: HumanoidStation,
-    *,
-    support_foot: str = "right",
-    origin_W: np.ndarray | None = None,
-    noise: bool = True,
-    seed: int = 0,
-    fsr_noise_std: float | None = None,
-    observer_period: float = OBSERVER_PERIOD,
-    parameters: LipObserverParameters | None = None,
-) -> ObserverPipeline:
-    """Adds the Nao's measurement pipeline and the Kalman observer to ``builder``: FSR array
-    (from the plant's contact results), CoP/ZMP and total normal force (eqs. 12-13), CoM by
-    forward kinematics and CoM acceleration from the IMU (all from the sensed state, in one
-    world-aligned frame F), and ``LipForceObserverSystem``.
-
-    Args:
-        station: a ``nao_like`` station (``add_humanoid_station``) with its sensors.
-        support_foot: "left" or "right": origin of F (the support-foot frame, standing).
-        origin_W: instead, a fixed world point as F's origin, m (walking; see
-            ``systems.observer.fsr_sensing.CenterOfPressure``).
-        noise, seed: FSR noise on, and the seed (the FSRs use 16 seed + 5).
-        fsr_noise_std: N per FSR (default ``fsr_sensing.FSR_NOISE_STD``; ignored without noise).
-        observer_period: T, s (with the default parameters).
-        parameters: the observer's parameters; default eq. (21) with the model's mass at
-            ``observer_period`` (``nao_observer_parameters``).
-    """
-    plant, humanoid = station.plant, station.humanoid
-    std = (FSR_NOISE_STD if fsr_noise_std is None else fsr_noise_std) if noise else 0.0
-    fsr = builder.AddSystem(FsrArray(plant, humanoid, noise_std=std, seed=SEEDS_PER_CALL * seed + FSR_SEED_OFFSET))
-    fsr.set_name("fsr_array")
-    builder.Connect(plant.get_contact_results_output_port(), fsr.GetInputPort("contact_results"))
-    cop = builder.AddSystem(CenterOfPressure(plant, humanoid, support_foot=support_foot, origin_W=origin_W))
-    cop.set_name("center_of_pressure")
-    builder.Connect(fsr.GetOutputPort("fsr_forces"), cop.GetInputPort("fsr_forces"))
-    builder.Connect(station.sensed_state, cop.GetInputPort("state"))
-    com = builder.AddSystem(SupportFootCom(plant, humanoid, support_foot=support_foot, origin_W=origin_W))
-    com.set_name("support_foot_com")
-    builder.Connect(station.sensed_state, com.GetInputPort("state"))
-    acc = builder.AddSystem(ImuComAcceleration(plant, humanoid.imu_frame))
-    acc.set_name("imu_com_acceleration")
-    builder.Connect(station.sensors.imu.linear_acceleration, acc.GetInputPort("linear_acceleration"))
-    builder.Connect(station.sensed_state, acc.GetInputPort("state"))
-    if parameters is None:
-        parameters = nao_observer_parameters(plant, humanoid.model_instance, period=observer_period)
-    observer = builder.AddSystem(LipForceObserverSystem(parameters))
-    observer.set_name("lip_force_observer")
-    builder.Connect(com.GetOutputPort("com_position"), observer.GetInputPort("com_position"))
-    builder.Connect(acc.GetOutputPort("com_acceleration"), observer.GetInputPort("com_acceleration"))
-    builder.Connect(cop.GetOutputPort("zmp"), observer.GetInputPort("zmp"))
-    builder.Connect(cop.GetOutputPort("normal_force"), observer.GetInputPort("normal_force"))
-    return ObserverPipeline(fsr, cop, com, acc, parameters, observer)
 
 
 def build_nao_force_observer_diagram(
@@ -288,7 +202,7 @@ def build_nao_force_observer_diagram(
     builder.Connect(push_source.GetOutputPort("applied_spatial_forces"), plant.get_applied_spatial_force_input_port())
     builder.Connect(plant.get_state_output_port(), push_source.GetInputPort("state"))
 
-    # Measurement pipeline (sensors only) and the observer.
+    # Measurement pipeline (sensors only) and the observer (``diagrams.observer.nao_sensing``).
     pipeline = add_observer_pipeline(builder, station, support_foot=support_foot, noise=noise, seed=seed,
                                      fsr_noise_std=fsr_noise_std, observer_period=observer_period)
     fsr, cop, com, acc = pipeline.fsr_array, pipeline.center_of_pressure, pipeline.support_foot_com, pipeline.imu_com_acceleration
@@ -370,43 +284,10 @@ def full_posture(humanoid: HumanoidHandles, posture: dict[str, float] | None) ->
     return out
 
 
-@functools.lru_cache(maxsize=8)
-def _settled_state(duration: float, posture: tuple) -> tuple[float, ...]:
-    builder = DiagramBuilder()
-    station = add_humanoid_station(builder, "nao_like", noise=False)
-    plant, humanoid = station.plant, station.humanoid
-    angles = full_posture(humanoid, dict(posture))
-    hold = builder.AddSystem(ConstantVectorSource(joint_vector_from_names(plant, angles)))
-    builder.Connect(hold.get_output_port(), station.desired_position)
-    diagram = builder.Build()
-    simulator = Simulator(diagram)
-    plant_context = plant.CreateDefaultContext()
-    set_standing_state(plant, plant_context, dataclasses.replace(humanoid, nominal_posture=angles))
-    station.set_initial_state(simulator.get_mutable_context(), plant.GetPositionsAndVelocities(plant_context))
-    simulator.AdvanceTo(duration)
-    plant_context = plant.GetMyContextFromRoot(simulator.get_context())
-    return tuple(plant.GetPositionsAndVelocities(plant_context).tolist())
-
-
-def settled_standing_state(posture: dict[str, float] | None = None, duration: float = 1.0) -> np.ndarray:
-    """[q; v] of nao_like after standing still for ``duration`` s in ``posture`` (overrides
-    of the nominal posture) under position control, without pushes or noise: a state at
-    static equilibrium on the ground (contact forces balanced, velocities ~0), so that an
-    experiment and its observer start without the touch-down transient. Cached."""
-    if not (math.isfinite(duration) and duration > 0):
-        raise ValueError(f"duration must be positive, got {duration}")
-    return np.array(_settled_state(float(duration), tuple(sorted((posture or {}).items()))))
-
-
 __all__ = [
-    "ObserverPipeline",
-    "add_observer_pipeline",
-    "OBSERVER_PERIOD",
     "NaoForceObserverHandles",
     "VirtualForceTruth",
     "build_nao_force_observer_diagram",
-    "nao_observer_parameters",
     "full_posture",
-    "settled_standing_state",
     "wide_stance",
 ]

@@ -66,8 +66,8 @@ from pydrake.systems.framework import BasicVector, Context, Diagram, DiagramBuil
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
 from diagrams.station.humanoid_station import add_humanoid_station
-from diagrams.observer.nao_force_observer import (OBSERVER_PERIOD, ObserverPipeline, VirtualForceTruth, add_observer_pipeline,
-                                  nao_observer_parameters)
+from diagrams.observer.nao_force_observer import VirtualForceTruth
+from diagrams.observer.nao_sensing import OBSERVER_PERIOD, ObserverPipeline, add_observer_pipeline, nao_observer_parameters
 from diagrams.locomotion.nao_walk import ContactZmp, NaoWalkHandles, add_walking_loggers
 from diagrams.station.standing import default_gains
 from models import HumanoidHandles
@@ -184,7 +184,7 @@ class NaoWalkPulledHandles(NaoWalkHandles):
         planned_tighten_time / planned_lift_time: when the plan makes the line taut / the
             load start rising (quasi-static, from the planned torso motion), s.
         frame_origin: p_WF0, m.
-        pipeline (``diagrams.observer.nao_force_observer.ObserverPipeline``, F at ``frame_origin``),
+        pipeline (``diagrams.observer.nao_sensing.ObserverPipeline``, F at ``frame_origin``),
             fsr_array, imu_com_acceleration, observer: its parts; truth: the ground truth.
         parameters: the observer's parameters (eq. 22 with the model's mass, T = 1/60 s).
         observer_loggers: loggers at the observer period: ``virtual_force``, ``valid``,

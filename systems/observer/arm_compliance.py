@@ -11,7 +11,8 @@ The paper's Fig. 13, as Drake systems (all ports SI, forces in N, world axes unl
 * ``CompliantArmBlender`` (eq. 28): F = K1 F_observer + K2 F_joint, K1 = K_a / K_t, K2 = 1 - K1.
 * ``HandComplianceController`` (eq. 29): x_h = x_h^0 + F_x / k, realised by a damped
   least-squares IK of each arm, output as the station PD's ``desired_position``.
-* ``identify_motor_constant``: K_m of eq. 27 identified from a simulated static test.
+* ``fit_motor_constants``: K_m of eq. 27 from the rest states of a static test (the test
+  itself, a simulation, is ``diagrams.observer.calibration.identify_motor_constant``).
 
 What eq. 27 measures here. The station's controller (``systems.simulation.pd_gravity``) applies
 u = -tau_g(q) + K_p (q_d - q) - K_d v: gravity is compensated by a model feed-forward, so
@@ -23,7 +24,7 @@ Drake's arm rows of M v_dot + C v = tau_g + u + J^T F, the proportional torque i
 so tau_hat of eq. 25 keeps the inertia, Coriolis/centrifugal and damping terms and drops
 gravity (``gravity_compensated=True``, the default; set it False for a controller without
 gravity feed-forward, then tau_hat also holds g(q) = -tau_g). At rest K_m identifies as K_p
-(``identify_motor_constant``). Sign: the paper's F^ext (eq. 25, tau_m = tau_hat + J^T F^ext)
+(``diagrams.observer.calibration.identify_motor_constant``). Sign: the paper's F^ext (eq. 25, tau_m = tau_hat + J^T F^ext)
 is the force the hand exerts on the environment; the systems here output the force applied
 TO the hand (the push), F = -F^ext.
 """
@@ -162,7 +163,7 @@ class JointTorqueFromPositionError(LeafSystem):
     Args:
         plant: the finalized plant.
         motor_constants: K_m, N m/rad: scalar, m values in chain-joint order, or
-            {joint name: K_m} (``identify_motor_constant(...).as_dict()``).
+            {joint name: K_m} (``fit_motor_constants(...).as_dict()``).
         chains: the arms (default ``NAO_ARM_CHAINS``).
 
     Raises:
@@ -673,7 +674,7 @@ class HandComplianceController(LeafSystem):
 
 @dataclass
 class MotorConstantIdentification:
-    """Result of ``identify_motor_constant``.
+    """Result of ``fit_motor_constants``.
 
     Attributes:
         joint_names: the identified joints (chain order).
@@ -693,82 +694,47 @@ class MotorConstantIdentification:
         return dict(zip(self.joint_names, self.motor_constants.tolist()))
 
 
-def identify_motor_constant(
-    loads: Sequence[Sequence[float]] = ((-2.0, 0.0, 0.0), (0.0, 1.5, 0.0), (0.0, 0.0, -2.0)),
+def fit_motor_constants(
+    plant: MultibodyPlant,
+    q_desired: np.ndarray,
+    rest_states: np.ndarray,
+    loads: np.ndarray,
     *,
     chains: Sequence[ArmChain] = NAO_ARM_CHAINS,
     load_point: Sequence[float] = (0.02, 0.02, 0.02),
-    hold: float = 1.5,
-    window: float = 0.5,
 ) -> MotorConstantIdentification:
-    """Identifies K_m of eq. (27) on the simulated nao_like (station, no noise) by a static
-    test: it stands in the nominal posture (wide stance) while known forces ``loads`` (N,
-    world; each applied to every hand at ``load_point`` in the hand body's frame, m) are
-    applied one after the other, each held ``hold`` s; the last ``window`` s of each hold
-    give the mean position error e = q_d - q of each arm joint and the load's joint torque
-    tau_L = J^T F (at the mean state). At rest the PD balances the load, K_m e = -tau_L
-    (gravity is compensated by the controller's feed-forward), so per joint
-    K_m = -sum(e tau_L) / sum(e^2) over the loads. The point is offset from the gripper
-    origin so that the wrist yaw carries torque too. In this simulator K_m recovers the
-    PD's proportional gain K_p (5 N m/rad for the arms, 2 for the wrists); on a real Nao it
-    would lump motor, gearbox and servo-loop constants.
+    """K_m of eq. (27) from a static test (no simulation here; the test itself is
+    ``diagrams.observer.calibration.identify_motor_constant``): under load i (force
+    ``loads[i]``, N, world, applied to every hand at ``load_point`` in the hand body's
+    frame, m) the robot rests in ``rest_states[i]`` ([q; v], a mean over a window; its base
+    quaternion is renormalised here). Per arm joint, the position error e = q_d - q and the
+    load's joint torque tau_L = J^T F (at the rest state) satisfy K_m e = -tau_L at rest
+    (gravity compensated by the controller's feed-forward), so K_m = -sum(e tau_L) / sum(e^2)
+    over the loads.
+
+    Args:
+        plant: the finalized plant of the test.
+        q_desired: (n) the PD's constant command, v[6:] order, rad.
+        rest_states: (loads, nq + nv) the mean state under each load.
+        loads: (loads, 3) the forces, N.
 
     Raises:
-        ValueError: fewer than one load, a non-finite load, bad durations, or a joint that
-            no load moves.
+        ValueError: bad chains, mismatched shapes, or a joint that no load moves.
     """
-    # Imported here: the diagrams package depends on this module.
-    from pydrake.systems.analysis import Simulator
-    from pydrake.systems.framework import DiagramBuilder
-    from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
-
-    from diagrams.station.humanoid_station import add_humanoid_station
-    from diagrams.observer.nao_force_observer import full_posture, settled_standing_state, wide_stance
-    from systems.simulation.disturbances import Push, PushSource, Step
-    from systems.simulation.pd_gravity import joint_vector_from_names
-
+    topology, resolved, k_all = _resolve(plant, chains, "fit_motor_constants")
     loads = np.asarray(loads, dtype=float)
-    if loads.ndim != 2 or loads.shape[1] != 3 or len(loads) < 1 or not np.all(np.isfinite(loads)):
-        raise ValueError("identify_motor_constant: loads must be a list of finite 3-vectors")
-    hold = positive_number(hold, "identify_motor_constant: hold")
-    window = positive_number(window, "identify_motor_constant: window")
-    if window >= hold:
-        raise ValueError("identify_motor_constant: window must be shorter than hold")
-    builder = DiagramBuilder()
-    station = add_humanoid_station(builder, "nao_like", noise=False)
-    plant = station.plant
-    topology, resolved, k_all = _resolve(plant, chains, "identify_motor_constant")
+    rest_states = np.asarray(rest_states, dtype=float)
+    if loads.ndim != 2 or loads.shape[1] != 3 or rest_states.shape != (len(loads), plant.num_multibody_states()):
+        raise ValueError(f"fit_motor_constants: need one [q; v] per load, got loads {loads.shape} and states "
+                         f"{rest_states.shape}")
     quaternion = topology.free_joint.position_start()
-    posture = wide_stance()
-    q_desired = joint_vector_from_names(plant, full_posture(station.humanoid, posture))
-    builder.Connect(builder.AddSystem(ConstantVectorSource(q_desired)).get_output_port(), station.desired_position)
-    t0 = 0.2
-    pushes = []
-    for i, F in enumerate(loads):
-        norm = float(np.linalg.norm(F))
-        if norm == 0.0:
-            continue
-        profile = Step(norm, t0 + i * hold, t0 + (i + 1) * hold)
-        pushes += [Push(c.chain.hand_body, tuple(load_point), F / norm, profile) for c in resolved]
-    source = builder.AddSystem(PushSource(plant, pushes))
-    builder.Connect(source.GetOutputPort("applied_spatial_forces"), plant.get_applied_spatial_force_input_port())
-    builder.Connect(plant.get_state_output_port(), source.GetInputPort("state"))
-    logger = LogVectorOutput(plant.get_state_output_port(), builder, 0.01)
-    diagram = builder.Build()
-    simulator = Simulator(diagram)
-    station.set_initial_state(simulator.get_mutable_context(), settled_standing_state(posture))
-    simulator.AdvanceTo(t0 + len(loads) * hold)
-    log = logger.FindLog(simulator.get_context())
-    t, X = log.sample_times(), log.data().T
     q_index = np.concatenate([r.q_index for r in resolved])
     v_index = np.concatenate([r.v_index for r in resolved])
     ctx = plant.CreateDefaultContext()
     errors, torques = [], []
     point = np.asarray(load_point, dtype=float)
-    for i, F in enumerate(loads):
-        t_end = t0 + (i + 1) * hold
-        inside = (t > t_end - window) & (t < t_end - 0.005)
-        x_mean = X[inside].mean(axis=0)
+    for F, x_mean in zip(loads, rest_states):
+        x_mean = x_mean.copy()
         x_mean[quaternion: quaternion + 4] /= np.linalg.norm(x_mean[quaternion: quaternion + 4])
         plant.SetPositionsAndVelocities(ctx, x_mean)
         tau = np.zeros(plant.num_velocities())
@@ -776,12 +742,12 @@ def identify_motor_constant(
             J = plant.CalcJacobianTranslationalVelocity(ctx, JacobianWrtVariable.kV, c.frame, point,
                                                         plant.world_frame(), plant.world_frame())
             tau += J.T @ F
-        errors.append(q_desired[k_all] - x_mean[q_index])
+        errors.append(np.asarray(q_desired)[k_all] - x_mean[q_index])
         torques.append(tau[v_index])
     E, T = np.array(errors), np.array(torques)
     denominator = np.sum(E * E, axis=0)
     if np.any(denominator < 1e-12):
-        raise ValueError("identify_motor_constant: a joint is not moved by any load; add loads")
+        raise ValueError("fit_motor_constants: a joint is not moved by any load; add loads")
     km = -np.sum(E * T, axis=0) / denominator
     residual = float(np.sqrt(np.mean((km * E + T) ** 2)))
     return MotorConstantIdentification(tuple(_joint_names(resolved)), km, E, T, residual)
@@ -799,5 +765,5 @@ __all__ = [
     "NAO_ARM_CHAINS",
     "NAO_FSR_COUNT",
     "ObserverHandForce",
-    "identify_motor_constant",
+    "fit_motor_constants",
 ]

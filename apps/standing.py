@@ -9,9 +9,9 @@ Usage::
 For each model of the scenario (``StandingScenario``; ``--model`` and ``--duration`` override
 its ``models`` and ``duration``): simulates ``duration`` seconds (1 ms discrete steps, SAP,
 point contact), prints a table (base drift after the first second of settling, smallest foot
-sphere normal force, feet flat, real-time factor), writes ``DIR/stand/<model>.json``,
-``DIR/stand/metrics.json`` (every model and the scenario) and, with Meshcat on, a
-self-contained replay ``DIR/stand/<model>.html``. Exits with status 1 if a robot falls.
+sphere normal force, feet flat, real-time factor), writes ``DIR/standing/<model>.json``,
+``DIR/standing/metrics.json`` (every model and the scenario) and, with Meshcat on, a
+self-contained replay ``DIR/standing/<model>.html``. Exits with status 1 if a robot falls.
 """
 
 from __future__ import annotations
@@ -81,7 +81,7 @@ def main(argv=None) -> int:
         models = None if args.model is None else (list(MODEL_NAMES) if args.model == "all" else [args.model])
         scenario = scenario_from_args(StandingScenario, args, models=models, duration=args.duration)
         print("standing simulation of the humanoids (PD + gravity compensation)")
-        out_dir = output_folder(args, "stand")
+        out_dir = output_folder(args, "standing")
         meshcat = replay_meshcat(not args.no_replay, args.headless)
 
         rows = []

@@ -19,12 +19,12 @@ def test_stand_app_runs_and_reports(tmp_path, capsys):
     assert "standing simulation of the humanoids" in out
     for name in ("hrp4_like", "nao_like"):
         assert name in out
-        row = json.loads((tmp_path / "stand" / f"{name}.json").read_text())
+        row = json.loads((tmp_path / "standing" / f"{name}.json").read_text())
         assert row["fell"] is False
         assert row["feet_flat"] is True
         assert row["min_sphere_force_N"] > 0.0
         assert row["real_time_factor"] > 0.0
-        assert not (tmp_path / "stand" / f"{name}.html").exists()  # no Meshcat, no replay
+        assert not (tmp_path / "standing" / f"{name}.html").exists()  # no Meshcat, no replay
 
 
 def test_stand_app_rejects_bad_arguments(tmp_path):
@@ -51,14 +51,14 @@ def test_stand_app_reads_scenario_file_and_text(tmp_path, capsys):
     args = ["--scenario", str(scenario), "--scenario-text", "models: [nao_like]", "--no-meshcat",
             "--out", str(tmp_path)]
     assert stand.main(args) == 0
-    assert not (tmp_path / "stand" / "hrp4_like.json").exists()
-    row = json.loads((tmp_path / "stand" / "nao_like.json").read_text())
+    assert not (tmp_path / "standing" / "hrp4_like.json").exists()
+    row = json.loads((tmp_path / "standing" / "nao_like.json").read_text())
     assert row["duration_s"] == 0.3 and row["fell"] is False
-    metrics = json.loads((tmp_path / "stand" / "metrics.json").read_text())
+    metrics = json.loads((tmp_path / "standing" / "metrics.json").read_text())
     assert metrics["scenario"]["models"] == ["nao_like"] and metrics["nao_like"]["duration_s"] == 0.3
     # The shorthand options override the scenario's fields.
     assert stand.main([*args, "--model", "hrp4_like", "--duration", "0.2"]) == 0
-    assert json.loads((tmp_path / "stand" / "hrp4_like.json").read_text())["duration_s"] == 0.2
+    assert json.loads((tmp_path / "standing" / "hrp4_like.json").read_text())["duration_s"] == 0.2
     capsys.readouterr()
     assert stand.main(["--scenario-text", "model: nao_like", "--no-meshcat", "--out", str(tmp_path)]) == 2
     assert "model" in capsys.readouterr().err
@@ -68,4 +68,4 @@ def test_stand_app_reads_scenario_file_and_text(tmp_path, capsys):
 
 def test_stand_app_writes_a_replay(tmp_path):
     assert stand.main(["--model", "nao_like", "--duration", "0.3", "--headless", "--out", str(tmp_path)]) == 0
-    assert (tmp_path / "stand" / "nao_like.html").stat().st_size > 10_000
+    assert (tmp_path / "standing" / "nao_like.html").stat().st_size > 10_000

@@ -1,2 +1,3 @@
 """The humanoid station shared by every experiment (plant, ground, sensors, PD + gravity
-compensation) and the standing experiment."""
+compensation), the plant configuration it accepts (``plant_config``), and the standing
+experiment."""

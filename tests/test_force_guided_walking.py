@@ -248,19 +248,18 @@ def test_app_refuses_an_unknown_trigger_source():
         build_force_guided_diagram(NaoForceGuidedWalkScenario(trigger_source="fsr"))
 
 
-def test_scenario_file_text_and_unknown_keys(capsys):
-    """apps/scenarios/nao_force_guided_walk_default.yaml lists every field at its default;
-    YAML text overrides nested fields; an unknown key is an error that names it; the app
-    refuses a force below the threshold."""
-    from pathlib import Path
-
+def test_scenario_file_text_and_unknown_keys(tmp_path, capsys):
+    """apps/scenarios/nao_force_guided_walk_default.yaml lists every field at its default
+    (the scenario convention, ``tests/scenario_checks.py``); YAML text overrides nested
+    fields; an unknown nested key is an error that names it; the app refuses a force below
+    the threshold."""
     from apps import nao_force_guided_walk
     from diagrams.observer.nao_force_guided_walk import NaoForceGuidedWalkScenario
-    from diagrams.scenarios import ScenarioError, load_scenario, scenario_as_dict
+    from diagrams.scenarios import ScenarioError, load_scenario
+    from scenario_checks import SCENARIOS, check_scenario_convention
 
-    path = Path(__file__).resolve().parents[1] / "apps" / "scenarios" / "nao_force_guided_walk_default.yaml"
-    assert scenario_as_dict(load_scenario(NaoForceGuidedWalkScenario, filename=path)) == \
-        scenario_as_dict(NaoForceGuidedWalkScenario())
+    check_scenario_convention(NaoForceGuidedWalkScenario, "nao_force_guided_walk_default.yaml", tmp_path)
+    path = SCENARIOS / "nao_force_guided_walk_default.yaml"
     scenario = load_scenario(NaoForceGuidedWalkScenario, filename=path,
                              text="trigger: {threshold: 1.0}\nepisodes: [[1.0, 3.0, -1.0]]")
     assert scenario.trigger.threshold == 1.0 and scenario.trigger.stop_debounce == 0.05

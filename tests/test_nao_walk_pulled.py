@@ -12,7 +12,6 @@ dominated by that transient and the mean error is 0.68 N (measured, seed 0), abo
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -26,14 +25,14 @@ from diagrams.observer.nao_walk_pulled import (
     build_nao_walk_pulled_diagram,
     observer_metrics,
 )
-from diagrams.scenarios import ScenarioError, load_scenario, scenario_as_dict
+from diagrams.scenarios import ScenarioError, load_scenario
 from diagrams.locomotion.nao_walk import walking_metrics
 from models import add_humanoid, set_standing_state
 from systems.observer.fsr_sensing import CenterOfPressure, SupportFootCom
 from systems.locomotion.walking_pattern import WalkingParameters
+from scenario_checks import SCENARIOS, check_scenario_convention
 
 G = 9.81
-SCENARIOS = Path(__file__).resolve().parents[1] / "apps" / "scenarios"
 
 
 @pytest.fixture(scope="module")
@@ -148,13 +147,13 @@ def test_observer_meets_the_exp4_floors(pulled_walk):
     assert abs(o["estimated_x_mean_before_pull_N"]) < 0.3
 
 
-def test_scenario_file_text_and_unknown_keys():
-    """apps/scenarios/nao_walk_pulled_default.yaml lists every field at its default; YAML text
-    overrides nested fields; an unknown key is an error that names it; a loaded bad value is
-    refused by the builder."""
-    default = scenario_as_dict(NaoWalkPulledScenario())
+def test_scenario_file_text_and_unknown_keys(tmp_path):
+    """apps/scenarios/nao_walk_pulled_default.yaml lists every field at its default (the
+    scenario convention, ``tests/scenario_checks.py``); YAML text overrides nested fields; an
+    unknown nested key is an error that names it; a loaded bad value is refused by the
+    builder."""
+    check_scenario_convention(NaoWalkPulledScenario, "nao_walk_pulled_default.yaml", tmp_path)
     path = SCENARIOS / "nao_walk_pulled_default.yaml"
-    assert scenario_as_dict(load_scenario(NaoWalkPulledScenario, filename=path)) == default
     scenario = load_scenario(NaoWalkPulledScenario, filename=path, text="pull: false\ncable: {stiffness: 1500.0}")
     assert not scenario.pull and scenario.cable.stiffness == 1500.0 and scenario.cable.pulley_height == 0.65
     with pytest.raises(ScenarioError, match="pulley_hieght"):

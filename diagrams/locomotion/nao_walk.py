@@ -25,7 +25,8 @@ from pydrake.systems.framework import BasicVector, Context, Diagram, DiagramBuil
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
 from diagrams.scenarios import check_common_fields
-from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station, default_plant_config
+from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station
+from diagrams.station.plant_config import default_plant_config
 from diagrams.station.standing import default_gains
 from models import HumanoidHandles
 from systems.simulation.disturbances import Push, PushSource

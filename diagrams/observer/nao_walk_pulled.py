@@ -57,7 +57,8 @@ from pydrake.systems.framework import BasicVector, Context, Diagram, DiagramBuil
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
 from diagrams.scenarios import check_common_fields
-from diagrams.station.humanoid_station import add_humanoid_station, default_plant_config
+from diagrams.station.humanoid_station import add_humanoid_station
+from diagrams.station.plant_config import default_plant_config
 from diagrams.observer.nao_force_observer import VirtualForceTruth
 from diagrams.observer.nao_sensing import OBSERVER_PERIOD, ObserverPipeline, add_observer_pipeline, nao_observer_parameters
 from diagrams.locomotion.nao_walk import ContactZmp, NaoWalkHandles, add_walking_loggers, walking_floors, walking_metrics

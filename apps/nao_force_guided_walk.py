@@ -95,7 +95,8 @@ from systems.observer.arm_compliance import (NAO_ARM_CHAINS, ArmExternalForceEst
 from systems.simulation.disturbances import Push, PushSource  # noqa: E402
 from systems.observer.force_guided_walking import GUIDED_WALKING, ForceGuidedWalkingController, TriggerParameters  # noqa: E402
 from systems.observer.force_observer import STANDING, WALKING  # noqa: E402
-from systems.locomotion.walking_pattern import WalkingParameters, smoothstep5  # noqa: E402
+from systems.common.smoothing import smoothstep5  # noqa: E402
+from systems.locomotion.walking_pattern import WalkingParameters  # noqa: E402
 
 #: Floors of issue 7 (force-guided walking).
 MAX_START_LATENCY = 0.5  # s

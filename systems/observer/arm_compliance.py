@@ -31,7 +31,7 @@ TO the hand (the push), F = -F^ext.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,7 +39,7 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Frame, JacobianWrtVariable
 from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem
 
-from systems.common.checks import eval_finite_input, positive_number
+from systems.common.checks import eval_finite_input, per_joint, positive_number
 from systems.common.topology import floating_base_topology
 
 #: Nao's number of FSRs, K_t of eq. (28).
@@ -119,25 +119,6 @@ def _resolve(plant: MultibodyPlant, chains: Sequence[ArmChain], who: str):
     return topology, resolved, all_k
 
 
-def _per_joint(value, names: Sequence[str], what: str, who: str, *, positive: bool) -> np.ndarray:
-    """A scalar, a sequence in chain-joint order or a {joint name: value} mapping -> array."""
-    if isinstance(value, Mapping):
-        missing = [n for n in names if n not in value]
-        if missing:
-            raise ValueError(f"{who}: {what} has no value for {missing}")
-        arr = np.array([float(value[n]) for n in names])
-    else:
-        arr = np.asarray(value, dtype=float)
-        arr = np.full(len(names), float(arr)) if arr.ndim == 0 else arr.reshape(-1)
-    if arr.shape != (len(names),) or not np.all(np.isfinite(arr)):
-        raise ValueError(f"{who}: {what} must be a finite scalar or {len(names)} finite values, got {value!r}")
-    if positive and np.any(arr <= 0):
-        raise ValueError(f"{who}: {what} must be positive, got {arr.tolist()}")
-    if not positive and np.any(arr < 0):
-        raise ValueError(f"{who}: {what} must be non-negative, got {arr.tolist()}")
-    return arr
-
-
 def _joint_names(resolved) -> list[str]:
     return [n for r in resolved for n in r.chain.joint_names]
 
@@ -176,7 +157,7 @@ class JointTorqueFromPositionError(LeafSystem):
         topology, resolved, self._k = _resolve(plant, chains, who)
         self._q_index = np.concatenate([r.q_index for r in resolved])
         self.joint_names = tuple(_joint_names(resolved))
-        self._km = _per_joint(motor_constants, self.joint_names, "motor_constants", who, positive=True)
+        self._km = per_joint(motor_constants, self.joint_names, "motor_constants", who=who, sign="positive")
         self._desired = self.DeclareVectorInputPort("desired_position", len(topology.joints))
         self._state = self.DeclareVectorInputPort("state", plant.num_positions() + plant.num_velocities())
         self.DeclareVectorOutputPort("motor_torque", len(self._k), self._CalcTorque)
@@ -256,7 +237,7 @@ class ArmExternalForceEstimator(LeafSystem):
         self._nq, self._nv = plant.num_positions(), plant.num_velocities()
         names = _joint_names(self._chains)
         self._m = len(names)
-        self._kd = _per_joint(damping, names, "damping", who, positive=False)
+        self._kd = per_joint(damping, names, "damping", who=who, sign="non-negative")
         # The model's viscous joint damping (SDFormat <damping>), part of tau_hat as well.
         self._joint_damping = np.concatenate(
             [[plant.GetJointByName(n).default_damping_vector()[0] for n in r.chain.joint_names] for r in self._chains])
@@ -545,8 +526,8 @@ class HandComplianceController(LeafSystem):
         self._max_dx = positive_number(max_displacement, f"{who}: max_displacement")
         names = _joint_names(self._chains)
         self._m = len(names)
-        self._km = None if motor_constants is None else _per_joint(motor_constants, names, "motor_constants", who,
-                                                                     positive=True)
+        self._km = None if motor_constants is None else per_joint(motor_constants, names, "motor_constants", who=who,
+                                                                    sign="positive")
         self._plant = plant
         self._base = topology.base_body.body_frame()
         self._nq = plant.num_positions()

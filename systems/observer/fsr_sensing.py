@@ -33,7 +33,7 @@ from pydrake.multibody.tree import Frame
 from pydrake.systems.framework import BasicVector, Context, LeafSystem
 
 from models import FSR_ORDER, HumanoidHandles
-from systems.common.checks import eval_finite_input
+from systems.common.checks import check_plant, eval_finite_input
 from systems.simulation.noise import SampledNoise, as_std_vector, check_period, check_seed
 
 #: Nao's FSR range (paper Sec. 4.1), N.
@@ -52,14 +52,6 @@ MIN_CONTACT_FORCE = 0.5
 #: ``models.FSR_ORDER`` (front_left, front_right, rear_left, rear_right).
 FSR_SIDES = ("left", "right")
 FSR_NAMES = tuple(f"{side}_{name}" for side in FSR_SIDES for name in FSR_ORDER)
-
-
-def _check_plant(plant, who: str) -> MultibodyPlant:
-    if not isinstance(plant, MultibodyPlant):
-        raise ValueError(f"{who}: plant must be a MultibodyPlant, got {type(plant).__name__}")
-    if not plant.is_finalized():
-        raise ValueError(f"{who}: the MultibodyPlant must be finalized")
-    return plant
 
 
 def _check_handles(handles, who: str) -> HumanoidHandles:
@@ -115,7 +107,7 @@ class FsrArray(LeafSystem):
                  saturation: float = FSR_SATURATION, period: float = FSR_NOISE_PERIOD, seed: int = 0):
         super().__init__()
         who = type(self).__name__
-        _check_plant(plant, who)
+        check_plant(plant, who)
         _check_handles(handles, who)
         ids = []
         for side in FSR_SIDES:
@@ -184,7 +176,7 @@ class _KinematicsSystem(LeafSystem):
 
     def __init__(self, plant: MultibodyPlant, who: str):
         super().__init__()
-        _check_plant(plant, who)
+        check_plant(plant, who)
         self._plant = plant
         self._who = who
         self._plant_context = plant.CreateDefaultContext()

@@ -44,7 +44,8 @@ from systems.residuals.geometry_intersection import (
     outward_normals,
     signed_distances,
 )
-from systems.common.checks import eval_finite_input, positive_number
+from systems.common.checks import eval_finite_input, positive_number, resolve_body
+from systems.common.spatial import cross, skew
 from systems.common.topology import floating_base_topology
 
 DEFAULT_PERIOD = 1e-3  # s
@@ -64,18 +65,7 @@ __all__ = [
 # ---------------------------------------------------------------------------------------
 
 
-def _skew(p: np.ndarray) -> np.ndarray:
-    x, y, z = p
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    ax, ay, az = a.tolist()
-    bx, by, bz = b.tolist()
-    return np.array((ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx))
-
-
-class _Kinematics:
+class _SensedConfiguration:
     """A private plant context at the sensed positions: body poses, translational Jacobians,
     the base elimination A = M_bb^-1 M_bj (computed once per q), F0's pose."""
 
@@ -123,27 +113,6 @@ class _Kinematics:
 
     def base_pose(self) -> np.ndarray:
         return self.topology.base_frame.CalcPoseInWorld(self.context).GetAsMatrix34()
-
-
-def _resolve_body(plant: MultibodyPlant, body, who: str) -> RigidBody:
-    if isinstance(body, RigidBody):
-        if int(body.index()) >= plant.num_bodies() or plant.get_body(body.index()).name() != body.name():
-            raise ValueError(f"{who}: body '{body.name()}' does not belong to this plant")
-        resolved = plant.get_body(body.index())
-    elif isinstance(body, str):
-        if not plant.HasBodyNamed(body):
-            raise ValueError(f"{who}: unknown body '{body}'")
-        resolved = plant.GetBodyByName(body)
-    elif isinstance(body, (int, np.integer, BodyIndex)):
-        index = int(body)
-        if not 0 <= index < plant.num_bodies():
-            raise ValueError(f"{who}: body index {index} out of range [0, {plant.num_bodies()})")
-        resolved = plant.get_body(BodyIndex(index))
-    else:
-        raise ValueError(f"{who}: a body must be a RigidBody, a name or an index, got {type(body).__name__}")
-    if resolved.index() == plant.world_body().index():
-        raise ValueError(f"{who}: the world body cannot carry a contact of the robot")
-    return resolved
 
 
 def _weights(value, size: int, what: str) -> np.ndarray:
@@ -225,7 +194,7 @@ class ContactForceEstimator(LeafSystem):
         if mode not in self.MODES:
             raise ValueError(f"{who}: unknown mode {mode!r}; choose one of {self.MODES}")
         self._mode = mode
-        self._kin = _Kinematics(plant, who)
+        self._kin = _SensedConfiguration(plant, who)
         nq, nv, n = self._kin.nq, self._kin.nv, self._kin.n
         self._damping = float(damping)
         if not math.isfinite(self._damping) or self._damping < 0.0:
@@ -240,7 +209,7 @@ class ContactForceEstimator(LeafSystem):
                 p = np.asarray(p, dtype=float).reshape(-1)
                 if p.shape != (3,) or not np.all(np.isfinite(p)):
                     raise ValueError(f"{who}: contact_points[{i}] point must be 3 finite numbers")
-                points.append((_resolve_body(plant, body, who), p))
+                points.append((resolve_body(plant, body, who), p))
             if not points:
                 raise ValueError(f"{who}: contact_points is empty")
             if num_contacts is not None and num_contacts != len(points):
@@ -295,7 +264,7 @@ class ContactForceEstimator(LeafSystem):
         for i, row in enumerate(raw):
             if row[0] != round(row[0]):
                 raise ValueError(f"{self._who}: input 'contact_points' entry {i}: body index {row[0]} is not an integer")
-            out.append((_resolve_body(plant, int(round(row[0])), f"{self._who}: input 'contact_points' entry {i}"), row[1:].copy()))
+            out.append((resolve_body(plant, int(round(row[0])), f"{self._who}: input 'contact_points' entry {i}"), row[1:].copy()))
         return out
 
     def system_matrix(self, q: np.ndarray, points: Sequence[tuple[RigidBody, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
@@ -312,7 +281,7 @@ class ContactForceEstimator(LeafSystem):
                 X = kin.body_pose(body)
                 p_W = X[:, :3] @ p_B + X[:, 3]
                 J = kin.jacobian(body, p_B)
-                A[:3, 3 * c : 3 * c + 3] = _skew(p_W)
+                A[:3, 3 * c : 3 * c + 3] = skew(p_W)
                 A[3:6, 3 * c : 3 * c + 3] = np.eye(3)
                 A[6:, 3 * c : 3 * c + 3] = (J[:, 6:] - J[:, :6] @ E).T
             return A, np.concatenate((self._w_ext, self._w_int))
@@ -324,7 +293,7 @@ class ContactForceEstimator(LeafSystem):
             X = kin.body_pose(body)
             p_W = X[:, :3] @ p_B + X[:, 3]
             J = kin.jacobian(body, p_B)
-            A[:3, 3 * c : 3 * c + 3] = R.T @ _skew(p_W - p_F0)
+            A[:3, 3 * c : 3 * c + 3] = R.T @ skew(p_W - p_F0)
             A[3:6, 3 * c : 3 * c + 3] = R.T
             A[6:, 3 * c : 3 * c + 3] = J[:, 6:].T
         return A, self._w_cls
@@ -409,7 +378,7 @@ def predicted_residual_covariances(
     """
     from systems.dynamics.floating_base import FloatingBaseDynamics
 
-    kin = _Kinematics(plant, "predicted_residual_covariances")
+    kin = _SensedConfiguration(plant, "predicted_residual_covariances")
     if q is None:
         q = plant.GetPositions(kin.context)
     q = np.asarray(q, dtype=float)
@@ -512,7 +481,7 @@ class ContactDetector(LeafSystem):
     ):
         super().__init__()
         who = self._who = "ContactDetector"
-        kin = _Kinematics(plant, who)
+        kin = _SensedConfiguration(plant, who)
         n = kin.n
         if not (use_external or use_internal):
             raise ValueError(f"{who}: at least one of use_external, use_internal must be True")
@@ -729,16 +698,16 @@ class ContactLocalizer(LeafSystem):
     ):
         super().__init__()
         who = self._who = "ContactLocalizer"
-        self._kin = kin = _Kinematics(plant, who)
+        self._kin = kin = _SensedConfiguration(plant, who)
         inspector = scene_graph.model_inspector() if isinstance(scene_graph, SceneGraph) else scene_graph
         if not isinstance(inspector, SceneGraphInspector):
             raise ValueError(f"{who}: scene_graph must be a SceneGraph or SceneGraphInspector")
-        excluded = {int(_resolve_body(plant, b, who).index()) for b in exclude_bodies}
+        excluded = {int(resolve_body(plant, b, who).index()) for b in exclude_bodies}
         if bodies is None:
             candidates = [plant.get_body(BodyIndex(i)) for i in range(1, plant.num_bodies())]
             candidates = [b for b in candidates if plant.GetCollisionGeometriesForBody(b)]
         else:
-            candidates = [_resolve_body(plant, b, who) for b in bodies]
+            candidates = [resolve_body(plant, b, who) for b in bodies]
         candidates = [b for b in candidates if int(b.index()) not in excluded]
         if not candidates:
             raise ValueError(f"{who}: no candidate link left")
@@ -793,7 +762,7 @@ class ContactLocalizer(LeafSystem):
             return LocalizationResult(FORCE_TOO_SMALL, force_W=f.copy())
         fn = math.sqrt(f2)
         d = f / fn
-        p0 = _cross(f, m) / f2  # eq. (22)
+        p0 = cross(f, m) / f2  # eq. (22)
         kin, geo = self._kin, self._geometry
         kin.set_positions(np.asarray(q, dtype=float))
         X_WB = np.array([kin.body_pose(b) for b in self._bodies])

@@ -88,7 +88,8 @@ from pydrake.systems.primitives import LogVectorOutput, MatrixGain  # noqa: E402
 from apps.common import replay_meshcat  # noqa: E402
 from diagrams.station.humanoid_station import add_humanoid_station  # noqa: E402
 from diagrams.observer.nao_force_observer import add_observer_pipeline, nao_observer_parameters  # noqa: E402
-from diagrams.locomotion.nao_walk import ContactZmp, detect_steps  # noqa: E402
+from diagrams.locomotion.nao_walk import detect_steps  # noqa: E402
+from systems.locomotion.contact_zmp import ContactZmp  # noqa: E402
 from diagrams.station.standing import default_gains  # noqa: E402
 from systems.observer.arm_compliance import (NAO_ARM_CHAINS, ArmExternalForceEstimator, CompliantArmBlender,  # noqa: E402
                                     JointTorqueFromPositionError, ObserverHandForce)

@@ -54,6 +54,7 @@ __all__ = [
     "ContactDetector",
     "ContactForceEstimator",
     "ContactLocalizer",
+    "GatedEstimate",
     "LocalizationResult",
     "STATUS_REASONS",
     "predicted_residual_covariances",
@@ -856,3 +857,20 @@ class ContactLocalizer(LeafSystem):
         return np.concatenate((
             [float(result.status), float(result.body_index)], result.point_W, result.force_W,
             [result.score, result.runner_up_score]))
+
+
+class GatedEstimate(LeafSystem):
+    """The localizer's force and point, zeroed while the result is not valid (so the
+    estimate's arrow hides). Inputs ``force``, ``point``, ``valid``; outputs ``force_world``,
+    ``point_world``."""
+
+    def __init__(self):
+        super().__init__()
+        self._f = self.DeclareVectorInputPort("force", 3)
+        self._p = self.DeclareVectorInputPort("point", 3)
+        self._v = self.DeclareVectorInputPort("valid", 1)
+        self.DeclareVectorOutputPort("force_world", 3, self._CalcForce)
+        self.DeclareVectorOutputPort("point_world", 3, lambda c, o: o.SetFromVector(self._p.Eval(c)))
+
+    def _CalcForce(self, context: Context, output: BasicVector) -> None:
+        output.SetFromVector(self._f.Eval(context) if self._v.Eval(context)[0] > 0.5 else np.zeros(3))

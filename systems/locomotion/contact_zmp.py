@@ -9,6 +9,7 @@ from pydrake.multibody.plant import ContactResults, MultibodyPlant
 from pydrake.systems.framework import BasicVector, Context, LeafSystem
 
 from models import HumanoidHandles
+from systems.common.contact_results import robot_point_contacts
 
 #: Below this total normal force (N) the ZMP is undefined and reported as NaN.
 MIN_NORMAL_FORCE = 0.5
@@ -18,8 +19,9 @@ class ContactZmp(LeafSystem):
     """ZMP (centre of pressure on the flat ground) from the plant's point-contact results.
 
     On flat ground at z = 0 the ZMP is the normal-force-weighted mean of the contact points:
-    p_zmp = sum_i f_z,i p_i / sum_i f_z,i (m), f_z,i the ground's normal force on the
-    robot at contact point p_i (world).
+    p_zmp = sum_i f_n,i p_i / sum_i f_n,i (m), f_n,i the ground's normal force on the
+    robot at contact point p_i (world; ``systems.common.contact_results``' convention, on
+    flat ground the world-z component).
 
     Inputs:
         contact_results: the plant's ContactResults (point contact).
@@ -42,18 +44,9 @@ class ContactZmp(LeafSystem):
     def contacts(self, context: Context) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(points (m, 3), normal forces on the robot (m,), foot index (m,), -1 if not a
         foot sphere) of the current contact results."""
-        results = self._contact.Eval(context)
-        m = results.num_point_pair_contacts()
-        points, forces, foot = np.zeros((m, 3)), np.zeros(m), np.full(m, -1)
-        for i in range(m):
-            info = results.point_pair_contact_info(i)
-            pair = info.point_pair()
-            sign = 1.0 if pair.id_B in self._robot else -1.0  # force on B, world
-            robot_geometry = pair.id_B if sign > 0 else pair.id_A
-            points[i] = info.contact_point()
-            forces[i] = sign * info.contact_force()[2]
-            foot[i] = self._foot_of.get(robot_geometry, -1)
-        return points, forces, foot
+        contacts = robot_point_contacts(self._contact.Eval(context), self._robot, "ContactZmp")
+        foot = np.array([self._foot_of.get(g, -1) for g in contacts.geometries], dtype=int)
+        return contacts.points, contacts.normal_forces, foot
 
     def _CalcZmp(self, context: Context, output: BasicVector) -> None:
         points, forces, _ = self.contacts(context)

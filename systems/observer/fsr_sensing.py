@@ -34,6 +34,7 @@ from pydrake.systems.framework import BasicVector, Context, LeafSystem
 
 from models import FSR_ORDER, HumanoidHandles
 from systems.common.checks import check_plant, eval_finite_input
+from systems.common.contact_results import robot_point_contacts
 from systems.simulation.noise import SampledNoise, as_std_vector, check_period, check_seed
 
 #: Nao's FSR range (paper Sec. 4.1), N.
@@ -141,25 +142,9 @@ class FsrArray(LeafSystem):
 
     def normal_forces(self, results: ContactResults) -> np.ndarray:
         """(8) noise-free normal force of each FSR sphere in ``results``, N (>= 0 for
-        compressive contact). For a point pair with the sphere as body A or B, the force on
-        the sphere along the normal pointing out of the other geometry is
-        -f_Bc_W . n_BA_W in both cases (f_Bc_W: force on B; n_BA_W: from B into A)."""
-        out = np.zeros(len(self._index))
-        index = self._index
-        for c in range(results.num_point_pair_contacts()):
-            info = results.point_pair_contact_info(c)
-            pair = info.point_pair()
-            i = index.get(pair.id_A)
-            if i is None:
-                i = index.get(pair.id_B)
-            if i is not None:
-                out[i] -= float(np.dot(info.contact_force(), pair.nhat_BA_W))
-        for c in range(results.num_hydroelastic_contacts()):
-            surface = results.hydroelastic_contact_info(c).contact_surface()
-            if surface.id_M() in index or surface.id_N() in index:
-                raise ValueError("FsrArray: hydroelastic contact on an FSR sphere is not supported; "
-                                 "use point contact for the foot spheres")
-        return out
+        compressive contact): the force on the sphere along the contact normal pointing
+        out of the other geometry (``systems.common.contact_results``' convention)."""
+        return robot_point_contacts(results, self._index, "FsrArray").summed(self._index, len(self._index))
 
     def _CalcTrueForces(self, context: Context, output: BasicVector) -> None:
         output.SetFromVector(self.normal_forces(self._contact.Eval(context)))

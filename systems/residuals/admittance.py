@@ -160,11 +160,11 @@ class JointAdmittanceController(LeafSystem):
             state only (no direct feedthrough), so closing the loop through the PD, the
             plant and the residual makes no algebraic loop.
 
-    Discrete state: q_d (n) and an "initialised" flag (1). At initialisation
-    (``Simulator.Initialize``), or at the first periodic update if no initialisation
-    event ran, q_d is set to ``initial_position`` if given, else to the measured
-    position, so nothing jumps at start. Each periodic update (period T, first at t = 0)
-    then computes
+    Discrete state: q_d (n). The initialization event (``Simulator.Initialize``, or
+    ``ExecuteInitializationEvents`` on a context stepped by hand) sets q_d to
+    ``initial_position`` if given, else to the measured position, so nothing jumps at
+    start; a context never initialised starts from ``initial_position`` (zeros if None).
+    Each periodic update (period T, first at t = 0) then computes
 
         r' = soft_threshold(r, dead_band),  q̇_d = clip(K_a r', ±max_rate),
         q_d <- clip(base + q̇_d T, min(lower, q_d), max(upper, q_d)),
@@ -258,7 +258,6 @@ class JointAdmittanceController(LeafSystem):
         self._measured_port = self.DeclareVectorInputPort("measured_position", n)
         default_q_d = self._initial_position if self._initial_position is not None else np.zeros(n)
         self._q_d_index = self.DeclareDiscreteState(BasicVector(default_q_d))
-        self._flag_index = self.DeclareDiscreteState(BasicVector([0.0]))
         self.DeclareInitializationDiscreteUpdateEvent(self._Initialize)
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._Update)
         self._output_port = self.DeclareStateOutputPort("desired_position", self._q_d_index)
@@ -386,18 +385,13 @@ class JointAdmittanceController(LeafSystem):
 
     def _Initialize(self, context: Context, discrete_state: DiscreteValues) -> None:
         discrete_state.set_value(self._q_d_index, self._start_position(context))
-        discrete_state.set_value(self._flag_index, [1.0])
 
     def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
-        if context.get_discrete_state(self._flag_index).GetAtIndex(0) == 0.0:
-            previous = self._start_position(context)
-        else:
-            previous = context.get_discrete_state(self._q_d_index).get_value()
+        previous = context.get_discrete_state(self._q_d_index).get_value()
         residual = self._eval_input(self._residual_port, context)
         measured = self._eval_input(self._measured_port, context)
         discrete_state.set_value(self._q_d_index,
                                  self.CalcNextDesiredPosition(residual, measured, previous))
-        discrete_state.set_value(self._flag_index, [1.0])
 
 
 __all__ = [

@@ -202,8 +202,12 @@ class ArmExternalForceEstimator(LeafSystem):
         motor_torque: (m) tau_m of eq. (27), chain after chain, N m.
         state: the SENSED plant state [q; v].
 
-    State (discrete, updated every ``period``): [F (3 per chain); v of the last sample;
-    initialised flag].
+    State (discrete groups, updated every ``period``, first at t = 0): ``force`` F (3 per
+    chain), ``velocity`` v of the last sample, ``initialised`` (0 before the first update,
+    which takes the raw estimate with v_dot = 0; later ones low-pass filter it with v_dot
+    from the last sample's v). Not an initialization event: at ``Simulator.Initialize``
+    the discrete plant has not taken its first step, so the inputs differ from the first
+    update's.
 
     Outputs:
         hand_forces: (3 per chain) the filtered force applied TO each hand, world axes, N
@@ -250,12 +254,11 @@ class ArmExternalForceEstimator(LeafSystem):
         self._nf = 3 * len(self._chains)
         self._torque = self.DeclareVectorInputPort("motor_torque", self._m)
         self._state = self.DeclareVectorInputPort("state", self._nq + self._nv)
-        self._xd = self.DeclareDiscreteState(self._nf + self._nv + 1)
+        self._force_index = self.DeclareDiscreteState(self._nf)
+        self._velocity_index = self.DeclareDiscreteState(self._nv)
+        self._initialised_index = self.DeclareDiscreteState(1)
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._Update)
-        self.DeclareVectorOutputPort(
-            "hand_forces", self._nf,
-            lambda c, o: o.SetFromVector(c.get_discrete_state(self._xd).get_value()[: self._nf]),
-            {self.xd_ticket()})
+        self.DeclareStateOutputPort("hand_forces", self._force_index)
 
     @property
     def period(self) -> float:
@@ -289,17 +292,17 @@ class ArmExternalForceEstimator(LeafSystem):
     def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
         tau_m = eval_finite_input(self._who, self._torque, context)
         x = eval_finite_input(self._who, self._state, context)
-        s = context.get_discrete_state(self._xd).get_value()
-        nf, nv = self._nf, self._nv
         v = x[self._nq:]
-        first = s[-1] < 0.5
-        v_dot = None if first else (v - s[nf: nf + nv]) / self._period
-        raw = self.hand_forces(x, tau_m, v_dot)
-        out = np.empty_like(s)
-        out[:nf] = raw if first else s[:nf] + self._alpha * (raw - s[:nf])
-        out[nf: nf + nv] = v
-        out[-1] = 1.0
-        discrete_state.set_value(self._xd, out)
+        if context.get_discrete_state(self._initialised_index).GetAtIndex(0) == 0.0:  # the first sample
+            force = self.hand_forces(x, tau_m)
+        else:
+            v_last = context.get_discrete_state(self._velocity_index).get_value()
+            raw = self.hand_forces(x, tau_m, (v - v_last) / self._period)
+            force = context.get_discrete_state(self._force_index).get_value()
+            force = force + self._alpha * (raw - force)
+        discrete_state.set_value(self._force_index, force)
+        discrete_state.set_value(self._velocity_index, v)
+        discrete_state.set_value(self._initialised_index, [1.0])
 
 
 # ---------------------------------------------------------------------------------------

@@ -33,6 +33,7 @@ import numpy as np
 from pydrake.geometry import SceneGraph, SceneGraphInspector
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable, RigidBody
+from pydrake.common.containers import namedview
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem, ValueProducer
 from scipy.stats import chi2
@@ -114,6 +115,12 @@ class _SensedConfiguration:
 
     def base_pose(self) -> np.ndarray:
         return self.topology.base_frame.CalcPoseInWorld(self.context).GetAsMatrix34()
+
+
+#: ContactDetector's state: contact (1/0), detection time (s, -1: none), consecutive samples
+#: above the on-thresholds, time below the off-thresholds (s), the two test statistics.
+_DetectorState = namedview("_DetectorState", ("detected", "detection_time", "samples_above", "time_below",
+                                              "statistic_external", "statistic_internal"))
 
 
 def _weights(value, size: int, what: str) -> np.ndarray:
@@ -514,11 +521,13 @@ class ContactDetector(LeafSystem):
 
         self._wrench_port = self.DeclareVectorInputPort("external_wrench_world", 6)
         self._residual_port = self.DeclareVectorInputPort("residual", n)
-        self._state_index = self.DeclareDiscreteState(np.array([0.0, -1.0, 0.0, 0.0, 0.0, 0.0]))
+        self._state_index = self.DeclareDiscreteState(np.array([0.0, -1.0, 0.0, 0.0, 0.0, 0.0]))  # _DetectorState
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._Update)
-        self.DeclareVectorOutputPort("contact_detected", 1, lambda c, o: o.SetFromVector(self._s(c)[:1]), {self.xd_ticket()})
-        self.DeclareVectorOutputPort("detection_time", 1, lambda c, o: o.SetFromVector(self._s(c)[1:2]), {self.xd_ticket()})
-        self.DeclareVectorOutputPort("test_statistics", 2, lambda c, o: o.SetFromVector(self._s(c)[4:6]), {self.xd_ticket()})
+        xd = {self.xd_ticket()}
+        self.DeclareVectorOutputPort("contact_detected", 1, lambda c, o: o.SetFromVector([self._s(c).detected]), xd)
+        self.DeclareVectorOutputPort("detection_time", 1, lambda c, o: o.SetFromVector([self._s(c).detection_time]), xd)
+        self.DeclareVectorOutputPort("test_statistics", 2, lambda c, o: o.SetFromVector(
+            [self._s(c).statistic_external, self._s(c).statistic_internal]), xd)
 
     def _whitener(self, cov, size: int, name: str) -> np.ndarray:
         """W with W^T W = cov^-1 (inverse Cholesky factor), from a covariance or stds."""
@@ -545,13 +554,14 @@ class ContactDetector(LeafSystem):
         z_int = self._L_int @ np.asarray(residual)
         return float(z_ext @ z_ext), float(z_int @ z_int)
 
-    def _s(self, context: Context) -> np.ndarray:
-        return context.get_discrete_state(self._state_index).get_value()
+    def _s(self, context: Context) -> "_DetectorState":
+        return _DetectorState(context.get_discrete_state(self._state_index).get_value())
 
     def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
         w = eval_finite_input(self._who, self._wrench_port, context)
         r = eval_finite_input(self._who, self._residual_port, context)
-        detected, t_detect, above, below_time, _, _ = self._s(context)
+        old = self._s(context)
+        detected, t_detect, above, below_time = old.detected, old.detection_time, old.samples_above, old.time_below
         s = self.statistics(w, r)
         use = self._use
         is_above = any(u and si > th for u, si, th in zip(use, s, self._on))
@@ -572,6 +582,9 @@ class ContactDetector(LeafSystem):
 # ---------------------------------------------------------------------------------------
 # ContactLocalizer: Sec. VI, eq. (22), Fig. 9.
 # ---------------------------------------------------------------------------------------
+
+#: ContactLocalizer's averaging state: averaging (1/0), samples averaged, onset time (s).
+_Averaging = namedview("_Averaging", ("active", "count", "onset"))
 
 VALID, NO_CONTACT, FORCE_TOO_SMALL, NO_INTERSECTION, AMBIGUOUS = 0, 1, 2, 3, 4
 STATUS_REASONS = {
@@ -732,8 +745,9 @@ class ContactLocalizer(LeafSystem):
         self._wrench_port = self.DeclareVectorInputPort("external_wrench_world", 6)
         self._residual_port = self.DeclareVectorInputPort("residual", n)
         self._detected_port = self.DeclareVectorInputPort("contact_detected", 1) if use_detector else None
-        # Averaging state: [active, count, onset], mean wrench, mean residual, mean q.
-        self._avg_index = self.DeclareDiscreteState(3 + 6 + n + nq)
+        # Averaging state: _Averaging, then the means of the wrench (6), residual (n) and q (nq).
+        self._avg_index = self.DeclareDiscreteState(len(_Averaging.get_fields()))
+        self._means_index = self.DeclareDiscreteState(6 + n + nq)
         result0 = np.array([NO_CONTACT, -1, 0, 0, 0, 0, 0, 0, np.inf, np.inf], dtype=float)
         self._result_index = self.DeclareDiscreteState(result0)
         self._n, self._nq = n, nq
@@ -829,27 +843,28 @@ class ContactLocalizer(LeafSystem):
         detected = True
         if self._detected_port is not None:
             detected = float(eval_finite_input(who, self._detected_port, context)[0]) > 0.5
-        avg = np.array(context.get_discrete_state(self._avg_index).get_value())
+        avg = _Averaging(np.array(context.get_discrete_state(self._avg_index).get_value()))
         n = self._n
         t = context.get_time()
         if not detected:
-            avg[:3] = 0.0
-            discrete_state.set_value(self._avg_index, avg)
+            discrete_state.set_value(self._avg_index, np.zeros(len(_Averaging.get_fields())))
             discrete_state.set_value(self._result_index, self._pack(LocalizationResult(NO_CONTACT, force_W=np.array(w[3:]))))
             return
-        if avg[0] < 0.5:
-            avg[:3] = (1.0, 0.0, t)
-        if t - avg[2] >= self._settle_time - 1e-12:
-            avg[1] += 1.0
-            alpha = 1.0 / avg[1]
+        if avg.active < 0.5:
+            avg.active, avg.count, avg.onset = 1.0, 0.0, t
+        if t - avg.onset >= self._settle_time - 1e-12:
+            avg.count += 1.0
+            alpha = 1.0 / avg.count
             if self._tau is not None:
                 alpha = max(alpha, self._period / self._tau)
             sample = np.concatenate((w, r, q))
-            avg[3:] += alpha * (sample - avg[3:])
-            w, r = avg[3:9], avg[9 : 9 + n]
-            q = avg[9 + n :].copy()
+            means = np.array(context.get_discrete_state(self._means_index).get_value())
+            means += alpha * (sample - means)
+            discrete_state.set_value(self._means_index, means)
+            w, r = means[:6], means[6 : 6 + n]
+            q = means[6 + n :].copy()
             q[:4] /= np.linalg.norm(q[:4])  # the mean of nearby unit quaternions, renormalised
-        discrete_state.set_value(self._avg_index, avg)
+        discrete_state.set_value(self._avg_index, avg[:])
         discrete_state.set_value(self._result_index, self._pack(self.localize(q, w, r)))
 
     @staticmethod

@@ -18,7 +18,8 @@ import pytest
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.analysis import Simulator
 
-from diagrams.observer.nao_walk_pulled import CableSetup, CableVirtualForceTruth, build_nao_walk_pulled_diagram, observer_metrics
+from diagrams.observer.nao_walk_pulled import CableSetup, build_nao_walk_pulled_diagram, observer_metrics
+from systems.simulation.ground_truth import CableVirtualForceTruth
 from diagrams.locomotion.nao_walk import walking_metrics
 from models import add_humanoid, set_standing_state
 from systems.observer.fsr_sensing import CenterOfPressure, SupportFootCom

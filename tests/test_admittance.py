@@ -47,9 +47,12 @@ def chain():
 
 
 def _context(dut, residual, measured):
+    """A context with fixed inputs, initialised as Simulator.Initialize would (q_d = the
+    measured or the given initial position)."""
     ctx = dut.CreateDefaultContext()
     dut.get_residual_input_port().FixValue(ctx, np.asarray(residual, dtype=float))
     dut.get_measured_position_input_port().FixValue(ctx, np.asarray(measured, dtype=float))
+    dut.ExecuteInitializationEvents(ctx)
     return ctx
 
 
@@ -397,7 +400,8 @@ def test_nan_inputs_raise(chain):
     ctx = _context(dut, [0.0, np.nan, 0.0], Q0)
     with pytest.raises(ValueError, match=r"input 'residual' has NaN or inf at indices \[1\]"):
         _step(dut, ctx)
-    ctx = _context(dut, R, [np.inf, 0.0, 0.0])
+    ctx = _context(dut, R, Q0)  # initialised, then a bad measurement arrives
+    dut.get_measured_position_input_port().FixValue(ctx, np.array([np.inf, 0.0, 0.0]))
     with pytest.raises(ValueError, match=r"input 'measured_position' has NaN or inf at indices \[0\]"):
         _step(dut, ctx)
     # Also at initialisation (Simulator.Initialize) from a NaN measured position.

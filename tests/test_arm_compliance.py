@@ -18,7 +18,8 @@ from diagrams.observer.nao_compliant_arms import (
     hand_pushes,
 )
 from diagrams.observer.calibration import identified_motor_constants, motor_constant_identification, settle_standing_state
-from diagrams.observer.nao_force_observer import VirtualForceTruth, full_posture, wide_stance
+from diagrams.observer.nao_force_observer import full_posture, wide_stance
+from systems.simulation.ground_truth import VirtualForceTruth
 from diagrams.station.standing import default_gains
 from systems.observer.arm_compliance import (
     NAO_ARM_CHAINS,
@@ -133,7 +134,7 @@ def test_estimator_filter_and_first_sample(station):
 
 
 def test_observer_hand_force_inverts_eq_11(station):
-    """VirtualForceTruth (eq. 11, diagrams.observer.nao_force_observer) of a force at the hands' mean
+    """VirtualForceTruth (eq. 11, systems.simulation.ground_truth) of a force at the hands' mean
     position, mapped back: the original force, shared by the two hands."""
     plant, humanoid = station.plant, station.humanoid
     dut = ObserverHandForce(plant, humanoid.sole_frames["right"], model_instances=[humanoid.model_instance])

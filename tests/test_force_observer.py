@@ -181,3 +181,27 @@ def test_drake_system_matches_the_core_on_real_data(dataset):
     system.GetInputPort("zmp").FixValue(context, [np.nan, 0.0])
     with pytest.raises(ValueError, match="input 'zmp' has NaN"):
         system.EvalUniquePeriodicDiscreteUpdate(context)
+
+
+def test_core_state_round_trips():
+    """LipForceObserver.state()/set_state() carry the filters exactly (what the Drake wrapper
+    keeps in its context)."""
+    from systems.observer.force_observer import FILTER_STATE_SIZE, LipForceObserverSystem
+
+    observer = LipForceObserver(STANDING)
+    with pytest.raises(RuntimeError, match="no filter state"):
+        observer.state()
+    observer.reset([0.01, 0.0, 0.26], [0.0, 0.0, 0.0])
+    for _ in range(3):
+        observer.update([0.01, 0.0, 0.26], [0.1, 0.0, 0.0], [0.0, 0.0], -STANDING.mass * STANDING.gravity)
+    saved = observer.state()
+    assert saved.shape == (3, FILTER_STATE_SIZE)
+    copy = LipForceObserver(STANDING)
+    copy.set_state(saved)
+    args = ([0.01, 0.0, 0.26], [0.2, 0.0, 0.0], [0.01, 0.0], -STANDING.mass * STANDING.gravity)
+    assert copy.update(*args)[0].tolist() == observer.update(*args)[0].tolist()
+    with pytest.raises(ValueError, match="finite"):
+        copy.set_state(np.full((3, FILTER_STATE_SIZE), np.nan))
+    system = LipForceObserverSystem()
+    context = system.CreateDefaultContext()
+    assert system.GetOutputPort("virtual_force").Eval(context).tolist() == [0.0, 0.0, 0.0]  # before the first update

@@ -13,10 +13,11 @@ from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
 from diagrams.station.humanoid_station import add_humanoid_station
 from diagrams.observer.calibration import settle_standing_state
-from diagrams.observer.nao_force_observer import VirtualForceTruth, build_nao_force_observer_diagram, wide_stance
+from diagrams.observer.nao_force_observer import build_nao_force_observer_diagram, wide_stance
 from diagrams.observer.nao_sensing import OBSERVER_PERIOD
 from models import add_ground, add_humanoid
 from systems.simulation.disturbances import Push
+from systems.simulation.ground_truth import VirtualForceTruth
 from systems.observer.force_observer import STANDING, LipForceObserver, transition_matrices
 from systems.observer.fsr_sensing import (
     FSR_NAMES,

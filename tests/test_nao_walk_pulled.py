@@ -20,12 +20,12 @@ from pydrake.systems.analysis import Simulator
 
 from diagrams.observer.nao_walk_pulled import (
     CableSetup,
-    CableVirtualForceTruth,
     NaoWalkPulledScenario,
     build_nao_walk_pulled_diagram,
     observer_metrics,
 )
 from diagrams.scenarios import ScenarioError, load_scenario
+from systems.simulation.ground_truth import CableVirtualForceTruth
 from diagrams.locomotion.nao_walk import walking_metrics
 from models import add_humanoid, set_standing_state
 from systems.observer.fsr_sensing import CenterOfPressure, SupportFootCom

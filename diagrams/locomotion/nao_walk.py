@@ -17,78 +17,19 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.common.value import AbstractValue
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams
-from pydrake.multibody.plant import ContactResults, MultibodyPlant, MultibodyPlantConfig
+from pydrake.multibody.plant import MultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.analysis import SimulatorConfig
-from pydrake.systems.framework import BasicVector, Context, Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
 from diagrams.scenarios import check_common_fields
 from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station
 from diagrams.station.plant_config import default_plant_config
 from diagrams.station.standing import default_gains
-from models import HumanoidHandles
 from systems.simulation.disturbances import Push, PushSource
+from systems.locomotion.contact_zmp import MIN_NORMAL_FORCE, ContactZmp
 from systems.locomotion.walking_pattern import NaoWalkingController, WalkingParameters
-
-#: Below this total normal force (N) the ZMP is undefined and reported as NaN.
-MIN_NORMAL_FORCE = 0.5
-
-
-class ContactZmp(LeafSystem):
-    """ZMP (centre of pressure on the flat ground) from the plant's point-contact results.
-
-    On flat ground at z = 0 the ZMP is the normal-force-weighted mean of the contact points:
-    p_zmp = sum_i f_z,i p_i / sum_i f_z,i (m), f_z,i the ground's normal force on the
-    robot at contact point p_i (world).
-
-    Inputs:
-        contact_results: the plant's ContactResults (point contact).
-
-    Outputs:
-        zmp: (2) world x, y, m; NaN when the total normal force < MIN_NORMAL_FORCE.
-        foot_normal_forces: (2) ground normal force on the left / right foot spheres, N.
-        normal_force: (1) total ground normal force on the robot, N.
-    """
-
-    def __init__(self, plant: MultibodyPlant, humanoid: HumanoidHandles):
-        super().__init__()
-        self._robot = {g for ids in humanoid.collision_geometries.values() for g in ids}
-        self._foot_of = {g: k for k, side in enumerate(("left", "right")) for g in humanoid.fsr_geometries[side]}
-        self._contact = self.DeclareAbstractInputPort("contact_results", AbstractValue.Make(ContactResults()))
-        self.DeclareVectorOutputPort("zmp", 2, self._CalcZmp)
-        self.DeclareVectorOutputPort("foot_normal_forces", 2, self._CalcFootForces)
-        self.DeclareVectorOutputPort("normal_force", 1, self._CalcNormalForce)
-
-    def contacts(self, context: Context) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(points (m, 3), normal forces on the robot (m,), foot index (m,), -1 if not a
-        foot sphere) of the current contact results."""
-        results = self._contact.Eval(context)
-        m = results.num_point_pair_contacts()
-        points, forces, foot = np.zeros((m, 3)), np.zeros(m), np.full(m, -1)
-        for i in range(m):
-            info = results.point_pair_contact_info(i)
-            pair = info.point_pair()
-            sign = 1.0 if pair.id_B in self._robot else -1.0  # force on B, world
-            robot_geometry = pair.id_B if sign > 0 else pair.id_A
-            points[i] = info.contact_point()
-            forces[i] = sign * info.contact_force()[2]
-            foot[i] = self._foot_of.get(robot_geometry, -1)
-        return points, forces, foot
-
-    def _CalcZmp(self, context: Context, output: BasicVector) -> None:
-        points, forces, _ = self.contacts(context)
-        total = forces.sum()
-        output.SetFromVector(forces @ points[:, :2] / total if total >= MIN_NORMAL_FORCE else np.full(2, np.nan))
-
-    def _CalcFootForces(self, context: Context, output: BasicVector) -> None:
-        _, forces, foot = self.contacts(context)
-        output.SetFromVector(np.array([forces[foot == 0].sum(), forces[foot == 1].sum()]))
-
-    def _CalcNormalForce(self, context: Context, output: BasicVector) -> None:
-        output.SetFromVector([self.contacts(context)[1].sum()])
-
 
 @dataclass
 class NaoWalkHandles:
@@ -446,7 +387,6 @@ def nao_walk_metrics(scenario: NaoWalkScenario, handles: NaoWalkHandles, root_co
     return m
 
 
-__all__ = ["ContactZmp", "walking_floors", "MIN_NORMAL_FORCE", "detect_steps", "NaoWalkHandles", "NaoWalkScenario",
-           "add_walking_loggers", "build_nao_walk_diagram",
-           "nao_walk_metrics",
+__all__ = ["walking_floors", "detect_steps", "NaoWalkHandles", "NaoWalkScenario", "add_walking_loggers",
+           "build_nao_walk_diagram", "nao_walk_metrics",
            "signed_distance_to_polygon", "walking_metrics"]

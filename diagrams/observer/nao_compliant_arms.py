@@ -21,12 +21,12 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Rgba
-from pydrake.systems.framework import BasicVector, Context, Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
 from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station
 from diagrams.station.standing import default_gains
-from diagrams.observer.nao_force_observer import VirtualForceTruth, full_posture, wide_stance
+from diagrams.observer.nao_force_observer import full_posture, wide_stance
 from diagrams.observer.nao_sensing import OBSERVER_PERIOD, add_observer_pipeline
 from systems.observer.arm_compliance import (
     DEFAULT_PERIOD,
@@ -40,46 +40,12 @@ from systems.observer.arm_compliance import (
     ObserverHandForce,
 )
 from systems.simulation.disturbances import Push, PushSource
+from systems.simulation.ground_truth import VirtualForceTruth
+from systems.locomotion.posture_schedule import PostureSchedule
 from systems.observer.force_observer import LipForceObserverSystem
 from systems.observer.fsr_sensing import CenterOfPressure, FsrArray, ImuComAcceleration, SupportFootCom
 from systems.simulation.pd_gravity import joint_vector_from_names
 from systems.simulation.visualization import ForceArrows
-
-
-class PostureSchedule(LeafSystem):
-    """Joint posture through knots (t_i, q_i): constant outside, a quintic smoothstep (C2)
-    between consecutive knots.
-
-    Outputs:
-        position: (n) joint positions, v[6:] order, rad.
-
-    Args:
-        times: increasing knot times, s (>= 1).
-        positions: (len(times), n) the postures at the knots, rad.
-    """
-
-    def __init__(self, times: Sequence[float], positions: np.ndarray):
-        super().__init__()
-        self._t = np.asarray(times, dtype=float).reshape(-1)
-        self._q = np.atleast_2d(np.asarray(positions, dtype=float))
-        if self._t.size < 1 or self._q.shape[0] != self._t.size or not np.all(np.isfinite(self._q)):
-            raise ValueError("PostureSchedule: need one finite posture per knot time")
-        if np.any(np.diff(self._t) <= 0) or not np.all(np.isfinite(self._t)):
-            raise ValueError("PostureSchedule: knot times must be finite and increasing")
-        self.DeclareVectorOutputPort("position", self._q.shape[1], self._CalcPosition, {self.time_ticket()})
-
-    def value(self, t: float) -> np.ndarray:
-        k = int(np.searchsorted(self._t, t, side="right"))
-        if k == 0:
-            return self._q[0].copy()
-        if k == self._t.size:
-            return self._q[-1].copy()
-        s = (t - self._t[k - 1]) / (self._t[k] - self._t[k - 1])
-        s = s * s * s * (10.0 + s * (-15.0 + 6.0 * s))
-        return self._q[k - 1] + s * (self._q[k] - self._q[k - 1])
-
-    def _CalcPosition(self, context: Context, output: BasicVector) -> None:
-        output.SetFromVector(self.value(context.get_time()))
 
 
 def lean_posture(delta: float, posture: dict[str, float] | None = None) -> dict[str, float]:
@@ -319,7 +285,6 @@ def hand_pushes(profile, direction=(-1.0, 0.0, 0.0)) -> list[Push]:
 
 __all__ = [
     "NaoCompliantArmsHandles",
-    "PostureSchedule",
     "build_nao_compliant_arms_diagram",
     "hand_pushes",
     "lean_posture",

@@ -24,12 +24,13 @@ from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput, MatrixGain
 
-from diagrams.locomotion.nao_walk import ContactZmp, detect_steps
+from diagrams.locomotion.nao_walk import detect_steps
 from diagrams.observer.nao_sensing import add_observer_pipeline, nao_observer_parameters
 from diagrams.scenarios import check_common_fields
 from diagrams.station.humanoid_station import add_humanoid_station
 from diagrams.station.plant_config import default_plant_config
 from diagrams.station.standing import default_gains
+from systems.locomotion.contact_zmp import ContactZmp
 from systems.locomotion.walking_pattern import WalkingParameters
 from systems.observer.arm_compliance import (NAO_ARM_CHAINS, ArmExternalForceEstimator, CompliantArmBlender,
                                              JointTorqueFromPositionError, ObserverHandForce)

@@ -30,88 +30,19 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Rgba
-from pydrake.multibody.plant import MultibodyPlant
-from pydrake.systems.framework import BasicVector, Context, Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
 from diagrams.observer.nao_sensing import OBSERVER_PERIOD, add_observer_pipeline
 from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station
 from models import HumanoidHandles
 from systems.simulation.disturbances import Push, PushSource
+from systems.simulation.ground_truth import VirtualForceTruth
 from systems.observer.force_observer import LipForceObserverSystem, LipObserverParameters
 from systems.observer.fsr_sensing import CenterOfPressure, FsrArray, ImuComAcceleration, SupportFootCom
-from systems.common.checks import eval_finite_input
 from systems.simulation.pd_gravity import joint_vector_from_names
 from systems.simulation.visualization import ForceArrows
 
-class VirtualForceTruth(LeafSystem):
-    """Ground-truth virtual force (paper eq. 11) of the applied external wrench.
-
-    An external force F applied at a point P of the robot moves the ZMP as the same force
-    plus the moment tau = (p_P - p_Cm) x F about the CoM would (eqs. 8-10). Seen from the
-    ZMP, that is the virtual force F^ = [F_x + tau_y / z_c, F_y - tau_x / z_c, F_z] applied
-    at the CoM of the LIP (eq. 11), z_c being the CoM height above the ground plane in
-    which the ZMP lies (the support-foot frame's z). A horizontal force at height h thus
-    counts as F_x h / z_c: above the CoM it moves the ZMP more than at the CoM; a vertical
-    load at a horizontal offset d from the CoM adds a horizontal virtual force -d F_z / z_c.
-    At static equilibrium this is exact for the multibody robot (moments about the CoP);
-    during motion the LIP neglects the rate of angular momentum.
-
-    Inputs:
-        state: the TRUE plant state [q; v].
-        total_wrench_world: (6) [moment about the world origin, N m; force, N], world
-            (``PushSource.total_wrench_world``).
-
-    Outputs:
-        virtual_force: (3) F^ in the world-aligned support-foot frame, N.
-        com_position: (3) the true CoM in the support-foot frame F, m (for checks).
-        com_world: (3) the true CoM in world, m (to draw the virtual force).
-    """
-
-    def __init__(self, plant: MultibodyPlant, handles: HumanoidHandles, *, support_foot: str = "right"):
-        super().__init__()
-        if support_foot not in handles.sole_frames:
-            raise ValueError(f"VirtualForceTruth: unknown support foot {support_foot!r}")
-        self._plant = plant
-        self._plant_context = plant.CreateDefaultContext()
-        self._support = handles.sole_frames[support_foot]
-        self._instances = [handles.model_instance]
-        self._nq = plant.num_positions()
-        self._state = self.DeclareVectorInputPort("state", plant.num_positions() + plant.num_velocities())
-        self._wrench = self.DeclareVectorInputPort("total_wrench_world", 6)
-        self.DeclareVectorOutputPort("virtual_force", 3, self._CalcVirtualForce)
-        self.DeclareVectorOutputPort("com_position", 3, self._CalcComPosition)
-        self.DeclareVectorOutputPort("com_world", 3, self._CalcComWorld)
-
-    def _com(self, context: Context) -> tuple[np.ndarray, np.ndarray]:
-        x = eval_finite_input("VirtualForceTruth", self._state, context)
-        self._plant.SetPositions(self._plant_context, x[: self._nq])
-        p_WCm = self._plant.CalcCenterOfMassPositionInWorld(self._plant_context, self._instances)
-        return p_WCm, self._support.CalcPoseInWorld(self._plant_context).translation()
-
-    @staticmethod
-    def virtual_force(wrench_world: np.ndarray, p_WCm: np.ndarray, ground_height: float) -> np.ndarray:
-        """Eq. (11) from [moment about the world origin; force] and the CoM position in
-        world; ``ground_height`` is the z of the plane of the ZMP (the support frame's)."""
-        tau_O, force = np.asarray(wrench_world[:3], float), np.asarray(wrench_world[3:], float)
-        tau = tau_O - np.cross(p_WCm, force)  # moment about the CoM
-        z_c = float(p_WCm[2] - ground_height)
-        return np.array([force[0] + tau[1] / z_c, force[1] - tau[0] / z_c, force[2]])
-
-    def _CalcVirtualForce(self, context: Context, output: BasicVector) -> None:
-        wrench = eval_finite_input("VirtualForceTruth", self._wrench, context)
-        if not np.any(wrench):
-            output.SetFromVector(np.zeros(3))
-            return
-        p_WCm, p_WF = self._com(context)
-        output.SetFromVector(self.virtual_force(wrench, p_WCm, p_WF[2]))
-
-    def _CalcComPosition(self, context: Context, output: BasicVector) -> None:
-        p_WCm, p_WF = self._com(context)
-        output.SetFromVector(p_WCm - p_WF)
-
-    def _CalcComWorld(self, context: Context, output: BasicVector) -> None:
-        output.SetFromVector(self._com(context)[0])
 
 
 @dataclass
@@ -286,7 +217,6 @@ def full_posture(humanoid: HumanoidHandles, posture: dict[str, float] | None) ->
 
 __all__ = [
     "NaoForceObserverHandles",
-    "VirtualForceTruth",
     "build_nao_force_observer_diagram",
     "full_posture",
     "wide_stance",

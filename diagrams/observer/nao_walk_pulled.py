@@ -51,23 +51,22 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Rgba
-from pydrake.multibody.plant import ExternallyAppliedSpatialForceMultiplexer, MultibodyPlant, MultibodyPlantConfig
+from pydrake.multibody.plant import ExternallyAppliedSpatialForceMultiplexer, MultibodyPlantConfig
 from pydrake.systems.analysis import SimulatorConfig
-from pydrake.systems.framework import BasicVector, Context, Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
 from diagrams.scenarios import check_common_fields
 from diagrams.station.humanoid_station import add_humanoid_station
 from diagrams.station.plant_config import default_plant_config
-from diagrams.observer.nao_force_observer import VirtualForceTruth
 from diagrams.observer.nao_sensing import OBSERVER_PERIOD, ObserverPipeline, add_observer_pipeline, nao_observer_parameters
-from diagrams.locomotion.nao_walk import ContactZmp, NaoWalkHandles, add_walking_loggers, walking_floors, walking_metrics
+from diagrams.locomotion.nao_walk import NaoWalkHandles, add_walking_loggers, walking_floors, walking_metrics
 from diagrams.station.standing import default_gains
-from models import HumanoidHandles
 from systems.simulation.cable import PulleyLoad
+from systems.simulation.ground_truth import CableVirtualForceTruth
+from systems.locomotion.contact_zmp import ContactZmp
 from systems.observer.force_observer import WALKING, LipForceObserverSystem, LipObserverParameters
 from systems.observer.fsr_sensing import FsrArray, ImuComAcceleration
-from systems.common.checks import eval_finite_input
 from systems.simulation.visualization import ForceArrows
 from systems.locomotion.walking_pattern import NaoWalkingController, WalkingParameters
 
@@ -122,55 +121,6 @@ class CableSetup:
                 raise ValueError(f"CableSetup.{name} must be non-negative, got {value}")
         if not (0.0 <= self.lateral_angle_deg < 45.0):
             raise ValueError(f"CableSetup.lateral_angle_deg must be in [0, 45), got {self.lateral_angle_deg}")
-
-
-class CableVirtualForceTruth(LeafSystem):
-    """Ground truth: the virtual force (eq. 11) of the cable's force F applied at A, with the
-    TRUE CoM and the ground plane at ``ground_height`` (F0's z = 0):
-    F^ = [F_x + tau_y / z_c, F_y - tau_x / z_c, F_z], tau = (p_A - p_Cm) x F,
-    z_c = z_Cm - ground_height (``VirtualForceTruth.virtual_force``).
-
-    Inputs:
-        state: the TRUE plant state [q; v].
-        force_world: (3) the force on the robot, N (``PulleyLoad.force_world``).
-        point_world: (3) its point of application A, m (``PulleyLoad.point_world``).
-
-    Outputs:
-        virtual_force: (3) F^, N, world-aligned.
-        com_world: (3) the true CoM, m (to draw the estimate at the CoM).
-    """
-
-    def __init__(self, plant: MultibodyPlant, humanoid: HumanoidHandles, ground_height: float = 0.0):
-        super().__init__()
-        if not math.isfinite(ground_height):
-            raise ValueError(f"CableVirtualForceTruth: ground_height must be finite, got {ground_height}")
-        self._plant = plant
-        self._plant_context = plant.CreateDefaultContext()
-        self._nq = plant.num_positions()
-        self._instances = [humanoid.model_instance]
-        self._ground = float(ground_height)
-        self._state = self.DeclareVectorInputPort("state", plant.num_positions() + plant.num_velocities())
-        self._force = self.DeclareVectorInputPort("force_world", 3)
-        self._point = self.DeclareVectorInputPort("point_world", 3)
-        self.DeclareVectorOutputPort("virtual_force", 3, self._CalcVirtual)
-        self.DeclareVectorOutputPort("com_world", 3, self._CalcCom)
-
-    def _com(self, context: Context) -> np.ndarray:
-        x = eval_finite_input("CableVirtualForceTruth", self._state, context)
-        self._plant.SetPositions(self._plant_context, x[: self._nq])
-        return self._plant.CalcCenterOfMassPositionInWorld(self._plant_context, self._instances)
-
-    def _CalcVirtual(self, context: Context, output: BasicVector) -> None:
-        force = np.asarray(eval_finite_input("CableVirtualForceTruth", self._force, context))
-        if not force.any():
-            output.SetFromVector(np.zeros(3))
-            return
-        point = np.asarray(eval_finite_input("CableVirtualForceTruth", self._point, context))
-        wrench = np.concatenate([np.cross(point, force), force])  # moment about the world origin; force
-        output.SetFromVector(VirtualForceTruth.virtual_force(wrench, self._com(context), self._ground))
-
-    def _CalcCom(self, context: Context, output: BasicVector) -> None:
-        output.SetFromVector(self._com(context))
 
 
 @dataclass
@@ -496,6 +446,6 @@ def nao_walk_pulled_metrics(scenario: NaoWalkPulledScenario, handles: NaoWalkPul
     }
 
 
-__all__ = ["CableSetup", "CableVirtualForceTruth", "LOAD_MASS", "MAX_MEAN_ERROR_X", "MAX_RMS_ERROR_X", "NaoWalkPulledHandles",
+__all__ = ["CableSetup", "LOAD_MASS", "MAX_MEAN_ERROR_X", "MAX_RMS_ERROR_X", "NaoWalkPulledHandles",
            "NaoWalkPulledScenario", "build_nao_walk_pulled_diagram", "nao_walk_pulled_metrics", "observer_metrics",
            "pulled_floors"]

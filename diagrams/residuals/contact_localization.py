@@ -41,11 +41,11 @@ from pydrake.geometry import Meshcat, MeshcatVisualizer, Rgba, SceneGraph
 from pydrake.multibody.plant import MultibodyPlant, MultibodyPlantConfig
 from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.analysis import SimulatorConfig
-from pydrake.systems.framework import BasicVector, Context, Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
 from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station, default_plant_config
-from systems.residuals.contact_estimation import ContactDetector, ContactLocalizer
+from systems.residuals.contact_estimation import ContactDetector, ContactLocalizer, GatedEstimate
 from systems.residuals.geometry_intersection import inward_direction, sample_surface, surface_areas
 from systems.simulation.disturbances import Push, PushSource, Step
 from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual, ResidualModel
@@ -135,23 +135,6 @@ class ContactLocalizationHandles:
     meshcat_visualizer: MeshcatVisualizer | None = None
 
 
-class _GatedEstimate(LeafSystem):
-    """The localizer's force and point, zeroed while the result is not valid (so the
-    estimate's arrow hides). Inputs ``force``, ``point``, ``valid``; outputs ``force_world``,
-    ``point_world``."""
-
-    def __init__(self):
-        super().__init__()
-        self._f = self.DeclareVectorInputPort("force", 3)
-        self._p = self.DeclareVectorInputPort("point", 3)
-        self._v = self.DeclareVectorInputPort("valid", 1)
-        self.DeclareVectorOutputPort("force_world", 3, self._CalcForce)
-        self.DeclareVectorOutputPort("point_world", 3, lambda c, o: o.SetFromVector(self._p.Eval(c)))
-
-    def _CalcForce(self, context: Context, output: BasicVector) -> None:
-        output.SetFromVector(self._f.Eval(context) if self._v.Eval(context)[0] > 0.5 else np.zeros(3))
-
-
 def sole_bodies(station: HumanoidStation) -> tuple[str, ...]:
     """Names of the links outboard of the F/T sensors (the soles)."""
     return tuple(j.child_body().name() for j in (station.humanoid.ft_sensor_joints or {}).values())
@@ -236,7 +219,7 @@ def build_contact_localization_diagram(
                                                     shaft_radius=0.016, head_radius=0.035))
         builder.Connect(push_source.GetOutputPort("force_world"), true_arrows.get_force_world_input_port())
         builder.Connect(push_source.GetOutputPort("point_world"), true_arrows.get_point_world_input_port())
-        gate = builder.AddSystem(_GatedEstimate())
+        gate = builder.AddSystem(GatedEstimate())
         builder.Connect(localizer.GetOutputPort("contact_force_world"), gate.GetInputPort("force"))
         builder.Connect(localizer.GetOutputPort("contact_point_world"), gate.GetInputPort("point"))
         builder.Connect(localizer.GetOutputPort("valid"), gate.GetInputPort("valid"))

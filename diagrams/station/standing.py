@@ -37,6 +37,7 @@ from models import (
     point_contact_scene_graph_config,
     set_standing_state,
 )
+from systems.common.contact_results import robot_point_contacts
 from systems.simulation.pd_gravity import PdGravityController, joint_vector_from_names
 
 #: Default PD gains per joint group: (kp [N m/rad], kd [N m s/rad]). Chosen so that the
@@ -192,25 +193,16 @@ def set_initial_state(diagram: Diagram, context: Context, handles: StandingHandl
 
 def foot_sphere_normal_forces(plant: MultibodyPlant, plant_context: Context,
                               humanoid: HumanoidHandles) -> dict[str, np.ndarray]:
-    """Ground normal force (world z, N) on each foot contact sphere, FSR order.
+    """Ground normal force (N, along the contact normal: world z on flat ground; the
+    convention of ``systems.common.contact_results``) on each foot contact sphere, FSR order.
 
     Reads the plant's contact results (point contact); a sphere without contact reads 0.
     """
     results = plant.get_contact_results_output_port().Eval(plant_context)
-    where = {g: (side, i) for side, ids in humanoid.fsr_geometries.items()
-             for i, g in enumerate(ids)}
-    out = {side: np.zeros(len(ids)) for side, ids in humanoid.fsr_geometries.items()}
-    for c in range(results.num_point_pair_contacts()):
-        info = results.point_pair_contact_info(c)
-        pair = info.point_pair()
-        f_on_B = info.contact_force()
-        if pair.id_B in where:
-            side, i = where[pair.id_B]
-            out[side][i] += f_on_B[2]
-        elif pair.id_A in where:
-            side, i = where[pair.id_A]
-            out[side][i] -= f_on_B[2]
-    return out
+    spheres = {g for ids in humanoid.fsr_geometries.values() for g in ids}
+    contacts = robot_point_contacts(results, spheres, "foot_sphere_normal_forces")
+    return {side: contacts.summed({g: i for i, g in enumerate(ids)}, len(ids))
+            for side, ids in humanoid.fsr_geometries.items()}
 
 
 @dataclass

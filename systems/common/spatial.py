@@ -18,6 +18,28 @@ def skew(r: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a × b`` of two 3-vectors, or row by row of (..., 3) arrays (broadcast).
+
+    The arithmetic of ``np.cross`` ((a_y b_z - a_z b_y, a_z b_x - a_x b_z, a_x b_y - a_y b_x),
+    the same numbers), without its overhead on single vectors (~15 µs per call).
+
+    Raises:
+        ValueError: an argument whose last dimension is not 3.
+    """
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    if a.shape == (3,) and b.shape == (3,):
+        ax, ay, az = a.tolist()
+        bx, by, bz = b.tolist()
+        return np.array((ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx))
+    if a.shape[-1:] != (3,) or b.shape[-1:] != (3,):
+        raise ValueError(f"cross needs 3-vectors (shape (..., 3)), got shapes {a.shape} and {b.shape}")
+    ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
+    bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack((ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx), axis=-1)
+
+
 def crm(v: np.ndarray) -> np.ndarray:
     """Spatial cross product for motion vectors, ``v×`` (RBDA eq. 2.31).
 

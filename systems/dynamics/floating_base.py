@@ -23,6 +23,7 @@ import math
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Frame, JacobianWrtVariable
+from pydrake.systems.framework import Context
 
 from systems.dynamics.floating_base_terms import FloatingBaseTerms, reduce_to_floating_terms
 from systems.dynamics.base_state import checked_state, quaternion_to_rotation
@@ -61,6 +62,12 @@ class DrakeFloatingBaseDynamics:
         self._sizes = (plant.num_positions(), plant.num_velocities())
         self._q_F0 = plant.GetPositions(self._context_F0).copy()
         self._q_F0[:7] = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+
+    @property
+    def context_F0(self) -> Context:
+        """The plant context at the identity base pose (F0 = world); after ``compute(q, v)``
+        it holds q's joint positions (for F0-expressed Jacobians of the same q)."""
+        return self._context_F0
 
     def _mass_matrix_F0(self, q_joints: np.ndarray) -> np.ndarray:
         self._q_F0[7:] = q_joints
@@ -177,6 +184,13 @@ class FloatingBaseDynamics:
     def num_joints(self) -> int:
         """n, the number of joint velocities (nv - 6)."""
         return self.topology.num_joints
+
+    @property
+    def context_F0(self) -> Context | None:
+        """The "fast" implementation's plant context at the identity base pose, holding the
+        joint positions of the last ``compute`` (see ``DrakeFloatingBaseDynamics.context_F0``);
+        None for the "reference" implementation, which keeps no such context."""
+        return self._impl.context_F0 if isinstance(self._impl, DrakeFloatingBaseDynamics) else None
 
     def compute(self, q: np.ndarray, v: np.ndarray) -> FloatingBaseTerms:
         """All terms of eq. (9) and their derivatives at (q, v) (Drake's coordinates in)."""

@@ -68,19 +68,13 @@ from pydrake.systems.framework import BasicVector, Context, LeafSystem
 
 from models import HumanoidHandles, set_standing_state
 from systems.locomotion.leg_ik import LEG_JOINTS, NaoLegGeometry, leg_ik
+from systems.common.smoothing import smoothstep5
 from systems.common.topology import floating_base_topology
 
 SIDES = ("left", "right")
 #: Largest step length accepted before the IK check, m (the straight leg reaches about
 #: sqrt(0.2029^2 - z^2) ~ 0.08 m horizontally from the hip at z_c = 0.255 m).
 MAX_STEP_LENGTH = 0.08
-
-
-def smoothstep5(s: np.ndarray) -> np.ndarray:
-    """10 s^3 - 15 s^4 + 6 s^5 on [0, 1] (clipped): 0 -> 1 with zero end velocity and
-    acceleration."""
-    s = np.clip(s, 0.0, 1.0)
-    return s * s * s * (10.0 + s * (-15.0 + 6.0 * s))
 
 
 def _bump(s: np.ndarray) -> np.ndarray:

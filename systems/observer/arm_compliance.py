@@ -32,7 +32,7 @@ TO the hand (the push), F = -F^ext.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,7 +40,7 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Frame, JacobianWrtVariable
 from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem
 
-from systems.common.checks import eval_finite_input, positive_number
+from systems.common.checks import eval_finite_input, per_joint, positive_number
 from systems.common.topology import floating_base_topology
 
 #: Nao's number of FSRs, K_t of eq. (28).
@@ -120,25 +120,6 @@ def _resolve(plant: MultibodyPlant, chains: Sequence[ArmChain], who: str):
     return topology, resolved, all_k
 
 
-def _per_joint(value, names: Sequence[str], what: str, who: str, *, positive: bool) -> np.ndarray:
-    """A scalar, a sequence in chain-joint order or a {joint name: value} mapping -> array."""
-    if isinstance(value, Mapping):
-        missing = [n for n in names if n not in value]
-        if missing:
-            raise ValueError(f"{who}: {what} has no value for {missing}")
-        arr = np.array([float(value[n]) for n in names])
-    else:
-        arr = np.asarray(value, dtype=float)
-        arr = np.full(len(names), float(arr)) if arr.ndim == 0 else arr.reshape(-1)
-    if arr.shape != (len(names),) or not np.all(np.isfinite(arr)):
-        raise ValueError(f"{who}: {what} must be a finite scalar or {len(names)} finite values, got {value!r}")
-    if positive and np.any(arr <= 0):
-        raise ValueError(f"{who}: {what} must be positive, got {arr.tolist()}")
-    if not positive and np.any(arr < 0):
-        raise ValueError(f"{who}: {what} must be non-negative, got {arr.tolist()}")
-    return arr
-
-
 def _joint_names(resolved) -> list[str]:
     return [n for r in resolved for n in r.chain.joint_names]
 
@@ -177,7 +158,7 @@ class JointTorqueFromPositionError(LeafSystem):
         topology, resolved, self._k = _resolve(plant, chains, who)
         self._q_index = np.concatenate([r.q_index for r in resolved])
         self.joint_names = tuple(_joint_names(resolved))
-        self._km = _per_joint(motor_constants, self.joint_names, "motor_constants", who, positive=True)
+        self._km = per_joint(motor_constants, self.joint_names, "motor_constants", who=who, sign="positive")
         self._desired = self.DeclareVectorInputPort("desired_position", len(topology.joints))
         self._state = self.DeclareVectorInputPort("state", plant.num_positions() + plant.num_velocities())
         self.DeclareVectorOutputPort("motor_torque", len(self._k), self._CalcTorque)
@@ -222,8 +203,12 @@ class ArmExternalForceEstimator(LeafSystem):
         motor_torque: (m) tau_m of eq. (27), chain after chain, N m.
         state: the SENSED plant state [q; v].
 
-    State (discrete, updated every ``period``): [F (3 per chain); v of the last sample;
-    initialised flag].
+    State (discrete groups, updated every ``period``, first at t = 0): ``force`` F (3 per
+    chain), ``velocity`` v of the last sample, ``initialised`` (0 before the first update,
+    which takes the raw estimate with v_dot = 0; later ones low-pass filter it with v_dot
+    from the last sample's v). Not an initialization event: at ``Simulator.Initialize``
+    the discrete plant has not taken its first step, so the inputs differ from the first
+    update's.
 
     Outputs:
         hand_forces: (3 per chain) the filtered force applied TO each hand, world axes, N
@@ -257,7 +242,7 @@ class ArmExternalForceEstimator(LeafSystem):
         self._nq, self._nv = plant.num_positions(), plant.num_velocities()
         names = _joint_names(self._chains)
         self._m = len(names)
-        self._kd = _per_joint(damping, names, "damping", who, positive=False)
+        self._kd = per_joint(damping, names, "damping", who=who, sign="non-negative")
         # The model's viscous joint damping (SDFormat <damping>), part of tau_hat as well.
         self._joint_damping = np.concatenate(
             [[plant.GetJointByName(n).default_damping_vector()[0] for n in r.chain.joint_names] for r in self._chains])
@@ -270,12 +255,11 @@ class ArmExternalForceEstimator(LeafSystem):
         self._nf = 3 * len(self._chains)
         self._torque = self.DeclareVectorInputPort("motor_torque", self._m)
         self._state = self.DeclareVectorInputPort("state", self._nq + self._nv)
-        self._xd = self.DeclareDiscreteState(self._nf + self._nv + 1)
+        self._force_index = self.DeclareDiscreteState(self._nf)
+        self._velocity_index = self.DeclareDiscreteState(self._nv)
+        self._initialised_index = self.DeclareDiscreteState(1)
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._Update)
-        self.DeclareVectorOutputPort(
-            "hand_forces", self._nf,
-            lambda c, o: o.SetFromVector(c.get_discrete_state(self._xd).get_value()[: self._nf]),
-            {self.xd_ticket()})
+        self.DeclareStateOutputPort("hand_forces", self._force_index)
 
     @property
     def period(self) -> float:
@@ -309,17 +293,17 @@ class ArmExternalForceEstimator(LeafSystem):
     def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
         tau_m = eval_finite_input(self._who, self._torque, context)
         x = eval_finite_input(self._who, self._state, context)
-        s = context.get_discrete_state(self._xd).get_value()
-        nf, nv = self._nf, self._nv
         v = x[self._nq:]
-        first = s[-1] < 0.5
-        v_dot = None if first else (v - s[nf: nf + nv]) / self._period
-        raw = self.hand_forces(x, tau_m, v_dot)
-        out = np.empty_like(s)
-        out[:nf] = raw if first else s[:nf] + self._alpha * (raw - s[:nf])
-        out[nf: nf + nv] = v
-        out[-1] = 1.0
-        discrete_state.set_value(self._xd, out)
+        if context.get_discrete_state(self._initialised_index).GetAtIndex(0) == 0.0:  # the first sample
+            force = self.hand_forces(x, tau_m)
+        else:
+            v_last = context.get_discrete_state(self._velocity_index).get_value()
+            raw = self.hand_forces(x, tau_m, (v - v_last) / self._period)
+            force = context.get_discrete_state(self._force_index).get_value()
+            force = force + self._alpha * (raw - force)
+        discrete_state.set_value(self._force_index, force)
+        discrete_state.set_value(self._velocity_index, v)
+        discrete_state.set_value(self._initialised_index, [1.0])
 
 
 # ---------------------------------------------------------------------------------------
@@ -546,8 +530,8 @@ class HandComplianceController(LeafSystem):
         self._max_dx = positive_number(max_displacement, f"{who}: max_displacement")
         names = _joint_names(self._chains)
         self._m = len(names)
-        self._km = None if motor_constants is None else _per_joint(motor_constants, names, "motor_constants", who,
-                                                                     positive=True)
+        self._km = None if motor_constants is None else per_joint(motor_constants, names, "motor_constants", who=who,
+                                                                    sign="positive")
         self._plant = plant
         self._base = topology.base_body.body_frame()
         self._nq = plant.num_positions()

@@ -65,7 +65,8 @@ from pydrake.systems.framework import BasicVector, Context, DiscreteValues, Leaf
 from models import HumanoidHandles
 from systems.common.checks import eval_finite_input
 from systems.common.topology import floating_base_topology
-from systems.locomotion.walking_pattern import (SIDES, NaoWalkingController, WalkingParameters, WalkingPattern, smoothstep5,
+from systems.common.smoothing import smoothstep5
+from systems.locomotion.walking_pattern import (SIDES, NaoWalkingController, WalkingParameters, WalkingPattern,
                                      preview_gains, whole_body_trajectory)
 
 #: Default segment parameters: the committed walk (0.05 m, 0.5 s steps) with a short

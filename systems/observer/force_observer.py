@@ -23,10 +23,11 @@ f_n^o = -M g at rest.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.systems.framework import Context, DiscreteValues, LeafSystem
+from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem
 
 from systems.common.checks import eval_finite_input, vector3
 
@@ -117,6 +118,18 @@ class _KalmanState:
         P = np.asarray(P, dtype=float).reshape(5, 5)
         self.p = tuple(float(P[i, j]) for i, j in _UPPER)
 
+    @classmethod
+    def from_entries(cls, row) -> "_KalmanState":
+        """From 20 floats: x (5) then p (15), as ``entries``."""
+        state = cls.__new__(cls)
+        state.x, state.p = tuple(row[:5]), tuple(row[5:])
+        return state
+
+    @property
+    def entries(self) -> tuple:
+        """x (5) then p (15), 20 floats."""
+        return self.x + self.p
+
     @property
     def P(self) -> np.ndarray:
         """The (5, 5) covariance as a new numpy array."""
@@ -128,6 +141,9 @@ class _KalmanState:
 
 #: (row, column) of the entries of ``_KalmanState.p``.
 _UPPER = tuple((i, j) for i in range(5) for j in range(i, 5))
+#: Entries per filter in ``LipForceObserver.state()``: the state (5), then the upper
+#: triangle of the covariance (15).
+FILTER_STATE_SIZE = 20
 
 
 def _predict(x, p, T, T2, q):
@@ -305,6 +321,29 @@ class LipForceObserver:
             _KalmanState(np.array([com_position[i], 0.0, com_acceleration[i], 0.0, 0.0]), P0) for i in range(3)
         ]
 
+    def state(self) -> np.ndarray:
+        """The three filters (x, y, z) as a new (3, FILTER_STATE_SIZE) array: per row the
+        filter's state [c, dc, ddc, F, dF] (eqs. 18, 20; m, m/s, m/s^2, N, N/s), then the
+        upper triangle of its covariance P, row by row (15 entries).
+
+        Raises:
+            RuntimeError: before ``reset`` or the first ``update`` (no filters yet).
+        """
+        if self._filters is None:
+            raise RuntimeError("LipForceObserver: no filter state before reset() or the first update()")
+        return np.array([f.entries for f in self._filters])
+
+    def set_state(self, state: np.ndarray) -> None:
+        """Loads filters saved by ``state()`` (e.g. kept in a Drake context).
+
+        Raises:
+            ValueError: not a finite (3, FILTER_STATE_SIZE) array.
+        """
+        s = np.asarray(state, dtype=float)
+        if s.shape != (3, FILTER_STATE_SIZE) or not math.isfinite(float(s.sum())):
+            raise ValueError(f"LipForceObserver: state must be a finite (3, {FILTER_STATE_SIZE}) array, got shape {s.shape}")
+        self._filters = [_KalmanState.from_entries(row) for row in s.tolist()]
+
     def update(
         self, com_position: np.ndarray, com_acceleration: np.ndarray, zmp: np.ndarray, normal_force: float
     ) -> tuple[np.ndarray, bool]:
@@ -407,15 +446,20 @@ class LipForceObserverSystem(LeafSystem):
         com_acceleration: (3,) CoM acceleration in the inertial frame, gravity-compensated, m/s^2.
         zmp: (2,) ZMP = CoP of the FSRs (eq. 13), m.
         normal_force: (1,) f_n^o = -(sum of the FSR normal forces) (eq. 12), N (-M g at rest).
-    State: discrete, [initialised flag; per filter (z, x, y) its 5 states and 5x5 covariance].
+    State: discrete groups ``filters`` (3 x FILTER_STATE_SIZE: the x, y and z filters as
+        ``LipForceObserver.state()``), ``valid`` (1) and ``initialised`` (1: 0 before the
+        first update).
     Outputs:
         virtual_force: (3,) F^ = [F^_x, F^_y, F^_z] (eq. 11), N, world-aligned CoM frame.
         valid: (1,) 1 when the normal force allows the x/y estimate, else 0 (feet off the
             ground: the x/y filters only predict).
         filter_states: (15,) the z, x and y filters' states (eq. 18, 20).
 
-    The first update initialises the filters from the inputs as the authors do
-    (``LipForceObserver.reset``), then runs one predict/correct step.
+    The first update (t = 0) initialises the filters from its inputs as the authors do
+    (``LipForceObserver.reset``), then runs one predict/correct step. Not an initialization
+    event: at ``Simulator.Initialize`` the discrete plant has not taken its first step, so
+    the sensors read other values than at the first update (measured: the estimates change
+    by up to 1e-6 relative, 6e-4 on the walking robot's small pre-pull mean).
     """
 
     def __init__(self, parameters: LipObserverParameters = STANDING):
@@ -428,18 +472,23 @@ class LipForceObserverSystem(LeafSystem):
             "zmp": self.DeclareVectorInputPort("zmp", 2),
             "normal_force": self.DeclareVectorInputPort("normal_force", 1),
         }
-        # [flag, valid, 3 x (x (5), P (25))]
-        self._state_index = self.DeclareDiscreteState(2 + 3 * 30)
+        self._filters_index = self.DeclareDiscreteState(3 * FILTER_STATE_SIZE)
+        self._valid_index = self.DeclareDiscreteState(1)
+        self._initialised_index = self.DeclareDiscreteState(1)
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._Update)
-        xd = {self.xd_ticket()}
-        self.DeclareVectorOutputPort("virtual_force", 3, lambda c, o: o.SetFromVector(self._unpacked(c)[2][[8, 13, 3]]), xd)
-        self.DeclareVectorOutputPort("valid", 1, lambda c, o: o.SetFromVector([self._unpacked(c)[1]]), xd)
-        self.DeclareVectorOutputPort("filter_states", 15, lambda c, o: o.SetFromVector(self._unpacked(c)[2]), xd)
+        self.DeclareVectorOutputPort("virtual_force", 3, self._CalcVirtualForce, {self.xd_ticket()})
+        self.DeclareStateOutputPort("valid", self._valid_index)
+        self.DeclareVectorOutputPort("filter_states", 15, self._CalcFilterStates, {self.xd_ticket()})
 
-    def _unpacked(self, context: Context):
-        s = context.get_discrete_state(self._state_index).get_value()
-        states = np.concatenate([s[2 + 30 * i : 7 + 30 * i] for i in range(3)])  # z, x, y
-        return s[0], s[1], states
+    def _filters(self, context: Context) -> np.ndarray:
+        """(3, FILTER_STATE_SIZE) the x, y, z filters of ``context``."""
+        return context.get_discrete_state(self._filters_index).get_value().reshape(3, FILTER_STATE_SIZE)
+
+    def _CalcVirtualForce(self, context: Context, output: BasicVector) -> None:
+        output.SetFromVector(self._filters(context)[:, 3])  # F of the x, y, z filters
+
+    def _CalcFilterStates(self, context: Context, output: BasicVector) -> None:
+        output.SetFromVector(self._filters(context)[[2, 0, 1], :5].reshape(-1))  # z, x, y
 
     def _inputs(self, context: Context):
         return {
@@ -449,21 +498,12 @@ class LipForceObserverSystem(LeafSystem):
 
     def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
         u = self._inputs(context)
-        s = context.get_discrete_state(self._state_index).get_value()
         core = self._core
-        if s[0] < 0.5:
+        if context.get_discrete_state(self._initialised_index).GetAtIndex(0) == 0.0:
             core.reset(u["com_position"], u["com_acceleration"])
-        else:  # load the filters of this context (order z, x, y) into the core
-            if core._filters is None:
-                core.reset(np.zeros(3), np.zeros(3))
-            for i, axis in enumerate((2, 0, 1)):
-                block = s[2 + 30 * i : 32 + 30 * i]
-                core._filters[axis] = _KalmanState(block[:5], block[5:])
+        else:
+            core.set_state(self._filters(context))
         _, valid = core._update(u["com_position"], u["com_acceleration"], u["zmp"], float(u["normal_force"][0]))
-        out = np.empty_like(s)
-        out[0], out[1] = 1.0, float(valid)
-        for i, axis in enumerate((2, 0, 1)):
-            state = core._filters[axis]
-            out[2 + 30 * i : 7 + 30 * i] = state.x
-            out[7 + 30 * i : 32 + 30 * i] = state.P.reshape(-1)
-        discrete_state.set_value(self._state_index, out)
+        discrete_state.set_value(self._filters_index, core.state().reshape(-1))
+        discrete_state.set_value(self._valid_index, [float(valid)])
+        discrete_state.set_value(self._initialised_index, [1.0])

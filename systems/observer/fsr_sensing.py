@@ -33,7 +33,8 @@ from pydrake.multibody.tree import Frame
 from pydrake.systems.framework import BasicVector, Context, LeafSystem
 
 from models import FSR_ORDER, HumanoidHandles
-from systems.common.checks import eval_finite_input
+from systems.common.checks import check_plant, eval_finite_input
+from systems.common.contact_results import robot_point_contacts
 from systems.simulation.noise import SampledNoise, as_std_vector, check_period, check_seed
 
 #: Nao's FSR range (paper Sec. 4.1), N.
@@ -52,14 +53,6 @@ MIN_CONTACT_FORCE = 0.5
 #: ``models.FSR_ORDER`` (front_left, front_right, rear_left, rear_right).
 FSR_SIDES = ("left", "right")
 FSR_NAMES = tuple(f"{side}_{name}" for side in FSR_SIDES for name in FSR_ORDER)
-
-
-def _check_plant(plant, who: str) -> MultibodyPlant:
-    if not isinstance(plant, MultibodyPlant):
-        raise ValueError(f"{who}: plant must be a MultibodyPlant, got {type(plant).__name__}")
-    if not plant.is_finalized():
-        raise ValueError(f"{who}: the MultibodyPlant must be finalized")
-    return plant
 
 
 def _check_handles(handles, who: str) -> HumanoidHandles:
@@ -115,7 +108,7 @@ class FsrArray(LeafSystem):
                  saturation: float = FSR_SATURATION, period: float = FSR_NOISE_PERIOD, seed: int = 0):
         super().__init__()
         who = type(self).__name__
-        _check_plant(plant, who)
+        check_plant(plant, who)
         _check_handles(handles, who)
         ids = []
         for side in FSR_SIDES:
@@ -149,25 +142,9 @@ class FsrArray(LeafSystem):
 
     def normal_forces(self, results: ContactResults) -> np.ndarray:
         """(8) noise-free normal force of each FSR sphere in ``results``, N (>= 0 for
-        compressive contact). For a point pair with the sphere as body A or B, the force on
-        the sphere along the normal pointing out of the other geometry is
-        -f_Bc_W . n_BA_W in both cases (f_Bc_W: force on B; n_BA_W: from B into A)."""
-        out = np.zeros(len(self._index))
-        index = self._index
-        for c in range(results.num_point_pair_contacts()):
-            info = results.point_pair_contact_info(c)
-            pair = info.point_pair()
-            i = index.get(pair.id_A)
-            if i is None:
-                i = index.get(pair.id_B)
-            if i is not None:
-                out[i] -= float(np.dot(info.contact_force(), pair.nhat_BA_W))
-        for c in range(results.num_hydroelastic_contacts()):
-            surface = results.hydroelastic_contact_info(c).contact_surface()
-            if surface.id_M() in index or surface.id_N() in index:
-                raise ValueError("FsrArray: hydroelastic contact on an FSR sphere is not supported; "
-                                 "use point contact for the foot spheres")
-        return out
+        compressive contact): the force on the sphere along the contact normal pointing
+        out of the other geometry (``systems.common.contact_results``' convention)."""
+        return robot_point_contacts(results, self._index, "FsrArray").summed(self._index, len(self._index))
 
     def _CalcTrueForces(self, context: Context, output: BasicVector) -> None:
         output.SetFromVector(self.normal_forces(self._contact.Eval(context)))
@@ -184,7 +161,7 @@ class _KinematicsSystem(LeafSystem):
 
     def __init__(self, plant: MultibodyPlant, who: str):
         super().__init__()
-        _check_plant(plant, who)
+        check_plant(plant, who)
         self._plant = plant
         self._who = who
         self._plant_context = plant.CreateDefaultContext()

@@ -54,7 +54,7 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem
 from pydrake.systems.primitives import MatrixGain
 
-from systems.common.checks import eval_finite_input
+from systems.common.checks import eval_finite_input, per_joint
 from systems.simulation.pd_gravity import joints_in_velocity_order
 
 #: Default update period T of the admittance [s] (the residuals' period).
@@ -64,31 +64,6 @@ DEFAULT_LIMIT_MARGIN = 0.02
 
 _WHO = "JointAdmittanceController"
 _INTEGRATE_FROM = ("measured", "desired")
-
-
-def _per_joint(value, n: int, name: str, *, who: str = _WHO, allow_inf: bool = False) -> np.ndarray:
-    """Scalar or (n,) -> (n,) float array; rejects NaN (and inf unless ``allow_inf``)."""
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as err:
-        raise ValueError(f"{who}: {name} must be a number or an array of {n} numbers") from err
-    if arr.ndim == 0:
-        arr = np.full(n, float(arr))
-    elif arr.shape != (n,):
-        raise ValueError(f"{who}: {name} must be a scalar or have shape ({n},), got shape {arr.shape}")
-    else:
-        arr = arr.copy()
-    if np.isnan(arr).any() or (not allow_inf and np.isinf(arr).any()):
-        bad = np.flatnonzero(~np.isfinite(arr) if not allow_inf else np.isnan(arr))
-        raise ValueError(f"{who}: {name} has non-finite entries at indices {bad.tolist()}")
-    return arr
-
-
-def _non_negative(arr: np.ndarray, name: str, who: str = _WHO) -> np.ndarray:
-    bad = np.flatnonzero(arr < 0)
-    if bad.size:
-        raise ValueError(f"{who}: {name} must be non-negative; negative at joint indices {bad.tolist()}")
-    return arr
 
 
 def soft_threshold(r: np.ndarray, dead_band) -> np.ndarray:
@@ -185,11 +160,11 @@ class JointAdmittanceController(LeafSystem):
             state only (no direct feedthrough), so closing the loop through the PD, the
             plant and the residual makes no algebraic loop.
 
-    Discrete state: q_d (n) and an "initialised" flag (1). At initialisation
-    (``Simulator.Initialize``), or at the first periodic update if no initialisation
-    event ran, q_d is set to ``initial_position`` if given, else to the measured
-    position, so nothing jumps at start. Each periodic update (period T, first at t = 0)
-    then computes
+    Discrete state: q_d (n). The initialization event (``Simulator.Initialize``, or
+    ``ExecuteInitializationEvents`` on a context stepped by hand) sets q_d to
+    ``initial_position`` if given, else to the measured position, so nothing jumps at
+    start; a context never initialised starts from ``initial_position`` (zeros if None).
+    Each periodic update (period T, first at t = 0) then computes
 
         r' = soft_threshold(r, dead_band),  q̇_d = clip(K_a r', ±max_rate),
         q_d <- clip(base + q̇_d T, min(lower, q_d), max(upper, q_d)),
@@ -255,12 +230,12 @@ class JointAdmittanceController(LeafSystem):
             raise ValueError(f"{_WHO}: integrate_from must be one of {_INTEGRATE_FROM}, got {integrate_from!r}")
         self._integrate_from = integrate_from
 
-        self._gains = _non_negative(_per_joint(gains, n, "gains"), "gains")
-        self._dead_band = _non_negative(_per_joint(dead_band, n, "dead_band"), "dead_band")
+        self._gains = per_joint(gains, n, "gains", who=_WHO, sign="non-negative")
+        self._dead_band = per_joint(dead_band, n, "dead_band", who=_WHO, sign="non-negative")
         if max_rate is None:
             self._max_rate = np.full(n, np.inf)
         else:
-            self._max_rate = _non_negative(_per_joint(max_rate, n, "max_rate", allow_inf=True), "max_rate")
+            self._max_rate = per_joint(max_rate, n, "max_rate", who=_WHO, allow_inf=True, sign="non-negative")
         self._neg_max_rate = -self._max_rate
 
         try:
@@ -275,7 +250,7 @@ class JointAdmittanceController(LeafSystem):
         if initial_position is None:
             self._initial_position = None
         else:
-            self._initial_position = _per_joint(initial_position, n, "initial_position")
+            self._initial_position = per_joint(initial_position, n, "initial_position", who=_WHO)
 
         self._residual_includes_base = bool(residual_includes_base)
         residual_size = n + 6 if self._residual_includes_base else n
@@ -283,7 +258,6 @@ class JointAdmittanceController(LeafSystem):
         self._measured_port = self.DeclareVectorInputPort("measured_position", n)
         default_q_d = self._initial_position if self._initial_position is not None else np.zeros(n)
         self._q_d_index = self.DeclareDiscreteState(BasicVector(default_q_d))
-        self._flag_index = self.DeclareDiscreteState(BasicVector([0.0]))
         self.DeclareInitializationDiscreteUpdateEvent(self._Initialize)
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._Update)
         self._output_port = self.DeclareStateOutputPort("desired_position", self._q_d_index)
@@ -311,8 +285,8 @@ class JointAdmittanceController(LeafSystem):
             lower, upper = position_limits
         except (TypeError, ValueError) as err:
             raise ValueError(f"{_WHO}: position_limits must be 'model', None or a pair (lower, upper)") from err
-        lower = _per_joint(lower, n, "position_limits lower", allow_inf=True)
-        upper = _per_joint(upper, n, "position_limits upper", allow_inf=True)
+        lower = per_joint(lower, n, "position_limits lower", who=_WHO, allow_inf=True)
+        upper = per_joint(upper, n, "position_limits upper", who=_WHO, allow_inf=True)
         bad = np.flatnonzero(lower > upper)
         if bad.size:
             raise ValueError(f"{_WHO}: position_limits lower > upper at joint indices {bad.tolist()} "
@@ -411,18 +385,13 @@ class JointAdmittanceController(LeafSystem):
 
     def _Initialize(self, context: Context, discrete_state: DiscreteValues) -> None:
         discrete_state.set_value(self._q_d_index, self._start_position(context))
-        discrete_state.set_value(self._flag_index, [1.0])
 
     def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
-        if context.get_discrete_state(self._flag_index).GetAtIndex(0) == 0.0:
-            previous = self._start_position(context)
-        else:
-            previous = context.get_discrete_state(self._q_d_index).get_value()
+        previous = context.get_discrete_state(self._q_d_index).get_value()
         residual = self._eval_input(self._residual_port, context)
         measured = self._eval_input(self._measured_port, context)
         discrete_state.set_value(self._q_d_index,
                                  self.CalcNextDesiredPosition(residual, measured, previous))
-        discrete_state.set_value(self._flag_index, [1.0])
 
 
 __all__ = [

@@ -33,6 +33,7 @@ import numpy as np
 from pydrake.geometry import SceneGraph, SceneGraphInspector
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable, RigidBody
+from pydrake.common.containers import namedview
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem, ValueProducer
 from scipy.stats import chi2
@@ -44,7 +45,8 @@ from systems.residuals.geometry_intersection import (
     outward_normals,
     signed_distances,
 )
-from systems.common.checks import eval_finite_input, positive_number
+from systems.common.checks import eval_finite_input, positive_number, resolve_body
+from systems.common.spatial import cross, skew
 from systems.common.topology import floating_base_topology
 
 DEFAULT_PERIOD = 1e-3  # s
@@ -53,6 +55,7 @@ __all__ = [
     "ContactDetector",
     "ContactForceEstimator",
     "ContactLocalizer",
+    "GatedEstimate",
     "LocalizationResult",
     "STATUS_REASONS",
     "predicted_residual_covariances",
@@ -64,18 +67,7 @@ __all__ = [
 # ---------------------------------------------------------------------------------------
 
 
-def _skew(p: np.ndarray) -> np.ndarray:
-    x, y, z = p
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    ax, ay, az = a.tolist()
-    bx, by, bz = b.tolist()
-    return np.array((ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx))
-
-
-class _Kinematics:
+class _SensedConfiguration:
     """A private plant context at the sensed positions: body poses, translational Jacobians,
     the base elimination A = M_bb^-1 M_bj (computed once per q), F0's pose."""
 
@@ -125,25 +117,10 @@ class _Kinematics:
         return self.topology.base_frame.CalcPoseInWorld(self.context).GetAsMatrix34()
 
 
-def _resolve_body(plant: MultibodyPlant, body, who: str) -> RigidBody:
-    if isinstance(body, RigidBody):
-        if int(body.index()) >= plant.num_bodies() or plant.get_body(body.index()).name() != body.name():
-            raise ValueError(f"{who}: body '{body.name()}' does not belong to this plant")
-        resolved = plant.get_body(body.index())
-    elif isinstance(body, str):
-        if not plant.HasBodyNamed(body):
-            raise ValueError(f"{who}: unknown body '{body}'")
-        resolved = plant.GetBodyByName(body)
-    elif isinstance(body, (int, np.integer, BodyIndex)):
-        index = int(body)
-        if not 0 <= index < plant.num_bodies():
-            raise ValueError(f"{who}: body index {index} out of range [0, {plant.num_bodies()})")
-        resolved = plant.get_body(BodyIndex(index))
-    else:
-        raise ValueError(f"{who}: a body must be a RigidBody, a name or an index, got {type(body).__name__}")
-    if resolved.index() == plant.world_body().index():
-        raise ValueError(f"{who}: the world body cannot carry a contact of the robot")
-    return resolved
+#: ContactDetector's state: contact (1/0), detection time (s, -1: none), consecutive samples
+#: above the on-thresholds, time below the off-thresholds (s), the two test statistics.
+_DetectorState = namedview("_DetectorState", ("detected", "detection_time", "samples_above", "time_below",
+                                              "statistic_external", "statistic_internal"))
 
 
 def _weights(value, size: int, what: str) -> np.ndarray:
@@ -225,7 +202,7 @@ class ContactForceEstimator(LeafSystem):
         if mode not in self.MODES:
             raise ValueError(f"{who}: unknown mode {mode!r}; choose one of {self.MODES}")
         self._mode = mode
-        self._kin = _Kinematics(plant, who)
+        self._kin = _SensedConfiguration(plant, who)
         nq, nv, n = self._kin.nq, self._kin.nv, self._kin.n
         self._damping = float(damping)
         if not math.isfinite(self._damping) or self._damping < 0.0:
@@ -240,7 +217,7 @@ class ContactForceEstimator(LeafSystem):
                 p = np.asarray(p, dtype=float).reshape(-1)
                 if p.shape != (3,) or not np.all(np.isfinite(p)):
                     raise ValueError(f"{who}: contact_points[{i}] point must be 3 finite numbers")
-                points.append((_resolve_body(plant, body, who), p))
+                points.append((resolve_body(plant, body, who), p))
             if not points:
                 raise ValueError(f"{who}: contact_points is empty")
             if num_contacts is not None and num_contacts != len(points):
@@ -295,7 +272,7 @@ class ContactForceEstimator(LeafSystem):
         for i, row in enumerate(raw):
             if row[0] != round(row[0]):
                 raise ValueError(f"{self._who}: input 'contact_points' entry {i}: body index {row[0]} is not an integer")
-            out.append((_resolve_body(plant, int(round(row[0])), f"{self._who}: input 'contact_points' entry {i}"), row[1:].copy()))
+            out.append((resolve_body(plant, int(round(row[0])), f"{self._who}: input 'contact_points' entry {i}"), row[1:].copy()))
         return out
 
     def system_matrix(self, q: np.ndarray, points: Sequence[tuple[RigidBody, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
@@ -312,7 +289,7 @@ class ContactForceEstimator(LeafSystem):
                 X = kin.body_pose(body)
                 p_W = X[:, :3] @ p_B + X[:, 3]
                 J = kin.jacobian(body, p_B)
-                A[:3, 3 * c : 3 * c + 3] = _skew(p_W)
+                A[:3, 3 * c : 3 * c + 3] = skew(p_W)
                 A[3:6, 3 * c : 3 * c + 3] = np.eye(3)
                 A[6:, 3 * c : 3 * c + 3] = (J[:, 6:] - J[:, :6] @ E).T
             return A, np.concatenate((self._w_ext, self._w_int))
@@ -324,7 +301,7 @@ class ContactForceEstimator(LeafSystem):
             X = kin.body_pose(body)
             p_W = X[:, :3] @ p_B + X[:, 3]
             J = kin.jacobian(body, p_B)
-            A[:3, 3 * c : 3 * c + 3] = R.T @ _skew(p_W - p_F0)
+            A[:3, 3 * c : 3 * c + 3] = R.T @ skew(p_W - p_F0)
             A[3:6, 3 * c : 3 * c + 3] = R.T
             A[6:, 3 * c : 3 * c + 3] = J[:, 6:].T
         return A, self._w_cls
@@ -409,7 +386,7 @@ def predicted_residual_covariances(
     """
     from systems.dynamics.floating_base import FloatingBaseDynamics
 
-    kin = _Kinematics(plant, "predicted_residual_covariances")
+    kin = _SensedConfiguration(plant, "predicted_residual_covariances")
     if q is None:
         q = plant.GetPositions(kin.context)
     q = np.asarray(q, dtype=float)
@@ -512,7 +489,7 @@ class ContactDetector(LeafSystem):
     ):
         super().__init__()
         who = self._who = "ContactDetector"
-        kin = _Kinematics(plant, who)
+        kin = _SensedConfiguration(plant, who)
         n = kin.n
         if not (use_external or use_internal):
             raise ValueError(f"{who}: at least one of use_external, use_internal must be True")
@@ -544,11 +521,13 @@ class ContactDetector(LeafSystem):
 
         self._wrench_port = self.DeclareVectorInputPort("external_wrench_world", 6)
         self._residual_port = self.DeclareVectorInputPort("residual", n)
-        self._state_index = self.DeclareDiscreteState(np.array([0.0, -1.0, 0.0, 0.0, 0.0, 0.0]))
+        self._state_index = self.DeclareDiscreteState(np.array([0.0, -1.0, 0.0, 0.0, 0.0, 0.0]))  # _DetectorState
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._Update)
-        self.DeclareVectorOutputPort("contact_detected", 1, lambda c, o: o.SetFromVector(self._s(c)[:1]), {self.xd_ticket()})
-        self.DeclareVectorOutputPort("detection_time", 1, lambda c, o: o.SetFromVector(self._s(c)[1:2]), {self.xd_ticket()})
-        self.DeclareVectorOutputPort("test_statistics", 2, lambda c, o: o.SetFromVector(self._s(c)[4:6]), {self.xd_ticket()})
+        xd = {self.xd_ticket()}
+        self.DeclareVectorOutputPort("contact_detected", 1, lambda c, o: o.SetFromVector([self._s(c).detected]), xd)
+        self.DeclareVectorOutputPort("detection_time", 1, lambda c, o: o.SetFromVector([self._s(c).detection_time]), xd)
+        self.DeclareVectorOutputPort("test_statistics", 2, lambda c, o: o.SetFromVector(
+            [self._s(c).statistic_external, self._s(c).statistic_internal]), xd)
 
     def _whitener(self, cov, size: int, name: str) -> np.ndarray:
         """W with W^T W = cov^-1 (inverse Cholesky factor), from a covariance or stds."""
@@ -575,13 +554,14 @@ class ContactDetector(LeafSystem):
         z_int = self._L_int @ np.asarray(residual)
         return float(z_ext @ z_ext), float(z_int @ z_int)
 
-    def _s(self, context: Context) -> np.ndarray:
-        return context.get_discrete_state(self._state_index).get_value()
+    def _s(self, context: Context) -> "_DetectorState":
+        return _DetectorState(context.get_discrete_state(self._state_index).get_value())
 
     def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
         w = eval_finite_input(self._who, self._wrench_port, context)
         r = eval_finite_input(self._who, self._residual_port, context)
-        detected, t_detect, above, below_time, _, _ = self._s(context)
+        old = self._s(context)
+        detected, t_detect, above, below_time = old.detected, old.detection_time, old.samples_above, old.time_below
         s = self.statistics(w, r)
         use = self._use
         is_above = any(u and si > th for u, si, th in zip(use, s, self._on))
@@ -602,6 +582,9 @@ class ContactDetector(LeafSystem):
 # ---------------------------------------------------------------------------------------
 # ContactLocalizer: Sec. VI, eq. (22), Fig. 9.
 # ---------------------------------------------------------------------------------------
+
+#: ContactLocalizer's averaging state: averaging (1/0), samples averaged, onset time (s).
+_Averaging = namedview("_Averaging", ("active", "count", "onset"))
 
 VALID, NO_CONTACT, FORCE_TOO_SMALL, NO_INTERSECTION, AMBIGUOUS = 0, 1, 2, 3, 4
 STATUS_REASONS = {
@@ -729,16 +712,16 @@ class ContactLocalizer(LeafSystem):
     ):
         super().__init__()
         who = self._who = "ContactLocalizer"
-        self._kin = kin = _Kinematics(plant, who)
+        self._kin = kin = _SensedConfiguration(plant, who)
         inspector = scene_graph.model_inspector() if isinstance(scene_graph, SceneGraph) else scene_graph
         if not isinstance(inspector, SceneGraphInspector):
             raise ValueError(f"{who}: scene_graph must be a SceneGraph or SceneGraphInspector")
-        excluded = {int(_resolve_body(plant, b, who).index()) for b in exclude_bodies}
+        excluded = {int(resolve_body(plant, b, who).index()) for b in exclude_bodies}
         if bodies is None:
             candidates = [plant.get_body(BodyIndex(i)) for i in range(1, plant.num_bodies())]
             candidates = [b for b in candidates if plant.GetCollisionGeometriesForBody(b)]
         else:
-            candidates = [_resolve_body(plant, b, who) for b in bodies]
+            candidates = [resolve_body(plant, b, who) for b in bodies]
         candidates = [b for b in candidates if int(b.index()) not in excluded]
         if not candidates:
             raise ValueError(f"{who}: no candidate link left")
@@ -762,8 +745,9 @@ class ContactLocalizer(LeafSystem):
         self._wrench_port = self.DeclareVectorInputPort("external_wrench_world", 6)
         self._residual_port = self.DeclareVectorInputPort("residual", n)
         self._detected_port = self.DeclareVectorInputPort("contact_detected", 1) if use_detector else None
-        # Averaging state: [active, count, onset], mean wrench, mean residual, mean q.
-        self._avg_index = self.DeclareDiscreteState(3 + 6 + n + nq)
+        # Averaging state: _Averaging, then the means of the wrench (6), residual (n) and q (nq).
+        self._avg_index = self.DeclareDiscreteState(len(_Averaging.get_fields()))
+        self._means_index = self.DeclareDiscreteState(6 + n + nq)
         result0 = np.array([NO_CONTACT, -1, 0, 0, 0, 0, 0, 0, np.inf, np.inf], dtype=float)
         self._result_index = self.DeclareDiscreteState(result0)
         self._n, self._nq = n, nq
@@ -793,7 +777,7 @@ class ContactLocalizer(LeafSystem):
             return LocalizationResult(FORCE_TOO_SMALL, force_W=f.copy())
         fn = math.sqrt(f2)
         d = f / fn
-        p0 = _cross(f, m) / f2  # eq. (22)
+        p0 = cross(f, m) / f2  # eq. (22)
         kin, geo = self._kin, self._geometry
         kin.set_positions(np.asarray(q, dtype=float))
         X_WB = np.array([kin.body_pose(b) for b in self._bodies])
@@ -859,27 +843,28 @@ class ContactLocalizer(LeafSystem):
         detected = True
         if self._detected_port is not None:
             detected = float(eval_finite_input(who, self._detected_port, context)[0]) > 0.5
-        avg = np.array(context.get_discrete_state(self._avg_index).get_value())
+        avg = _Averaging(np.array(context.get_discrete_state(self._avg_index).get_value()))
         n = self._n
         t = context.get_time()
         if not detected:
-            avg[:3] = 0.0
-            discrete_state.set_value(self._avg_index, avg)
+            discrete_state.set_value(self._avg_index, np.zeros(len(_Averaging.get_fields())))
             discrete_state.set_value(self._result_index, self._pack(LocalizationResult(NO_CONTACT, force_W=np.array(w[3:]))))
             return
-        if avg[0] < 0.5:
-            avg[:3] = (1.0, 0.0, t)
-        if t - avg[2] >= self._settle_time - 1e-12:
-            avg[1] += 1.0
-            alpha = 1.0 / avg[1]
+        if avg.active < 0.5:
+            avg.active, avg.count, avg.onset = 1.0, 0.0, t
+        if t - avg.onset >= self._settle_time - 1e-12:
+            avg.count += 1.0
+            alpha = 1.0 / avg.count
             if self._tau is not None:
                 alpha = max(alpha, self._period / self._tau)
             sample = np.concatenate((w, r, q))
-            avg[3:] += alpha * (sample - avg[3:])
-            w, r = avg[3:9], avg[9 : 9 + n]
-            q = avg[9 + n :].copy()
+            means = np.array(context.get_discrete_state(self._means_index).get_value())
+            means += alpha * (sample - means)
+            discrete_state.set_value(self._means_index, means)
+            w, r = means[:6], means[6 : 6 + n]
+            q = means[6 + n :].copy()
             q[:4] /= np.linalg.norm(q[:4])  # the mean of nearby unit quaternions, renormalised
-        discrete_state.set_value(self._avg_index, avg)
+        discrete_state.set_value(self._avg_index, avg[:])
         discrete_state.set_value(self._result_index, self._pack(self.localize(q, w, r)))
 
     @staticmethod
@@ -887,3 +872,20 @@ class ContactLocalizer(LeafSystem):
         return np.concatenate((
             [float(result.status), float(result.body_index)], result.point_W, result.force_W,
             [result.score, result.runner_up_score]))
+
+
+class GatedEstimate(LeafSystem):
+    """The localizer's force and point, zeroed while the result is not valid (so the
+    estimate's arrow hides). Inputs ``force``, ``point``, ``valid``; outputs ``force_world``,
+    ``point_world``."""
+
+    def __init__(self):
+        super().__init__()
+        self._f = self.DeclareVectorInputPort("force", 3)
+        self._p = self.DeclareVectorInputPort("point", 3)
+        self._v = self.DeclareVectorInputPort("valid", 1)
+        self.DeclareVectorOutputPort("force_world", 3, self._CalcForce)
+        self.DeclareVectorOutputPort("point_world", 3, lambda c, o: o.SetFromVector(self._p.Eval(c)))
+
+    def _CalcForce(self, context: Context, output: BasicVector) -> None:
+        output.SetFromVector(self._f.Eval(context) if self._v.Eval(context)[0] > 0.5 else np.zeros(3))

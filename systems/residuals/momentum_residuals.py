@@ -59,7 +59,7 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Frame, JacobianWrtVariable
 from pydrake.systems.framework import Context, DiscreteValues, LeafSystem
 
-from systems.dynamics.floating_base import DrakeFloatingBaseDynamics, FloatingBaseDynamics
+from systems.dynamics.floating_base import FloatingBaseDynamics
 from systems.dynamics.floating_base_terms import FloatingBaseTerms
 from systems.common.checks import eval_finite_input
 from systems.common.topology import uniform_gravity
@@ -88,10 +88,10 @@ class ResidualModel:
         self.num_positions = plant.num_positions()
         self.num_velocities = plant.num_velocities()
         self.joint_velocity_start = 6
-        impl = self.dynamics._impl
-        if isinstance(impl, DrakeFloatingBaseDynamics):
-            # After compute(q, v) its F0 context holds q's joints at the identity base pose.
-            self._context_F0 = impl._context_F0
+        context_F0 = self.dynamics.context_F0
+        if context_F0 is not None:
+            # After compute(q, v) the F0 context holds q's joints at the identity base pose.
+            self._context_F0 = context_F0
             self._context_is_current = True
         else:
             self._context_F0 = plant.CreateDefaultContext()

@@ -40,7 +40,9 @@ from pydrake.multibody.tree import JacobianWrtVariable, RigidBody
 from pydrake.systems.framework import BasicVector, Context, LeafSystem, ValueProducer
 
 from systems.dynamics.floating_base import FloatingBaseDynamics
-from systems.common.checks import vector3
+from systems.common.checks import resolve_body, vector3
+from systems.common.smoothing import smoothstep5
+from systems.common.spatial import cross
 
 __all__ = [
     "ForceProfile",
@@ -134,11 +136,6 @@ class Sinusoid:
         return np.where(on, self.offset + self.amplitude * np.sin(w * (t - self.t_start) + self.phase), 0.0)
 
 
-def _quintic_smoothstep(x):
-    """s(x) = 10x³ - 15x⁴ + 6x⁵: s(0)=0, s(1)=1, s' and s'' vanish at both ends."""
-    return x * x * x * (10.0 + x * (-15.0 + 6.0 * x))
-
-
 @dataclass(frozen=True)
 class PolynomialRampUpDown:
     """Rise from 0 at t_start to ``peak`` at t_peak, back to 0 at t_end, zero outside.
@@ -174,10 +171,10 @@ class PolynomialRampUpDown:
             if t <= t0 or t >= t2:
                 return 0.0
             x = (t - t0) / (t1 - t0) if t <= t1 else (t2 - t) / (t2 - t1)
-            return self.peak * _quintic_smoothstep(x)
+            return self.peak * smoothstep5(x)
         t = np.asarray(t, dtype=float)
         x = np.where(t <= t1, (t - t0) / (t1 - t0), (t2 - t) / (t2 - t1))
-        return self.peak * _quintic_smoothstep(np.clip(x, 0.0, 1.0))
+        return self.peak * smoothstep5(x)
 
 
 @dataclass(frozen=True)
@@ -210,11 +207,6 @@ class Step:
         return np.where((t >= self.t_on) & (t < self.t_off), self.magnitude, 0.0)
 
 
-def _smoothstep_array(x):
-    x = np.clip(x, 0.0, 1.0)
-    return x * x * x * (10.0 + x * (-15.0 + 6.0 * x))
-
-
 @dataclass(frozen=True)
 class SmoothPiecewise:
     """A force profile through knots (t_i, v_i): constant before the first and after the
@@ -244,12 +236,12 @@ class SmoothPiecewise:
                 return float(self.values[-1])
             t0, t1, v0, v1 = self.times[k - 1], self.times[k], self.values[k - 1], self.values[k]
             x = (t - t0) / (t1 - t0)
-            return float(v0 + (v1 - v0) * x * x * x * (10.0 + x * (-15.0 + 6.0 * x)))
+            return float(v0 + (v1 - v0) * smoothstep5(x))
         times, values = np.asarray(self.times, float), np.asarray(self.values, float)
         t_arr = np.asarray(t, dtype=float)
         out = np.full(t_arr.shape, values[0])
         for (t0, v0), (t1, v1) in zip(zip(times, values), zip(times[1:], values[1:])):
-            out = np.where(t_arr >= t0, v0 + (v1 - v0) * _smoothstep_array((t_arr - t0) / (t1 - t0)), out)
+            out = np.where(t_arr >= t0, v0 + (v1 - v0) * smoothstep5((t_arr - t0) / (t1 - t0)), out)
         out = np.where(t_arr >= times[-1], values[-1], out)
         return float(out) if np.ndim(t) == 0 else out
 
@@ -337,7 +329,7 @@ class Push:
 # ---------------------------------------------------------------------------------------
 
 
-class _Kinematics:
+class _PushGroundTruth:
     """Cached ground truth shared by the wrench outputs (one per context)."""
 
     __slots__ = ("forces", "points", "active", "R_WF0", "p_WF0", "q")
@@ -351,24 +343,9 @@ class _Kinematics:
         self.p_WF0 = np.zeros(3)  # base frame origin in world, m
 
 
-def _resolve_body(plant: MultibodyPlant, push: Push) -> RigidBody:
-    name = push.body_name
-    if push.model_instance_name is not None:
-        if not plant.HasModelInstanceNamed(push.model_instance_name):
-            raise ValueError(f"push on body {name!r}: no model instance named "
-                             f"{push.model_instance_name!r} in the plant")
-        instance = plant.GetModelInstanceByName(push.model_instance_name)
-        if not plant.HasBodyNamed(name, instance):
-            raise ValueError(f"push on body {name!r}: no body of that name in model instance "
-                             f"{push.model_instance_name!r}")
-        return plant.GetBodyByName(name, instance)
-    if not plant.HasBodyNamed(name):
-        raise ValueError(f"push on body {name!r}: the plant has no body of that name")
-    try:
-        return plant.GetBodyByName(name)
-    except RuntimeError as error:  # the name exists in several model instances
-        raise ValueError(f"push on body {name!r}: the name is ambiguous ({error}); "
-                         "set Push.model_instance_name") from None
+def _push_body(plant: MultibodyPlant, push: Push) -> RigidBody:
+    return resolve_body(plant, push.body_name, f"push on body {push.body_name!r}",
+                        model_instance=push.model_instance_name, allow_world=True)
 
 
 def _tree_bodies(plant: MultibodyPlant, root: RigidBody) -> set:
@@ -452,7 +429,7 @@ class PushSource(LeafSystem):
         self._plant = plant
         self._dynamics = dynamics
         self._pushes = pushes
-        self._bodies = tuple(_resolve_body(plant, p) for p in pushes)
+        self._bodies = tuple(_push_body(plant, p) for p in pushes)
         tree = _tree_bodies(plant, dynamics.topology.base_body)
         self._on_robot = np.array([b.index() in tree for b in self._bodies], dtype=bool)
         self._base_frame = dynamics.topology.base_frame
@@ -486,7 +463,7 @@ class PushSource(LeafSystem):
             self._CalcAppliedForces, prerequisites_of_calc=time_only)
         self._kinematics = self.DeclareCacheEntry(
             "push ground truth (forces, points)",
-            ValueProducer(allocate=lambda: AbstractValue.Make(_Kinematics(k, self._nq)),
+            ValueProducer(allocate=lambda: AbstractValue.Make(_PushGroundTruth(k, self._nq)),
                           calc=self._CalcKinematics),
             prerequisites_of_calc=truth)
         self._force_world_port = self.DeclareVectorOutputPort(
@@ -580,7 +557,7 @@ class PushSource(LeafSystem):
             X_WB = plant.EvalBodyPoseInWorld(ctx, body).GetAsMatrix34()
             kin.points[i] = X_WB[:, :3] @ push.p_BoP_B + X_WB[:, 3]
 
-    def _eval_kinematics(self, context: Context) -> _Kinematics:
+    def _eval_kinematics(self, context: Context) -> _PushGroundTruth:
         return self._kinematics.Eval(context)
 
     def _CalcForceWorld(self, context: Context, output: BasicVector) -> None:
@@ -589,11 +566,11 @@ class PushSource(LeafSystem):
     def _CalcPointWorld(self, context: Context, output: BasicVector) -> None:
         output.SetFromVector(self._eval_kinematics(context).points.reshape(-1))
 
-    def _wrench_world(self, kin: _Kinematics) -> np.ndarray:
+    def _wrench_world(self, kin: _PushGroundTruth) -> np.ndarray:
         """[Σ p × f; Σ f] over the active pushes on the robot, world, about the world origin."""
         w = np.zeros(6)
         for i in np.flatnonzero(kin.active & self._on_robot):
-            w[:3] += _cross(kin.points[i], kin.forces[i])
+            w[:3] += cross(kin.points[i], kin.forces[i])
             w[3:] += kin.forces[i]
         return w
 
@@ -605,7 +582,7 @@ class PushSource(LeafSystem):
         w = self._wrench_world(kin)
         if w.any():
             # Shift the moment to the F0 origin (still in world), then express both in F0.
-            w[:3] -= _cross(kin.p_WF0, w[3:])
+            w[:3] -= cross(kin.p_WF0, w[3:])
             R_F0W = kin.R_WF0.T
             w[:3] = R_F0W @ w[:3]
             w[3:] = R_F0W @ w[3:]
@@ -641,10 +618,3 @@ class PushSource(LeafSystem):
 _ZERO3 = np.zeros(3)
 #: The plant's applied_spatial_force input type (typed even for an empty push list).
 _ForceListValue = Value[list[ExternallyAppliedSpatialForce]]
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a × b for 3-vectors (np.cross costs ~15 µs per call)."""
-    ax, ay, az = a.tolist()
-    bx, by, bz = b.tolist()
-    return np.array((ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx))

@@ -24,7 +24,7 @@ from collections import OrderedDict
 import numpy as np
 from pydrake.systems.framework import BasicVector, Context, LeafSystem
 
-from systems.common.checks import check_finite_input
+from systems.common.checks import check_finite_input, per_joint
 
 #: Samples generated per random-generator call (one block per (seed, block index)).
 BLOCK_SIZE = 1024
@@ -41,19 +41,7 @@ def as_std_vector(std, dimension: int, name: str = "std") -> np.ndarray:
     Raises:
         ValueError: wrong shape, NaN/inf or negative entries; the message names ``name``.
     """
-    try:
-        arr = np.asarray(std, dtype=float)
-    except (TypeError, ValueError) as err:
-        raise ValueError(f"{name} must be a number or an array of numbers, got {std!r}") from err
-    if arr.ndim == 0:
-        arr = np.full(dimension, float(arr))
-    elif arr.shape != (dimension,):
-        raise ValueError(f"{name} must be a scalar or have shape ({dimension},), got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite, got {arr.tolist()}")
-    if np.any(arr < 0.0):
-        raise ValueError(f"{name} must be non-negative, got {arr.tolist()}")
-    return arr.copy()
+    return per_joint(std, dimension, name, sign="non-negative", entry="entry")
 
 
 def check_period(period, name: str = "period") -> float:

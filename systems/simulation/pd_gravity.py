@@ -25,7 +25,7 @@ from pydrake.multibody.tree import Joint, JointActuatorIndex
 from pydrake.systems.framework import BasicVector, Context, LeafSystem
 
 from systems.dynamics.base_state import QUATERNION_NORM_TOLERANCE
-from systems.common.checks import eval_finite_input
+from systems.common.checks import eval_finite_input, per_joint
 from systems.common.topology import floating_base_topology
 
 
@@ -53,15 +53,6 @@ def joint_vector_from_names(plant: MultibodyPlant, values: dict[str, float],
             raise ValueError(f"no 1-DoF joint named {name!r} in the plant")
         out[index[name]] = value
     return out
-
-
-def _per_joint(value, n: int, what: str) -> np.ndarray:
-    arr = np.asarray(value, dtype=float)
-    if arr.ndim == 0:
-        return np.full(n, float(arr))
-    if arr.shape != (n,):
-        raise ValueError(f"{what} must be a scalar or have shape ({n},), got {arr.shape}")
-    return arr.copy()
 
 
 class PdGravityController(LeafSystem):
@@ -112,10 +103,8 @@ class PdGravityController(LeafSystem):
         joints = joints_in_velocity_order(plant)
         n = len(joints)
         self._n = n
-        self._kp = _per_joint(kp, n, "kp")
-        self._kd = _per_joint(kd, n, "kd")
-        if np.any(self._kp < 0) or np.any(self._kd < 0):
-            raise ValueError("kp and kd must be non-negative")
+        self._kp = per_joint(kp, n, "kp", who="PdGravityController", sign="non-negative")
+        self._kd = per_joint(kd, n, "kd", who="PdGravityController", sign="non-negative")
         self._q_index = np.array([j.position_start() for j in joints], dtype=int)
         self._v_index = np.array([j.velocity_start() for j in joints], dtype=int)
         self._nq = plant.num_positions()
@@ -137,9 +126,8 @@ class PdGravityController(LeafSystem):
         if effort_limits is None:
             self._limits = model_limits
         else:
-            self._limits = _per_joint(effort_limits, n, "effort_limits")
-            if np.any(self._limits < 0):
-                raise ValueError("effort_limits must be non-negative")
+            self._limits = per_joint(effort_limits, n, "effort_limits", who="PdGravityController", allow_inf=True,
+                                     sign="non-negative")
         self._neg_limits = -self._limits
 
         self._desired_port = self.DeclareVectorInputPort("desired_position", n)

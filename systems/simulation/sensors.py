@@ -51,6 +51,7 @@ from systems.simulation.noise import (
     check_period,
     check_seed,
 )
+from systems.common.checks import check_plant
 from systems.common.topology import floating_base_topology
 
 #: Default noise standard deviations (SI) of the sensors: white Gaussian noise, sampled and
@@ -81,17 +82,9 @@ SEEDS_PER_CALL = 16
 # ---------------------------------------------------------------------------------------
 
 
-def _check_plant(plant, who: str) -> MultibodyPlant:
-    if not isinstance(plant, MultibodyPlant):
-        raise ValueError(f"{who}: plant must be a MultibodyPlant, got {type(plant).__name__}")
-    if not plant.is_finalized():
-        raise ValueError(f"{who}: the MultibodyPlant must be finalized")
-    return plant
-
-
 def _joint_indices(plant: MultibodyPlant, who: str):
     """(topology, q index per joint, v index per joint) in v[6:] order."""
-    _check_plant(plant, who)
+    check_plant(plant, who)
     try:
         topology = floating_base_topology(plant)
     except ValueError as err:
@@ -371,7 +364,7 @@ class FootForceTorqueSensors(LeafSystem):
         """
         super().__init__()
         who = "FootForceTorqueSensors"
-        _check_plant(plant, who)
+        check_plant(plant, who)
         if isinstance(sensor_joints, (str, bytes, Joint)) or not isinstance(sensor_joints, Sequence):
             raise ValueError(f"{who}: sensor_joints must be a sequence of weld joints, got "
                              f"{type(sensor_joints).__name__}")
@@ -552,7 +545,7 @@ def add_imu(builder: DiagramBuilder, plant: MultibodyPlant, frame: Frame, *,
         ValueError: unfinalized plant, a frame not of this plant, bad std/period/seed.
     """
     who = "add_imu"
-    _check_plant(plant, who)
+    check_plant(plant, who)
     if not isinstance(frame, Frame):
         raise ValueError(f"{who}: frame must be a Frame, got {type(frame).__name__}")
     if frame.GetParentPlant() is not plant:
@@ -820,7 +813,7 @@ def add_sensors(builder: DiagramBuilder, plant: MultibodyPlant, handles: Humanoi
         ValueError: bad arguments (see the individual sensors).
     """
     who = "add_sensors"
-    _check_plant(plant, who)
+    check_plant(plant, who)
     if not isinstance(noise, (bool, np.bool_)):
         raise ValueError(f"{who}: noise must be a bool, got {noise!r}")
     if not isinstance(name_prefix, str):

@@ -253,10 +253,10 @@ def benchmark_contact_localizer(model: str = "hrp4_like", *, calls: int = 100, b
     scores) at a new sensed state, for the lines of 16 random contacts of the study, in us
     and as a ratio to one CalcMassMatrix after a new state measured in the same run (the
     unit of ``apps.benchmark``). For ``make benchmark``; the issue's floor is 2 ms."""
-    from diagrams.residuals.contact_localization import (ContactLocalizationConfig, build_contact_localization_diagram,
+    from diagrams.residuals.contact_localization import (ContactLocalizationScenario, build_contact_localization_diagram,
                                                          sample_trials)
 
-    _, handles = build_contact_localization_diagram(ContactLocalizationConfig(model=model, noise=False))
+    _, handles = build_contact_localization_diagram(ContactLocalizationScenario(model=model, noise=False))
     plant, localizer = handles.plant, handles.localizer
     x0 = handles.station.initial_state
     nq = plant.num_positions()

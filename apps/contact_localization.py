@@ -10,236 +10,106 @@ detection and its delay, the localized link and point and the force at the end o
 computation time of one localizer update. A separate run without contact (10 s) counts
 false detections.
 
-Run: ``python -m apps.contact_localization [--trials N] [--seed S] [--model M] [--out DIR]
-[--headless] [--workers W] [--replays R]``. Trials run in parallel processes ('spawn').
-Writes to ``DIR/contact_localization/``: ``metrics.json`` (totals, floors, per-trial
-results), ``position_errors.png`` (histogram), and ``replay_trial_<i>.html`` (Meshcat
-replays of the first R trials: green arrow = true force ending at the true contact
-point, red arrow = the localizer's estimate, shown while valid).
+Run: ``python -m apps.contact_localization [--scenario FILE] [--scenario-text YAML]
+[--trials N] [--seed S] [--model M] [--push-start S] [--contact-duration S]
+[--no-contact-duration S] [--no-noise] [--out DIR] [--headless] [--workers W] [--replays R]``.
+The scenario is a ``ContactLocalizationScenario``; ``--trials``, ``--seed``, ``--model``,
+``--push-start``, ``--contact-duration`` (``push_duration``), ``--no-contact-duration`` and
+``--no-noise`` override its fields; ``--workers`` and ``--replays`` are how it runs. Trials run
+in parallel processes ('spawn'). Writes to ``DIR/contact_localization/``: ``metrics.json``
+(totals, floors, per-trial results, the scenario), ``position_errors.png`` (histogram), and
+``replay_trial_<i>.html`` (Meshcat replays of the first R trials: green arrow = true force
+ending at the true contact point, red arrow = the localizer's estimate, shown while valid).
 
-Metric definitions: ``detection_rate`` = trials whose contact was detected during the push
-(a detection before the push counts as a false detection, not as this trial's);
-``correct_link_rate`` and the position errors are over ALL trials (a trial without a
-localization counts as a wrong link and an infinite position error); force errors are over
-the detected trials: |f_hat - f| / |f| and the angle between f_hat and f.
+The metrics are defined in ``diagrams.residuals.contact_localization``.
 """
 
 from __future__ import annotations
 
-import argparse
-import json
-import math
 import multiprocessing
 import os
-import sys
 import time
 from pathlib import Path
 
-import matplotlib
+import matplotlib.pyplot as plt
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from apps.runner import (
+    experiment_parser,
+    output_folder,
+    print_written,
+    replay_meshcat,
+    run_app,
+    save_replay,
+    scenario_from_args,
+    simulate,
+    write_metrics,
+)
+from diagrams.residuals.contact_localization import (
+    FLOORS,
+    MAX_ANGLE_DEG,
+    MAX_FORCE,
+    MIN_FORCE,
+    ContactLocalizationScenario,
+    build_contact_localization_diagram,
+    contact_localization_metrics,
+    no_contact_result,
+    no_contact_scenario,
+    sample_trials,
+    trial_result,
+    trial_scenario,
+)
+from diagrams.scenarios import load_scenario, scenario_as_yaml
 
-from diagrams.residuals.contact_localization import MAX_ANGLE_DEG, MAX_FORCE, MIN_FORCE, sample_trials  # noqa: E402
+#: The replays go on 0.3 s after the push, to show its release.
+REPLAY_AFTER_PUSH_S = 0.3
 
-FLOORS = {
-    "detection_rate": (">=", 0.99),
-    "median_detection_delay_s": ("<=", 0.020),
-    "false_detections": ("<=", 0),
-    "correct_link_rate": (">=", 0.95),
-    "median_position_error_m": ("<=", 0.02),
-    "p95_position_error_m": ("<=", 0.05),
-    "median_force_error_rel": ("<=", 0.05),
-    "median_angle_error_deg": ("<=", 5.0),
-    "median_localizer_update_ms": ("<=", 2.0),
-}
 
 # ---------------------------------------------------------------------------------------
 # One trial (worker process).
 # ---------------------------------------------------------------------------------------
 
 
-def _time_localizer_update(handles, context, repeats: int = 20) -> float:
-    """Median wall time [s] of one ContactLocalizer update with the trial's final inputs,
-    each call at a slightly different q (so that no pose or mass matrix is reused)."""
-    localizer = handles.localizer
-    lc = localizer.GetMyContextFromRoot(context)
-    x = np.array(localizer.GetInputPort("state").Eval(lc))
-    probe = localizer.CreateDefaultContext()
-    state_value = localizer.GetInputPort("state").FixValue(probe, x)
-    for name in ("external_wrench_world", "residual", "contact_detected"):
-        localizer.GetInputPort(name).FixValue(probe, np.array(localizer.GetInputPort(name).Eval(lc)))
-    localizer.GetInputPort("contact_detected").FixValue(probe, [1.0])
-    rng = np.random.default_rng(0)
-    nq = handles.plant.num_positions()
-    samples = []
-    for _ in range(repeats):
-        x2 = x.copy()
-        x2[7:nq] += 1e-6 * rng.normal(size=nq - 7)
-        state_value.GetMutableData().set_value(x2)
-        start = time.perf_counter()
-        localizer.EvalUniquePeriodicDiscreteUpdate(probe)
-        samples.append(time.perf_counter() - start)
-    return float(np.median(samples))
+def run_trial(spec: dict, scenario: ContactLocalizationScenario) -> dict:
+    """Simulates the trial ``spec`` (``sample_trials``) of ``scenario`` to the end of its push;
+    returns its results (``trial_result``)."""
+    trial = trial_scenario(scenario, spec)
+    diagram, handles = build_contact_localization_diagram(trial)
+    run = simulate(diagram, trial.push_start + trial.push_duration,
+                   set_initial_state=handles.station.set_initial_state, simulator_config=trial.simulator_config)
+    return trial_result(trial, spec, handles, run.context, run.wall_time_s)
 
 
-def run_trial(spec: dict, model: str = "hrp4_like", push_start: float = 0.5, duration: float = 1.0,
-              noise: bool = True, meshcat=None) -> dict:
-    """Simulates one trial; returns its results (see the module docstring)."""
-    from pydrake.multibody.tree import BodyIndex
-    from pydrake.systems.analysis import Simulator
-
-    from diagrams.residuals.contact_localization import ContactLocalizationConfig, build_contact_localization_diagram
-
-    config = ContactLocalizationConfig(
-        model=model, push_body=spec["body"], push_point=tuple(spec["point_body"]), push_force=tuple(spec["force_world"]),
-        push_start=push_start, push_duration=duration, noise=noise, seed=spec["noise_seed"])
-    diagram, handles = build_contact_localization_diagram(config, meshcat)
-    simulator = Simulator(diagram)
-    context = simulator.get_mutable_context()
-    handles.station.set_initial_state(context)
-    if meshcat is not None:
-        meshcat.StartRecording(frames_per_second=32.0)
-    simulator.Initialize()
-    wall = time.perf_counter()
-    t_end = push_start + duration
-    simulator.AdvanceTo(t_end)
-    wall = time.perf_counter() - wall
-    estimate = handles.localizer.estimate(handles.localizer.GetMyContextFromRoot(context))
-    pc = handles.push_source.GetMyContextFromRoot(context)
-    true_point = np.array(handles.push_source.GetOutputPort("point_world").Eval(pc))
-    f_true = np.asarray(spec["force_world"])
-    if meshcat is not None:
-        simulator.AdvanceTo(t_end + 0.3)  # the replay shows the release too
-        meshcat.StopRecording()
-        meshcat.PublishRecording()
-
-    log = handles.loggers["contact_detected"].FindLog(context)
-    t, detected = log.sample_times(), log.data()[0]
-    times = handles.loggers["detection_time"].FindLog(context).data()[0]
-    during = (t >= push_start) & (t <= t_end) & (detected > 0.5)
-    rising = np.flatnonzero(np.diff(np.concatenate(([0.0], detected))) > 0.5)
-    false_before = int(np.sum(t[rising] < push_start))
-    result = {
-        **spec,
-        "detected": bool(during.any()),
-        "false_detections_before_push": false_before,
-        "detection_delay_s": None,
-        "status": estimate.status,
-        "status_reason": estimate.reason,
-        "estimated_body_index": estimate.body_index,
-        "estimated_body": handles.plant.get_body(BodyIndex(estimate.body_index)).name()
-        if estimate.body_index >= 0 else None,
-        "correct_link": estimate.body_index == spec["body_index"],
-        "position_error_m": None,
-        "force_error_rel": None,
-        "angle_error_deg": None,
-        "score": estimate.score if math.isfinite(estimate.score) else None,
-        "runner_up_score": estimate.runner_up_score if math.isfinite(estimate.runner_up_score) else None,
-        "true_point_world": true_point.tolist(),
-        "estimated_point_world": estimate.point_W.tolist(),
-        "estimated_force_world": estimate.force_W.tolist(),
-        "simulation_wall_s": wall,
-    }
-    if result["detected"]:
-        first = np.flatnonzero(during)[0]
-        result["detection_delay_s"] = float(times[first] - push_start)
-        f_hat = estimate.force_W
-        result["force_error_rel"] = float(np.linalg.norm(f_hat - f_true) / np.linalg.norm(f_true))
-        cos = float(f_hat @ f_true / max(np.linalg.norm(f_hat) * np.linalg.norm(f_true), 1e-300))
-        result["angle_error_deg"] = math.degrees(math.acos(min(1.0, max(-1.0, cos))))
-    if estimate.body_index >= 0:
-        result["position_error_m"] = float(np.linalg.norm(estimate.point_W - true_point))
-    result["localizer_update_s"] = _time_localizer_update(handles, context)
-    return result
+def record_replay(spec: dict, scenario: ContactLocalizationScenario, meshcat, *, live: bool = True) -> None:
+    """Records the trial ``spec`` in ``meshcat``, its push and its release."""
+    trial = trial_scenario(scenario, spec)
+    diagram, handles = build_contact_localization_diagram(trial, meshcat)
+    simulate(diagram, trial.push_start + trial.push_duration + REPLAY_AFTER_PUSH_S,
+             set_initial_state=handles.station.set_initial_state, simulator_config=trial.simulator_config,
+             meshcat=meshcat, live=live, camera=([1.6, -1.6, 1.2], [0.0, 0.0, 0.7]))
 
 
-def run_no_contact(model: str, duration: float, seed: int, noise: bool = True) -> dict:
-    """A run without contact: the number of OFF->ON switches of the detector."""
-    from pydrake.systems.analysis import Simulator
-
-    from diagrams.residuals.contact_localization import ContactLocalizationConfig, build_contact_localization_diagram
-
-    config = ContactLocalizationConfig(model=model, push_body=None, noise=noise, seed=seed, log_period=1e-3)
-    diagram, handles = build_contact_localization_diagram(config)
-    simulator = Simulator(diagram)
-    context = simulator.get_mutable_context()
-    handles.station.set_initial_state(context)
-    simulator.Initialize()
-    simulator.AdvanceTo(duration)
-    log = handles.loggers["contact_detected"].FindLog(context)
-    detected = log.data()[0]
-    stats = handles.loggers["test_statistics"].FindLog(context).data()
-    on = handles.detector.thresholds["on"]
-    return {
-        "duration_s": duration,
-        "noise_seed": seed,
-        "false_detections": int(np.sum(np.diff(np.concatenate(([0.0], detected))) > 0.5)),
-        "max_statistic_over_threshold": [float(stats[0].max() / on[0]), float(stats[1].max() / on[1])],
-    }
+def run_no_contact(scenario: ContactLocalizationScenario) -> dict:
+    """The study's run without contact (``no_contact_scenario``): its false detections."""
+    run_scenario = no_contact_scenario(scenario)
+    diagram, handles = build_contact_localization_diagram(run_scenario)
+    run = simulate(diagram, run_scenario.no_contact_duration, set_initial_state=handles.station.set_initial_state,
+                   simulator_config=run_scenario.simulator_config)
+    return no_contact_result(run_scenario, handles, run.context)
 
 
 def _job(job: tuple) -> tuple[str, dict]:
-    kind, payload, options = job
+    # The scenario travels as YAML: Drake's config types do not pickle.
+    kind, spec, scenario_yaml = job
+    scenario = load_scenario(ContactLocalizationScenario, text=scenario_yaml)
     if kind == "trial":
-        return kind, run_trial(payload, **options)
-    return kind, run_no_contact(**payload)
+        return kind, run_trial(spec, scenario)
+    return kind, run_no_contact(scenario)
 
 
 # ---------------------------------------------------------------------------------------
-# Metrics and outputs.
+# Outputs.
 # ---------------------------------------------------------------------------------------
-
-
-def summarize(results: list[dict], no_contact: dict | None) -> dict:
-    """The totals of the module docstring."""
-    n = len(results)
-    detected = [r for r in results if r["detected"]]
-    delays = [r["detection_delay_s"] for r in detected]
-    positions = np.array([r["position_error_m"] if r["position_error_m"] is not None else np.inf for r in results])
-    forces = [r["force_error_rel"] for r in detected]
-    angles = [r["angle_error_deg"] for r in detected]
-    updates = np.array([r["localizer_update_s"] for r in results]) * 1e3
-
-    def median(values):
-        return float(np.median(values)) if len(values) else None
-
-    metrics = {
-        "trials": n,
-        "detection_rate": len(detected) / n if n else None,
-        "median_detection_delay_s": median(delays),
-        "p95_detection_delay_s": float(np.percentile(delays, 95)) if delays else None,
-        "false_detections": (no_contact["false_detections"] if no_contact else 0)
-        + sum(r["false_detections_before_push"] for r in results),
-        "false_detections_no_contact_run": no_contact["false_detections"] if no_contact else None,
-        "no_contact_run_s": no_contact["duration_s"] if no_contact else None,
-        "false_detections_before_push_in_trials": sum(r["false_detections_before_push"] for r in results),
-        "correct_link_rate": float(np.mean([r["correct_link"] for r in results])) if n else None,
-        "valid_rate": float(np.mean([r["status"] == 0 for r in results])) if n else None,
-        "ambiguous_rate": float(np.mean([r["status"] == 4 for r in results])) if n else None,
-        "median_position_error_m": float(np.median(positions)) if n else None,
-        "p95_position_error_m": float(np.percentile(positions, 95)) if n else None,
-        "median_position_error_correct_link_m": median([r["position_error_m"] for r in results if r["correct_link"]]),
-        "median_force_error_rel": median(forces),
-        "p95_force_error_rel": float(np.percentile(forces, 95)) if forces else None,
-        "median_angle_error_deg": median(angles),
-        "p95_angle_error_deg": float(np.percentile(angles, 95)) if angles else None,
-        "median_localizer_update_ms": float(np.median(updates)) if n else None,
-        "max_localizer_update_ms": float(np.max(updates)) if n else None,
-        "status_counts": {reason: sum(r["status_reason"] == reason for r in results)
-                          for reason in sorted({r["status_reason"] for r in results})},
-        "wrong_links": [{"trial": r["trial"], "true": r["body"], "estimated": r["estimated_body"],
-                         "status": r["status_reason"]} for r in results if not r["correct_link"]],
-    }
-    checks = {}
-    for key, (op, floor) in FLOORS.items():
-        value = metrics.get(key)
-        checks[key] = None if value is None else bool(value >= floor if op == ">=" else value <= floor)
-    metrics["floors"] = {k: f"{op} {v}" for k, (op, v) in FLOORS.items()}
-    metrics["meets_floors"] = checks
-    return metrics
-
 
 def plot_position_errors(path: Path, results: list[dict]) -> None:
     errors = np.array([r["position_error_m"] for r in results if r["position_error_m"] is not None]) * 100.0
@@ -261,48 +131,36 @@ def plot_position_errors(path: Path, results: list[dict]) -> None:
 
 
 def _parse(argv):
-    parser = argparse.ArgumentParser(prog="python -m apps.contact_localization", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--trials", type=int, default=200, help="number of random contacts (default 200)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the trials and of the sensor noise")
-    parser.add_argument("--model", default="hrp4_like", help="humanoid with foot F/T sensors (hrp4_like)")
-    parser.add_argument("--out", type=Path, default=Path("out"), help="output folder (default out)")
-    parser.add_argument("--headless", action="store_true", help="no live Meshcat URL (replays are still written)")
+    parser = experiment_parser("apps.contact_localization", __doc__, replay=False)
+    parser.add_argument("--trials", type=int, default=None, help="number of random contacts (scenario default 200)")
+    parser.add_argument("--seed", type=int, default=None, help="seed of the trials and of the sensor noise")
+    parser.add_argument("--model", default=None, help="humanoid with foot F/T sensors (hrp4_like)")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="parallel processes (default: all cores)")
     parser.add_argument("--replays", type=int, default=3, help="Meshcat replays of the first N trials (default 3)")
-    parser.add_argument("--push-start", type=float, default=0.5, help="contact onset, s (default 0.5)")
-    parser.add_argument("--contact-duration", type=float, default=1.0, help="contact duration, s (default 1)")
-    parser.add_argument("--no-contact-duration", type=float, default=10.0,
-                        help="length of the run without contact for false detections, s (default 10; 0 skips)")
+    parser.add_argument("--push-start", type=float, default=None, help="contact onset, s (scenario default 0.5)")
+    parser.add_argument("--contact-duration", type=float, default=None,
+                        help="contact duration, s (the scenario's push_duration, default 1)")
+    parser.add_argument("--no-contact-duration", type=float, default=None,
+                        help="length of the run without contact for false detections, s "
+                             "(scenario default 10; 0 skips)")
     parser.add_argument("--no-noise", action="store_true", help="ideal sensors")
     args = parser.parse_args(argv)
-    if args.trials < 1 or args.workers < 1 or args.replays < 0 or args.contact_duration <= 0 or args.push_start < 0:
+    if (args.workers < 1 or args.replays < 0 or (args.trials is not None and args.trials < 1)
+            or (args.contact_duration is not None and args.contact_duration <= 0)
+            or (args.push_start is not None and args.push_start < 0)):
         parser.error("--trials and --workers must be >= 1, --replays >= 0, --contact-duration > 0, --push-start >= 0")
     return args
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = _parse(argv)
-    out_dir = args.out / "contact_localization"
-    out_dir.mkdir(parents=True, exist_ok=True)
-    start = time.perf_counter()
-    try:
-        specs = sample_trials(args.model, args.trials, args.seed)
-    except ValueError as error:
-        print(f"contact_localization: error: {error}", file=sys.stderr)
-        return 2
-    options = {"model": args.model, "push_start": args.push_start, "duration": args.contact_duration,
-               "noise": not args.no_noise}
-    jobs = []
-    if args.no_contact_duration > 0:  # the longest job first
-        jobs.append(("no_contact", {"model": args.model, "duration": args.no_contact_duration,
-                                    "seed": (args.seed * 100003 + 99991) % (2**31 - 1), "noise": not args.no_noise}, None))
-    jobs += [("trial", spec, options) for spec in specs]
+def _run_jobs(jobs: list, workers: int) -> tuple[list[dict], dict | None]:
+    """Runs the jobs (in ``workers`` spawned processes when more than one); returns the
+    trials' results in trial order and the run without contact's (or None)."""
     results, no_contact = [], None
-    if args.workers == 1:
+    if workers == 1:
         outputs = map(_job, jobs)
         pool = None
     else:
-        pool = multiprocessing.get_context("spawn").Pool(min(args.workers, len(jobs)))
+        pool = multiprocessing.get_context("spawn").Pool(min(workers, len(jobs)))
         outputs = pool.imap_unordered(_job, jobs)
     try:
         for done, (kind, value) in enumerate(outputs, 1):
@@ -317,33 +175,58 @@ def main(argv: list[str] | None = None) -> int:
             pool.join()
     print()
     results.sort(key=lambda r: r["trial"])
-    metrics = summarize(results, no_contact)
-    metrics.update({"model": args.model, "seed": args.seed, "noise": not args.no_noise, "workers": args.workers,
-                    "push_start_s": args.push_start, "contact_duration_s": args.contact_duration,
-                    "force_range_N": [MIN_FORCE, MAX_FORCE], "max_angle_from_normal_deg": MAX_ANGLE_DEG,
-                    "wall_time_s": None, "no_contact_run": no_contact})
+    return results, no_contact
 
-    if args.replays:
-        from pydrake.geometry import Meshcat
 
-        meshcat = Meshcat()
-        if not args.headless:
-            print(f"Meshcat (live view): {meshcat.web_url()}")
+def main(argv: list[str] | None = None) -> int:
+    args = _parse(argv)
+
+    def body() -> int:
+        scenario = scenario_from_args(
+            ContactLocalizationScenario,
+            args,
+            trials=args.trials,
+            seed=args.seed,
+            model=args.model,
+            push_start=args.push_start,
+            push_duration=args.contact_duration,
+            no_contact_duration=args.no_contact_duration,
+            noise=False if args.no_noise else None,
+        )
+        if scenario.trials < 1:
+            raise ValueError(f"the study needs at least one trial, got trials: {scenario.trials}")
+        out_dir = output_folder(args, "contact_localization")
+        start = time.perf_counter()
+        specs = sample_trials(scenario.model, scenario.trials, scenario.seed)
+        scenario_yaml = scenario_as_yaml(scenario)
+        jobs = []
+        if scenario.no_contact_duration > 0:  # the longest job first
+            jobs.append(("no_contact", None, scenario_yaml))
+        jobs += [("trial", spec, scenario_yaml) for spec in specs]
+        results, no_contact = _run_jobs(jobs, args.workers)
+        metrics = contact_localization_metrics(results, no_contact)
+        metrics.update({"model": scenario.model, "seed": scenario.seed, "noise": scenario.noise,
+                        "workers": args.workers, "push_start_s": scenario.push_start,
+                        "contact_duration_s": scenario.push_duration,
+                        "force_range_N": [MIN_FORCE, MAX_FORCE], "max_angle_from_normal_deg": MAX_ANGLE_DEG,
+                        "wall_time_s": None, "no_contact_run": no_contact})
+
+        meshcat = replay_meshcat(args.replays > 0, args.headless)
         for spec in specs[: args.replays]:
-            meshcat.Delete()
-            meshcat.DeleteRecording()
-            meshcat.SetCameraPose(camera_in_world=[1.6, -1.6, 1.2], target_in_world=[0.0, 0.0, 0.7])
-            run_trial(spec, meshcat=meshcat, **options)
-            (out_dir / f"replay_trial_{spec['trial']}.html").write_text(meshcat.StaticHtml())
-    metrics["wall_time_s"] = time.perf_counter() - start
-    metrics["per_trial"] = results
-    (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2, allow_nan=True))
-    plot_position_errors(out_dir / "position_errors.png", results)
-    _print_summary(metrics, out_dir)
-    return 0
+            record_replay(spec, scenario, meshcat, live=not args.headless)
+            save_replay(meshcat, out_dir / f"replay_trial_{spec['trial']}.html")
+        metrics["wall_time_s"] = time.perf_counter() - start
+        metrics["per_trial"] = results
+        write_metrics(out_dir, metrics, scenario)
+        plot_position_errors(out_dir / "position_errors.png", results)
+        _print_summary(metrics)
+        print_written(out_dir)
+        return 0
+
+    return run_app("contact_localization", body)
 
 
-def _print_summary(metrics: dict, out_dir: Path) -> None:
+def _print_summary(metrics: dict) -> None:
     print(f"contact localization on {metrics['model']}, {metrics['trials']} trials, noise {'on' if metrics['noise'] else 'off'}:")
     for key, (op, floor) in FLOORS.items():
         value = metrics.get(key)
@@ -351,7 +234,7 @@ def _print_summary(metrics: dict, out_dir: Path) -> None:
         text = "n/a" if value is None else f"{value:.4g}"
         print(f"  {key:32s} {text:>10s}   floor {op} {floor:<6}  {'ok' if ok else 'MISSED' if ok is not None else ''}")
     print(f"  status counts: {metrics['status_counts']}")
-    print(f"wall time {metrics['wall_time_s']:.1f} s; wrote {out_dir}")
+    print(f"wall time {metrics['wall_time_s']:.1f} s")
 
 
 if __name__ == "__main__":

@@ -5,142 +5,71 @@ its right shoulder. The classical residual (eq. 7, model 8), the internal residu
 and the external residual (eq. 16) run on the simulated sensors only; the push's ground
 truth (tau_c,real of eq. 12, the total external wrench) goes to the metrics only.
 
-Run: ``python -m apps.residual_comparison [--model M] [--push-body B] [--duration S]
-[--seed N] [--no-noise] [--out DIR]``. Writes to ``DIR/residual_comparison/``:
-``fig3_classical.png``, ``fig4_internal.png``, ``fig7_external_base.png``,
-``fig8_external_force.png`` and ``metrics.json``, and prints a summary.
+Run: ``python -m apps.residual_comparison [--scenario FILE] [--scenario-text YAML]
+[--model M] [--push-body B] [--duration S] [--seed N] [--no-noise] [--skip S] [--out DIR]``
+(the shorthand options override the scenario's fields of the same name; ``--no-noise`` sets
+``noise: false``). Writes to ``DIR/residual_comparison/``: ``fig3_classical.png``,
+``fig4_internal.png``, ``fig7_external_base.png``, ``fig8_external_force.png`` and
+``metrics.json``, and prints a summary.
 
-Errors are relative RMS errors over the samples after ``--skip`` seconds (default 0.5 s):
-sqrt(sum (estimate - truth)^2) / sqrt(sum truth^2), over all joints or per joint. Each is
-reported against the raw truth and against the truth passed through the residual's own
-first-order filter (time constant 1/K), which removes the filter's designed lag.
+Errors are relative RMS errors over the samples after the scenario's ``skip`` seconds
+(default 0.5 s): sqrt(sum (estimate - truth)^2) / sqrt(sum truth^2), over all joints or per
+joint. Each is reported against the raw truth and against the truth passed through the
+residual's own first-order filter (time constant 1/K), which removes the filter's designed
+lag (``diagrams.residuals.residual_comparison.residual_comparison_metrics``).
 """
 
 from __future__ import annotations
 
-import argparse
-import json
-import sys
-import time
 from pathlib import Path
 
-import matplotlib
+import matplotlib.pyplot as plt
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from pydrake.systems.analysis import Simulator  # noqa: E402
-
-from diagrams.residuals.residual_comparison import (  # noqa: E402
-    ResidualComparisonConfig,
+from apps.runner import (
+    experiment_parser,
+    logged_signals,
+    output_folder,
+    print_written,
+    run_app,
+    scenario_from_args,
+    simulate,
+    write_metrics,
+)
+from diagrams.residuals.residual_comparison import (
+    ResidualComparisonScenario,
     build_residual_comparison_diagram,
-    set_initial_state,
+    check_metrics_window,
+    residual_comparison_metrics,
 )
 
 
-def relative_rms_error(estimate: np.ndarray, truth: np.ndarray) -> float:
-    """sqrt(sum (estimate - truth)^2) / sqrt(sum truth^2) over every entry (nan if truth is 0)."""
-    denominator = float(np.sqrt(np.sum(np.square(truth))))
-    if denominator == 0.0:
-        return float("nan")
-    return float(np.sqrt(np.sum(np.square(estimate - truth))) / denominator)
-
-
-def first_order_filter(samples: np.ndarray, gain: float, dt: float) -> np.ndarray:
-    """The truth as a residual of gain K would see it: y' = K (u - y), y(0) = 0, for the
-    columns of ``samples`` taken every ``dt`` seconds (exact for piecewise-constant input)."""
-    a = 1.0 - np.exp(-gain * dt)
-    out = np.zeros_like(samples)
-    y = np.zeros(samples.shape[0])
-    for k in range(1, samples.shape[1]):
-        y = y + a * (samples[:, k - 1] - y)
-        out[:, k] = y
-    return out
-
-
 def _parse(argv):
-    parser = argparse.ArgumentParser(
-        prog="python -m apps.residual_comparison", description=__doc__.split("\n\n")[0]
-    )
-    parser.add_argument("--model", default="hrp4_like", help="hrp4_like, nao_like, or a floating-base SDF/URDF path")
+    parser = experiment_parser("apps.residual_comparison", __doc__, replay=False)
+    parser.add_argument("--model", default=None, help="hrp4_like, nao_like, or a floating-base SDF/URDF path")
     parser.add_argument("--push-body", default=None, help="pushed body (default: the right shoulder)")
-    parser.add_argument("--duration", type=float, default=10.0, help="simulated time, s (default 10)")
-    parser.add_argument("--seed", type=int, default=0, help="sensor noise seed")
+    parser.add_argument("--duration", type=float, default=None, help="simulated time, s (scenario default 10)")
+    parser.add_argument("--seed", type=int, default=None, help="sensor noise seed (scenario default 0)")
     parser.add_argument("--no-noise", action="store_true", help="ideal sensors")
-    parser.add_argument("--skip", type=float, default=0.5, help="metrics ignore the first SKIP s (default 0.5)")
-    parser.add_argument("--out", type=Path, default=Path("out"), help="output folder (default out)")
-    args = parser.parse_args(argv)
-    if args.duration <= args.skip:
-        parser.error("--duration must exceed --skip")
-    return args
+    parser.add_argument("--skip", type=float, default=None,
+                        help="metrics ignore the first SKIP s (scenario default 0.5)")
+    return parser.parse_args(argv)
 
 
-def run(config: ResidualComparisonConfig, skip: float = 0.5) -> tuple[dict, dict]:
-    """Simulates ``config``; returns (metrics, the logged signals)."""
-    diagram, handles = build_residual_comparison_diagram(config)
-    simulator = Simulator(diagram)
-    context = simulator.get_mutable_context()
-    set_initial_state(diagram, context, handles)
-    simulator.Initialize()
-    start = time.perf_counter()
-    simulator.AdvanceTo(config.duration)
-    wall = time.perf_counter() - start
-    logs = {name: logger.FindLog(context) for name, logger in handles.loggers.items()}
-    t = logs["internal"].sample_times()
-    signals = {name: log.data() for name, log in logs.items()}
-    signals["t"] = t
-    window = t >= skip
-    dt = config.log_period
-
-    truth = signals["tau_c_real"]
-    internal, classical = signals["internal"], signals["classical"][6:]
-    internal_truth_filtered = first_order_filter(truth, config.internal_gain, dt)
-    classical_truth_filtered = first_order_filter(truth, config.classical_gain, dt)
-    force_truth = signals["force_world_true"]
-    force_estimate = signals["external_world"][3:]
-    force_truth_filtered = first_order_filter(force_truth, config.external_gain, dt)
-    wrench_base_truth = signals["wrench_base_true"]
-    wrench_base_filtered = first_order_filter(wrench_base_truth, config.external_gain, dt)
-    names = handles.joint_names
-
-    def per_joint(estimate, reference):
-        return {name: relative_rms_error(estimate[k, window], reference[k, window]) for k, name in enumerate(names)}
-
-    before = t < config.push_start  # no push yet: the residuals show only noise
-    metrics = {
-        "model": config.model,
-        "push_body": handles.push_source.pushes[0].body_name,
-        "noise": config.noise,
-        "sensors": "simulated sensors" if handles.sensors is not None else "true state (no sensor model for this robot)",
-        "seed": config.seed,
-        "duration_s": config.duration,
-        "skip_s": skip,
-        "gains_per_s": {"classical": config.classical_gain, "internal": config.internal_gain, "external": config.external_gain},
-        "internal_rel_rms_error": relative_rms_error(internal[:, window], truth[:, window]),
-        "internal_rel_rms_error_per_joint": per_joint(internal, truth),
-        "internal_rel_rms_error_vs_filtered_truth": relative_rms_error(internal[:, window], internal_truth_filtered[:, window]),
-        "internal_rel_rms_error_per_joint_vs_filtered_truth": per_joint(internal, internal_truth_filtered),
-        "classical_rel_rms_error": relative_rms_error(classical[:, window], truth[:, window]),
-        "classical_rel_rms_error_per_joint": per_joint(classical, truth),
-        "classical_rel_rms_error_vs_filtered_truth": relative_rms_error(classical[:, window], classical_truth_filtered[:, window]),
-        "external_force_rel_rms_error": relative_rms_error(force_estimate[:, window], force_truth[:, window]),
-        "external_force_rel_rms_error_vs_filtered_truth": relative_rms_error(
-            force_estimate[:, window], force_truth_filtered[:, window]
-        ),
-        "external_wrench_base_rel_rms_error": relative_rms_error(signals["external_base"][:, window], wrench_base_truth[:, window]),
-        "external_wrench_base_rel_rms_error_vs_filtered_truth": relative_rms_error(
-            signals["external_base"][:, window], wrench_base_filtered[:, window]
-        ),
-        "rms_true_joint_effort_Nm": {name: float(np.sqrt(np.mean(truth[k, window] ** 2))) for k, name in enumerate(names)},
-        "rms_classical_joint_effort_Nm": {name: float(np.sqrt(np.mean(classical[k, window] ** 2))) for k, name in enumerate(names)},
-        "rms_internal_noise_before_push_Nm": {
-            name: float(np.sqrt(np.mean(internal[k, before & (t > 0.05)] ** 2))) if np.any(before & (t > 0.05)) else None
-            for k, name in enumerate(names)
-        },
-        "wall_time_s": wall,
-        "real_time_factor": config.duration / wall,
-    }
-    return metrics, {"signals": signals, "names": names, "window": window, "handles": handles}
+def run_once(scenario: ResidualComparisonScenario, meshcat=None) -> dict:
+    """Simulates ``scenario``: its logged signals, handles, wall time and metrics."""
+    check_metrics_window(scenario)  # before the simulation, not after it
+    diagram, handles = build_residual_comparison_diagram(scenario, meshcat)
+    run = simulate(
+        diagram,
+        scenario.duration,
+        set_initial_state=handles.station.set_initial_state,
+        simulator_config=scenario.simulator_config,
+        meshcat=meshcat,
+    )
+    signals = logged_signals(handles.loggers, run.context, "internal")
+    metrics = residual_comparison_metrics(scenario, handles, signals, run.wall_time_s)
+    return {"signals": signals, "handles": handles, "wall": run.wall_time_s, "metrics": metrics}
 
 
 def _joint_rows(names):
@@ -203,10 +132,9 @@ def _plot_wrench(path: Path, title: str, t, estimate, truth, *, moment: bool):
     plt.close(fig)
 
 
-def write_outputs(out_dir: Path, metrics: dict, data: dict) -> None:
-    """Writes the four figures and metrics.json to ``out_dir``."""
-    out_dir.mkdir(parents=True, exist_ok=True)
-    s, names = data["signals"], list(data["names"])
+def _plot(out_dir: Path, run: dict) -> None:
+    """Writes the four figures to ``out_dir``."""
+    s, names = run["signals"], list(run["handles"].joint_names)
     t = s["t"]
     _plot_joints(
         out_dir / "fig3_classical.png",
@@ -229,10 +157,9 @@ def write_outputs(out_dir: Path, metrics: dict, data: dict) -> None:
         "External force of the single contact (eq. 19), world: estimate (solid) vs true (dashed)",
         t, s["external_world"][3:], s["force_world_true"], moment=False,
     )
-    (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2, allow_nan=True))
 
 
-def _print_summary(metrics: dict, out_dir: Path) -> None:
+def _print_summary(metrics: dict) -> None:
     print(
         f"residual comparison on {metrics['model']} ({metrics['sensors']}, noise {'on' if metrics['noise'] else 'off'}),"
         f" after {metrics['skip_s']} s:"
@@ -253,23 +180,31 @@ def _print_summary(metrics: dict, out_dir: Path) -> None:
             f"  (true RMS {metrics['rms_true_joint_effort_Nm'][name]:.3f} N m, classical RMS {metrics['rms_classical_joint_effort_Nm'][name]:.3f} N m)"
         )
     print(f"real-time factor {metrics['real_time_factor']:.2f} ({metrics['wall_time_s']:.1f} s wall)")
-    print(f"wrote {out_dir}")
 
 
 def main(argv: list[str] | None = None) -> int:
     args = _parse(argv)
-    config = ResidualComparisonConfig(
-        model=args.model, push_body=args.push_body, duration=args.duration, seed=args.seed, noise=not args.no_noise
-    )
-    try:
-        metrics, data = run(config, skip=args.skip)
-    except ValueError as error:  # bad model, body, or settings: say so, no traceback
-        print(f"residual_comparison: error: {error}", file=sys.stderr)
-        return 2
-    out_dir = args.out / "residual_comparison"
-    write_outputs(out_dir, metrics, data)
-    _print_summary(metrics, out_dir)
-    return 0
+
+    def body() -> int:
+        scenario = scenario_from_args(
+            ResidualComparisonScenario,
+            args,
+            model=args.model,
+            push_body=args.push_body,
+            duration=args.duration,
+            seed=args.seed,
+            noise=False if args.no_noise else None,
+            skip=args.skip,
+        )
+        run = run_once(scenario)  # a bad model, body or setting: a ValueError, reported by run_app
+        out_dir = output_folder(args, "residual_comparison")
+        _plot(out_dir, run)
+        write_metrics(out_dir, run["metrics"], scenario)
+        _print_summary(run["metrics"])
+        print_written(out_dir)
+        return 0
+
+    return run_app("residual_comparison", body)
 
 
 if __name__ == "__main__":

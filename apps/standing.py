@@ -2,132 +2,119 @@
 
 Usage::
 
-    python -m apps.standing [--model hrp4_like|nao_like|all] [--duration 10]
-                         [--no-meshcat] [--out DIR]
+    python -m apps.standing [--scenario FILE] [--scenario-text YAML]
+                         [--model hrp4_like|nao_like|all] [--duration 10]
+                         [--no-meshcat | --no-replay] [--headless] [--out DIR]
 
-For each model: simulates ``--duration`` seconds (1 ms discrete steps, SAP, point
-contact), prints a table (base drift after the first second of settling, smallest foot
-sphere normal force, feet flat, real-time factor), writes ``DIR/stand/<model>.json`` and,
-with Meshcat on, a self-contained replay ``DIR/stand/<model>.html``. Exits with status 1
-if a robot falls.
+For each model of the scenario (``StandingScenario``; ``--model`` and ``--duration`` override
+its ``models`` and ``duration``): simulates ``duration`` seconds (1 ms discrete steps, SAP,
+point contact), prints a table (base drift after the first second of settling, smallest foot
+sphere normal force, feet flat, real-time factor), writes ``DIR/standing/<model>.json``,
+``DIR/standing/metrics.json`` (every model and the scenario) and, with Meshcat on, a
+self-contained replay ``DIR/standing/<model>.html``. Exits with status 1 if a robot falls.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
-import time
-from pathlib import Path
 
 import numpy as np
-from pydrake.systems.analysis import Simulator
 
-from diagrams.station.standing import build_standing_diagram, set_initial_state, standing_metrics
+from apps.runner import (
+    experiment_parser,
+    output_folder,
+    replay_meshcat,
+    run_app,
+    save_replay,
+    scenario_from_args,
+    simulate,
+    write_metrics,
+)
+from diagrams.station.standing import (
+    StandingScenario,
+    build_standing_diagram,
+    set_initial_state,
+    standing_run_metrics,
+)
 from models import MODEL_NAMES
-
-SETTLE_TIME = 1.0  # s; drift is measured after this
 
 
 def _parse(argv):
-    parser = argparse.ArgumentParser(
-        prog="python -m apps.standing", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--model", choices=(*MODEL_NAMES, "all"), default="all",
-                        help="which humanoid to simulate (default: all)")
-    parser.add_argument("--duration", type=float, default=10.0,
-                        help="simulated time per model, s (default: 10)")
-    parser.add_argument("--no-meshcat", action="store_true",
-                        help="do not start Meshcat (no live view, no HTML replay)")
-    parser.add_argument("--out", type=Path, default=Path("out"),
-                        help="output directory (default: out); files go to OUT/stand/")
+    parser = experiment_parser("apps.standing", __doc__)
+    parser.add_argument("--model", choices=(*MODEL_NAMES, "all"), default=None,
+                        help="which humanoid to simulate (overrides the scenario's models, default: all)")
+    parser.add_argument("--duration", type=float, default=None,
+                        help="simulated time per model, s (overrides the scenario's, default: 10)")
+    parser.add_argument("--no-meshcat", dest="no_replay", action="store_true",
+                        help="the same as --no-replay: no Meshcat (no live view, no HTML replay)")
     args = parser.parse_args(argv)
-    if args.duration <= 0:
+    if args.duration is not None and args.duration <= 0:
         parser.error("--duration must be positive")
     return args
 
 
-def run_model(name: str, duration: float, meshcat, out_dir: Path) -> dict:
-    """Simulates one model standing; returns its metrics as a dict."""
-    if meshcat is not None:
-        meshcat.Delete()
-    diagram, handles = build_standing_diagram(name, meshcat=meshcat)
-    if meshcat is not None:
-        # A three-quarter view framing the robot (Meshcat's default camera is far away).
-        height = 1.5 if name == "hrp4_like" else 0.57
-        meshcat.SetCameraPose(
-            camera_in_world=np.array([1.1, -1.1, 0.8]) * height, target_in_world=np.array([0.0, 0.0, 0.5 * height])
-        )
-    simulator = Simulator(diagram)
-    context = simulator.get_mutable_context()
-    set_initial_state(diagram, context, handles)
-    if meshcat is not None:
-        meshcat.StartRecording(frames_per_second=32.0)
-    simulator.Initialize()
-    start = time.perf_counter()
-    simulator.AdvanceTo(duration)
-    wall = time.perf_counter() - start
-    metrics = standing_metrics(handles, context, settle_time=min(SETTLE_TIME, duration))
-    row = dict(
-        model=name,
-        duration_s=duration,
-        wall_s=wall,
-        real_time_factor=duration / wall,
-        base_drift_cm=100.0 * metrics.base_drift_m,
-        base_drift_deg=float(np.degrees(metrics.base_drift_rad)),
-        min_sphere_force_N=metrics.min_sphere_force_N,
-        sole_tilt_deg={k: float(np.degrees(v)) for k, v in metrics.sole_tilt_rad.items()},
-        sole_height_mm={k: 1000.0 * v for k, v in metrics.sole_height_m.items()},
-        sphere_forces_N={k: v.tolist() for k, v in metrics.sphere_forces_N.items()},
-        feet_flat=metrics.feet_flat,
-        fell=metrics.fell,
+def run_model(scenario: StandingScenario, name: str, meshcat, *, live: bool = True) -> dict:
+    """Simulates one model standing; returns its metrics (``standing_run_metrics``)."""
+    diagram, handles = build_standing_diagram(
+        name, plant_config=scenario.plant_config, meshcat=meshcat, state_log_period=scenario.state_log_period
     )
-    (out_dir / f"{name}.json").write_text(json.dumps(row, indent=2) + "\n")
-    if meshcat is not None:
-        meshcat.StopRecording()
-        meshcat.PublishRecording()
-        html = out_dir / f"{name}.html"
-        html.write_text(meshcat.StaticHtml())
-        row["replay"] = str(html)
-    return row
+    # A three-quarter view framing the robot (Meshcat's default camera is far away).
+    height = 1.5 if name == "hrp4_like" else 0.57
+    run = simulate(
+        diagram,
+        scenario.duration,
+        set_initial_state=lambda context: set_initial_state(diagram, context, handles),
+        simulator_config=scenario.simulator_config,
+        meshcat=meshcat,
+        live=live,
+        camera=(np.array([1.1, -1.1, 0.8]) * height, np.array([0.0, 0.0, 0.5 * height])),
+    )
+    return standing_run_metrics(scenario, handles, run.context, run.wall_time_s)
 
 
 def main(argv=None) -> int:
-    """Runs the app; returns the process exit status (1 if a robot fell)."""
+    """Runs the app; returns the process exit status (1 if a robot fell, 2 on an error)."""
     args = _parse(argv)
-    print("standing simulation of the humanoids (PD + gravity compensation)")
-    names = MODEL_NAMES if args.model == "all" else (args.model,)
-    out_dir = args.out / "stand"
-    out_dir.mkdir(parents=True, exist_ok=True)
-    meshcat = None
-    if not args.no_meshcat:
-        from pydrake.geometry import StartMeshcat
 
-        meshcat = StartMeshcat()
-        print(f"Meshcat: {meshcat.web_url()}")
+    def body() -> int:
+        models = None if args.model is None else (list(MODEL_NAMES) if args.model == "all" else [args.model])
+        scenario = scenario_from_args(StandingScenario, args, models=models, duration=args.duration)
+        print("standing simulation of the humanoids (PD + gravity compensation)")
+        out_dir = output_folder(args, "standing")
+        meshcat = replay_meshcat(not args.no_replay, args.headless)
 
-    rows = []
-    for name in names:
-        print(f"simulating {name} for {args.duration:g} s ...", flush=True)
-        rows.append(run_model(name, args.duration, meshcat, out_dir))
+        rows = []
+        for name in scenario.models:
+            print(f"simulating {name} for {scenario.duration:g} s ...", flush=True)
+            row = run_model(scenario, name, meshcat, live=not args.headless)
+            (out_dir / f"{name}.json").write_text(json.dumps(row, indent=2) + "\n")
+            html = save_replay(meshcat, out_dir / f"{name}.html")
+            if html is not None:
+                row["replay"] = str(html)
+            rows.append(row)
+        write_metrics(out_dir, {row["model"]: row for row in rows}, scenario)
 
-    header = (f"{'model':<10} {'drift cm':>9} {'drift deg':>9} {'min F N':>8} "
-              f"{'feet flat':>9} {'RTF':>6} {'fell':>5}")
-    print(f"\nbase drift measured after the first {SETTLE_TIME:g} s; "
-          "min F = smallest foot-sphere normal force at the end")
-    print(header)
-    print("-" * len(header))
-    for r in rows:
-        print(f"{r['model']:<10} {r['base_drift_cm']:9.3f} {r['base_drift_deg']:9.3f} "
-              f"{r['min_sphere_force_N']:8.2f} {str(r['feet_flat']):>9} "
-              f"{r['real_time_factor']:6.2f} {str(r['fell']):>5}")
-    for r in rows:
-        if "replay" in r:
-            print(f"replay: {r['replay']}")
-    fell = [r["model"] for r in rows if r["fell"]]
-    if fell:
-        print(f"FELL: {', '.join(fell)}", file=sys.stderr)
-        return 1
-    return 0
+        header = (f"{'model':<10} {'drift cm':>9} {'drift deg':>9} {'min F N':>8} "
+                  f"{'feet flat':>9} {'RTF':>6} {'fell':>5}")
+        print(f"\nbase drift measured after the first {scenario.settle_time:g} s; "
+              "min F = smallest foot-sphere normal force at the end")
+        print(header)
+        print("-" * len(header))
+        for r in rows:
+            print(f"{r['model']:<10} {r['base_drift_cm']:9.3f} {r['base_drift_deg']:9.3f} "
+                  f"{r['min_sphere_force_N']:8.2f} {str(r['feet_flat']):>9} "
+                  f"{r['real_time_factor']:6.2f} {str(r['fell']):>5}")
+        for r in rows:
+            if "replay" in r:
+                print(f"replay: {r['replay']}")
+        fell = [r["model"] for r in rows if r["fell"]]
+        if fell:
+            print(f"FELL: {', '.join(fell)}", file=sys.stderr)
+            return 1
+        return 0
+
+    return run_app("standing", body)
 
 
 if __name__ == "__main__":

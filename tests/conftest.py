@@ -1,5 +1,4 @@
-"""Shared test set-up: the apps write their plots to files (matplotlib's file backend, as
-the Makefile sets for ``make``), unless the caller chose a backend."""
+"""Shared test setup: matplotlib draws off screen (the Makefile exports the same for the apps)."""
 
 import os
 

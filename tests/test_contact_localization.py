@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
-from diagrams.residuals.contact_localization import ContactLocalizationConfig, build_contact_localization_diagram
+from diagrams.residuals.contact_localization import ContactLocalizationScenario, build_contact_localization_diagram
 from systems.residuals.contact_estimation import VALID
 
 
-def _simulate(config: ContactLocalizationConfig, t_end: float):
+def _simulate(config: ContactLocalizationScenario, t_end: float):
     diagram, handles = build_contact_localization_diagram(config)
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
@@ -25,7 +25,7 @@ def test_no_contact_statistics_match_predicted_noise():
     """Without contact, with sensor noise, the detector's Mahalanobis statistics have the
     chi-square means (3 and n dof) that the covariances predicted from the sensor noise
     imply, and nothing is detected."""
-    handles, context = _simulate(ContactLocalizationConfig(push_body=None, seed=5), 1.5)
+    handles, context = _simulate(ContactLocalizationScenario(push_body=None, seed=5), 1.5)
     log = handles.loggers["test_statistics"].FindLog(context)
     t, stats = log.sample_times(), log.data()
     window = t > 0.2
@@ -39,7 +39,7 @@ def test_push_detected_and_localized_without_noise():
     """A 12 N push on the chest's front face, ideal sensors: detected within 7 ms, the
     right link, the point within 1 mm, the force within 0.5 %."""
     body = "CHEST_Y_LINK"
-    _, handles = build_contact_localization_diagram(ContactLocalizationConfig(noise=False))
+    _, handles = build_contact_localization_diagram(ContactLocalizationScenario(noise=False))
     localizer = handles.localizer
     geo = localizer.geometry
     plant = handles.plant
@@ -55,7 +55,7 @@ def test_push_detected_and_localized_without_noise():
     tangent = np.cross(n_W, [0.0, 0.0, 1.0])
     tangent /= np.linalg.norm(tangent)
     f_W = 12.0 * (-np.cos(np.radians(30)) * n_W + np.sin(np.radians(30)) * tangent)
-    config = ContactLocalizationConfig(noise=False, push_start=0.2, push_duration=0.5, push_body=body,
+    config = ContactLocalizationScenario(noise=False, push_start=0.2, push_duration=0.5, push_body=body,
                                 push_point=tuple(p_B), push_force=tuple(f_W))
     handles, root = _simulate(config, 0.7)
     detection = handles.detector.GetOutputPort("detection_time").Eval(handles.detector.GetMyContextFromRoot(root))[0]
@@ -74,6 +74,6 @@ def test_push_detected_and_localized_without_noise():
 
 def test_rejects_model_without_ft_sensors_and_sole_push():
     with pytest.raises(ValueError, match="F/T"):
-        build_contact_localization_diagram(ContactLocalizationConfig(model="nao_like"))
+        build_contact_localization_diagram(ContactLocalizationScenario(model="nao_like"))
     with pytest.raises(ValueError, match="below an F/T sensor"):
-        build_contact_localization_diagram(ContactLocalizationConfig(push_body="r_sole", push_force=(0, 0, -5)))
+        build_contact_localization_diagram(ContactLocalizationScenario(push_body="r_sole", push_force=(0, 0, -5)))

@@ -6,9 +6,16 @@ from __future__ import annotations
 import json
 
 import numpy as np
+from scenario_checks import SCENARIOS, check_scenario_convention
 
 from apps import contact_localization
-from diagrams.residuals.contact_localization import sample_trials
+from diagrams.residuals.contact_localization import (
+    ContactLocalizationScenario,
+    no_contact_scenario,
+    sample_trials,
+    trial_scenario,
+)
+from diagrams.scenarios import load_scenario
 from systems.simulation.visualization import read_static_html
 
 
@@ -46,3 +53,36 @@ def test_sampled_contacts_are_on_the_outer_surface_and_within_the_cone():
         f = np.asarray(s["force_world"])
         assert 5.0 <= np.linalg.norm(f) <= 40.0
         assert s["body"] not in ("l_sole", "r_sole")
+
+
+def test_scenario_files_load_into_the_dataclass(tmp_path):
+    check_scenario_convention(ContactLocalizationScenario, "contact_localization_default.yaml", tmp_path, "workers")
+    scenario = load_scenario(ContactLocalizationScenario, filename=SCENARIOS / "contact_localization_default.yaml",
+                             text="trials: 40\nno_contact_duration: 0\n"
+                                  "plant_config: {discrete_contact_approximation: lagged}")
+    assert (scenario.trials, scenario.no_contact_duration, scenario.seed) == (40, 0.0, 0)  # others keep the defaults
+    assert scenario.plant_config.discrete_contact_approximation == "lagged"
+    # One trial's run: the study's settings with the trial's push and noise seed.
+    spec = {"body": "CHEST_Y_LINK", "point_body": [0.1, 0.0, 0.2], "force_world": [-20.0, 0.0, 0.0], "noise_seed": 17}
+    trial = trial_scenario(scenario, spec)
+    assert (trial.push_body, trial.push_point, trial.push_force, trial.seed) == (
+        "CHEST_Y_LINK", [0.1, 0.0, 0.2], [-20.0, 0.0, 0.0], 17)
+    assert trial.plant_config.discrete_contact_approximation == "lagged" and scenario.push_body is None
+    quiet = no_contact_scenario(scenario)
+    assert quiet.push_body is None and quiet.seed == 99991
+
+
+def test_app_reads_scenario_text_and_reports_errors(tmp_path, capsys):
+    code = contact_localization.main([
+        "--scenario-text", "trials: 1\npush_start: 0.1\npush_duration: 0.3\nno_contact_duration: 0\nseed: 2",
+        "--workers", "1", "--replays", "0", "--headless", "--out", str(tmp_path)])
+    assert code == 0
+    metrics = json.loads((tmp_path / "contact_localization" / "metrics.json").read_text())
+    assert metrics["trials"] == 1 and metrics["no_contact_run"] is None and metrics["seed"] == 2
+    assert (metrics["push_start_s"], metrics["contact_duration_s"]) == (0.1, 0.3)
+    assert metrics["scenario"]["trials"] == 1
+    capsys.readouterr()
+    assert contact_localization.main(["--scenario-text", "workers: 2", "--out", str(tmp_path)]) == 2
+    assert "workers" in capsys.readouterr().err
+    assert contact_localization.main(["--scenario-text", "trials: 0", "--out", str(tmp_path)]) == 2
+    assert "at least one trial" in capsys.readouterr().err

@@ -11,7 +11,7 @@ from pydrake.systems.primitives import ConstantVectorSource
 import systems.simulation.sensors as sensors_module
 from diagrams.station.humanoid_station import add_humanoid_station
 from diagrams.residuals.residual_comparison import (
-    ResidualComparisonConfig,
+    ResidualComparisonScenario,
     build_residual_comparison_diagram,
     set_initial_state,
 )
@@ -49,7 +49,7 @@ def test_sensor_chain_runs_once_per_step_with_three_residuals(monkeypatch):
         original(self, context, output)
 
     monkeypatch.setattr(sensors_module.SensedStateAssembler, "_CalcState", counting)
-    diagram, handles = build_residual_comparison_diagram(ResidualComparisonConfig(duration=0.02))
+    diagram, handles = build_residual_comparison_diagram(ResidualComparisonScenario(duration=0.02))
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
     set_initial_state(diagram, context, handles)

@@ -4,17 +4,15 @@ and the estimate) and that the blend of eq. (28) is really exercised (K1 < 1).""
 
 import json
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
-from scenario_checks import check_default_file_and_overrides
+from scenario_checks import SCENARIOS, check_scenario_convention
 
 from apps import nao_compliant_arms
 from diagrams.observer.nao_compliant_arms import DEFAULT_FORCE, NaoCompliantArmsScenario, make_scenario
+from diagrams.scenarios import load_scenario
 from systems.simulation.visualization import read_static_html
-
-SCENARIOS = Path(nao_compliant_arms.__file__).parent / "scenarios"
 
 
 @pytest.fixture(scope="module")
@@ -66,9 +64,10 @@ def test_bad_arguments(capsys):
 
 
 def test_scenario_file_text_overrides_and_unknown_keys(tmp_path, capsys):
-    overridden = check_default_file_and_overrides(
-        NaoCompliantArmsScenario, SCENARIOS / "nao_compliant_arms_default.yaml",
-        "cases: [b]\nlean: -0.2\nplant_config: {discrete_contact_approximation: lagged}", "push_force")
+    check_scenario_convention(NaoCompliantArmsScenario, "nao_compliant_arms_default.yaml", tmp_path, "push_force")
+    overridden = load_scenario(
+        NaoCompliantArmsScenario, filename=SCENARIOS / "nao_compliant_arms_default.yaml",
+        text="cases: [b]\nlean: -0.2\nplant_config: {discrete_contact_approximation: lagged}")
     assert (overridden.cases, overridden.lean, overridden.force) == (["b"], -0.2, DEFAULT_FORCE)
     assert overridden.plant_config.discrete_contact_approximation == "lagged"
     assert nao_compliant_arms.main(["--scenario-text", "push_force: 2.0", "--no-replay", "--out", str(tmp_path)]) == 2

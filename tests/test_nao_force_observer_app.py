@@ -3,18 +3,16 @@ durations, its outputs, and that the estimate tracks eq. (11)'s expected virtual
 
 import json
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
-from scenario_checks import check_default_file_and_overrides
+from scenario_checks import SCENARIOS, check_scenario_convention
 
 from apps import nao_force_observer
 from diagrams.observer.nao_force_observer import LOAD_MASS, NaoForceObserverScenario, make_experiment
+from diagrams.scenarios import load_scenario
 from systems.simulation.disturbances import SmoothPiecewise
 from systems.simulation.visualization import read_static_html
-
-SCENARIOS = Path(nao_force_observer.__file__).parent / "scenarios"
 
 
 @pytest.fixture(scope="module")
@@ -86,10 +84,11 @@ def test_bad_arguments_and_schedules(capsys):
         assert experiment.duration < 25.0
 
 
-def test_scenario_file_text_overrides_and_unknown_keys():
-    overridden = check_default_file_and_overrides(
-        NaoForceObserverScenario, SCENARIOS / "nao_force_observer_default.yaml",
-        "experiments: [2]\nramp: 0.1\nplant_config: {discrete_contact_approximation: lagged}", "load_kg")
+def test_scenario_file_text_overrides_and_unknown_keys(tmp_path):
+    check_scenario_convention(NaoForceObserverScenario, "nao_force_observer_default.yaml", tmp_path, "load_kg")
+    overridden = load_scenario(
+        NaoForceObserverScenario, filename=SCENARIOS / "nao_force_observer_default.yaml",
+        text="experiments: [2]\nramp: 0.1\nplant_config: {discrete_contact_approximation: lagged}")
     assert (overridden.experiments, overridden.ramp, overridden.seed) == ([2], 0.1, 0)
     assert overridden.plant_config.discrete_contact_approximation == "lagged"
     assert overridden.plant_config.time_step == 1e-3

@@ -72,9 +72,9 @@ def _case_standing() -> None:
 
 
 def _case_residual_comparison() -> None:
-    from diagrams.residuals.residual_comparison import ResidualComparisonConfig, build_residual_comparison_diagram, set_initial_state
+    from diagrams.residuals.residual_comparison import ResidualComparisonScenario, build_residual_comparison_diagram, set_initial_state
 
-    diagram, handles = build_residual_comparison_diagram(ResidualComparisonConfig(), _meshcat())
+    diagram, handles = build_residual_comparison_diagram(ResidualComparisonScenario(), _meshcat())
     _simulate(diagram, lambda context: set_initial_state(diagram, context, handles))
 
 
@@ -87,9 +87,9 @@ def _case_push_and_comply() -> None:
 
 
 def _case_contact_localization() -> None:
-    from diagrams.residuals.contact_localization import ContactLocalizationConfig, build_contact_localization_diagram
+    from diagrams.residuals.contact_localization import ContactLocalizationScenario, build_contact_localization_diagram
 
-    config = ContactLocalizationConfig(push_body="CHEST_Y_LINK", push_force=(-20.0, 0.0, 0.0), push_start=0.0)
+    config = ContactLocalizationScenario(push_body="CHEST_Y_LINK", push_force=(-20.0, 0.0, 0.0), push_start=0.0)
     diagram, handles = build_contact_localization_diagram(config, _meshcat())
     _simulate(diagram, handles.station.set_initial_state)
 

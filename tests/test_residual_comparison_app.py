@@ -6,10 +6,34 @@ import json
 
 import numpy as np
 import pytest
+from scenario_checks import SCENARIOS, check_scenario_convention
 
 from apps import residual_comparison
-from apps.residual_comparison import first_order_filter, relative_rms_error, run
-from diagrams.residuals.residual_comparison import ResidualComparisonConfig
+from apps.residual_comparison import run_once
+from diagrams.residuals.residual_comparison import (
+    ResidualComparisonScenario,
+    check_metrics_window,
+    first_order_filter,
+    relative_rms_error,
+)
+from diagrams.scenarios import load_scenario
+
+
+def test_scenario_files_load_into_the_dataclass(tmp_path):
+    check_scenario_convention(ResidualComparisonScenario, "residual_comparison_default.yaml", tmp_path, "push_strength")
+    default_file = load_scenario(ResidualComparisonScenario, filename=SCENARIOS / "residual_comparison_default.yaml")
+    assert default_file.push_body is None and default_file.push_amplitude == 40.0
+    overridden = load_scenario(
+        ResidualComparisonScenario,
+        filename=SCENARIOS / "residual_comparison_default.yaml",
+        text="seed: 7\nskip: 1.0\npush_direction: [0, 0, -1]\nplant_config: {discrete_contact_approximation: lagged}",
+    )
+    assert (overridden.seed, overridden.skip, overridden.push_direction) == (7, 1.0, [0.0, 0.0, -1.0])
+    assert overridden.plant_config.discrete_contact_approximation == "lagged"
+    assert overridden.plant_config.time_step == 1e-3
+    assert overridden.duration == 10.0  # other keys keep the defaults
+    with pytest.raises(ValueError, match="skip < duration"):
+        check_metrics_window(ResidualComparisonScenario(duration=1.0, skip=1.0))
 
 
 def test_relative_rms_error_and_first_order_filter():
@@ -26,8 +50,9 @@ def test_relative_rms_error_and_first_order_filter():
 @pytest.fixture(scope="module")
 def short_noise_free_run():
     """3 s of the paper's experiment with ideal sensors (the push starts at 0.5 s)."""
-    config = ResidualComparisonConfig(duration=3.0, noise=False)
-    return config, *run(config, skip=0.5)
+    scenario = ResidualComparisonScenario(duration=3.0, noise=False, skip=0.5)
+    run = run_once(scenario)
+    return scenario, run["metrics"], run
 
 
 def test_internal_and_external_residuals_track_the_truth(short_noise_free_run):
@@ -74,6 +99,21 @@ def test_app_writes_figures_and_metrics(tmp_path, capsys):
     assert set(metrics["internal_rel_rms_error_per_joint"]) >= {"R_KNEE_P", "L_KNEE_P", "CHEST_Y"}
     assert metrics["noise"] is True and metrics["seed"] == 3
     assert "internal residual" in capsys.readouterr().out
+    assert metrics["scenario"]["seed"] == 3 and metrics["scenario"]["duration"] == 1.2
+
+
+def test_app_reads_scenario_file_and_text_and_reports_errors(tmp_path, capsys):
+    scenario = tmp_path / "short.yaml"
+    scenario.write_text("duration: 1.0\nskip: 0.2\nseed: 5\nnoise: false\n")
+    args = ["--scenario", str(scenario), "--scenario-text", "seed: 6", "--skip", "0.3", "--out", str(tmp_path)]
+    assert residual_comparison.main(args) == 0
+    metrics = json.loads((tmp_path / "residual_comparison" / "metrics.json").read_text())
+    assert (metrics["duration_s"], metrics["seed"], metrics["noise"], metrics["skip_s"]) == (1.0, 6, False, 0.3)
+    capsys.readouterr()
+    assert residual_comparison.main(["--scenario-text", "push_strength: 3", "--out", str(tmp_path)]) == 2
+    assert "push_strength" in capsys.readouterr().err
+    assert residual_comparison.main(["--duration", "0.4", "--out", str(tmp_path)]) == 2  # skip 0.5 >= duration
+    assert "skip < duration" in capsys.readouterr().err
 
 
 def test_app_reports_bad_model_and_body(tmp_path, capsys):

@@ -7,6 +7,7 @@ soles must be flat on the ground with all four spheres of each foot loaded.
 
 import numpy as np
 import pytest
+from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.analysis import Simulator
 
 from diagrams.station.standing import build_standing_diagram, set_initial_state, standing_metrics
@@ -18,7 +19,8 @@ SETTLE = 1.0  # s
 
 @pytest.mark.parametrize("model_name", MODEL_NAMES)
 def test_stands_still_with_feet_flat(model_name):
-    diagram, handles = build_standing_diagram(model_name, time_step=1e-3)
+    plant_config = MultibodyPlantConfig(time_step=1e-3, discrete_contact_approximation="sap", contact_model="point")
+    diagram, handles = build_standing_diagram(model_name, plant_config=plant_config)
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
     set_initial_state(diagram, context, handles)

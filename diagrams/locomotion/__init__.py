@@ -1,1 +1,1 @@
-"""diagrams/locomotion."""
+"""The walking Nao (ZMP preview control) and its walking metrics."""

@@ -1,1 +1,2 @@
-"""diagrams/residuals."""
+"""Flacco et al. (2016) experiments: residual comparison, push-and-comply, contact
+localization."""

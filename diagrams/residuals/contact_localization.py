@@ -15,17 +15,33 @@ Only robots with foot F/T sensors (``hrp4_like``) are supported: without them th
 reaction is an unknown external force for the residuals and no single contact can be
 isolated. The soles (below the F/T sensors) are not candidate links: a force there is part
 of the measured wrench and invisible to the residuals.
+
+The Monte Carlo study (``apps.contact_localization``) samples random contacts
+(``sample_trials``), runs one diagram per trial and one without contact, and computes its
+metrics here (``trial_result``, ``no_contact_result``, ``contact_localization_metrics``).
+Scenarios are YAML files loaded into ``ContactLocalizationScenario`` with
+``pydrake.common.yaml.yaml_load_typed`` (``diagrams.scenarios``).
+
+Metric definitions: ``detection_rate`` = trials whose contact was detected during the push
+(a detection before the push counts as a false detection, not as this trial's);
+``correct_link_rate`` and the position errors are over ALL trials (a trial without a
+localization counts as a wrong link and an infinite position error); force errors are over
+the detected trials: |f_hat - f| / |f| and the angle between f_hat and f.
 """
 
-from __future__ import annotations
+# No ``from __future__ import annotations``: yaml_load_typed reads the scenario's field types.
 
+import dataclasses
+import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, Rgba, SceneGraph
 from pydrake.multibody.plant import MultibodyPlant, MultibodyPlantConfig
-from pydrake.systems.framework import BasicVector, Context, Diagram, DiagramBuilder, LeafSystem
 from pydrake.multibody.tree import BodyIndex
+from pydrake.systems.analysis import SimulatorConfig
+from pydrake.systems.framework import BasicVector, Context, Diagram, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
 from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station, default_plant_config
@@ -39,39 +55,68 @@ TRUE_RGBA = Rgba(0.1, 0.8, 0.1, 0.5)  # wide and translucent: the estimate shows
 ESTIMATE_RGBA = Rgba(0.85, 0.0, 0.0, 1.0)
 
 
+#: The issue's floors on the study's totals: (comparison, value).
+FLOORS = {
+    "detection_rate": (">=", 0.99),
+    "median_detection_delay_s": ("<=", 0.020),
+    "false_detections": ("<=", 0),
+    "correct_link_rate": (">=", 0.95),
+    "median_position_error_m": ("<=", 0.02),
+    "p95_position_error_m": ("<=", 0.05),
+    "median_force_error_rel": ("<=", 0.05),
+    "median_angle_error_deg": ("<=", 5.0),
+    "median_localizer_update_ms": ("<=", 2.0),
+}
+
+#: The random contacts of the localization study (``sample_trials``): force magnitude, N,
+#: and the largest angle between the force and the surface's inward normal, deg.
+MIN_FORCE, MAX_FORCE, MAX_ANGLE_DEG = 5.0, 40.0, 60.0
+
+
 @dataclass
-class ContactLocalizationConfig:
-    """One trial of the contact study. SI units.
+class ContactLocalizationScenario:
+    """The contact study, and one run of its diagram. SI units.
 
     Attributes:
         model: ``hrp4_like`` (needs foot F/T sensors).
-        push_body: the pushed link, or None for a run without contact.
+        push_body: the pushed link, or None for a run without contact (the study sets each
+            trial's push_body, push_point, push_force and seed from ``sample_trials``).
         push_point: the contact point in the link's body frame, m.
         push_force: the (constant) force in world, N.
         push_start: s; the force is on for push_start <= t < push_start + push_duration.
-        push_duration: s.
-        noise: sensor noise on (systems.simulation.sensors defaults) or off. seed: its seed.
+        push_duration: s (the study's contact duration).
+        noise: sensor noise on (systems.simulation.sensors defaults) or off.
+        seed: the sensor noise seed of one run; the study's seed, from which it samples the
+            trials and derives each run's noise seed.
+        trials: the study's number of random contacts.
+        no_contact_duration: the study's run without contact (false detections), s; 0 skips it.
         internal_gain, external_gain: residual gains K, 1/s.
-        plant_config: Drake's plant configuration (default: 1 ms steps, point contact, SAP).
+        plant_config: Drake's ``MultibodyPlantConfig`` (default: 1 ms steps, point contact,
+            SAP; see ``diagrams.station.humanoid_station``).
         period: residual/detector/localizer period, s.
         settle_time: the localizer's wait after detection before averaging, s.
         log_period: period of the loggers (detector and localizer outputs, truth), s.
+        simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``); the plant
+            is discrete, so only ``target_realtime_rate`` and the publishing matter.
     """
 
     model: str = "hrp4_like"
     push_body: str | None = None
-    push_point: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    push_force: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    push_point: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    push_force: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
     push_start: float = 0.5
     push_duration: float = 1.0
     noise: bool = True
     seed: int = 0
+    trials: int = 200
+    no_contact_duration: float = 10.0
     internal_gain: float = 35.0
     external_gain: float = 35.0
     plant_config: MultibodyPlantConfig = field(default_factory=default_plant_config)
     period: float = 1e-3
     settle_time: float = 0.1
     log_period: float = 1e-3
+    simulator_config: SimulatorConfig = field(default_factory=SimulatorConfig)
 
 
 @dataclass
@@ -113,34 +158,35 @@ def sole_bodies(station: HumanoidStation) -> tuple[str, ...]:
 
 
 def build_contact_localization_diagram(
-    config: ContactLocalizationConfig, meshcat: Meshcat | None = None
+    scenario: ContactLocalizationScenario, meshcat: Meshcat | None = None
 ) -> tuple[Diagram, ContactLocalizationHandles]:
-    """Builds the diagram of the module docstring for ``config``.
+    """Builds the diagram of the module docstring for ``scenario`` (one run: its push, or
+    none).
 
     Raises:
         ValueError: a model without foot F/T sensors, an unknown or excluded push body,
             bad settings.
     """
-    if config.push_duration <= 0 or config.push_start < 0 or config.log_period <= 0:
+    if scenario.push_duration <= 0 or scenario.push_start < 0 or scenario.log_period <= 0:
         raise ValueError("push_duration and log_period must be positive, push_start non-negative")
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, config.model, plant_config=config.plant_config, noise=config.noise, seed=config.seed)
+    station = add_humanoid_station(builder, scenario.model, plant_config=scenario.plant_config, noise=scenario.noise, seed=scenario.seed)
     if station.humanoid is None or not station.known_wrench_frames:
-        raise ValueError(f"the contact study needs a humanoid with foot F/T sensors (hrp4_like), got {config.model!r}")
+        raise ValueError(f"the contact study needs a humanoid with foot F/T sensors (hrp4_like), got {scenario.model!r}")
     plant = station.plant
     builder.Connect(builder.AddSystem(ConstantVectorSource(station.q_hold)).get_output_port(), station.desired_position)
     excluded = sole_bodies(station)
 
     pushes = []
-    if config.push_body is not None:
-        if config.push_body in excluded:
-            raise ValueError(f"push body {config.push_body!r} is below an F/T sensor: invisible to the residuals")
-        force = np.asarray(config.push_force, dtype=float)
+    if scenario.push_body is not None:
+        if scenario.push_body in excluded:
+            raise ValueError(f"push body {scenario.push_body!r} is below an F/T sensor: invisible to the residuals")
+        force = np.asarray(scenario.push_force, dtype=float)
         magnitude = float(np.linalg.norm(force))
         if magnitude == 0.0:
             raise ValueError("push_force must be non-zero (use push_body=None for no contact)")
-        pushes.append(Push(config.push_body, np.asarray(config.push_point, dtype=float), force / magnitude,
-                           Step(magnitude, config.push_start, config.push_start + config.push_duration)))
+        pushes.append(Push(scenario.push_body, np.asarray(scenario.push_point, dtype=float), force / magnitude,
+                           Step(magnitude, scenario.push_start, scenario.push_start + scenario.push_duration)))
     push_source = builder.AddSystem(PushSource(plant, pushes))
     push_source.set_name("push_source")
     builder.Connect(push_source.GetOutputPort("applied_spatial_forces"), plant.get_applied_spatial_force_input_port())
@@ -149,8 +195,8 @@ def build_contact_localization_diagram(
     frames = station.known_wrench_frames
     # The station's model: the PD's gravity comes from the same per-state computation.
     model = station.dynamics_model if station.dynamics_model is not None else ResidualModel(plant)
-    internal = builder.AddSystem(InternalResidual(plant, config.internal_gain, config.period, frames, model=model))
-    external = builder.AddSystem(ExternalResidual(plant, config.external_gain, config.period, frames, model=model))
+    internal = builder.AddSystem(InternalResidual(plant, scenario.internal_gain, scenario.period, frames, model=model))
+    external = builder.AddSystem(ExternalResidual(plant, scenario.external_gain, scenario.period, frames, model=model))
     internal.set_name("internal_residual")
     external.set_name("external_residual")
     for residual in (internal, external):
@@ -160,20 +206,20 @@ def build_contact_localization_diagram(
 
     nq = plant.num_positions()
     detector = builder.AddSystem(ContactDetector(
-        plant, internal_gain=config.internal_gain, external_gain=config.external_gain, known_wrench_frames=frames,
-        nominal_positions=station.initial_state[:nq], period=config.period))
+        plant, internal_gain=scenario.internal_gain, external_gain=scenario.external_gain, known_wrench_frames=frames,
+        nominal_positions=station.initial_state[:nq], period=scenario.period))
     detector.set_name("contact_detector")
     builder.Connect(external.GetOutputPort("external_wrench_world"), detector.GetInputPort("external_wrench_world"))
     builder.Connect(internal.GetOutputPort("residual"), detector.GetInputPort("residual"))
     localizer = builder.AddSystem(ContactLocalizer(
-        plant, station.scene_graph, exclude_bodies=excluded, period=config.period, settle_time=config.settle_time))
+        plant, station.scene_graph, exclude_bodies=excluded, period=scenario.period, settle_time=scenario.settle_time))
     localizer.set_name("contact_localizer")
     builder.Connect(station.sensed_state, localizer.GetInputPort("state"))
     builder.Connect(external.GetOutputPort("external_wrench_world"), localizer.GetInputPort("external_wrench_world"))
     builder.Connect(internal.GetOutputPort("residual"), localizer.GetInputPort("residual"))
     builder.Connect(detector.GetOutputPort("contact_detected"), localizer.GetInputPort("contact_detected"))
 
-    log = config.log_period
+    log = scenario.log_period
     loggers = {
         "contact_detected": LogVectorOutput(detector.GetOutputPort("contact_detected"), builder, log),
         "detection_time": LogVectorOutput(detector.GetOutputPort("detection_time"), builder, log),
@@ -206,10 +252,6 @@ def build_contact_localization_diagram(
         loggers=loggers, meshcat_visualizer=visualizer)
 
 
-#: The random contacts of the localization study (``sample_trials``): force magnitude, N,
-#: and the largest angle between the force and the surface's inward normal, deg.
-MIN_FORCE, MAX_FORCE, MAX_ANGLE_DEG = 5.0, 40.0, 60.0
-
 
 def sample_trials(model: str, trials: int, seed: int) -> list[dict]:
     """Random contacts at the standing pose: link uniform over the candidate links, point
@@ -221,7 +263,7 @@ def sample_trials(model: str, trials: int, seed: int) -> list[dict]:
     Returns one dict per trial: ``trial``, ``body``, ``body_index``, ``geometry``,
     ``point_body`` (m, body frame), ``point_world_nominal`` (m), ``force_world`` (N),
     ``noise_seed``."""
-    _, handles = build_contact_localization_diagram(ContactLocalizationConfig(model=model, noise=False))
+    _, handles = build_contact_localization_diagram(ContactLocalizationScenario(model=model, noise=False))
     plant, localizer = handles.plant, handles.localizer
     context = plant.CreateDefaultContext()
     plant.SetPositionsAndVelocities(context, handles.station.initial_state)
@@ -257,3 +299,156 @@ def sample_trials(model: str, trials: int, seed: int) -> list[dict]:
             "noise_seed": (seed * 100003 + i) % (2**31 - 1),
         })
     return specs
+
+
+def trial_scenario(scenario: ContactLocalizationScenario, spec: dict) -> ContactLocalizationScenario:
+    """The run of the trial ``spec`` (``sample_trials``): ``scenario`` with its push and noise seed."""
+    return dataclasses.replace(scenario, push_body=spec["body"], push_point=list(spec["point_body"]),
+                               push_force=list(spec["force_world"]), seed=spec["noise_seed"])
+
+
+def no_contact_scenario(scenario: ContactLocalizationScenario) -> ContactLocalizationScenario:
+    """The study's run without contact: no push, its own noise seed (derived from the study's)."""
+    return dataclasses.replace(scenario, push_body=None, seed=(scenario.seed * 100003 + 99991) % (2**31 - 1))
+
+
+def time_localizer_update(handles: ContactLocalizationHandles, context: Context, repeats: int = 20) -> float:
+    """Median wall time [s] of one ContactLocalizer update with the trial's final inputs,
+    each call at a slightly different q (so that no pose or mass matrix is reused)."""
+    localizer = handles.localizer
+    lc = localizer.GetMyContextFromRoot(context)
+    x = np.array(localizer.GetInputPort("state").Eval(lc))
+    probe = localizer.CreateDefaultContext()
+    state_value = localizer.GetInputPort("state").FixValue(probe, x)
+    for name in ("external_wrench_world", "residual", "contact_detected"):
+        localizer.GetInputPort(name).FixValue(probe, np.array(localizer.GetInputPort(name).Eval(lc)))
+    localizer.GetInputPort("contact_detected").FixValue(probe, [1.0])
+    rng = np.random.default_rng(0)
+    nq = handles.plant.num_positions()
+    samples = []
+    for _ in range(repeats):
+        x2 = x.copy()
+        x2[7:nq] += 1e-6 * rng.normal(size=nq - 7)
+        state_value.GetMutableData().set_value(x2)
+        start = time.perf_counter()
+        localizer.EvalUniquePeriodicDiscreteUpdate(probe)
+        samples.append(time.perf_counter() - start)
+    return float(np.median(samples))
+
+
+def trial_result(scenario: ContactLocalizationScenario, spec: dict, handles: ContactLocalizationHandles,
+                 context: Context, wall_time_s: float) -> dict:
+    """The results of the trial ``spec`` run as ``scenario`` (``trial_scenario``) up to the end
+    of its push, from the simulator's root ``context``: detection and its delay, the
+    localized link and point, the force errors, and the localizer's update time (module
+    docstring); ``wall_time_s``: the simulation's wall time."""
+    push_start, t_end = scenario.push_start, scenario.push_start + scenario.push_duration
+    estimate = handles.localizer.estimate(handles.localizer.GetMyContextFromRoot(context))
+    pc = handles.push_source.GetMyContextFromRoot(context)
+    true_point = np.array(handles.push_source.GetOutputPort("point_world").Eval(pc))
+    f_true = np.asarray(spec["force_world"])
+
+    log = handles.loggers["contact_detected"].FindLog(context)
+    t, detected = log.sample_times(), log.data()[0]
+    times = handles.loggers["detection_time"].FindLog(context).data()[0]
+    during = (t >= push_start) & (t <= t_end) & (detected > 0.5)
+    rising = np.flatnonzero(np.diff(np.concatenate(([0.0], detected))) > 0.5)
+    false_before = int(np.sum(t[rising] < push_start))
+    result = {
+        **spec,
+        "detected": bool(during.any()),
+        "false_detections_before_push": false_before,
+        "detection_delay_s": None,
+        "status": estimate.status,
+        "status_reason": estimate.reason,
+        "estimated_body_index": estimate.body_index,
+        "estimated_body": handles.plant.get_body(BodyIndex(estimate.body_index)).name()
+        if estimate.body_index >= 0 else None,
+        "correct_link": estimate.body_index == spec["body_index"],
+        "position_error_m": None,
+        "force_error_rel": None,
+        "angle_error_deg": None,
+        "score": estimate.score if math.isfinite(estimate.score) else None,
+        "runner_up_score": estimate.runner_up_score if math.isfinite(estimate.runner_up_score) else None,
+        "true_point_world": true_point.tolist(),
+        "estimated_point_world": estimate.point_W.tolist(),
+        "estimated_force_world": estimate.force_W.tolist(),
+        "simulation_wall_s": wall_time_s,
+    }
+    if result["detected"]:
+        first = np.flatnonzero(during)[0]
+        result["detection_delay_s"] = float(times[first] - push_start)
+        f_hat = estimate.force_W
+        result["force_error_rel"] = float(np.linalg.norm(f_hat - f_true) / np.linalg.norm(f_true))
+        cos = float(f_hat @ f_true / max(np.linalg.norm(f_hat) * np.linalg.norm(f_true), 1e-300))
+        result["angle_error_deg"] = math.degrees(math.acos(min(1.0, max(-1.0, cos))))
+    if estimate.body_index >= 0:
+        result["position_error_m"] = float(np.linalg.norm(estimate.point_W - true_point))
+    result["localizer_update_s"] = time_localizer_update(handles, context)
+    return result
+
+
+def no_contact_result(scenario: ContactLocalizationScenario, handles: ContactLocalizationHandles,
+                      context: Context) -> dict:
+    """The run without contact (``no_contact_scenario``) of ``scenario.no_contact_duration`` s:
+    the number of OFF->ON switches of the detector, and the largest test statistics."""
+    log = handles.loggers["contact_detected"].FindLog(context)
+    detected = log.data()[0]
+    stats = handles.loggers["test_statistics"].FindLog(context).data()
+    on = handles.detector.thresholds["on"]
+    return {
+        "duration_s": scenario.no_contact_duration,
+        "noise_seed": scenario.seed,
+        "false_detections": int(np.sum(np.diff(np.concatenate(([0.0], detected))) > 0.5)),
+        "max_statistic_over_threshold": [float(stats[0].max() / on[0]), float(stats[1].max() / on[1])],
+    }
+
+
+def contact_localization_metrics(results: list[dict], no_contact: dict | None) -> dict:
+    """The study's totals (module docstring) from its trials' ``trial_result``s and its
+    ``no_contact_result`` (None: skipped), and whether each meets its floor (``FLOORS``)."""
+    n = len(results)
+    detected = [r for r in results if r["detected"]]
+    delays = [r["detection_delay_s"] for r in detected]
+    positions = np.array([r["position_error_m"] if r["position_error_m"] is not None else np.inf for r in results])
+    forces = [r["force_error_rel"] for r in detected]
+    angles = [r["angle_error_deg"] for r in detected]
+    updates = np.array([r["localizer_update_s"] for r in results]) * 1e3
+
+    def median(values):
+        return float(np.median(values)) if len(values) else None
+
+    metrics = {
+        "trials": n,
+        "detection_rate": len(detected) / n if n else None,
+        "median_detection_delay_s": median(delays),
+        "p95_detection_delay_s": float(np.percentile(delays, 95)) if delays else None,
+        "false_detections": (no_contact["false_detections"] if no_contact else 0)
+        + sum(r["false_detections_before_push"] for r in results),
+        "false_detections_no_contact_run": no_contact["false_detections"] if no_contact else None,
+        "no_contact_run_s": no_contact["duration_s"] if no_contact else None,
+        "false_detections_before_push_in_trials": sum(r["false_detections_before_push"] for r in results),
+        "correct_link_rate": float(np.mean([r["correct_link"] for r in results])) if n else None,
+        "valid_rate": float(np.mean([r["status"] == 0 for r in results])) if n else None,
+        "ambiguous_rate": float(np.mean([r["status"] == 4 for r in results])) if n else None,
+        "median_position_error_m": float(np.median(positions)) if n else None,
+        "p95_position_error_m": float(np.percentile(positions, 95)) if n else None,
+        "median_position_error_correct_link_m": median([r["position_error_m"] for r in results if r["correct_link"]]),
+        "median_force_error_rel": median(forces),
+        "p95_force_error_rel": float(np.percentile(forces, 95)) if forces else None,
+        "median_angle_error_deg": median(angles),
+        "p95_angle_error_deg": float(np.percentile(angles, 95)) if angles else None,
+        "median_localizer_update_ms": float(np.median(updates)) if n else None,
+        "max_localizer_update_ms": float(np.max(updates)) if n else None,
+        "status_counts": {reason: sum(r["status_reason"] == reason for r in results)
+                          for reason in sorted({r["status_reason"] for r in results})},
+        "wrong_links": [{"trial": r["trial"], "true": r["body"], "estimated": r["estimated_body"],
+                         "status": r["status_reason"]} for r in results if not r["correct_link"]],
+    }
+    checks = {}
+    for key, (op, floor) in FLOORS.items():
+        value = metrics.get(key)
+        checks[key] = None if value is None else bool(value >= floor if op == ">=" else value <= floor)
+    metrics["floors"] = {k: f"{op} {v}" for k, (op, v) in FLOORS.items()}
+    metrics["meets_floors"] = checks
+    return metrics

@@ -12,28 +12,36 @@ the three residuals of Flacco et al. (2016) fed only by those sensors.
 For ``hrp4_like`` and ``nao_like`` the robot stands on flat ground; its F/T sensors (HRP-4)
 make the ground reaction a known wrench. Any other floating-base model (an SDFormat or URDF
 path) floats in zero gravity with no ground, holding its default posture.
+
+Scenarios are YAML files loaded into ``ResidualComparisonScenario`` with
+``pydrake.common.yaml.yaml_load_typed`` (``diagrams.scenarios``); the default is the paper's.
+The metrics (``residual_comparison_metrics``) are relative RMS errors over the samples after
+``skip`` seconds: sqrt(sum (estimate - truth)^2) / sqrt(sum truth^2), over all joints or per
+joint, each against the raw truth and against the truth passed through the residual's own
+first-order filter (time constant 1/K), which removes the filter's designed lag.
 """
 
-from __future__ import annotations
+# No ``from __future__ import annotations``: yaml_load_typed reads the scenario's field types.
 
 from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, SceneGraph
 from pydrake.multibody.plant import MultibodyPlant, MultibodyPlantConfig
+from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
 from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station, default_plant_config
 from models import HumanoidHandles
-from systems.simulation.disturbances import Push, PushSource, Sinusoid
 from systems.residuals.momentum_residuals import ClassicalResidual, ExternalResidual, InternalResidual, ResidualModel
+from systems.simulation.disturbances import Push, PushSource, Sinusoid
 from systems.simulation.sensors import SensorHandles
 
 
 @dataclass
-class ResidualComparisonConfig:
-    """Settings of the residual comparison (paper Secs. II-C, III, V). SI units.
+class ResidualComparisonScenario:
+    """The residual comparison's settings (paper Secs. II-C, III, V). SI units.
 
     Attributes:
         model: ``hrp4_like``, ``nao_like`` or a path to a floating-base SDFormat/URDF file.
@@ -53,15 +61,19 @@ class ResidualComparisonConfig:
             (omega/K = 1.8 % at 0.1 Hz) against the default sensor noise.
         noise: sensor noise on (the sensors' documented defaults) or off.
         seed: sensor noise seed.
-        plant_config: Drake's plant configuration (default: 1 ms steps, point contact, SAP).
+        plant_config: Drake's ``MultibodyPlantConfig`` (default: 1 ms steps, point contact,
+            SAP; see ``diagrams.station.humanoid_station``).
         period: the residuals' update period, s.
         log_period: the loggers' sampling period, s.
+        skip: the metrics ignore the first ``skip`` s (less than ``duration``).
+        simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``); the plant
+            is discrete, so only ``target_realtime_rate`` and the publishing matter.
     """
 
     model: str = "hrp4_like"
     push_body: str | None = None
-    push_point: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    push_direction: tuple[float, float, float] = (-0.4, 0.25, -0.88)
+    push_point: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    push_direction: list[float] = field(default_factory=lambda: [-0.4, 0.25, -0.88])
     push_amplitude: float | None = 40.0
     push_frequency: float = 0.1
     push_start: float = 0.5
@@ -74,6 +86,8 @@ class ResidualComparisonConfig:
     plant_config: MultibodyPlantConfig = field(default_factory=default_plant_config)
     period: float = 1e-3
     log_period: float = 5e-3
+    skip: float = 0.5
+    simulator_config: SimulatorConfig = field(default_factory=SimulatorConfig)
 
 
 @dataclass
@@ -97,37 +111,37 @@ class ResidualComparisonHandles:
 
 
 def build_residual_comparison_diagram(
-    config: ResidualComparisonConfig, meshcat: Meshcat | None = None
+    scenario: ResidualComparisonScenario, meshcat: Meshcat | None = None
 ) -> tuple[Diagram, ResidualComparisonHandles]:
-    """Builds the diagram of the module docstring for ``config``.
+    """Builds the diagram of the module docstring for ``scenario``.
 
     Raises:
         ValueError: an unknown model or body, a model without a floating base, bad settings.
     """
-    if config.duration <= 0 or config.push_frequency < 0 or config.log_period <= 0:
+    if scenario.duration <= 0 or scenario.push_frequency < 0 or scenario.log_period <= 0:
         raise ValueError("duration and log_period must be positive, push_frequency non-negative")
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, config.model, plant_config=config.plant_config, noise=config.noise, seed=config.seed)
+    station = add_humanoid_station(builder, scenario.model, plant_config=scenario.plant_config, noise=scenario.noise, seed=scenario.seed)
     plant, humanoid = station.plant, station.humanoid
     builder.Connect(
         builder.AddSystem(ConstantVectorSource(station.q_hold)).get_output_port(), station.desired_position
     )
-    amplitude = config.push_amplitude
+    amplitude = scenario.push_amplitude
     if amplitude is None:
         mass = plant.CalcTotalMass(plant.CreateDefaultContext())
         amplitude = 0.1 * mass * 9.81
 
     # The pusher and its ground truth.
-    push_body = config.push_body
+    push_body = scenario.push_body
     if push_body is None:
         if humanoid is None:
             raise ValueError("--push-body is required for a model other than the humanoids")
         push_body = humanoid.shoulder_bodies["right"].name()
     push = Push(
         body_name=push_body,
-        p_BoP_B=np.asarray(config.push_point, dtype=float),
-        direction_W=np.asarray(config.push_direction, dtype=float),
-        profile=Sinusoid(amplitude, config.push_frequency, t_start=config.push_start),
+        p_BoP_B=np.asarray(scenario.push_point, dtype=float),
+        direction_W=np.asarray(scenario.push_direction, dtype=float),
+        profile=Sinusoid(amplitude, scenario.push_frequency, t_start=scenario.push_start),
     )
     push_source = builder.AddSystem(PushSource(plant, [push]))
     push_source.set_name("push_source")
@@ -140,9 +154,9 @@ def build_residual_comparison_diagram(
     # The three residuals, sharing one model (one dynamics computation per update).
     # The station's model: the PD's gravity comes from the same per-state computation.
     model = station.dynamics_model if station.dynamics_model is not None else ResidualModel(plant)
-    classical = builder.AddSystem(ClassicalResidual(plant, config.classical_gain, config.period, known_frames, model=model))
-    internal = builder.AddSystem(InternalResidual(plant, config.internal_gain, config.period, known_frames, model=model))
-    external = builder.AddSystem(ExternalResidual(plant, config.external_gain, config.period, known_frames, model=model))
+    classical = builder.AddSystem(ClassicalResidual(plant, scenario.classical_gain, scenario.period, known_frames, model=model))
+    internal = builder.AddSystem(InternalResidual(plant, scenario.internal_gain, scenario.period, known_frames, model=model))
+    external = builder.AddSystem(ExternalResidual(plant, scenario.external_gain, scenario.period, known_frames, model=model))
     for name, residual in (("classical_residual", classical), ("internal_residual", internal), ("external_residual", external)):
         residual.set_name(name)
         builder.Connect(sensed_state, residual.GetInputPort("state"))
@@ -151,7 +165,7 @@ def build_residual_comparison_diagram(
         if known_frames:
             builder.Connect(known_wrenches, residual.GetInputPort("known_wrenches"))
 
-    log = config.log_period
+    log = scenario.log_period
     loggers = {
         "state": LogVectorOutput(plant.get_state_output_port(), builder, log),
         "classical": LogVectorOutput(classical.GetOutputPort("residual"), builder, log),
@@ -190,3 +204,98 @@ def set_initial_state(diagram: Diagram, context: Context, handles: ResidualCompa
     """Puts the robot in its initial (standing) state in the diagram's ``context`` (and the
     station's held sensor sample, see ``HumanoidStation.set_initial_state``)."""
     handles.station.set_initial_state(context)
+
+
+def check_metrics_window(scenario: ResidualComparisonScenario) -> None:
+    """Raises a ValueError unless 0 <= ``skip`` < ``duration`` (the metrics need samples)."""
+    if not 0.0 <= scenario.skip < scenario.duration:
+        raise ValueError(
+            f"the metrics window needs 0 <= skip < duration, got skip {scenario.skip:g} s, "
+            f"duration {scenario.duration:g} s"
+        )
+
+
+def relative_rms_error(estimate: np.ndarray, truth: np.ndarray) -> float:
+    """sqrt(sum (estimate - truth)^2) / sqrt(sum truth^2) over every entry (nan if truth is 0)."""
+    denominator = float(np.sqrt(np.sum(np.square(truth))))
+    if denominator == 0.0:
+        return float("nan")
+    return float(np.sqrt(np.sum(np.square(estimate - truth))) / denominator)
+
+
+def first_order_filter(samples: np.ndarray, gain: float, dt: float) -> np.ndarray:
+    """The truth as a residual of gain K would see it: y' = K (u - y), y(0) = 0, for the
+    columns of ``samples`` taken every ``dt`` seconds (exact for piecewise-constant input)."""
+    a = 1.0 - np.exp(-gain * dt)
+    out = np.zeros_like(samples)
+    y = np.zeros(samples.shape[0])
+    for k in range(1, samples.shape[1]):
+        y = y + a * (samples[:, k - 1] - y)
+        out[:, k] = y
+    return out
+
+
+def residual_comparison_metrics(
+    scenario: ResidualComparisonScenario, handles: ResidualComparisonHandles, signals: dict, wall_time_s: float
+) -> dict:
+    """The metrics of one run (module docstring), from its logged signals (``logged_signals``:
+    "t" and the loggers of ``handles``) over the samples after ``scenario.skip``, and the
+    real-time factor of a run that took ``wall_time_s`` s.
+
+    Raises:
+        ValueError: ``skip`` outside [0, duration).
+    """
+    check_metrics_window(scenario)
+    skip = scenario.skip
+    t = signals["t"]
+    window = t >= skip
+    dt = scenario.log_period
+
+    truth = signals["tau_c_real"]
+    internal, classical = signals["internal"], signals["classical"][6:]
+    internal_truth_filtered = first_order_filter(truth, scenario.internal_gain, dt)
+    classical_truth_filtered = first_order_filter(truth, scenario.classical_gain, dt)
+    force_truth = signals["force_world_true"]
+    force_estimate = signals["external_world"][3:]
+    force_truth_filtered = first_order_filter(force_truth, scenario.external_gain, dt)
+    wrench_base_truth = signals["wrench_base_true"]
+    wrench_base_filtered = first_order_filter(wrench_base_truth, scenario.external_gain, dt)
+    names = handles.joint_names
+
+    def per_joint(estimate, reference):
+        return {name: relative_rms_error(estimate[k, window], reference[k, window]) for k, name in enumerate(names)}
+
+    before = t < scenario.push_start  # no push yet: the residuals show only noise
+    return {
+        "model": scenario.model,
+        "push_body": handles.push_source.pushes[0].body_name,
+        "noise": scenario.noise,
+        "sensors": "simulated sensors" if handles.sensors is not None else "true state (no sensor model for this robot)",
+        "seed": scenario.seed,
+        "duration_s": scenario.duration,
+        "skip_s": skip,
+        "gains_per_s": {"classical": scenario.classical_gain, "internal": scenario.internal_gain, "external": scenario.external_gain},
+        "internal_rel_rms_error": relative_rms_error(internal[:, window], truth[:, window]),
+        "internal_rel_rms_error_per_joint": per_joint(internal, truth),
+        "internal_rel_rms_error_vs_filtered_truth": relative_rms_error(internal[:, window], internal_truth_filtered[:, window]),
+        "internal_rel_rms_error_per_joint_vs_filtered_truth": per_joint(internal, internal_truth_filtered),
+        "classical_rel_rms_error": relative_rms_error(classical[:, window], truth[:, window]),
+        "classical_rel_rms_error_per_joint": per_joint(classical, truth),
+        "classical_rel_rms_error_vs_filtered_truth": relative_rms_error(classical[:, window], classical_truth_filtered[:, window]),
+        "external_force_rel_rms_error": relative_rms_error(force_estimate[:, window], force_truth[:, window]),
+        "external_force_rel_rms_error_vs_filtered_truth": relative_rms_error(
+            force_estimate[:, window], force_truth_filtered[:, window]
+        ),
+        "external_wrench_base_rel_rms_error": relative_rms_error(signals["external_base"][:, window], wrench_base_truth[:, window]),
+        "external_wrench_base_rel_rms_error_vs_filtered_truth": relative_rms_error(
+            signals["external_base"][:, window], wrench_base_filtered[:, window]
+        ),
+        "rms_true_joint_effort_Nm": {name: float(np.sqrt(np.mean(truth[k, window] ** 2))) for k, name in enumerate(names)},
+        "rms_classical_joint_effort_Nm": {name: float(np.sqrt(np.mean(classical[k, window] ** 2))) for k, name in enumerate(names)},
+        "rms_internal_noise_before_push_Nm": {
+            name: float(np.sqrt(np.mean(internal[k, before & (t > 0.05)] ** 2))) if np.any(before & (t > 0.05)) else None
+            for k, name in enumerate(names)
+        },
+        "wall_time_s": wall_time_s,
+        "real_time_factor": scenario.duration / wall_time_s,
+    }

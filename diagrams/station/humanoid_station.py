@@ -20,6 +20,7 @@ from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, Multibody
 from pydrake.systems.framework import Context, DiagramBuilder, InputPort, OutputPort
 from pydrake.systems.primitives import MatrixGain, ZeroOrderHold
 
+from diagrams.station.plant_config import check_plant_config, default_plant_config
 from diagrams.station.standing import default_gains
 from models import (
     MODEL_NAMES,
@@ -33,16 +34,6 @@ from systems.simulation.pd_gravity import PdGravityController
 from systems.residuals.momentum_residuals import ResidualModel
 from systems.simulation.sensors import SensorHandles, add_sensors
 from systems.common.topology import FloatingBaseTopology, floating_base_topology
-
-
-#: Drake's discrete contact approximations the station accepts (``MultibodyPlantConfig``),
-#: all solved by SAP. TAMSI is refused: Drake deprecated it (removal on or after 2026-09-01).
-CONTACT_APPROXIMATIONS = ("sap", "similar", "lagged")
-
-
-def default_plant_config() -> MultibodyPlantConfig:
-    """The station's plant: discrete, 1 ms steps, point contact, Drake's SAP solver."""
-    return MultibodyPlantConfig(time_step=1e-3, discrete_contact_approximation="sap", contact_model="point")
 
 
 @dataclass
@@ -122,7 +113,7 @@ def add_humanoid_station(
         model: ``hrp4_like``, ``nao_like`` or a path to a floating-base SDFormat/URDF file.
         plant_config: Drake's plant configuration (default ``default_plant_config()``: 1 ms
             steps, point contact, SAP). Its ``time_step`` is the plant's discrete step, s,
-            and its ``discrete_contact_approximation`` one of ``CONTACT_APPROXIMATIONS``:
+            and its ``discrete_contact_approximation`` one of ``plant_config.CONTACT_APPROXIMATIONS``:
             "sap" (Drake's convex solver), "similar" or "lagged". Drake's TAMSI solver is
             deprecated and refused; the station's geometry is made for point contact.
         noise, seed: the sensors' noise (defaults of ``systems.simulation.sensors``) and its seed.
@@ -132,20 +123,7 @@ def add_humanoid_station(
             unknown contact approximation.
     """
     plant_config = default_plant_config() if plant_config is None else plant_config
-    contact_approximation = plant_config.discrete_contact_approximation
-    if not plant_config.time_step > 0.0:
-        raise ValueError(f"plant_config.time_step must be positive (a discrete plant), got {plant_config.time_step}")
-    if plant_config.contact_model != "point":
-        raise ValueError(f"plant_config.contact_model {plant_config.contact_model!r}: the station uses point contact ('point')")
-    if contact_approximation == "tamsi":
-        raise ValueError(
-            "contact approximation 'tamsi': Drake deprecated the TAMSI solver (removal on or after "
-            f"2026-09-01); choose one of {CONTACT_APPROXIMATIONS}"
-        )
-    if contact_approximation not in CONTACT_APPROXIMATIONS:
-        raise ValueError(
-            f"unknown contact approximation {contact_approximation!r}; choose one of {CONTACT_APPROXIMATIONS}"
-        )
+    check_plant_config(plant_config)
     time_step = plant_config.time_step
     plant, scene_graph = AddMultibodyPlant(
         plant_config,

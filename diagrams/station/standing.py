@@ -7,11 +7,15 @@
 
 The plant is discrete (default 1 ms) with SAP and point contact, as measured in
 DESIGN.md; the feet touch the ground through four small spheres each.
+
+Scenarios are YAML files loaded into ``StandingScenario`` with
+``pydrake.common.yaml.yaml_load_typed`` (``diagrams.scenarios``); ``standing_run_metrics``
+gives a run's metrics (base drift, foot contact, fall).
 """
 
-from __future__ import annotations
+# No ``from __future__ import annotations``: yaml_load_typed reads the scenario's field types.
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, SceneGraph
@@ -20,9 +24,11 @@ from pydrake.multibody.plant import (
     MultibodyPlant,
     MultibodyPlantConfig,
 )
+from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
+from diagrams.station.plant_config import check_plant_config, default_plant_config
 from models import (
     MODEL_NAMES,
     HumanoidHandles,
@@ -56,6 +62,29 @@ DEFAULT_GAINS = {
         "hands": (1.0, 0.01),
     },
 }
+
+
+@dataclass
+class StandingScenario:
+    """The standing experiment's settings (SI units).
+
+    Attributes:
+        models: the humanoids simulated one after the other (``models.MODEL_NAMES``).
+        duration: simulated time per model, s.
+        settle_time: the base drift is measured after this, s (at most ``duration``).
+        state_log_period: period of the state logger, s.
+        plant_config: Drake's ``MultibodyPlantConfig`` (default: 1 ms steps, point contact,
+            SAP; see ``diagrams.station.plant_config``).
+        simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``); the plant
+            is discrete, so only ``target_realtime_rate`` and the publishing matter.
+    """
+
+    models: list[str] = field(default_factory=lambda: list(MODEL_NAMES))
+    duration: float = 10.0
+    settle_time: float = 1.0
+    state_log_period: float = 0.01
+    plant_config: MultibodyPlantConfig = field(default_factory=default_plant_config)
+    simulator_config: SimulatorConfig = field(default_factory=SimulatorConfig)
 
 
 @dataclass
@@ -95,7 +124,7 @@ def default_gains(plant: MultibodyPlant, humanoid: HumanoidHandles) -> tuple[np.
 def build_standing_diagram(
     model_name: str,
     *,
-    time_step: float = 1e-3,
+    plant_config: MultibodyPlantConfig | None = None,
     meshcat: Meshcat | None = None,
     kp=None,
     kd=None,
@@ -105,7 +134,8 @@ def build_standing_diagram(
 
     Args:
         model_name: one of models.MODEL_NAMES.
-        time_step: plant discrete time step, s.
+        plant_config: Drake's plant configuration (default ``default_plant_config()``: 1 ms
+            steps, point contact, SAP; see ``diagrams.station.plant_config``).
         meshcat: if given, a MeshcatVisualizer is added.
         kp: PD stiffness, N m/rad, scalar or per joint (v[6:] order); default per model
             (DEFAULT_GAINS).
@@ -114,12 +144,15 @@ def build_standing_diagram(
 
     Returns:
         (diagram, StandingHandles).
+
+    Raises:
+        ValueError: an unknown model, a plant configuration the station refuses.
     """
     if model_name not in MODEL_NAMES:
         raise ValueError(f"unknown humanoid model {model_name!r}; valid names: {MODEL_NAMES}")
+    config = default_plant_config() if plant_config is None else plant_config
+    check_plant_config(config)
     builder = DiagramBuilder()
-    config = MultibodyPlantConfig(
-        time_step=time_step, discrete_contact_approximation="sap", contact_model="point")
     plant, scene_graph = AddMultibodyPlant(config, point_contact_scene_graph_config(), builder)
     humanoid = add_humanoid(plant, model_name, scene_graph=scene_graph)
     add_ground(plant)
@@ -232,13 +265,39 @@ def standing_metrics(handles: StandingHandles, context: Context, settle_time: fl
     return StandingMetrics(drift_m, drift_rad, tilt, height, forces, fell)
 
 
+def standing_run_metrics(scenario: StandingScenario, handles: StandingHandles, context: Context,
+                         wall_time_s: float) -> dict:
+    """The metrics of one finished run of ``scenario`` (``context``: the simulator's root
+    context, ``wall_time_s``: the wall time it took) as plain data: base drift after the
+    settle time (cm, deg), the final foot contact (sole tilt, deg; sole height, mm; sphere
+    forces, N), feet flat, fell, and the real-time factor."""
+    duration = scenario.duration
+    metrics = standing_metrics(handles, context, settle_time=min(scenario.settle_time, duration))
+    return dict(
+        model=handles.humanoid.name,
+        duration_s=duration,
+        wall_s=wall_time_s,
+        real_time_factor=duration / wall_time_s,
+        base_drift_cm=100.0 * metrics.base_drift_m,
+        base_drift_deg=float(np.degrees(metrics.base_drift_rad)),
+        min_sphere_force_N=metrics.min_sphere_force_N,
+        sole_tilt_deg={k: float(np.degrees(v)) for k, v in metrics.sole_tilt_rad.items()},
+        sole_height_mm={k: 1000.0 * v for k, v in metrics.sole_height_m.items()},
+        sphere_forces_N={k: v.tolist() for k, v in metrics.sphere_forces_N.items()},
+        feet_flat=metrics.feet_flat,
+        fell=metrics.fell,
+    )
+
+
 __all__ = [
     "DEFAULT_GAINS",
     "StandingHandles",
     "StandingMetrics",
+    "StandingScenario",
     "build_standing_diagram",
     "default_gains",
     "foot_sphere_normal_forces",
     "set_initial_state",
     "standing_metrics",
+    "standing_run_metrics",
 ]

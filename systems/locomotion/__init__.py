@@ -1,1 +1,2 @@
-"""systems/locomotion."""
+"""Walking: the ZMP preview-control pattern generator, the Nao walking controller and the
+analytic leg inverse kinematics."""

@@ -1,6 +1,7 @@
 """Speed of the floating-base decomposition (Flacco et al. eq. 9, Algorithms 1-2, eq. 13).
 
-Run: ``make benchmark`` (or ``python -m apps.benchmark``). For each humanoid model it prints the
+Run: ``make benchmark`` (or ``python -m apps.benchmark [--out OUT]``; the figures also go to
+``OUT/benchmark/metrics.json``, OUT default ``out``). For each humanoid model it prints the
 microseconds per call of
 
 * one ``CalcMassMatrix`` after a new state (``SetPositions`` + ``CalcMassMatrix``): the unit,
@@ -26,9 +27,7 @@ path); and one update of the contact localizer (Flacco et al. Sec. VI) on ``hrp4
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -36,10 +35,12 @@ from pathlib import Path
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
 
+from apps.runner import add_out_argument, memory_allocator, output_folder, print_written, run_app, write_metrics
 from models import MODEL_NAMES, add_humanoid
 from systems.dynamics.floating_base import FloatingBaseDynamics
 from systems.residuals.momentum_residuals import ClassicalResidual, ExternalResidual, InternalResidual, ResidualModel
 
+EXPERIMENT = "benchmark"
 
 
 def _median_microseconds(call: Callable[[int], object], calls: int, batches: int) -> float:
@@ -307,21 +308,24 @@ def _table_header(title: str, header: str, *, blank_line: bool = True) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(prog=f"python -m apps.{EXPERIMENT}", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--model", choices=(*MODEL_NAMES, "all"), default="all")
     parser.add_argument("--calls", type=int, default=300, help="calls per batch (fast paths)")
     parser.add_argument("--batches", type=int, default=7, help="batches; the median is reported")
     parser.add_argument("--loop-seconds", type=float, default=2.0,
                         help="simulated seconds per closed-loop timing (0 skips them)")
-    parser.add_argument("--json", type=Path, help="also write the results to this JSON file")
+    add_out_argument(parser)
     args = parser.parse_args(argv)
-    from systems.observer.nao_dataset import DatasetError, published_dataset_dir
+    return run_app(EXPERIMENT, lambda: _run(args))
 
-    try:  # before the long timings: a missing recording is an error, not a skipped figure
-        dataset_dir = published_dataset_dir()
-    except DatasetError as error:
-        print(f"benchmark: error: {error}", file=sys.stderr)
-        return 2
+
+def _run(args: argparse.Namespace) -> int:
+    from systems.observer.nao_dataset import published_dataset_dir
+
+    # Before the long timings: a missing recording is an error (DatasetError, a ValueError,
+    # naming the path), not a skipped figure.
+    dataset_dir = published_dataset_dir()
 
     names = MODEL_NAMES if args.model == "all" else (args.model,)
     rows = [benchmark_model(name, calls=args.calls, batches=args.batches) for name in names]
@@ -380,15 +384,11 @@ def main(argv: list[str] | None = None) -> int:
                 f"{r['model']:<10} {r['num_primitives']:>10} {r['calc_mass_matrix_us']:>12.1f} us"
                 f" {r['localizer_update_us']:>11.1f} us ({r['localizer_update_ratio']:>5.1f}x) {'2000 us':>8}"
             )
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(
-            json.dumps(
-                {"floating_base": rows, "residual_update": residual_rows, "force_observer": observer, "closed_loop": loop_rows,
-                 "contact_localizer": localizer_rows},
-                indent=2,
-            )
-        )
+    out_dir = output_folder(args, EXPERIMENT)
+    write_metrics(out_dir, {"floating_base": rows, "residual_update": residual_rows, "force_observer": observer,
+                            "closed_loop": loop_rows, "contact_localizer": localizer_rows})
+    print(f"\nmemory allocator: {memory_allocator()}")
+    print_written(out_dir)
     return 0
 
 

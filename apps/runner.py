@@ -44,13 +44,19 @@ def experiment_parser(module: str, doc: str | None, *, replay: bool = True) -> a
                         help="YAML scenario file (apps/scenarios/); missing keys keep their defaults")
     parser.add_argument("--scenario-text", default=None, metavar="YAML",
                         help="YAML overrides applied after --scenario, e.g. --scenario-text 'seed: 3'")
-    parser.add_argument("--out", type=Path, default=DEFAULT_OUT,
-                        help=f"output folder; the app writes into OUT/<experiment>/ (default {DEFAULT_OUT})")
+    add_out_argument(parser)
     parser.add_argument("--headless", action="store_true",
                         help="no live Meshcat URL (the replays are still written)")
     if replay:
         parser.add_argument("--no-replay", action="store_true", help="skip the Meshcat replays (faster)")
     return parser
+
+
+def add_out_argument(parser: argparse.ArgumentParser, folder: str = "<experiment>") -> None:
+    """``--out OUT`` (default ``out``): the app writes into ``OUT/<folder>/``
+    (``output_folder``); also for the apps without a scenario."""
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT,
+                        help=f"output folder; the app writes into OUT/{folder}/ (default {DEFAULT_OUT})")
 
 
 def scenario_from_args(schema: type, args: argparse.Namespace, defaults: Any = None, **overrides: Any) -> Any:
@@ -221,6 +227,7 @@ __all__ = [
     "DEFAULT_OUT",
     "ScenarioError",
     "SimulationRun",
+    "add_out_argument",
     "experiment_parser",
     "logged_signals",
     "memory_allocator",

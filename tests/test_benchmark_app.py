@@ -6,11 +6,10 @@ from apps import benchmark
 
 
 def test_benchmark_runs_and_reports_every_figure(tmp_path, capsys):
-    out = tmp_path / "bench.json"
     assert benchmark.main(
-        ["--model", "nao_like", "--calls", "3", "--batches", "1", "--loop-seconds", "0.08", "--json", str(out)]
+        ["--model", "nao_like", "--calls", "3", "--batches", "1", "--loop-seconds", "0.08", "--out", str(tmp_path)]
     ) == 0
-    results = json.loads(out.read_text())
+    results = json.loads((tmp_path / "benchmark" / "metrics.json").read_text())
     rows = results["floating_base"]
     assert [r["model"] for r in rows] == ["nao_like"]
     row = rows[0]

@@ -62,13 +62,14 @@ def test_environment_variable_points_at_other_recordings_or_fails_clearly(monkey
 def test_reproduces_the_authors_implementation_on_real_nao_data(name, dataset, tmp_path, capsys):
     """reference_F.csv is the authors' MATLAB observer run on the same recording (Octave)."""
     assert replay_nao_dataset.main([str(dataset / name), "--out", str(tmp_path)]) == 0
-    estimates = np.loadtxt(tmp_path / "estimates.csv", delimiter=",", skiprows=1)
+    out = tmp_path / "replay_nao_dataset" / name
+    estimates = np.loadtxt(out / "estimates.csv", delimiter=",", skiprows=1)
     reference = np.loadtxt(dataset / name / "reference_F.csv", delimiter=",")
     assert estimates.shape == (len(reference), 4)
     np.testing.assert_allclose(estimates[:, 0], STANDING.period * np.arange(1, len(reference) + 1), rtol=1e-12)
     assert np.abs(estimates[:, 1:] - reference).max() < 1e-9 * np.abs(reference).max()
-    assert (tmp_path / "estimates.png").stat().st_size > 10_000
-    assert (tmp_path / "estimates.csv").read_text().startswith("t,Fx,Fy,Fz\n")
+    assert (out / "estimates.png").stat().st_size > 10_000
+    assert (out / "estimates.csv").read_text().startswith("t,Fx,Fy,Fz\n")
 
 
 @pytest.mark.parametrize(

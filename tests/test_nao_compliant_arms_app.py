@@ -7,25 +7,28 @@ import re
 
 import numpy as np
 import pytest
+from scenario_checks import SCENARIOS, check_scenario_convention
 
 from apps import nao_compliant_arms
-from apps.nao_compliant_arms import DEFAULT_FORCE, make_scenario
+from diagrams.observer.nao_compliant_arms import DEFAULT_FORCE, NaoCompliantArmsScenario, make_scenario
+from diagrams.scenarios import load_scenario
 from systems.simulation.visualization import read_static_html
 
 
 @pytest.fixture(scope="module")
 def app_output(tmp_path_factory):
     out = tmp_path_factory.mktemp("nao_compliant_arms")
-    assert nao_compliant_arms.main(["--out", str(out), "--headless", "--scenario", "b", "--seed", "3"]) == 0
-    return out
+    assert nao_compliant_arms.main(["--out", str(out), "--headless", "--case", "b", "--seed", "3"]) == 0
+    return out / "nao_compliant_arms"
 
 
 def test_outputs_and_floor(app_output):
     assert (app_output / "scenario_b.png").stat().st_size > 20_000
     metrics = json.loads((app_output / "metrics.json").read_text())
-    assert set(metrics) == {"scenario_b", "summary"}
+    assert set(metrics) == {"scenario_b", "summary", "scenario", "memory_allocator"}
     m = metrics["scenario_b"]
     assert m["floor_relative_error"] == 0.10 and metrics["summary"]["seed"] == 3
+    assert metrics["scenario"]["seed"] == 3 and metrics["scenario"]["cases"] == ["b"]
     for side in ("left", "right"):
         hand = m["hands"][side]
         # The applied force per hand is -1.5 N along the torso's x (the torso barely tilts).
@@ -55,6 +58,17 @@ def test_bad_arguments(capsys):
     assert "force must be in" in capsys.readouterr().err
     assert nao_compliant_arms.main(["--seed", "-2", "--no-replay"]) == 2
     with pytest.raises(SystemExit):
-        nao_compliant_arms.main(["--scenario", "c"])
+        nao_compliant_arms.main(["--case", "c"])
     with pytest.raises(ValueError, match="unknown scenario"):
         make_scenario("c")
+
+
+def test_scenario_file_text_overrides_and_unknown_keys(tmp_path, capsys):
+    check_scenario_convention(NaoCompliantArmsScenario, "nao_compliant_arms_default.yaml", tmp_path, "push_force")
+    overridden = load_scenario(
+        NaoCompliantArmsScenario, filename=SCENARIOS / "nao_compliant_arms_default.yaml",
+        text="cases: [b]\nlean: -0.2\nplant_config: {discrete_contact_approximation: lagged}")
+    assert (overridden.cases, overridden.lean, overridden.force) == (["b"], -0.2, DEFAULT_FORCE)
+    assert overridden.plant_config.discrete_contact_approximation == "lagged"
+    assert nao_compliant_arms.main(["--scenario-text", "push_force: 2.0", "--no-replay", "--out", str(tmp_path)]) == 2
+    assert "nao_compliant_arms: error:" in capsys.readouterr().err

@@ -6,9 +6,11 @@ import re
 
 import numpy as np
 import pytest
+from scenario_checks import SCENARIOS, check_scenario_convention
 
 from apps import nao_force_observer
-from apps.nao_force_observer import LOAD_MASS, make_experiment
+from diagrams.observer.nao_force_observer import LOAD_MASS, NaoForceObserverScenario, make_experiment
+from diagrams.scenarios import load_scenario
 from systems.simulation.disturbances import SmoothPiecewise
 from systems.simulation.visualization import read_static_html
 
@@ -19,18 +21,19 @@ def app_output(tmp_path_factory):
     code = nao_force_observer.main(
         ["--out", str(out), "--headless", "--experiment", "3", "--time-scale", "0.5", "--seed", "2"])
     assert code == 0
-    return out
+    return out / "nao_force_observer"
 
 
 def test_app_writes_plot_replay_and_metrics(app_output):
     assert (app_output / "experiment_3.png").stat().st_size > 20_000
     metrics = json.loads((app_output / "metrics.json").read_text())
-    assert set(metrics) == {"experiment_3", "summary"}
+    assert set(metrics) == {"experiment_3", "summary", "scenario", "memory_allocator"}
     m = metrics["experiment_3"]
     for key in ("rms_error_N", "steady_state_error_N"):
         assert set(m[key]) == {"x", "y", "z"} and all(np.isfinite(v) for v in m[key].values())
     assert m["floors_N"] == {"steady_state": 0.5, "rms": 1.0}
     assert isinstance(m["meets_floors"], bool) and metrics["summary"]["seed"] == 2
+    assert metrics["scenario"]["seed"] == 2 and metrics["scenario"]["experiments"] == [3]
     assert m["invalid_samples"] == 0 and m["fsr_saturated_samples"] == 0 and m["base_height_drop_m"] < 0.01
 
 
@@ -79,3 +82,20 @@ def test_bad_arguments_and_schedules(capsys):
                 assert np.ptp(values) < 1e-12
                 assert all(abs(push.profile.value(float(t)) - v) < 1e-12 for t, v in zip(times, values))
         assert experiment.duration < 25.0
+
+
+def test_scenario_file_text_overrides_and_unknown_keys(tmp_path):
+    check_scenario_convention(NaoForceObserverScenario, "nao_force_observer_default.yaml", tmp_path, "load_kg")
+    overridden = load_scenario(
+        NaoForceObserverScenario, filename=SCENARIOS / "nao_force_observer_default.yaml",
+        text="experiments: [2]\nramp: 0.1\nplant_config: {discrete_contact_approximation: lagged}")
+    assert (overridden.experiments, overridden.ramp, overridden.seed) == ([2], 0.1, 0)
+    assert overridden.plant_config.discrete_contact_approximation == "lagged"
+    assert overridden.plant_config.time_step == 1e-3
+
+
+def test_scenario_errors_from_the_command_line(tmp_path, capsys):
+    assert nao_force_observer.main(["--scenario-text", "load_kg: 2.0", "--no-replay", "--out", str(tmp_path)]) == 2
+    assert "nao_force_observer: error:" in capsys.readouterr().err
+    assert nao_force_observer.main(["--scenario-text", "experiments: [4]", "--no-replay", "--out", str(tmp_path)]) == 2
+    assert "unknown experiment 4" in capsys.readouterr().err

@@ -19,12 +19,14 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
+from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
 from diagrams.observer.nao_force_observer import full_posture, wide_stance
-from diagrams.station.humanoid_station import add_humanoid_station
+from diagrams.station.humanoid_station import add_humanoid_station, default_plant_config
 from models import set_standing_state
 from systems.common.checks import positive_number
 from systems.observer.arm_compliance import NAO_ARM_CHAINS, ArmChain, MotorConstantIdentification, fit_motor_constants
@@ -33,9 +35,10 @@ from systems.simulation.pd_gravity import joint_vector_from_names
 
 
 @functools.lru_cache(maxsize=8)
-def _settled_state(duration: float, posture: tuple) -> tuple[float, ...]:
+def _settled_state(duration: float, posture: tuple, plant_config_yaml: str) -> tuple[float, ...]:
+    plant_config = yaml_load_typed(schema=MultibodyPlantConfig, data=plant_config_yaml)
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, "nao_like", noise=False)
+    station = add_humanoid_station(builder, "nao_like", plant_config=plant_config, noise=False)
     plant, humanoid = station.plant, station.humanoid
     angles = full_posture(humanoid, dict(posture))
     hold = builder.AddSystem(ConstantVectorSource(joint_vector_from_names(plant, angles)))
@@ -50,19 +53,26 @@ def _settled_state(duration: float, posture: tuple) -> tuple[float, ...]:
     return tuple(plant.GetPositionsAndVelocities(plant_context).tolist())
 
 
-def settle_standing_state(posture: dict[str, float] | None = None, duration: float = 1.0) -> np.ndarray:
+def settle_standing_state(
+    posture: dict[str, float] | None = None,
+    duration: float = 1.0,
+    *,
+    plant_config: MultibodyPlantConfig | None = None,
+) -> np.ndarray:
     """[q; v] of nao_like after standing still for ``duration`` s in ``posture`` (overrides
     of the nominal posture) under position control, without pushes or noise: a state at
     static equilibrium on the ground (contact forces balanced, velocities ~0), so that an
-    experiment and its observer start without the touch-down transient. Simulates once per
-    (posture, duration) and process (cached); returns a fresh array.
+    experiment and its observer start without the touch-down transient. ``plant_config``:
+    the experiment's plant (default: the station's). Simulates once per (posture,
+    duration, plant config) and process (cached); returns a fresh array.
 
     Raises:
         ValueError: a non-positive or non-finite duration, an unknown joint in ``posture``.
     """
     if not (math.isfinite(duration) and duration > 0):
         raise ValueError(f"duration must be positive, got {duration}")
-    return np.array(_settled_state(float(duration), tuple(sorted((posture or {}).items()))))
+    config_yaml = yaml_dump_typed(default_plant_config() if plant_config is None else plant_config)
+    return np.array(_settled_state(float(duration), tuple(sorted((posture or {}).items())), config_yaml))
 
 
 def identify_motor_constant(

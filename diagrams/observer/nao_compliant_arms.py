@@ -14,17 +14,18 @@ commanded joint positions; the pushes' truth goes to loggers only. Rates: plant 
 1 kHz, observer 60 Hz (the paper's), joint-level estimator and compliance controller 100 Hz.
 """
 
-from __future__ import annotations
-
+import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Rgba
+from pydrake.multibody.plant import MultibodyPlantConfig
+from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
-from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station
+from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station, default_plant_config
 from diagrams.station.standing import default_gains
 from diagrams.observer.nao_force_observer import full_posture, wide_stance
 from diagrams.observer.nao_sensing import OBSERVER_PERIOD, add_observer_pipeline
@@ -39,7 +40,7 @@ from systems.observer.arm_compliance import (
     JointTorqueFromPositionError,
     ObserverHandForce,
 )
-from systems.simulation.disturbances import Push, PushSource
+from systems.simulation.disturbances import Push, PushSource, SmoothPiecewise
 from systems.simulation.ground_truth import VirtualForceTruth
 from systems.locomotion.posture_schedule import PostureSchedule
 from systems.observer.force_observer import LipForceObserverSystem
@@ -53,8 +54,7 @@ def lean_posture(delta: float, posture: dict[str, float] | None = None) -> dict[
     (rad), on top of ``posture`` (default ``wide_stance()``). Kinematically a parallelogram
     that shifts the pelvis (negative delta: towards -y, the right foot); on nao_like, whose
     ankle PD is soft (40 N m/rad), the feet also roll onto their edges, so FSRs lose
-    contact (measured: delta = -0.1 leaves 2 of the 8 FSRs below 1 N, and 4 once
-    ``apps.nao_compliant_arms`` pushes each hand backwards by 1.5 N)."""
+    contact (measured in BENCHMARKS.md, "Compliant arms")."""
     out = dict(wide_stance() if posture is None else posture)
     for name in ("LHipRoll", "RHipRoll"):
         out[name] = out.get(name, 0.0) + delta
@@ -129,6 +129,7 @@ def build_nao_compliant_arms_diagram(
     filter_time_constant: float = 0.1,
     support_foot: str = "right",
     log_period: float = 0.01,
+    plant_config: MultibodyPlantConfig | None = None,
     meshcat: Meshcat | None = None,
 ) -> tuple[Diagram, NaoCompliantArmsHandles]:
     """Builds the diagram of the module docstring.
@@ -154,13 +155,15 @@ def build_nao_compliant_arms_diagram(
         filter_time_constant: the joint-level estimate's low-pass, s.
         support_foot: the observer's support-foot frame.
         log_period: s.
+        plant_config: Drake's ``MultibodyPlantConfig`` (default
+            ``diagrams.station.humanoid_station.default_plant_config()``).
         meshcat: adds a visualizer and force arrows (red: applied, blue: blended estimate).
     """
     if motor_constants is None:
         raise ValueError("build_nao_compliant_arms_diagram: motor_constants is required ({arm joint: K_m}, N m/rad): "
                          "pass dict(diagrams.observer.calibration.identified_motor_constants()) or your own")
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, "nao_like", noise=noise, seed=seed)
+    station = add_humanoid_station(builder, "nao_like", plant_config=plant_config, noise=noise, seed=seed)
     plant, humanoid = station.plant, station.humanoid
     if support_foot not in humanoid.sole_frames:
         raise ValueError(f"unknown support foot {support_foot!r}")
@@ -283,8 +286,268 @@ def hand_pushes(profile, direction=(-1.0, 0.0, 0.0)) -> list[Push]:
     return [Push(c.hand_body, c.p_HP, direction, profile) for c in NAO_ARM_CHAINS]
 
 
+
+# --- Scenarios a and b of Sec. 6.4 (Fig. 14) ---------------------------------------------
+
+#: Push per hand, N (along -x: towards the robot), and the schedule, s.
+DEFAULT_FORCE = 1.5
+PUSH_ON, PUSH_FULL, PUSH_OFF, PUSH_GONE, DURATION = 3.0, 5.0, 11.0, 13.0, 14.0
+#: Steady-state window (last second of the hold) and the baseline window before the push.
+STEADY_WINDOW = (PUSH_OFF - 1.0, PUSH_OFF)
+BASELINE_WINDOW = (PUSH_ON - 1.0, PUSH_ON)
+#: Scenario b's lean: knots (s) and hip-roll angle (rad).
+LEAN_START, LEAN_END, LEAN_ANGLE = 0.5, 2.5, -0.1
+#: Floor: relative error of the steady-state hand displacement vs F / k.
+DISPLACEMENT_FLOOR = 0.10
+SIDES = tuple(c.side for c in NAO_ARM_CHAINS)
+CASE_NAMES = ("a", "b")
+
+
+@dataclass
+class NaoCompliantArmsScenario:
+    """The settings of ``apps.nao_compliant_arms`` (SI units). Defaults: the paper's
+    Sec. 6.4 with a 1.5 N push per hand.
+
+    Attributes:
+        cases: which of the paper's scenarios run, in order: "a" (standing, all FSRs
+            loaded) and/or "b" (leaning sideways, feet partly off the ground).
+        force: push per hand along -x, N (in (0, 4]: the arms' effort limits).
+        lean: scenario b's hip-roll lean, rad (``lean_posture``; within +-0.3).
+        stiffness: k of eq. (29), N/m.
+        compensate_deflection: the controller offsets q_d by K_m^-1 J^T F (False: the
+            ablation without it).
+        saturation_guard: K1 = 0 while an FSR saturates (an extension of eq. 28).
+        noise: sensor noise on.
+        seed: sensor noise seed (>= 0).
+        plant_config: Drake's ``MultibodyPlantConfig`` (default: 1 ms steps, point contact,
+            SAP); the settled initial state uses the same. The K_m identification
+            (``diagrams.observer.calibration.identified_motor_constants``) runs on the
+            station's default plant.
+        simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``).
+    """
+
+    cases: list[str] = field(default_factory=lambda: list(CASE_NAMES))
+    force: float = DEFAULT_FORCE
+    lean: float = LEAN_ANGLE
+    stiffness: float = DEFAULT_STIFFNESS
+    compensate_deflection: bool = True
+    saturation_guard: bool = False
+    noise: bool = True
+    seed: int = 0
+    plant_config: MultibodyPlantConfig = field(default_factory=default_plant_config)
+    simulator_config: SimulatorConfig = field(default_factory=SimulatorConfig)
+
+
+@dataclass(frozen=True)
+class HandPushCase:
+    """Scenario a or b of Sec. 6.4: its name, title, push per hand (N) and lean (rad, or
+    None: no lean)."""
+
+    name: str
+    title: str
+    force: float
+    lean: float | None
+
+    def pushes(self) -> list[Push]:
+        profile = SmoothPiecewise((0.0, PUSH_ON, PUSH_FULL, PUSH_OFF, PUSH_GONE),
+                                  (0.0, 0.0, self.force, self.force, 0.0))
+        return hand_pushes(profile, direction=(-1.0, 0.0, 0.0))
+
+    def posture_knots(self) -> tuple:
+        if self.lean is None:
+            return ()
+        return ((LEAN_START, wide_stance()), (LEAN_END, lean_posture(self.lean)))
+
+
+def make_scenario(name: str, force: float = DEFAULT_FORCE, lean: float = LEAN_ANGLE) -> HandPushCase:
+    """Scenario ``name`` ("a" or "b") with ``force`` N per hand; ``lean`` is b's hip-roll
+    lean, rad (``lean_posture``).
+
+    * a: standing (wide stance), all 8 FSRs loaded: K1 = 1, the observer drives eq. 29;
+    * b: the robot first leans sideways (t = 0.5-2.5 s, both hip rolls ``lean``, ankle rolls
+      -``lean``): the soft ankles let both feet roll onto their edges and FSRs lose contact,
+      so K1 = K_a / K_t < 1 and the joint-level estimate takes part of the weight.
+
+    Raises:
+        ValueError: an unknown scenario, a force outside (0, 4] N, a lean beyond +-0.3 rad.
+    """
+    if name not in CASE_NAMES:
+        raise ValueError(f"unknown scenario {name!r}; choose a or b")
+    if not (math.isfinite(force) and 0.0 < force <= 4.0):
+        raise ValueError(f"force must be in (0, 4] N per hand (arm effort limits), got {force}")
+    if not (math.isfinite(lean) and abs(lean) <= 0.3):
+        raise ValueError(f"lean must be within +-0.3 rad (joint limits), got {lean}")
+    if name == "a":
+        return HandPushCase("a", f"a: {force:g} N per hand along -x, standing (all FSRs loaded)", force, None)
+    title = f"b: {force:g} N per hand along -x while leaning {lean:g} rad (feet partly off)"
+    return HandPushCase("b", title, force, lean)
+
+
+def scenario_cases(scenario: NaoCompliantArmsScenario) -> list[HandPushCase]:
+    """The cases of ``scenario``, in its order (``make_scenario`` of each).
+
+    Raises:
+        ValueError: no case, a bad case (see ``make_scenario``), a negative seed, a
+            non-positive stiffness.
+    """
+    if not scenario.cases:
+        raise ValueError("the scenario runs no case; choose one or both of a, b")
+    if scenario.seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {scenario.seed}")
+    if not (math.isfinite(scenario.stiffness) and scenario.stiffness > 0):
+        raise ValueError(f"stiffness must be positive, got {scenario.stiffness}")
+    return [make_scenario(name, scenario.force, scenario.lean) for name in scenario.cases]
+
+
+def build_case_diagram(
+    scenario: NaoCompliantArmsScenario,
+    case: HandPushCase,
+    motor_constants: Mapping[str, float],
+    meshcat: Meshcat | None = None,
+) -> tuple[Diagram, NaoCompliantArmsHandles]:
+    """``build_nao_compliant_arms_diagram`` for ``case`` with the scenario's settings and
+    the caller's ``motor_constants`` (e.g.
+    ``dict(diagrams.observer.calibration.identified_motor_constants())``). Its initial state
+    is the caller's too: ``settle_standing_state(wide_stance(), plant_config=...)``."""
+    return build_nao_compliant_arms_diagram(
+        case.pushes(), posture_knots=case.posture_knots(), stiffness=scenario.stiffness,
+        motor_constants=dict(motor_constants), compensate_deflection=scenario.compensate_deflection,
+        saturation_guard=scenario.saturation_guard, noise=scenario.noise, seed=scenario.seed,
+        plant_config=scenario.plant_config, meshcat=meshcat)
+
+
+def true_hand_kinematics(run: dict) -> tuple[np.ndarray, np.ndarray]:
+    """From the TRUE state log: (samples, 3 per hand) hand positions in the torso frame B, m,
+    and (samples, 3, 3) R_WB."""
+    handles = run["handles"]
+    plant = handles.station.plant
+    base = handles.station.humanoid.base_body.body_frame()
+    frames = [plant.GetBodyByName(c.hand_body).body_frame() for c in NAO_ARM_CHAINS]
+    points = [np.asarray(c.p_HP, float) for c in NAO_ARM_CHAINS]
+    ctx = plant.CreateDefaultContext()
+    X = run["signals"]["state"].T
+    nq = plant.num_positions()
+    p = np.empty((len(X), 3 * len(frames)))
+    R = np.empty((len(X), 3, 3))
+    for i, x in enumerate(X):
+        plant.SetPositions(ctx, x[:nq])
+        for j, (frame, point) in enumerate(zip(frames, points, strict=True)):
+            p[i, 3 * j: 3 * j + 3] = plant.CalcPointsPositions(ctx, frame, point, base).reshape(-1)
+        R[i] = base.CalcRotationMatrixInWorld(ctx).matrix()
+    return p, R
+
+
+def _to_base(forces_W: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """(samples, 3 per hand) world forces -> torso frame, with R (samples, 3, 3) = R_WB."""
+    F = forces_W.reshape(len(forces_W), -1, 3)
+    return np.einsum("nji,nkj->nki", R, F).reshape(len(forces_W), -1)
+
+
+def scenario_metrics(case: HandPushCase, run: dict, stiffness: float = DEFAULT_STIFFNESS) -> dict:
+    """The metrics of one case's run {"signals": logged signals (times of "state"),
+    "handles": NaoCompliantArmsHandles, "wall": wall-clock s}, with the plotted series
+    under "_series" (the caller pops it before writing).
+
+    Measured quantity: each hand's displacement along the torso's x axis, from the TRUE
+    plant state (torso-frame kinematics), relative to its mean over the second before the
+    push. Its mean over the last second of the hold is compared with F_true / k (the
+    applied force in the torso frame) and with F_est / k (the mean blended estimate that the
+    controller used). Floor (issue 7): within 10 % of F / k in steady state, against both."""
+    s = run["signals"]
+    t = s["t"]
+    p, R = true_hand_kinematics(run)
+    base = (t >= BASELINE_WINDOW[0]) & (t < BASELINE_WINDOW[1])
+    steady = (t >= STEADY_WINDOW[0]) & (t < STEADY_WINDOW[1])
+    hold = (t >= PUSH_FULL) & (t < PUSH_OFF)
+    dx = p - p[base].mean(axis=0)
+    F_true = _to_base(s["force_world"].T, R)
+    estimates = {name: _to_base(s[name].T, R) for name in ("observer_force", "joint_force", "blended_force")}
+    hands = {}
+    worst_true, worst_est = 0.0, 0.0
+    for j, side in enumerate(SIDES):
+        x = 3 * j
+        disp = float(dx[steady, x].mean())
+        f_true = float(F_true[steady, x].mean())
+        f_est = float(estimates["blended_force"][steady, x].mean())
+        rel_true = abs(disp - f_true / stiffness) / abs(f_true / stiffness)
+        rel_est = abs(disp - f_est / stiffness) / abs(f_est / stiffness)
+        worst_true, worst_est = max(worst_true, rel_true), max(worst_est, rel_est)
+        errors = {}
+        for name, F in estimates.items():
+            e = F[:, x] - F_true[:, x]
+            errors[name] = {"steady_state_mean_error_N": float(e[steady].mean()),
+                            "hold_rms_error_N": float(np.sqrt(np.mean(e[hold] ** 2)))}
+        hands[side] = {
+            "displacement_m": disp,
+            "F_true_x_N": f_true,
+            "F_est_x_N": f_est,
+            "F_true_over_k_m": f_true / stiffness,
+            "F_est_over_k_m": f_est / stiffness,
+            "relative_error_vs_true": rel_true,
+            "relative_error_vs_estimate": rel_est,
+            "estimate_errors_x": errors,
+        }
+    k1 = s["k1"][0]
+    fsr = s["fsr_forces"]
+    handles = run["handles"]
+    x = s["state"]
+    z_base = x[handles.station.humanoid.base_body.floating_positions_start() + 6]
+    return {
+        "title": case.title,
+        "force_per_hand_N": case.force,
+        "stiffness_N_per_m": stiffness,
+        "steady_window_s": list(STEADY_WINDOW),
+        "hands": hands,
+        "worst_relative_error_vs_true": worst_true,
+        "worst_relative_error_vs_estimate": worst_est,
+        "floor_relative_error": DISPLACEMENT_FLOOR,
+        "meets_floor": bool(worst_true <= DISPLACEMENT_FLOOR and worst_est <= DISPLACEMENT_FLOOR),
+        "k1_steady_mean": float(k1[steady].mean()),
+        "k1_min_after_first_step": float(k1[t >= 0.05].min()),
+        "k1_before_push_mean": float(k1[base].mean()),
+        "fsr_steady_mean_N": fsr[:, steady].mean(axis=1).tolist(),
+        "fsr_saturated_samples": int(np.sum(np.any(fsr >= handles.fsr_array.saturation - 1e-9, axis=0))),
+        "base_height_drop_m": float(z_base[0] - z_base.min()),
+        "wall_time_s": run["wall"],
+        "real_time_factor": DURATION / run["wall"],
+        "_series": {"t": t, "dx": dx, "F_true": F_true, **estimates, "k1": k1},
+    }
+
+
+def arms_summary(scenario: NaoCompliantArmsScenario, metrics: dict, motor_constants: Mapping[str, float]) -> dict:
+    """The "summary" entry of the app's metrics: every floor met, and the run's settings."""
+    return {
+        "all_floors_met": all(m["meets_floor"] for m in metrics.values()),
+        "seed": scenario.seed,
+        "motor_constants_N_m_per_rad": dict(motor_constants),
+        "controller": f"eq. 29 with k = {scenario.stiffness:g} N/m, damped least-squares arm IK, "
+                      + ("deflection compensation K_m^-1 J^T F" if scenario.compensate_deflection
+                         else "no deflection compensation (ablation)"),
+        "deflection_compensation": scenario.compensate_deflection,
+        "blend": "eq. 28, K1 = K_a / 8, FSR in contact above 1 N",
+        "lean_rad": scenario.lean,
+        "saturation_guard": scenario.saturation_guard,
+    }
+
+
 __all__ = [
+    "BASELINE_WINDOW",
+    "CASE_NAMES",
+    "DEFAULT_FORCE",
+    "DISPLACEMENT_FLOOR",
+    "DURATION",
+    "LEAN_ANGLE",
+    "SIDES",
+    "STEADY_WINDOW",
+    "HandPushCase",
     "NaoCompliantArmsHandles",
+    "NaoCompliantArmsScenario",
+    "arms_summary",
+    "build_case_diagram",
+    "make_scenario",
+    "scenario_cases",
+    "scenario_metrics",
+    "true_hand_kinematics",
     "build_nao_compliant_arms_diagram",
     "hand_pushes",
     "lean_posture",

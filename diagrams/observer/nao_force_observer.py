@@ -20,23 +20,24 @@ Timing: the observer updates at t_k = k T and reads the sensors at t_k; a logger
 before the discrete updates of the same time, so the estimate of sample k appears in the
 ``virtual_force`` log at t_{k+1}. Drake's discrete plant reports contact results only after
 its first step: the observer's first sample (t = 0) reads zero FSR forces; the filters
-absorb it within ~0.3 s (< 0.2 N on F_z, measured).
+absorb it within ~0.3 s (measured: BENCHMARKS.md, "Standing Nao").
 """
 
-from __future__ import annotations
-
+import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Rgba
+from pydrake.multibody.plant import MultibodyPlantConfig
+from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
 from diagrams.observer.nao_sensing import OBSERVER_PERIOD, add_observer_pipeline
-from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station
+from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station, default_plant_config
 from models import HumanoidHandles
-from systems.simulation.disturbances import Push, PushSource
+from systems.simulation.disturbances import Push, PushSource, SmoothPiecewise
 from systems.simulation.ground_truth import VirtualForceTruth
 from systems.observer.force_observer import LipForceObserverSystem, LipObserverParameters
 from systems.observer.fsr_sensing import CenterOfPressure, FsrArray, ImuComAcceleration, SupportFootCom
@@ -97,6 +98,7 @@ def build_nao_force_observer_diagram(
     seed: int = 0,
     fsr_noise_std: float | None = None,
     observer_period: float = OBSERVER_PERIOD,
+    plant_config: MultibodyPlantConfig | None = None,
     meshcat: Meshcat | None = None,
 ) -> tuple[Diagram, NaoForceObserverHandles]:
     """Builds the diagram of the module docstring.
@@ -110,6 +112,8 @@ def build_nao_force_observer_diagram(
         seed: noise seed; the FSRs use 16 seed + 5, the other sensors 16 seed + 0..4.
         fsr_noise_std: N per FSR (default ``fsr_sensing.FSR_NOISE_STD``; ignored without noise).
         observer_period: T, s (1/60 s: the paper's 16.7 ms).
+        plant_config: Drake's ``MultibodyPlantConfig`` (default
+            ``diagrams.station.humanoid_station.default_plant_config()``).
         meshcat: if given, a MeshcatVisualizer and arrows for the applied forces (red) and
             the estimated virtual force at the CoM (blue) are added (32 Hz).
 
@@ -117,7 +121,7 @@ def build_nao_force_observer_diagram(
         ValueError: unknown support foot, bad pushes (unknown body), bad noise settings.
     """
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, "nao_like", noise=noise, seed=seed)
+    station = add_humanoid_station(builder, "nao_like", plant_config=plant_config, noise=noise, seed=seed)
     plant, humanoid = station.plant, station.humanoid
     if support_foot not in humanoid.sole_frames:
         raise ValueError(f"unknown support foot {support_foot!r}; choose one of {sorted(humanoid.sole_frames)}")
@@ -199,8 +203,8 @@ def wide_stance(hip_roll: float = 0.1) -> dict[str, float]:
     """Posture overrides that widen the stance: each hip rolls outwards by ``hip_roll`` rad
     and its ankle rolls back, so the soles stay flat (0.1 rad moves each foot out by
     ~2 cm). Nao's FSR polygon is only ~16 cm wide in the nominal stance: an 11 N sideways
-    load near the CoM height moves the CoP ~7 cm (eq. 10), to its edge (the robot of
-    ``apps.nao_force_observer``'s experiment 2 tips over in the nominal stance)."""
+    load near the CoM height moves the CoP ~7 cm (eq. 10), to its edge (experiment 2 in the
+    nominal stance: BENCHMARKS.md, "Standing Nao")."""
     return {"LHipRoll": hip_roll, "LAnkleRoll": -hip_roll, "RHipRoll": -hip_roll, "RAnkleRoll": hip_roll}
 
 
@@ -215,9 +219,311 @@ def full_posture(humanoid: HumanoidHandles, posture: dict[str, float] | None) ->
     return out
 
 
+
+# --- The simulated experiments 1-3 of Hawley, Rahem and Suleiman (2019), Sec. 6.1-6.2 -----
+
+#: The paper's load: 2.5 lb = 1.13 kg (Sec. 6.2), and g.
+LOAD_MASS = 1.13
+GRAVITY = 9.81
+#: Experiment 1's force magnitude (N) and angles (deg, eq. 23).
+TORSO_FORCE = 2.0
+TORSO_ANGLES_DEG = (0.0, 45.0, 90.0)
+#: Points where the forces act (body, point in the body frame, m).
+TORSO_POINT = ("torso", (0.05, 0.0, -0.05))  # front of the torso, about the CoM height
+ELBOW_POINT = ("RForeArm", (0.0, 0.0, 0.0))  # cable of experiment 2 (at the elbow)
+HAND_POINT = ("r_gripper", (0.0, 0.0, 0.0))  # hanging load of experiment 3
+#: Floors, N.
+STEADY_STATE_FLOOR = 0.5
+RMS_FLOOR = 1.0
+#: Length of the steady-state window at the end of each plateau, s.
+STEADY_WINDOW = 1.0
+#: Default load ramp duration of experiments 2-3, s (with the paper's eq. 21 parameters the
+#: x/y filters settle in ~4 s, so a load applied as a step gives an RMS error above 1 N over
+#: a ~20 s run, even on exact LIP data).
+DEFAULT_RAMP = 5.0
+COMPONENTS = ("x", "y", "z")
+EXPERIMENT_NUMBERS = (1, 2, 3)
+
+
+@dataclass
+class NaoForceObserverScenario:
+    """The settings of ``apps.nao_force_observer`` (SI units). Defaults: the paper's
+    experiments 1-3 (Sec. 6.1-6.2) with the ramps and stance of ``make_experiment``.
+
+    Attributes:
+        experiments: which experiments run, in order (1, 2 and/or 3).
+        time_scale: multiplies every duration of the schedules (< 1 for quick runs).
+        ramp: the load ramp duration of experiments 2-3 before scaling, s.
+        load_mass: the load of experiments 2-3, kg (the paper's 1.13 kg).
+        torso_force: experiment 1's force magnitude, N.
+        torso_angles_deg: experiment 1's force angles theta, deg (eq. 23).
+        wide_stance: stand in ``wide_stance()`` (each hip rolled out by 0.1 rad) instead of
+            the nominal stance.
+        support_foot: "left" or "right", the origin of the observer's support-foot frame.
+        noise: sensor noise on.
+        seed: sensor noise seed (>= 0).
+        plant_config: Drake's ``MultibodyPlantConfig`` (default: 1 ms steps, point contact,
+            SAP; see ``diagrams.station.humanoid_station``); the settled initial state of
+            ``diagrams.observer.calibration.settle_standing_state`` uses the same.
+        simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``); the plant
+            is discrete, so only ``target_realtime_rate`` and the publishing matter.
+    """
+
+    experiments: list[int] = field(default_factory=lambda: list(EXPERIMENT_NUMBERS))
+    time_scale: float = 1.0
+    ramp: float = DEFAULT_RAMP
+    load_mass: float = LOAD_MASS
+    torso_force: float = TORSO_FORCE
+    torso_angles_deg: list[float] = field(default_factory=lambda: list(TORSO_ANGLES_DEG))
+    wide_stance: bool = True
+    support_foot: str = "right"
+    noise: bool = True
+    seed: int = 0
+    plant_config: MultibodyPlantConfig = field(default_factory=default_plant_config)
+    simulator_config: SimulatorConfig = field(default_factory=SimulatorConfig)
+
+    def posture(self) -> dict[str, float] | None:
+        """The posture overrides the robot stands in (None: the nominal stance)."""
+        return wide_stance() if self.wide_stance else None
+
+
+@dataclass(frozen=True)
+class _Component:
+    """magnitude(t) times cos or sin of angle(t): one Cartesian component of a force of
+    turning direction (experiment 1)."""
+
+    magnitude: SmoothPiecewise
+    angle: SmoothPiecewise
+    function: str  # "cos" or "sin"
+
+    def value(self, t):
+        if np.ndim(t) == 0:
+            trig = math.cos if self.function == "cos" else math.sin
+            return self.magnitude.value(t) * trig(self.angle.value(t))
+        trig = np.cos if self.function == "cos" else np.sin
+        return self.magnitude.value(t) * trig(self.angle.value(t))
+
+
+@dataclass
+class Experiment:
+    """One simulated experiment: its pushes, duration and steady-state windows."""
+
+    number: int
+    title: str
+    pushes: list
+    duration: float
+    windows: list[tuple[float, float]] = field(default_factory=list)
+    description: str = ""
+
+
+def make_experiment(
+    number: int,
+    *,
+    time_scale: float = 1.0,
+    ramp: float = DEFAULT_RAMP,
+    load_mass: float = LOAD_MASS,
+    torso_force: float = TORSO_FORCE,
+    torso_angles_deg: Sequence[float] = TORSO_ANGLES_DEG,
+) -> Experiment:
+    """The schedule of experiment ``number`` (1, 2 or 3); ``time_scale`` multiplies every
+    duration (< 1 for quick runs), ``ramp`` is the load ramp duration, s (before scaling).
+
+    * experiment 1 (Fig. 6): ``torso_force`` N through the torso in the x-z plane at the
+      angles ``torso_angles_deg`` (eq. 23: F_x = |F| cos theta, F_z = |F| sin theta); the
+      direction turns from one angle to the next at constant magnitude;
+    * experiment 2 (Fig. 7): a ``load_mass`` kg load pulling the right arm along -y by a
+      cable at the elbow;
+    * experiment 3 (Fig. 8): the same load hanging from the right hand (-z).
+
+    Raises:
+        ValueError: an unknown experiment, a non-positive time scale, ramp, force or mass.
+    """
+    if number not in EXPERIMENT_NUMBERS:
+        raise ValueError(f"unknown experiment {number}; choose 1, 2 or 3")
+    if not (time_scale > 0 and math.isfinite(time_scale)):
+        raise ValueError(f"time_scale must be positive, got {time_scale}")
+    if not (ramp > 0 and math.isfinite(ramp)):
+        raise ValueError(f"ramp must be positive, got {ramp}")
+    if not (load_mass > 0 and math.isfinite(load_mass)):
+        raise ValueError(f"load_mass must be positive, got {load_mass}")
+    if not (torso_force > 0 and math.isfinite(torso_force)):
+        raise ValueError(f"torso_force must be positive, got {torso_force}")
+    if len(torso_angles_deg) < 1 or not all(math.isfinite(a) for a in torso_angles_deg):
+        raise ValueError(f"torso_angles_deg must be one or more finite angles, got {list(torso_angles_deg)}")
+    s = time_scale
+    start = 0.5 * s
+    if number == 1:
+        up = 1.5 * s
+        hold, turn, tail = 4.0 * s, 1.0 * s, 4.0 * s
+        times, magnitudes, angles = [0.0, start], [0.0, 0.0], [0.0, 0.0]
+        t = start + up
+        times.append(t), magnitudes.append(torso_force), angles.append(math.radians(torso_angles_deg[0]))
+        for angle in torso_angles_deg[1:]:
+            t += hold
+            times.append(t), magnitudes.append(torso_force), angles.append(angles[-1])
+            t += turn
+            times.append(t), magnitudes.append(torso_force), angles.append(math.radians(angle))
+        t += hold
+        times.append(t), magnitudes.append(torso_force), angles.append(angles[-1])
+        t += up
+        times.append(t), magnitudes.append(0.0), angles.append(angles[-1])
+        duration = t + tail
+        magnitude = SmoothPiecewise(tuple(times), tuple(magnitudes))
+        angle = SmoothPiecewise(tuple(times), tuple(angles))
+        body, point = TORSO_POINT
+        pushes = [
+            Push(body, point, (1.0, 0.0, 0.0), _Component(magnitude, angle, "cos")),
+            Push(body, point, (0.0, 0.0, 1.0), _Component(magnitude, angle, "sin")),
+        ]
+        # Plateaus: where both the magnitude and the angle are constant, plus the tail.
+        windows = [(a, b) for (a, b) in magnitude.plateaus(STEADY_WINDOW) if (a, b) in angle.plateaus(STEADY_WINDOW)]
+        windows.append((t, duration))
+        angles_text = ", ".join(f"{a:g}" for a in torso_angles_deg)
+        return Experiment(1, f"Experiment 1: {torso_force:g} N through the torso at theta = {angles_text} deg (eq. 23)",
+                          pushes, duration, [w for w in windows if w[1] - w[0] >= STEADY_WINDOW],
+                          "torso point (0.05, 0, -0.05) m in the torso frame; F = |F| (cos theta, 0, sin theta)")
+    weight = load_mass * GRAVITY
+    r, hold, tail = ramp * s, 6.0 * s, 5.0 * s
+    t_loaded, t_off = start + r, start + r + hold
+    duration = t_off + r + tail
+    profile = SmoothPiecewise((0.0, start, t_loaded, t_off, t_off + r), (0.0, 0.0, weight, weight, 0.0))
+    if number == 2:
+        body, point = ELBOW_POINT
+        direction, title = (0.0, -1.0, 0.0), f"Experiment 2: {load_mass:g} kg load pulling the right arm along -y"
+    else:
+        body, point = HAND_POINT
+        direction, title = (0.0, 0.0, -1.0), f"Experiment 3: {load_mass:g} kg load hanging from the right hand"
+    windows = profile.plateaus(STEADY_WINDOW) + [(t_off + r, duration)]
+    return Experiment(number, title, [Push(body, point, direction, profile)], duration,
+                      [w for w in windows if w[1] - w[0] >= STEADY_WINDOW],
+                      f"{weight:.2f} N at {body} {point}, ramps of {r:g} s")
+
+
+def scenario_experiments(scenario: NaoForceObserverScenario) -> list[Experiment]:
+    """The experiments of ``scenario``, in its order (``make_experiment`` of each).
+
+    Raises:
+        ValueError: no experiment, a bad schedule (see ``make_experiment``), a negative seed
+            or an unknown support foot.
+    """
+    if not scenario.experiments:
+        raise ValueError("the scenario runs no experiment; choose one or more of 1, 2, 3")
+    if scenario.seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {scenario.seed}")
+    if scenario.support_foot not in ("left", "right"):
+        raise ValueError(f"unknown support foot {scenario.support_foot!r}; choose left or right")
+    return [
+        make_experiment(number, time_scale=scenario.time_scale, ramp=scenario.ramp, load_mass=scenario.load_mass,
+                        torso_force=scenario.torso_force, torso_angles_deg=scenario.torso_angles_deg)
+        for number in scenario.experiments
+    ]
+
+
+def build_experiment_diagram(
+    scenario: NaoForceObserverScenario, experiment: Experiment, meshcat: Meshcat | None = None
+) -> tuple[Diagram, NaoForceObserverHandles]:
+    """``build_nao_force_observer_diagram`` with ``experiment``'s pushes and the scenario's
+    stance, sensors and plant. Its initial state is the caller's explicit calibration run:
+    ``settle_standing_state(scenario.posture(), plant_config=scenario.plant_config)``
+    (``diagrams.observer.calibration``)."""
+    return build_nao_force_observer_diagram(
+        experiment.pushes, posture=scenario.posture(), support_foot=scenario.support_foot, noise=scenario.noise,
+        seed=scenario.seed, plant_config=scenario.plant_config, meshcat=meshcat)
+
+
+def aligned(signals: dict) -> dict:
+    """Estimate and expected value per observer sample: the observer's update at t_k reads
+    the sensors at t_k and its output is logged at t_{k+1} (a logger publishes before the
+    discrete update of the same time), so estimate row k+1 goes with expected row k."""
+    t = signals["t"]
+    return {
+        "t": t[:-1],
+        "estimate": signals["virtual_force"][:, 1:].T,
+        "valid": signals["valid"][0, 1:] > 0.5,
+        "expected": signals["truth"][:, :-1].T,
+    }
+
+
+def experiment_metrics(experiment: Experiment, run: dict) -> dict:
+    """RMS and steady-state error per component, the floors, and sanity figures, of a run
+    {"signals": logged signals (``logged_signals`` of the handles' loggers, times of
+    "virtual_force"), "handles": NaoForceObserverHandles, "wall": wall-clock s}.
+
+    Floors (issue 6): per component, steady-state error <= 0.5 N and RMS error over the run
+    <= 1 N. Steady-state error: |mean(estimate - expected)| over the last second of every
+    plateau of the applied force (loaded and unloaded), the largest over plateaus. RMS: over
+    every observer sample of the run. The estimate of sample k is compared with the expected
+    value at the same sample (``aligned``)."""
+    s = run["signals"]
+    a = aligned(s)
+    t, error = a["t"], a["estimate"] - a["expected"]
+    rms = np.sqrt(np.mean(error**2, axis=0))
+    windows = []
+    for _t0, t1 in experiment.windows:
+        inside = (t > t1 - STEADY_WINDOW - 1e-9) & (t <= t1 + 1e-9)
+        windows.append({
+            "window_s": [float(t1 - STEADY_WINDOW), float(t1)],
+            "expected_N": a["expected"][inside].mean(axis=0).tolist(),
+            "estimate_N": a["estimate"][inside].mean(axis=0).tolist(),
+            "error_N": error[inside].mean(axis=0).tolist(),
+        })
+    steady = np.max(np.abs([w["error_N"] for w in windows]), axis=0)
+    handles = run["handles"]
+    plant = handles.station.plant
+    base = handles.station.humanoid.base_body
+    x = s["state"]
+    z_base = x[base.floating_positions_start() + 6]
+    fsr = s["fsr_forces"]
+    loaded = [w for w in windows if np.abs(w["expected_N"]).max() > 0.5]
+    return {
+        "title": experiment.title,
+        "description": experiment.description,
+        "duration_s": experiment.duration,
+        "samples": int(len(t)),
+        "rms_error_N": dict(zip(COMPONENTS, rms.tolist(), strict=True)),
+        "steady_state_error_N": dict(zip(COMPONENTS, steady.tolist(), strict=True)),
+        "floors_N": {"steady_state": STEADY_STATE_FLOOR, "rms": RMS_FLOOR},
+        "meets_floors": bool(np.all(steady <= STEADY_STATE_FLOOR) and np.all(rms <= RMS_FLOOR)),
+        "steady_state_windows": windows,
+        "expected_while_loaded_N": [w["expected_N"] for w in loaded],
+        "invalid_samples": int(np.sum(~a["valid"])),
+        "max_fsr_reading_N": float(fsr.max()),
+        "fsr_saturated_samples": int(np.sum(np.any(fsr >= handles.fsr_array.saturation - 1e-9, axis=0))),
+        "base_height_drop_m": float(z_base[0] - z_base.min()),
+        "robot_mass_kg": float(plant.CalcTotalMass(plant.CreateDefaultContext())),
+        "wall_time_s": run["wall"],
+        "real_time_factor": experiment.duration / run["wall"],
+    }
+
+
+def experiments_summary(scenario: NaoForceObserverScenario, metrics: dict) -> dict:
+    """The "summary" entry of the app's metrics: every floor met, and the run's settings."""
+    return {
+        "all_floors_met": all(m["meets_floors"] for m in metrics.values()),
+        "seed": scenario.seed,
+        "time_scale": scenario.time_scale,
+        "ramp_s": scenario.ramp,
+        "observer": "LipForceObserverSystem, paper eq. 21 parameters, T = 1/60 s",
+    }
+
+
 __all__ = [
+    "COMPONENTS",
+    "DEFAULT_RAMP",
+    "LOAD_MASS",
+    "RMS_FLOOR",
+    "STEADY_STATE_FLOOR",
+    "STEADY_WINDOW",
+    "Experiment",
     "NaoForceObserverHandles",
+    "NaoForceObserverScenario",
+    "aligned",
+    "build_experiment_diagram",
     "build_nao_force_observer_diagram",
+    "experiment_metrics",
+    "experiments_summary",
     "full_posture",
+    "make_experiment",
+    "scenario_experiments",
     "wide_stance",
 ]

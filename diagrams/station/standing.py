@@ -5,8 +5,9 @@
                                             └──────────────────────┤─► state logger
                                                                    └─► SceneGraph ─► Meshcat (optional)
 
-The plant is discrete (default 1 ms) with SAP and point contact, as measured in
-DESIGN.md; the feet touch the ground through four small spheres each.
+The plant is discrete (default 1 ms) with Drake's SAP solver and point contact
+(``diagrams.station.plant_config.default_plant_config``); the feet touch the ground through
+four small spheres each. ``make standing`` measures base drift and foot forces (README).
 
 Scenarios are YAML files loaded into ``StandingScenario`` with
 ``pydrake.common.yaml.yaml_load_typed`` (``diagrams.scenarios``); ``standing_run_metrics``

@@ -1,12 +1,9 @@
-"""Plots shared by several apps: ``plot_walking_time`` (nao_walk, nao_walk_pulled). (The apps'
-runner is ``apps.runner``; ``logged_signals``, ``memory_allocator`` and ``replay_meshcat`` are
-re-exported here for the apps not yet moved to it: nao_force_observer and nao_compliant_arms.)"""
+"""Plots shared by several apps: ``plot_walking_time`` (nao_walk, nao_walk_pulled). The apps'
+runner is ``apps.runner``."""
 
 from __future__ import annotations
 
 from pathlib import Path
-
-from apps.runner import logged_signals, memory_allocator, replay_meshcat
 
 
 def plot_walking_time(path: Path, run: dict) -> None:
@@ -45,4 +42,4 @@ def plot_walking_time(path: Path, run: dict) -> None:
     plt.close(fig)
 
 
-__all__ = ["logged_signals", "memory_allocator", "plot_walking_time", "replay_meshcat"]
+__all__ = ["plot_walking_time"]

@@ -139,7 +139,10 @@ def benchmark_residual_update(name: str, *, calls: int = 200, batches: int = 7) 
         if frames:
             residual.GetInputPort("known_wrenches").FixValue(context, wrenches)
         contexts.append(context)
-    fixed = [residual.GetInputPort("state").FixValue(context, np.concatenate(states[0])) for residual, context in zip(residuals, contexts)]
+    fixed = [
+        residual.GetInputPort("state").FixValue(context, np.concatenate(states[0]))
+        for residual, context in zip(residuals, contexts)
+    ]
     full_states = [np.concatenate(s) for s in states]
 
     def update_all(i: int):
@@ -174,7 +177,6 @@ def benchmark_force_observer(batches: int = 5, dataset_dir: Path | None = None) 
         systems.observer.nao_dataset.DatasetError: the recording is missing or unreadable.
     """
     from systems.observer.force_observer import calibrated_normal_force, estimate_virtual_forces
-
     from systems.observer.nao_dataset import load_recording, published_dataset_dir
 
     dataset = (published_dataset_dir() if dataset_dir is None else Path(dataset_dir)) / "Force_Y_data"
@@ -195,12 +197,10 @@ def benchmark_closed_loop(seconds: float = 2.0) -> list[dict]:
     from pydrake.systems.framework import DiagramBuilder
     from pydrake.systems.primitives import ConstantVectorSource
 
-    from diagrams.station.humanoid_station import add_humanoid_station
     from diagrams.residuals.push_and_comply import PushAndComplyScenario, build_push_and_comply_diagram
+    from diagrams.station.humanoid_station import add_humanoid_station
 
-    scenario = PushAndComplyScenario(
-        duration=seconds, push_start=0.0, push_peak_time=0.6 * seconds, push_end=seconds
-    )
+    scenario = PushAndComplyScenario(duration=seconds, push_start=0.0, push_peak_time=0.6 * seconds, push_end=seconds)
 
     def station_only():
         builder = DiagramBuilder()
@@ -213,6 +213,7 @@ def benchmark_closed_loop(seconds: float = 2.0) -> list[dict]:
         def build():
             diagram, handles = build_push_and_comply_diagram(scenario, "internal", meshcat)
             return diagram, handles.station, meshcat
+
         return build
 
     rows = []
@@ -238,12 +239,14 @@ def benchmark_closed_loop(seconds: float = 2.0) -> list[dict]:
             recorder.DeleteRecording()
             recorder.Delete()
         steps = round((seconds - 0.05) / 1e-3)
-        rows.append({
-            "loop": label.strip(" +"),
-            "wall_us_per_step": wall / steps * 1e6,
-            "cpu_us_per_step": cpu / steps * 1e6,
-            "real_time_factor": (seconds - 0.05) / wall,
-        })
+        rows.append(
+            {
+                "loop": label.strip(" +"),
+                "wall_us_per_step": wall / steps * 1e6,
+                "cpu_us_per_step": cpu / steps * 1e6,
+                "real_time_factor": (seconds - 0.05) / wall,
+            }
+        )
         rows[-1]["label"] = label
     return rows
 
@@ -253,8 +256,11 @@ def benchmark_contact_localizer(model: str = "hrp4_like", *, calls: int = 100, b
     scores) at a new sensed state, for the lines of 16 random contacts of the study, in us
     and as a ratio to one CalcMassMatrix after a new state measured in the same run (the
     unit of ``apps.benchmark``). For ``make benchmark``; the issue's floor is 2 ms."""
-    from diagrams.residuals.contact_localization import (ContactLocalizationScenario, build_contact_localization_diagram,
-                                                         sample_trials)
+    from diagrams.residuals.contact_localization import (
+        ContactLocalizationScenario,
+        build_contact_localization_diagram,
+        sample_trials,
+    )
 
     _, handles = build_contact_localization_diagram(ContactLocalizationScenario(model=model, noise=False))
     plant, localizer = handles.plant, handles.localizer
@@ -294,8 +300,13 @@ def benchmark_contact_localizer(model: str = "hrp4_like", *, calls: int = 100, b
 
     unit = _median_microseconds(mass_matrix, calls, batches)
     update_us = _median_microseconds(update, calls, batches)
-    return {"model": model, "num_primitives": len(localizer.geometry), "calc_mass_matrix_us": unit,
-            "localizer_update_us": update_us, "localizer_update_ratio": update_us / unit}
+    return {
+        "model": model,
+        "num_primitives": len(localizer.geometry),
+        "calc_mass_matrix_us": unit,
+        "localizer_update_us": update_us,
+        "localizer_update_ratio": update_us / unit,
+    }
 
 
 def _table_header(title: str, header: str, *, blank_line: bool = True) -> None:
@@ -308,13 +319,15 @@ def _table_header(title: str, header: str, *, blank_line: bool = True) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog=f"python -m apps.{EXPERIMENT}", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        prog=f"python -m apps.{EXPERIMENT}", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--model", choices=(*MODEL_NAMES, "all"), default="all")
     parser.add_argument("--calls", type=int, default=300, help="calls per batch (fast paths)")
     parser.add_argument("--batches", type=int, default=7, help="batches; the median is reported")
-    parser.add_argument("--loop-seconds", type=float, default=2.0,
-                        help="simulated seconds per closed-loop timing (0 skips them)")
+    parser.add_argument(
+        "--loop-seconds", type=float, default=2.0, help="simulated seconds per closed-loop timing (0 skips them)"
+    )
     add_out_argument(parser)
     args = parser.parse_args(argv)
     return run_app(EXPERIMENT, lambda: _run(args))
@@ -344,7 +357,9 @@ def _run(args: argparse.Namespace) -> int:
             f" {r['fast_floating_jacobian_us']:>7.1f} us ({r['fast_floating_jacobian_ratio']:>4.1f}x)"
             f" {r['reference_over_fast']:>8.0f}x"
         )
-    residual_rows = [benchmark_residual_update(name, calls=max(args.calls // 2, 1), batches=args.batches) for name in names]
+    residual_rows = [
+        benchmark_residual_update(name, calls=max(args.calls // 2, 1), batches=args.batches) for name in names
+    ]
     _table_header(
         "Residual update: classical + internal + external, one shared model, at a new state (us per update)",
         f"{'model':<10} {'F/T frames':>10} {'CalcMassMatrix':>15} {'three residuals':>22}",
@@ -368,7 +383,10 @@ def _run(args: argparse.Namespace) -> int:
             f"{'loop':<36} {'wall/step':>11} {'CPU/step':>11} {'real-time factor':>17}",
         )
         for r in loop_rows:
-            print(f"{r.pop('label'):<36} {r['wall_us_per_step']:>8.0f} us {r['cpu_us_per_step']:>8.0f} us {r['real_time_factor']:>17.2f}")
+            print(
+                f"{r.pop('label'):<36} {r['wall_us_per_step']:>8.0f} us {r['cpu_us_per_step']:>8.0f} us"
+                f" {r['real_time_factor']:>17.2f}"
+            )
     localizer_rows = [
         benchmark_contact_localizer(name, calls=max(args.calls // 3, 1), batches=args.batches)
         for name in names
@@ -385,8 +403,16 @@ def _run(args: argparse.Namespace) -> int:
                 f" {r['localizer_update_us']:>11.1f} us ({r['localizer_update_ratio']:>5.1f}x) {'2000 us':>8}"
             )
     out_dir = output_folder(args, EXPERIMENT)
-    write_metrics(out_dir, {"floating_base": rows, "residual_update": residual_rows, "force_observer": observer,
-                            "closed_loop": loop_rows, "contact_localizer": localizer_rows})
+    write_metrics(
+        out_dir,
+        {
+            "floating_base": rows,
+            "residual_update": residual_rows,
+            "force_observer": observer,
+            "closed_loop": loop_rows,
+            "contact_localizer": localizer_rows,
+        },
+    )
     print(f"\nmemory allocator: {memory_allocator()}")
     print_written(out_dir)
     return 0

@@ -75,8 +75,12 @@ def run_trial(spec: dict, scenario: ContactLocalizationScenario) -> dict:
     returns its results (``trial_result``)."""
     trial = trial_scenario(scenario, spec)
     diagram, handles = build_contact_localization_diagram(trial)
-    run = simulate(diagram, trial.push_start + trial.push_duration,
-                   set_initial_state=handles.station.set_initial_state, simulator_config=trial.simulator_config)
+    run = simulate(
+        diagram,
+        trial.push_start + trial.push_duration,
+        set_initial_state=handles.station.set_initial_state,
+        simulator_config=trial.simulator_config,
+    )
     return trial_result(trial, spec, handles, run.context, run.wall_time_s)
 
 
@@ -84,17 +88,27 @@ def record_replay(spec: dict, scenario: ContactLocalizationScenario, meshcat, *,
     """Records the trial ``spec`` in ``meshcat``, its push and its release."""
     trial = trial_scenario(scenario, spec)
     diagram, handles = build_contact_localization_diagram(trial, meshcat)
-    simulate(diagram, trial.push_start + trial.push_duration + REPLAY_AFTER_PUSH_S,
-             set_initial_state=handles.station.set_initial_state, simulator_config=trial.simulator_config,
-             meshcat=meshcat, live=live, camera=([1.6, -1.6, 1.2], [0.0, 0.0, 0.7]))
+    simulate(
+        diagram,
+        trial.push_start + trial.push_duration + REPLAY_AFTER_PUSH_S,
+        set_initial_state=handles.station.set_initial_state,
+        simulator_config=trial.simulator_config,
+        meshcat=meshcat,
+        live=live,
+        camera=([1.6, -1.6, 1.2], [0.0, 0.0, 0.7]),
+    )
 
 
 def run_no_contact(scenario: ContactLocalizationScenario) -> dict:
     """The study's run without contact (``no_contact_scenario``): its false detections."""
     run_scenario = no_contact_scenario(scenario)
     diagram, handles = build_contact_localization_diagram(run_scenario)
-    run = simulate(diagram, run_scenario.no_contact_duration, set_initial_state=handles.station.set_initial_state,
-                   simulator_config=run_scenario.simulator_config)
+    run = simulate(
+        diagram,
+        run_scenario.no_contact_duration,
+        set_initial_state=handles.station.set_initial_state,
+        simulator_config=run_scenario.simulator_config,
+    )
     return no_contact_result(run_scenario, handles, run.context)
 
 
@@ -111,13 +125,16 @@ def _job(job: tuple) -> tuple[str, dict]:
 # Outputs.
 # ---------------------------------------------------------------------------------------
 
+
 def plot_position_errors(path: Path, results: list[dict]) -> None:
     errors = np.array([r["position_error_m"] for r in results if r["position_error_m"] is not None]) * 100.0
     fig, ax = plt.subplots(figsize=(7, 4))
     if errors.size:
         ax.hist(np.minimum(errors, 20.0), bins=np.linspace(0.0, 20.0, 41), color="tab:blue", edgecolor="k")
         ax.axvline(np.median(errors), color="tab:green", label=f"median {np.median(errors):.2f} cm")
-        ax.axvline(np.percentile(errors, 95), color="tab:orange", label=f"95th percentile {np.percentile(errors, 95):.2f} cm")
+        ax.axvline(
+            np.percentile(errors, 95), color="tab:orange", label=f"95th percentile {np.percentile(errors, 95):.2f} cm"
+        )
     ax.axvline(2.0, color="tab:green", ls="--", label="floor: median 2 cm")
     ax.axvline(5.0, color="tab:orange", ls="--", label="floor: p95 5 cm")
     missing = sum(r["position_error_m"] is None for r in results)
@@ -135,19 +152,32 @@ def _parse(argv):
     parser.add_argument("--trials", type=int, default=None, help="number of random contacts (scenario default 200)")
     parser.add_argument("--seed", type=int, default=None, help="seed of the trials and of the sensor noise")
     parser.add_argument("--model", default=None, help="humanoid with foot F/T sensors (hrp4_like)")
-    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="parallel processes (default: all cores)")
+    parser.add_argument(
+        "--workers", type=int, default=os.cpu_count() or 1, help="parallel processes (default: all cores)"
+    )
     parser.add_argument("--replays", type=int, default=3, help="Meshcat replays of the first N trials (default 3)")
     parser.add_argument("--push-start", type=float, default=None, help="contact onset, s (scenario default 0.5)")
-    parser.add_argument("--contact-duration", type=float, default=None,
-                        help="contact duration, s (the scenario's push_duration, default 1)")
-    parser.add_argument("--no-contact-duration", type=float, default=None,
-                        help="length of the run without contact for false detections, s "
-                             "(scenario default 10; 0 skips)")
+    parser.add_argument(
+        "--contact-duration",
+        type=float,
+        default=None,
+        help="contact duration, s (the scenario's push_duration, default 1)",
+    )
+    parser.add_argument(
+        "--no-contact-duration",
+        type=float,
+        default=None,
+        help="length of the run without contact for false detections, s (scenario default 10; 0 skips)",
+    )
     parser.add_argument("--no-noise", action="store_true", help="ideal sensors")
     args = parser.parse_args(argv)
-    if (args.workers < 1 or args.replays < 0 or (args.trials is not None and args.trials < 1)
-            or (args.contact_duration is not None and args.contact_duration <= 0)
-            or (args.push_start is not None and args.push_start < 0)):
+    if (
+        args.workers < 1
+        or args.replays < 0
+        or (args.trials is not None and args.trials < 1)
+        or (args.contact_duration is not None and args.contact_duration <= 0)
+        or (args.push_start is not None and args.push_start < 0)
+    ):
         parser.error("--trials and --workers must be >= 1, --replays >= 0, --contact-duration > 0, --push-start >= 0")
     return args
 
@@ -205,11 +235,20 @@ def main(argv: list[str] | None = None) -> int:
         jobs += [("trial", spec, scenario_yaml) for spec in specs]
         results, no_contact = _run_jobs(jobs, args.workers)
         metrics = contact_localization_metrics(results, no_contact)
-        metrics.update({"model": scenario.model, "seed": scenario.seed, "noise": scenario.noise,
-                        "workers": args.workers, "push_start_s": scenario.push_start,
-                        "contact_duration_s": scenario.push_duration,
-                        "force_range_N": [MIN_FORCE, MAX_FORCE], "max_angle_from_normal_deg": MAX_ANGLE_DEG,
-                        "wall_time_s": None, "no_contact_run": no_contact})
+        metrics.update(
+            {
+                "model": scenario.model,
+                "seed": scenario.seed,
+                "noise": scenario.noise,
+                "workers": args.workers,
+                "push_start_s": scenario.push_start,
+                "contact_duration_s": scenario.push_duration,
+                "force_range_N": [MIN_FORCE, MAX_FORCE],
+                "max_angle_from_normal_deg": MAX_ANGLE_DEG,
+                "wall_time_s": None,
+                "no_contact_run": no_contact,
+            }
+        )
 
         meshcat = replay_meshcat(args.replays > 0, args.headless)
         for spec in specs[: args.replays]:
@@ -227,7 +266,10 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _print_summary(metrics: dict) -> None:
-    print(f"contact localization on {metrics['model']}, {metrics['trials']} trials, noise {'on' if metrics['noise'] else 'off'}:")
+    print(
+        f"contact localization on {metrics['model']}, {metrics['trials']} trials,"
+        f" noise {'on' if metrics['noise'] else 'off'}:"
+    )
     for key, (op, floor) in FLOORS.items():
         value = metrics.get(key)
         ok = metrics["meets_floors"].get(key)

@@ -78,16 +78,23 @@ def plot_scenario(path: Path, case: HandPushCase, metrics: dict) -> None:
     colors = {"left": "tab:blue", "right": "tab:orange"}
     for j, side in enumerate(SIDES):
         x = 3 * j
-        axes[0].plot(t, 100 * d["dx"][:, x], color=colors[side], lw=2.6 if side == "left" else 1.2,
-                     alpha=0.6 if side == "left" else 1.0, label=f"{side} hand displacement (true)")
+        axes[0].plot(
+            t,
+            100 * d["dx"][:, x],
+            color=colors[side],
+            lw=2.6 if side == "left" else 1.2,
+            alpha=0.6 if side == "left" else 1.0,
+            label=f"{side} hand displacement (true)",
+        )
     axes[0].plot(t, 100 * d["F_true"][:, 0] / k, "--", color="tab:green", lw=1.5, label="F_true / k")
     axes[0].plot(t, 100 * d["blended_force"][:, 0] / k, ":", color="k", lw=1.3, label="F_est / k (left)")
     axes[0].set_ylabel("x_h - x_h^0 [cm]")
     axes[0].legend(fontsize=8, loc="lower left")
     axes[0].set_title(case.title, fontsize=10)
     axes[1].plot(t, d["F_true"][:, 0], "--", color="tab:green", lw=1.5, label="true (per hand)")
-    axes[1].plot(t, d["observer_force"][:, 0], color="tab:purple", lw=2.4, alpha=0.6,
-                 label="observer (eq. 11 inverted)")
+    axes[1].plot(
+        t, d["observer_force"][:, 0], color="tab:purple", lw=2.4, alpha=0.6, label="observer (eq. 11 inverted)"
+    )
     axes[1].plot(t, d["joint_force"][:, 0], color="tab:red", lw=1.0, label="joint level (eqs. 25-27)")
     axes[1].plot(t, d["blended_force"][:, 0], color="k", lw=1.3, label="blended (eq. 28)")
     axes[1].set_ylabel("F_x, left hand [N]")
@@ -107,30 +114,54 @@ def plot_scenario(path: Path, case: HandPushCase, metrics: dict) -> None:
 def _parse(argv):
     parser = experiment_parser(f"apps.{EXPERIMENT}", __doc__)
     parser.add_argument("--seed", type=int, default=None, help="sensor noise seed (overrides the scenario's)")
-    parser.add_argument("--case", choices=(*CASE_NAMES, "all"), default=None,
-                        help="which of the paper's scenarios a, b (overrides the scenario's cases; all = a b)")
+    parser.add_argument(
+        "--case",
+        choices=(*CASE_NAMES, "all"),
+        default=None,
+        help="which of the paper's scenarios a, b (overrides the scenario's cases; all = a b)",
+    )
     parser.add_argument("--force", type=float, default=None, help="push per hand, N (overrides the scenario's)")
-    parser.add_argument("--lean", type=float, default=None,
-                        help="case b's hip-roll lean, rad (overrides the scenario's; -0.2 saturates an FSR)")
-    parser.add_argument("--saturation-guard", action="store_const", const=True, default=None,
-                        help="extension of eq. 28: K1 = 0 while an FSR saturates (25 N)")
-    parser.add_argument("--no-deflection-compensation", dest="compensate_deflection", action="store_const",
-                        const=False, default=None,
-                        help="ablation: command eq. 29's IK solution without the K_m^-1 J^T F offset")
+    parser.add_argument(
+        "--lean",
+        type=float,
+        default=None,
+        help="case b's hip-roll lean, rad (overrides the scenario's; -0.2 saturates an FSR)",
+    )
+    parser.add_argument(
+        "--saturation-guard",
+        action="store_const",
+        const=True,
+        default=None,
+        help="extension of eq. 28: K1 = 0 while an FSR saturates (25 N)",
+    )
+    parser.add_argument(
+        "--no-deflection-compensation",
+        dest="compensate_deflection",
+        action="store_const",
+        const=False,
+        default=None,
+        help="ablation: command eq. 29's IK solution without the K_m^-1 J^T F offset",
+    )
     return parser.parse_args(argv)
 
 
 def _print_table(metrics: dict) -> None:
-    print(f"{'scenario':<12}{'hand':<7}{'dx [cm]':>9}{'Ftrue/k':>9}{'Fest/k':>9}{'err true':>10}{'err est':>9}"
-          f"{'K1':>6}{'floor':>8}{'RTF':>6}")
+    print(
+        f"{'scenario':<12}{'hand':<7}{'dx [cm]':>9}{'Ftrue/k':>9}{'Fest/k':>9}{'err true':>10}{'err est':>9}"
+        f"{'K1':>6}{'floor':>8}{'RTF':>6}"
+    )
     for key, m in metrics.items():
         for side, h in m["hands"].items():
-            print(f"{key:<12}{side:<7}{100 * h['displacement_m']:>9.3f}{100 * h['F_true_over_k_m']:>9.3f}"
-                  f"{100 * h['F_est_over_k_m']:>9.3f}{100 * h['relative_error_vs_true']:>9.1f}%"
-                  f"{100 * h['relative_error_vs_estimate']:>8.1f}%{m['k1_steady_mean']:>6.2f}"
-                  f"{'met' if m['meets_floor'] else 'MISSED':>8}{m['real_time_factor']:>6.2f}")
-    print(f"floor: steady-state hand displacement within {100 * DISPLACEMENT_FLOOR:g} % of F/k "
-          "(against the true force and against the estimate)")
+            print(
+                f"{key:<12}{side:<7}{100 * h['displacement_m']:>9.3f}{100 * h['F_true_over_k_m']:>9.3f}"
+                f"{100 * h['F_est_over_k_m']:>9.3f}{100 * h['relative_error_vs_true']:>9.1f}%"
+                f"{100 * h['relative_error_vs_estimate']:>8.1f}%{m['k1_steady_mean']:>6.2f}"
+                f"{'met' if m['meets_floor'] else 'MISSED':>8}{m['real_time_factor']:>6.2f}"
+            )
+    print(
+        f"floor: steady-state hand displacement within {100 * DISPLACEMENT_FLOOR:g} % of F/k "
+        "(against the true force and against the estimate)"
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -141,14 +172,24 @@ def main(argv: list[str] | None = None) -> int:
         if args.case is not None:
             cases = list(CASE_NAMES) if args.case == "all" else [args.case]
         scenario = scenario_from_args(
-            NaoCompliantArmsScenario, args, seed=args.seed, cases=cases, force=args.force, lean=args.lean,
-            saturation_guard=args.saturation_guard, compensate_deflection=args.compensate_deflection)
+            NaoCompliantArmsScenario,
+            args,
+            seed=args.seed,
+            cases=cases,
+            force=args.force,
+            lean=args.lean,
+            saturation_guard=args.saturation_guard,
+            compensate_deflection=args.compensate_deflection,
+        )
         runs = scenario_cases(scenario)  # every case checked before the calibration
         out_dir = output_folder(args, EXPERIMENT)
         start = time.perf_counter()
         km = dict(identified_motor_constants())  # the calibration run, explicit
-        print(f"K_m identified (static loads on the hands, {time.perf_counter() - start:.1f} s): "
-              + ", ".join(f"{n} {v:.3f}" for n, v in km.items()) + " N m/rad")
+        print(
+            f"K_m identified (static loads on the hands, {time.perf_counter() - start:.1f} s): "
+            + ", ".join(f"{n} {v:.3f}" for n, v in km.items())
+            + " N m/rad"
+        )
         initial_state = settle_standing_state(wide_stance(), plant_config=scenario.plant_config)
         meshcat = replay_meshcat(not args.no_replay, args.headless)
         metrics = {}
@@ -167,8 +208,9 @@ def main(argv: list[str] | None = None) -> int:
             key = f"scenario_{case.name}"
             save_replay(meshcat, out_dir / f"{key}.html")
             signals = logged_signals(handles.loggers, run.context, "state")
-            m = scenario_metrics(case, {"signals": signals, "handles": handles, "wall": run.wall_time_s},
-                                 scenario.stiffness)
+            m = scenario_metrics(
+                case, {"signals": signals, "handles": handles, "wall": run.wall_time_s}, scenario.stiffness
+            )
             plot_scenario(out_dir / f"{key}.png", case, m)
             m.pop("_series")
             metrics[key] = m

@@ -112,29 +112,54 @@ def run_scenario(scenario: NaoForceGuidedWalkScenario, meshcat: Meshcat | None =
     """Builds the diagram, simulates ``scenario.duration``; returns the metrics
     (``force_guided_walk_metrics``, with their signals)."""
     diagram, handles = build_force_guided_diagram(scenario, meshcat=meshcat)
-    run = simulate(diagram, scenario.duration, set_initial_state=handles["station"].set_initial_state,
-                   simulator_config=scenario.simulator_config, meshcat=meshcat, live=live,
-                   camera=([0.3, -1.4, 0.6], [0.2, 0.0, 0.2]))
+    run = simulate(
+        diagram,
+        scenario.duration,
+        set_initial_state=handles["station"].set_initial_state,
+        simulator_config=scenario.simulator_config,
+        meshcat=meshcat,
+        live=live,
+        camera=([0.3, -1.4, 0.6], [0.2, 0.0, 0.2]),
+    )
     return force_guided_walk_metrics(scenario, handles, run.context, run.wall_time_s)
 
 
 def _parse(argv):
     d = NaoForceGuidedWalkScenario()
     parser = experiment_parser("apps.nao_force_guided_walk", __doc__)
-    parser.add_argument("--force", type=float, default=None,
-                        help=f"total guidance force on the hands, N (default {d.force}; 0: no force, the "
-                             "false-start check)")
-    parser.add_argument("--trigger-source", choices=TRIGGER_SOURCES, default=None,
-                        help="the trigger's input: the arm joints' hand force estimate (eqs. 25-27), the "
-                             "observer's, or eq. 28's blend of the two with K1 = K_a / 8 "
-                             f"(default {d.trigger_source})")
-    parser.add_argument("--threshold", type=float, default=None,
-                        help=f"threshold on the estimated F_x, N (default {d.trigger.threshold})")
-    parser.add_argument("--preset", choices=("walking", "standing"), default=None,
-                        help=f"observer covariances: eq. 22 (walking) or eq. 21 (standing; default {d.preset})")
-    parser.add_argument("--force-rate-variance", type=float, default=None,
-                        help="sigma^2 of the force's second derivative (eq. 17), (N/s^2)^2 "
-                             f"(default {d.force_rate_variance:g}; the paper's presets: 1e3)")
+    parser.add_argument(
+        "--force",
+        type=float,
+        default=None,
+        help=f"total guidance force on the hands, N (default {d.force}; 0: no force, the false-start check)",
+    )
+    parser.add_argument(
+        "--trigger-source",
+        choices=TRIGGER_SOURCES,
+        default=None,
+        help="the trigger's input: the arm joints' hand force estimate (eqs. 25-27), the "
+        "observer's, or eq. 28's blend of the two with K1 = K_a / 8 "
+        f"(default {d.trigger_source})",
+    )
+    parser.add_argument(
+        "--threshold",
+        type=float,
+        default=None,
+        help=f"threshold on the estimated F_x, N (default {d.trigger.threshold})",
+    )
+    parser.add_argument(
+        "--preset",
+        choices=("walking", "standing"),
+        default=None,
+        help=f"observer covariances: eq. 22 (walking) or eq. 21 (standing; default {d.preset})",
+    )
+    parser.add_argument(
+        "--force-rate-variance",
+        type=float,
+        default=None,
+        help="sigma^2 of the force's second derivative (eq. 17), (N/s^2)^2 "
+        f"(default {d.force_rate_variance:g}; the paper's presets: 1e3)",
+    )
     parser.add_argument("--start-debounce", type=float, default=None, help=f"s (default {d.trigger.start_debounce})")
     parser.add_argument("--stop-debounce", type=float, default=None, help=f"s (default {d.trigger.stop_debounce})")
     parser.add_argument("--seed", type=int, default=None, help="noise seed (default 0)")
@@ -147,21 +172,37 @@ def main(argv: list[str] | None = None) -> int:
 
     def body() -> int:
         scenario = scenario_from_args(
-            NaoForceGuidedWalkScenario, args, force=args.force, trigger_source=args.trigger_source, preset=args.preset,
-            force_rate_variance=args.force_rate_variance, seed=args.seed, noise=False if args.no_noise else None)
-        scenario.trigger = replace_fields(scenario.trigger, threshold=args.threshold,
-                                          start_debounce=args.start_debounce, stop_debounce=args.stop_debounce)
+            NaoForceGuidedWalkScenario,
+            args,
+            force=args.force,
+            trigger_source=args.trigger_source,
+            preset=args.preset,
+            force_rate_variance=args.force_rate_variance,
+            seed=args.seed,
+            noise=False if args.no_noise else None,
+        )
+        scenario.trigger = replace_fields(
+            scenario.trigger,
+            threshold=args.threshold,
+            start_debounce=args.start_debounce,
+            stop_debounce=args.stop_debounce,
+        )
         scenario.check()
         out = output_folder(args, "nao_force_guided_walk")
         meshcat = replay_meshcat(not args.no_replay, args.headless)
-        source = {"joint": "the arm joints' hand force estimate",
-                  "observer": f"the observer's estimate ({scenario.preset} preset)",
-                  "blend": f"eq. 28's blend of the observer ({scenario.preset} preset) and the arm joints"
-                  }[scenario.trigger_source]
-        episodes = ", ".join(f"{'forwards' if sign > 0 else 'backwards'} {t_on:g}-{t_off:g} s"
-                             for t_on, t_off, sign in scenario.episodes)
-        print(f"guiding nao_like by the hands: {scenario.force} N {episodes}; threshold "
-              f"{scenario.trigger.threshold} N on {source} ...", flush=True)
+        source = {
+            "joint": "the arm joints' hand force estimate",
+            "observer": f"the observer's estimate ({scenario.preset} preset)",
+            "blend": f"eq. 28's blend of the observer ({scenario.preset} preset) and the arm joints",
+        }[scenario.trigger_source]
+        episodes = ", ".join(
+            f"{'forwards' if sign > 0 else 'backwards'} {t_on:g}-{t_off:g} s" for t_on, t_off, sign in scenario.episodes
+        )
+        print(
+            f"guiding nao_like by the hands: {scenario.force} N {episodes}; threshold "
+            f"{scenario.trigger.threshold} N on {source} ...",
+            flush=True,
+        )
         m = run_scenario(scenario, meshcat, live=not args.headless)
         save_replay(meshcat, out / "guided.html")
         plot(out / "guided.png", m, scenario.trigger.threshold)
@@ -172,20 +213,26 @@ def main(argv: list[str] | None = None) -> int:
             return "never" if value is None else f"{value:.3f} s"
 
         for i, e in enumerate(m["episodes"]):
-            print(f"  episode {i} ({'forwards' if e['direction'] > 0 else 'backwards'}): start latency "
-                  f"{seconds(e['start_latency_s'])} (first lift-off {seconds(e['first_lift_off_latency_s'])}), "
-                  f"{e['steps_during']} steps, CoM x {e['com_x_displacement_m']:+.3f} m; after the drop: stop decided "
-                  f"+{seconds(e['stop_decision_latency_s'])}, "
-                  f"steps begun {e['steps_begun_after_drop']} (lift-offs {e['lift_offs_after_drop']}), last touch-down "
-                  f"+{e['last_touch_down_after_drop_s']:.2f} s")
+            print(
+                f"  episode {i} ({'forwards' if e['direction'] > 0 else 'backwards'}): start latency "
+                f"{seconds(e['start_latency_s'])} (first lift-off {seconds(e['first_lift_off_latency_s'])}), "
+                f"{e['steps_during']} steps, CoM x {e['com_x_displacement_m']:+.3f} m; after the drop: stop decided "
+                f"+{seconds(e['stop_decision_latency_s'])}, "
+                f"steps begun {e['steps_begun_after_drop']} (lift-offs {e['lift_offs_after_drop']}), last touch-down "
+                f"+{e['last_touch_down_after_drop_s']:.2f} s"
+            )
         print(f"  false starts (no force on): {len(m['false_starts_s'])}")
         for name, err in m["estimate_errors_while_walking"].items():
             if err["samples"]:
-                print(f"  F_x error while walking, {name}: mean {err['mean_N']:+.3f} N, std {err['std_N']:.3f} N, "
-                      f"max |e| {err['max_abs_N']:.2f} N ({err['samples']} samples)")
-        print(f"  {'upright' if not m['fell'] else 'FELL'} (max tilt {m['max_base_tilt_deg']:.1f} deg, max |yaw| "
-              f"{m['max_abs_yaw_deg']:.1f} deg); {m['wall_time_s']:.1f} s wall for {m['simulated_s']:.1f} s; floors "
-              f"{'met' if m['meets_floors'] else 'MISSED: ' + ', '.join(k for k, v in checks.items() if not v)}")
+                print(
+                    f"  F_x error while walking, {name}: mean {err['mean_N']:+.3f} N, std {err['std_N']:.3f} N, "
+                    f"max |e| {err['max_abs_N']:.2f} N ({err['samples']} samples)"
+                )
+        print(
+            f"  {'upright' if not m['fell'] else 'FELL'} (max tilt {m['max_base_tilt_deg']:.1f} deg, max |yaw| "
+            f"{m['max_abs_yaw_deg']:.1f} deg); {m['wall_time_s']:.1f} s wall for {m['simulated_s']:.1f} s; floors "
+            f"{'met' if m['meets_floors'] else 'MISSED: ' + ', '.join(k for k, v in checks.items() if not v)}"
+        )
         print_written(out)
         return 0
 

@@ -114,24 +114,40 @@ def plot_experiment(path: Path, experiment: Experiment, run: dict) -> None:
 def _parse(argv):
     parser = experiment_parser(f"apps.{EXPERIMENT}", __doc__)
     parser.add_argument("--seed", type=int, default=None, help="sensor noise seed (overrides the scenario's)")
-    parser.add_argument("--experiment", choices=(*map(str, EXPERIMENT_NUMBERS), "all"), default=None,
-                        help="which experiment (overrides the scenario's experiments; all = 1 2 3)")
-    parser.add_argument("--time-scale", type=float, default=None,
-                        help="multiply every duration of the schedules (e.g. 0.5 for a quick run; "
-                        "overrides the scenario's)")
-    parser.add_argument("--ramp", type=float, default=None,
-                        help="load ramp duration of experiments 2-3 before scaling, s (overrides the scenario's)")
+    parser.add_argument(
+        "--experiment",
+        choices=(*map(str, EXPERIMENT_NUMBERS), "all"),
+        default=None,
+        help="which experiment (overrides the scenario's experiments; all = 1 2 3)",
+    )
+    parser.add_argument(
+        "--time-scale",
+        type=float,
+        default=None,
+        help="multiply every duration of the schedules (e.g. 0.5 for a quick run; overrides the scenario's)",
+    )
+    parser.add_argument(
+        "--ramp",
+        type=float,
+        default=None,
+        help="load ramp duration of experiments 2-3 before scaling, s (overrides the scenario's)",
+    )
     return parser.parse_args(argv)
 
 
 def _print_table(metrics: dict) -> None:
-    print(f"{'experiment':<12}{'RMS x':>8}{'RMS y':>8}{'RMS z':>8}{'SS x':>8}{'SS y':>8}{'SS z':>8}"
-          f"{'floors':>9}{'RTF':>7}")
+    print(
+        f"{'experiment':<12}{'RMS x':>8}{'RMS y':>8}{'RMS z':>8}{'SS x':>8}{'SS y':>8}{'SS z':>8}"
+        f"{'floors':>9}{'RTF':>7}"
+    )
     for key, m in metrics.items():
         rms, ss = m["rms_error_N"], m["steady_state_error_N"]
-        print(f"{key:<12}" + "".join(f"{rms[c]:>8.3f}" for c in COMPONENTS)
-              + "".join(f"{ss[c]:>8.3f}" for c in COMPONENTS)
-              + f"{'met' if m['meets_floors'] else 'MISSED':>9}{m['real_time_factor']:>7.2f}")
+        print(
+            f"{key:<12}"
+            + "".join(f"{rms[c]:>8.3f}" for c in COMPONENTS)
+            + "".join(f"{ss[c]:>8.3f}" for c in COMPONENTS)
+            + f"{'met' if m['meets_floors'] else 'MISSED':>9}{m['real_time_factor']:>7.2f}"
+        )
     print(f"errors in N; floors: steady state (SS) <= {STEADY_STATE_FLOOR} N, RMS <= {RMS_FLOOR} N per component")
 
 
@@ -142,8 +158,14 @@ def main(argv: list[str] | None = None) -> int:
         experiments = None
         if args.experiment is not None:
             experiments = list(EXPERIMENT_NUMBERS) if args.experiment == "all" else [int(args.experiment)]
-        scenario = scenario_from_args(NaoForceObserverScenario, args, seed=args.seed, experiments=experiments,
-                                      time_scale=args.time_scale, ramp=args.ramp)
+        scenario = scenario_from_args(
+            NaoForceObserverScenario,
+            args,
+            seed=args.seed,
+            experiments=experiments,
+            time_scale=args.time_scale,
+            ramp=args.ramp,
+        )
         schedules = scenario_experiments(scenario)  # every schedule checked before the first run
         out_dir = output_folder(args, EXPERIMENT)
         meshcat = replay_meshcat(not args.no_replay, args.headless)
@@ -168,8 +190,10 @@ def main(argv: list[str] | None = None) -> int:
             metrics[key] = experiment_metrics(experiment, result)
             plot_experiment(out_dir / f"{key}.png", experiment, result)
             m = metrics[key]
-            print(f"  {m['wall_time_s']:.1f} s wall (real-time factor {m['real_time_factor']:.2f}); floors "
-                  f"{'met' if m['meets_floors'] else 'MISSED'}")
+            print(
+                f"  {m['wall_time_s']:.1f} s wall (real-time factor {m['real_time_factor']:.2f}); floors "
+                f"{'met' if m['meets_floors'] else 'MISSED'}"
+            )
         write_metrics(out_dir, {**metrics, "summary": experiments_summary(scenario, metrics)}, scenario)
         _print_table(metrics)
         print_written(out_dir)

@@ -47,9 +47,15 @@ def run_scenario(scenario: NaoWalkScenario, meshcat=None, *, live: bool = True) 
     """Builds the walking diagram, runs the whole pattern; returns the handles and the
     metrics (``nao_walk_metrics``, with their signals)."""
     diagram, handles = build_nao_walk_diagram(scenario, meshcat=meshcat)
-    run = simulate(diagram, handles.controller.duration, set_initial_state=handles.set_initial_state,
-                   simulator_config=scenario.simulator_config, meshcat=meshcat, live=live,
-                   camera=([0.6, -1.2, 0.6], [0.4, 0.0, 0.2]))
+    run = simulate(
+        diagram,
+        handles.controller.duration,
+        set_initial_state=handles.set_initial_state,
+        simulator_config=scenario.simulator_config,
+        meshcat=meshcat,
+        live=live,
+        camera=([0.6, -1.2, 0.6], [0.4, 0.0, 0.2]),
+    )
     return {"handles": handles, "metrics": nao_walk_metrics(scenario, handles, run.context, run.wall_time_s)}
 
 
@@ -62,8 +68,10 @@ def plot_top(path: Path, run: dict) -> None:
     fig, ax = plt.subplots(figsize=(12, 4.2))
     fsr = {side: humanoid.fsr_positions[side] for side in ("left", "right")}
     order = [0, 1, 3, 2, 0]  # front_left, front_right, rear_right, rear_left
-    prints = [(side, p) for side, p in (("left", controller.pattern.soles["left"][0]),
-                                       ("right", controller.pattern.soles["right"][0]))]
+    prints = [
+        (side, p)
+        for side, p in (("left", controller.pattern.soles["left"][0]), ("right", controller.pattern.soles["right"][0]))
+    ]
     prints += [(step.side, step.end) for step in controller.pattern.steps]
     for side, p in prints:
         corners = fsr[side][order] + p[:2]
@@ -91,8 +99,12 @@ def _parse(argv):
     parser.add_argument("--double-support-ratio", type=float, default=None, help="(walking.double_support_ratio)")
     parser.add_argument("--swing-height", type=float, default=None, help="m (walking.swing_height)")
     parser.add_argument("--com-height", type=float, default=None, help="m (walking.com_height)")
-    parser.add_argument("--zmp-correction-passes", type=int, default=None,
-                        help="passes of the multibody ZMP correction (Kajita 2003; 0 = cart-table only; default 1)")
+    parser.add_argument(
+        "--zmp-correction-passes",
+        type=int,
+        default=None,
+        help="passes of the multibody ZMP correction (Kajita 2003; 0 = cart-table only; default 1)",
+    )
     parser.add_argument("--noise", action="store_true", help="sensor noise on (the PD reads the noisy sensed state)")
     parser.add_argument("--seed", type=int, default=None, help="noise seed (default 0)")
     return parser.parse_args(argv)
@@ -102,18 +114,31 @@ def main(argv: list[str] | None = None) -> int:
     args = _parse(argv)
 
     def body() -> int:
-        scenario = scenario_from_args(NaoWalkScenario, args, zmp_correction_passes=args.zmp_correction_passes,
-                                      noise=True if args.noise else None, seed=args.seed)
+        scenario = scenario_from_args(
+            NaoWalkScenario,
+            args,
+            zmp_correction_passes=args.zmp_correction_passes,
+            noise=True if args.noise else None,
+            seed=args.seed,
+        )
         scenario.walking = replace_fields(
-            scenario.walking, num_steps=args.steps, step_length=args.step_length, step_duration=args.step_duration,
-            double_support_ratio=args.double_support_ratio, swing_height=args.swing_height,
-            com_height=args.com_height)
+            scenario.walking,
+            num_steps=args.steps,
+            step_length=args.step_length,
+            step_duration=args.step_duration,
+            double_support_ratio=args.double_support_ratio,
+            swing_height=args.swing_height,
+            com_height=args.com_height,
+        )
         scenario.check()
         out = output_folder(args, "nao_walk")
         meshcat = replay_meshcat(not args.no_replay, args.headless)
         params = scenario.walking
-        print(f"walking {params.num_steps} steps of {params.step_length} m, {params.step_duration} s each "
-              f"({params.duration:.1f} s simulated) ...", flush=True)
+        print(
+            f"walking {params.num_steps} steps of {params.step_length} m, {params.step_duration} s each "
+            f"({params.duration:.1f} s simulated) ...",
+            flush=True,
+        )
         run = run_scenario(scenario, meshcat, live=not args.headless)
         m = run["metrics"]
         save_replay(meshcat, out / "walk.html")
@@ -121,13 +146,17 @@ def main(argv: list[str] | None = None) -> int:
         plot_walking_time(out / "walk_time.png", run)
         write_metrics(out, {k: v for k, v in m.items() if k != "signals"}, scenario)
         checks = m["floors"]
-        print(f"  distance {m['distance_m']:.3f} m, mean speed {m['mean_speed_mps']:.3f} m/s, steps "
-              f"{m['steps_detected']}/{m['steps_planned']}, {'upright' if m['upright'] else 'FELL'} (max tilt "
-              f"{m['max_base_tilt_deg']:.1f} deg), ZMP in support {100 * m['zmp_in_support_fraction']:.1f} % "
-              f"(5th-percentile margin {1000 * m['zmp_margin_p05_m']:.1f} mm; in the loaded feet's polygon "
-              f"{1000 * m['zmp_loaded_margin_p05_m']:.1f} mm)")
-        print(f"  {m['wall_time_s']:.1f} s wall (real-time factor {m['real_time_factor']:.2f}); floors "
-              f"{'met' if m['meets_floors'] else 'MISSED: ' + ', '.join(k for k, v in checks.items() if not v)}")
+        print(
+            f"  distance {m['distance_m']:.3f} m, mean speed {m['mean_speed_mps']:.3f} m/s, steps "
+            f"{m['steps_detected']}/{m['steps_planned']}, {'upright' if m['upright'] else 'FELL'} (max tilt "
+            f"{m['max_base_tilt_deg']:.1f} deg), ZMP in support {100 * m['zmp_in_support_fraction']:.1f} % "
+            f"(5th-percentile margin {1000 * m['zmp_margin_p05_m']:.1f} mm; in the loaded feet's polygon "
+            f"{1000 * m['zmp_loaded_margin_p05_m']:.1f} mm)"
+        )
+        print(
+            f"  {m['wall_time_s']:.1f} s wall (real-time factor {m['real_time_factor']:.2f}); floors "
+            f"{'met' if m['meets_floors'] else 'MISSED: ' + ', '.join(k for k, v in checks.items() if not v)}"
+        )
         print_written(out)
         return 0
 

@@ -45,7 +45,11 @@ from apps.runner import (
     simulate,
     write_metrics,
 )
-from diagrams.observer.nao_walk_pulled import NaoWalkPulledScenario, build_nao_walk_pulled_diagram, nao_walk_pulled_metrics
+from diagrams.observer.nao_walk_pulled import (
+    NaoWalkPulledScenario,
+    build_nao_walk_pulled_diagram,
+    nao_walk_pulled_metrics,
+)
 from systems.locomotion.walking_pattern import WalkingParameters
 
 
@@ -60,9 +64,15 @@ def run_scenario(scenario: NaoWalkPulledScenario, meshcat: Meshcat | None = None
             meshcat.SetObject("pulley", Sphere(0.02), Rgba(0.2, 0.2, 0.2, 1.0))
             meshcat.SetTransform("pulley", RigidTransform(handles.cable.pulley))
 
-    run = simulate(diagram, handles.controller.duration, set_initial_state=set_initial_state,
-                   simulator_config=scenario.simulator_config, meshcat=meshcat, live=live,
-                   camera=([0.2, -1.6, 0.7], [0.2, 0.0, 0.2]))
+    run = simulate(
+        diagram,
+        handles.controller.duration,
+        set_initial_state=set_initial_state,
+        simulator_config=scenario.simulator_config,
+        meshcat=meshcat,
+        live=live,
+        camera=([0.2, -1.6, 0.7], [0.2, 0.0, 0.2]),
+    )
     return {"handles": handles, **nao_walk_pulled_metrics(scenario, handles, run.context, run.wall_time_s)}
 
 
@@ -146,9 +156,13 @@ def _parse(argv):
     parser.add_argument("--seed", type=int, default=None, help="noise seed (default 0)")
     parser.add_argument("--no-noise", action="store_true", help="ideal sensors (default: the sensors' noise on)")
     parser.add_argument("--no-pull", action="store_true", help="walk without the cable (observer bias while walking)")
-    parser.add_argument("--tighten-distance", type=float, default=None,
-                        help="torso travel before the line is taut, m (cable.tighten_distance; default: the "
-                             "scenario's, scaled to --steps)")
+    parser.add_argument(
+        "--tighten-distance",
+        type=float,
+        default=None,
+        help="torso travel before the line is taut, m (cable.tighten_distance; default: the "
+        "scenario's, scaled to --steps)",
+    )
     return parser.parse_args(argv)
 
 
@@ -156,8 +170,13 @@ def main(argv: list[str] | None = None) -> int:
     args = _parse(argv)
 
     def body() -> int:
-        scenario = scenario_from_args(NaoWalkPulledScenario, args, seed=args.seed,
-                                      noise=False if args.no_noise else None, pull=False if args.no_pull else None)
+        scenario = scenario_from_args(
+            NaoWalkPulledScenario,
+            args,
+            seed=args.seed,
+            noise=False if args.no_noise else None,
+            pull=False if args.no_pull else None,
+        )
         tighten = args.tighten_distance
         if tighten is None and args.steps is not None:  # keep the cable's share of the walk before the line is taut
             tighten = scenario.cable.tighten_distance * (args.steps - 1) / (WalkingParameters().num_steps - 1)
@@ -167,8 +186,11 @@ def main(argv: list[str] | None = None) -> int:
         out = output_folder(args, "nao_walk_pulled")
         meshcat = replay_meshcat(not args.no_replay, args.headless)
         params, pull = scenario.walking, scenario.pull
-        print(f"walking {params.num_steps} steps of {params.step_length} m ({params.duration:.1f} s simulated)"
-              f"{' pulled by a 0.3 kg load over a pulley' if pull else ' without the cable'} ...", flush=True)
+        print(
+            f"walking {params.num_steps} steps of {params.step_length} m ({params.duration:.1f} s simulated)"
+            f"{' pulled by a 0.3 kg load over a pulley' if pull else ' without the cable'} ...",
+            flush=True,
+        )
         run = run_scenario(scenario, meshcat, live=not args.headless)
         save_replay(meshcat, out / "walk_pulled.html")
         plot_forces(out, run)
@@ -180,18 +202,24 @@ def main(argv: list[str] | None = None) -> int:
         o = summary["observer"] = {k: v for k, v in run["observer"].items() if k not in ("signals", "window_mask")}
         write_metrics(out, summary, scenario)
         checks = summary["floors"]
-        print(f"  walk: {w['steps_detected']}/{w['steps_planned']} steps, {w['distance_m']:.3f} m, mean speed "
-              f"{w['mean_speed_mps']:.3f} m/s, {'upright' if w['upright'] else 'FELL'} (max tilt "
-              f"{w['max_base_tilt_deg']:.1f} deg, max |yaw| {w['max_abs_yaw_deg']:.1f} deg)")
+        print(
+            f"  walk: {w['steps_detected']}/{w['steps_planned']} steps, {w['distance_m']:.3f} m, mean speed "
+            f"{w['mean_speed_mps']:.3f} m/s, {'upright' if w['upright'] else 'FELL'} (max tilt "
+            f"{w['max_base_tilt_deg']:.1f} deg, max |yaw| {w['max_abs_yaw_deg']:.1f} deg)"
+        )
         if pull and o.get("window_samples", 0):
-            print(f"  load lifted at {o['measured_lift_time_s']:.2f} s (up to {o['max_load_height_m']:.3f} m); window "
-                  f"{o['window_s'][0]:.2f}-{o['window_s'][1]:.2f} s: pull F_x {o['true_pull_x_mean_N']:.3f} N "
-                  f"(virtual {o['true_virtual_x_mean_N']:.3f} N), estimated {o['estimated_x_mean_N']:.3f} N "
-                  f"(mean error {o['mean_error_x_N']:+.3f} N, RMS {o['rms_error_x_N']:.3f} N); F_y "
-                  f"{o['true_pull_y_mean_N']:.3f} vs {o['estimated_y_mean_N']:.3f} N; F_z {o['true_pull_z_mean_N']:.3f} "
-                  f"vs {o['estimated_z_mean_N']:.3f} N")
-        print(f"  {summary['wall_time_s']:.1f} s wall (real-time factor {summary['real_time_factor']:.2f}); floors "
-              f"{'met' if summary['meets_floors'] else 'MISSED: ' + ', '.join(k for k, v in checks.items() if not v)}")
+            print(
+                f"  load lifted at {o['measured_lift_time_s']:.2f} s (up to {o['max_load_height_m']:.3f} m); window "
+                f"{o['window_s'][0]:.2f}-{o['window_s'][1]:.2f} s: pull F_x {o['true_pull_x_mean_N']:.3f} N "
+                f"(virtual {o['true_virtual_x_mean_N']:.3f} N), estimated {o['estimated_x_mean_N']:.3f} N "
+                f"(mean error {o['mean_error_x_N']:+.3f} N, RMS {o['rms_error_x_N']:.3f} N); F_y "
+                f"{o['true_pull_y_mean_N']:.3f} vs {o['estimated_y_mean_N']:.3f} N; F_z {o['true_pull_z_mean_N']:.3f} "
+                f"vs {o['estimated_z_mean_N']:.3f} N"
+            )
+        print(
+            f"  {summary['wall_time_s']:.1f} s wall (real-time factor {summary['real_time_factor']:.2f}); floors "
+            f"{'met' if summary['meets_floors'] else 'MISSED: ' + ', '.join(k for k, v in checks.items() if not v)}"
+        )
         print_written(out)
         return 0
 

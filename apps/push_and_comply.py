@@ -17,10 +17,10 @@ the pushes), ``joint_trajectories.png``, ``residual_vs_true_effort.png`` and
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
-from pathlib import Path
 
 from apps.runner import (
     experiment_parser,
@@ -49,7 +49,9 @@ PLOTTED_JOINTS = ("R_KNEE_P", "L_KNEE_P", "R_HIP_P", "L_HIP_P", "R_ANKLE_P", "L_
 def _parse(argv):
     parser = experiment_parser("apps.push_and_comply", __doc__, replay=False)
     parser.add_argument("--seed", type=int, default=None, help="sensor noise seed (overrides the scenario's)")
-    parser.add_argument("--runs", nargs="+", choices=RESIDUAL_KINDS, default=list(RESIDUAL_KINDS), help=argparse.SUPPRESS)
+    parser.add_argument(
+        "--runs", nargs="+", choices=RESIDUAL_KINDS, default=list(RESIDUAL_KINDS), help=argparse.SUPPRESS
+    )
     return parser.parse_args(argv)
 
 

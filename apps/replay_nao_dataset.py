@@ -61,10 +61,14 @@ def write_outputs(out_dir: Path, forces: np.ndarray, period: float, name: str) -
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
-        prog=f"python -m apps.{EXPERIMENT}", description=__doc__.split("\n\n")[0],
+        prog=f"python -m apps.{EXPERIMENT}",
+        description=__doc__.split("\n\n")[0],
         epilog=f"The authors' published recordings: {', '.join(f'data/hawley2019-nao/{n}' for n in RECORDINGS)} "
-        "(in the repository; GPL-2.0 data, see data/hawley2019-nao/README.md).")
-    parser.add_argument("directory", type=Path, help="folder of one recording (CoM_Pos.mat, Acc.mat, ZMP.mat, total_force.mat)")
+        "(in the repository; GPL-2.0 data, see data/hawley2019-nao/README.md).",
+    )
+    parser.add_argument(
+        "directory", type=Path, help="folder of one recording (CoM_Pos.mat, Acc.mat, ZMP.mat, total_force.mat)"
+    )
     add_out_argument(parser, f"{EXPERIMENT}/<recording>")
     parser.add_argument("--preset", choices=("standing", "walking"), default="standing", help="eq. (21) or eq. (22)")
     parser.add_argument("--no-calibration", action="store_true", help="use -sum(total_force) as f_n without scaling")

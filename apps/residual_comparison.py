@@ -51,8 +51,9 @@ def _parse(argv):
     parser.add_argument("--duration", type=float, default=None, help="simulated time, s (scenario default 10)")
     parser.add_argument("--seed", type=int, default=None, help="sensor noise seed (scenario default 0)")
     parser.add_argument("--no-noise", action="store_true", help="ideal sensors")
-    parser.add_argument("--skip", type=float, default=None,
-                        help="metrics ignore the first SKIP s (scenario default 0.5)")
+    parser.add_argument(
+        "--skip", type=float, default=None, help="metrics ignore the first SKIP s (scenario default 0.5)"
+    )
     return parser.parse_args(argv)
 
 
@@ -114,9 +115,11 @@ def _plot_joints(path: Path, title: str, t, estimate, truth, names, *, base=None
 def _plot_wrench(path: Path, title: str, t, estimate, truth, *, moment: bool):
     n_rows = 3 if moment else 2
     fig, axes = plt.subplots(n_rows, 1, figsize=(8, 2.4 * n_rows), sharex=True)
-    rows = [(estimate[:3], truth[:3], "torque [N m]", "m"), (estimate[3:], truth[3:], "force [N]", "f")] if moment else [
-        (estimate, truth, "force [N]", "f")
-    ]
+    rows = (
+        [(estimate[:3], truth[:3], "torque [N m]", "m"), (estimate[3:], truth[3:], "force [N]", "f")]
+        if moment
+        else [(estimate, truth, "force [N]", "f")]
+    )
     for ax, (est, tru, label, symbol) in zip(axes, rows):
         for j, axis in enumerate("xyz"):
             (line,) = ax.plot(t, est[j], label=f"{symbol}_{axis} estimate")
@@ -139,45 +142,73 @@ def _plot(out_dir: Path, run: dict) -> None:
     _plot_joints(
         out_dir / "fig3_classical.png",
         "Classical residual (eq. 7, model 8): estimate (solid) vs true tau_c,real (dashed)",
-        t, s["classical"][6:], s["tau_c_real"], names,
-        base=s["classical"][:6], base_truth=s["wrench_base_true"],
+        t,
+        s["classical"][6:],
+        s["tau_c_real"],
+        names,
+        base=s["classical"][:6],
+        base_truth=s["wrench_base_true"],
     )
     _plot_joints(
         out_dir / "fig4_internal.png",
         "Internal residual (eq. 11): estimate (solid) vs true tau_c,real (dashed)",
-        t, s["internal"], s["tau_c_real"], names,
+        t,
+        s["internal"],
+        s["tau_c_real"],
+        names,
     )
     _plot_wrench(
         out_dir / "fig7_external_base.png",
         "External residual (eq. 16) in the base frame: estimate (solid) vs true (dashed)",
-        t, s["external_base"], s["wrench_base_true"], moment=True,
+        t,
+        s["external_base"],
+        s["wrench_base_true"],
+        moment=True,
     )
     _plot_wrench(
         out_dir / "fig8_external_force.png",
         "External force of the single contact (eq. 19), world: estimate (solid) vs true (dashed)",
-        t, s["external_world"][3:], s["force_world_true"], moment=False,
+        t,
+        s["external_world"][3:],
+        s["force_world_true"],
+        moment=False,
     )
 
 
 def _print_summary(metrics: dict) -> None:
     print(
-        f"residual comparison on {metrics['model']} ({metrics['sensors']}, noise {'on' if metrics['noise'] else 'off'}),"
+        f"residual comparison on {metrics['model']} ({metrics['sensors']},"
+        f" noise {'on' if metrics['noise'] else 'off'}),"
         f" after {metrics['skip_s']} s:"
     )
     print(f"{'':44s} {'vs truth':>10s} {'vs filtered truth':>18s}")
     rows = [
         ("internal residual, all joints", "internal_rel_rms_error", "internal_rel_rms_error_vs_filtered_truth"),
-        ("classical residual (joint part), all joints", "classical_rel_rms_error", "classical_rel_rms_error_vs_filtered_truth"),
-        ("external residual, force (world)", "external_force_rel_rms_error", "external_force_rel_rms_error_vs_filtered_truth"),
-        ("external residual, wrench (base frame)", "external_wrench_base_rel_rms_error", "external_wrench_base_rel_rms_error_vs_filtered_truth"),
+        (
+            "classical residual (joint part), all joints",
+            "classical_rel_rms_error",
+            "classical_rel_rms_error_vs_filtered_truth",
+        ),
+        (
+            "external residual, force (world)",
+            "external_force_rel_rms_error",
+            "external_force_rel_rms_error_vs_filtered_truth",
+        ),
+        (
+            "external residual, wrench (base frame)",
+            "external_wrench_base_rel_rms_error",
+            "external_wrench_base_rel_rms_error_vs_filtered_truth",
+        ),
     ]
     for label, raw, filtered in rows:
         print(f"{label:44s} {100 * metrics[raw]:9.2f}% {100 * metrics[filtered]:17.2f}%")
     per_joint = metrics["internal_rel_rms_error_per_joint"]
     for name in [n for n in per_joint if "KNEE" in n.upper() or n.upper() == "CHEST_Y"]:
         print(
-            f"  {name:12s} internal {100 * per_joint[name]:6.2f}%  classical {100 * metrics['classical_rel_rms_error_per_joint'][name]:7.2f}%"
-            f"  (true RMS {metrics['rms_true_joint_effort_Nm'][name]:.3f} N m, classical RMS {metrics['rms_classical_joint_effort_Nm'][name]:.3f} N m)"
+            f"  {name:12s} internal {100 * per_joint[name]:6.2f}%"
+            f"  classical {100 * metrics['classical_rel_rms_error_per_joint'][name]:7.2f}%"
+            f"  (true RMS {metrics['rms_true_joint_effort_Nm'][name]:.3f} N m,"
+            f" classical RMS {metrics['rms_classical_joint_effort_Nm'][name]:.3f} N m)"
         )
     print(f"real-time factor {metrics['real_time_factor']:.2f} ({metrics['wall_time_s']:.1f} s wall)")
 

@@ -15,9 +15,10 @@ import math
 import os
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from pydrake.geometry import Meshcat
 from pydrake.systems.analysis import ApplySimulatorConfig, Simulator, SimulatorConfig
@@ -30,7 +31,7 @@ DEFAULT_OUT = Path("out")
 
 
 def memory_allocator() -> str:
-    """"tcmalloc" when the process runs with tcmalloc preloaded (``make`` does it when the
+    """ "tcmalloc" when the process runs with tcmalloc preloaded (``make`` does it when the
     library is installed: Drake's SAP solver then takes less time per step), else "system"."""
     return "tcmalloc" if "tcmalloc" in os.environ.get("LD_PRELOAD", "") else "system"
 
@@ -40,13 +41,21 @@ def experiment_parser(module: str, doc: str | None, *, replay: bool = True) -> a
     name (``apps.<experiment>``), ``doc`` its docstring (the first paragraph is the
     description)."""
     parser = argparse.ArgumentParser(prog=f"python -m {module}", description=(doc or "").split("\n\n")[0])
-    parser.add_argument("--scenario", type=Path, default=None, metavar="FILE",
-                        help="YAML scenario file (apps/scenarios/); missing keys keep their defaults")
-    parser.add_argument("--scenario-text", default=None, metavar="YAML",
-                        help="YAML overrides applied after --scenario, e.g. --scenario-text 'seed: 3'")
+    parser.add_argument(
+        "--scenario",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="YAML scenario file (apps/scenarios/); missing keys keep their defaults",
+    )
+    parser.add_argument(
+        "--scenario-text",
+        default=None,
+        metavar="YAML",
+        help="YAML overrides applied after --scenario, e.g. --scenario-text 'seed: 3'",
+    )
     add_out_argument(parser)
-    parser.add_argument("--headless", action="store_true",
-                        help="no live Meshcat URL (the replays are still written)")
+    parser.add_argument("--headless", action="store_true", help="no live Meshcat URL (the replays are still written)")
     if replay:
         parser.add_argument("--no-replay", action="store_true", help="skip the Meshcat replays (faster)")
     return parser
@@ -55,8 +64,12 @@ def experiment_parser(module: str, doc: str | None, *, replay: bool = True) -> a
 def add_out_argument(parser: argparse.ArgumentParser, folder: str = "<experiment>") -> None:
     """``--out OUT`` (default ``out``): the app writes into ``OUT/<folder>/``
     (``output_folder``); also for the apps without a scenario."""
-    parser.add_argument("--out", type=Path, default=DEFAULT_OUT,
-                        help=f"output folder; the app writes into OUT/{folder}/ (default {DEFAULT_OUT})")
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=DEFAULT_OUT,
+        help=f"output folder; the app writes into OUT/{folder}/ (default {DEFAULT_OUT})",
+    )
 
 
 def scenario_from_args(schema: type, args: argparse.Namespace, defaults: Any = None, **overrides: Any) -> Any:

@@ -42,12 +42,24 @@ from models import MODEL_NAMES
 
 def _parse(argv):
     parser = experiment_parser("apps.standing", __doc__)
-    parser.add_argument("--model", choices=(*MODEL_NAMES, "all"), default=None,
-                        help="which humanoid to simulate (overrides the scenario's models, default: all)")
-    parser.add_argument("--duration", type=float, default=None,
-                        help="simulated time per model, s (overrides the scenario's, default: 10)")
-    parser.add_argument("--no-meshcat", dest="no_replay", action="store_true",
-                        help="the same as --no-replay: no Meshcat (no live view, no HTML replay)")
+    parser.add_argument(
+        "--model",
+        choices=(*MODEL_NAMES, "all"),
+        default=None,
+        help="which humanoid to simulate (overrides the scenario's models, default: all)",
+    )
+    parser.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        help="simulated time per model, s (overrides the scenario's, default: 10)",
+    )
+    parser.add_argument(
+        "--no-meshcat",
+        dest="no_replay",
+        action="store_true",
+        help="the same as --no-replay: no Meshcat (no live view, no HTML replay)",
+    )
     args = parser.parse_args(argv)
     if args.duration is not None and args.duration <= 0:
         parser.error("--duration must be positive")
@@ -95,16 +107,21 @@ def main(argv=None) -> int:
             rows.append(row)
         write_metrics(out_dir, {row["model"]: row for row in rows}, scenario)
 
-        header = (f"{'model':<10} {'drift cm':>9} {'drift deg':>9} {'min F N':>8} "
-                  f"{'feet flat':>9} {'RTF':>6} {'fell':>5}")
-        print(f"\nbase drift measured after the first {scenario.settle_time:g} s; "
-              "min F = smallest foot-sphere normal force at the end")
+        header = (
+            f"{'model':<10} {'drift cm':>9} {'drift deg':>9} {'min F N':>8} {'feet flat':>9} {'RTF':>6} {'fell':>5}"
+        )
+        print(
+            f"\nbase drift measured after the first {scenario.settle_time:g} s; "
+            "min F = smallest foot-sphere normal force at the end"
+        )
         print(header)
         print("-" * len(header))
         for r in rows:
-            print(f"{r['model']:<10} {r['base_drift_cm']:9.3f} {r['base_drift_deg']:9.3f} "
-                  f"{r['min_sphere_force_N']:8.2f} {str(r['feet_flat']):>9} "
-                  f"{r['real_time_factor']:6.2f} {str(r['fell']):>5}")
+            print(
+                f"{r['model']:<10} {r['base_drift_cm']:9.3f} {r['base_drift_deg']:9.3f} "
+                f"{r['min_sphere_force_N']:8.2f} {str(r['feet_flat']):>9} "
+                f"{r['real_time_factor']:6.2f} {str(r['fell']):>5}"
+            )
         for r in rows:
             if "replay" in r:
                 print(f"replay: {r['replay']}")

@@ -93,4 +93,11 @@ def scenario_as_yaml(scenario: Any) -> str:
     return yaml_dump_typed(scenario)
 
 
-__all__ = ["POSITIVE_FIELDS", "ScenarioError", "check_common_fields", "load_scenario", "scenario_as_dict", "scenario_as_yaml"]
+__all__ = [
+    "POSITIVE_FIELDS",
+    "ScenarioError",
+    "check_common_fields",
+    "load_scenario",
+    "scenario_as_dict",
+    "scenario_as_yaml",
+]

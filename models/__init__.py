@@ -167,14 +167,11 @@ def _nao_info() -> dict:
     for s in ("L", "R"):
         posture.update({f"{s}HipPitch": -0.3, f"{s}KneePitch": 0.6, f"{s}AnklePitch": -0.3})
         posture.update({f"{s}ShoulderPitch": 1.4, f"{s}Hand": 0.3})
-    posture.update({"LShoulderRoll": 0.2, "RShoulderRoll": -0.2,
-                    "LElbowRoll": -0.4, "RElbowRoll": 0.4})
+    posture.update({"LShoulderRoll": 0.2, "RShoulderRoll": -0.2, "LElbowRoll": -0.4, "RElbowRoll": 0.4})
     # Documented FSR positions (Aldebaran docs), foot frame, m.
     fsr_xy = {
-        "left": np.array([[0.07025, 0.0299], [0.07025, -0.0231],
-                          [-0.03025, 0.0299], [-0.02965, -0.0191]]),
-        "right": np.array([[0.07025, 0.0231], [0.07025, -0.0299],
-                           [-0.03025, 0.0191], [-0.02965, -0.0299]]),
+        "left": np.array([[0.07025, 0.0299], [0.07025, -0.0231], [-0.03025, 0.0299], [-0.02965, -0.0191]]),
+        "right": np.array([[0.07025, 0.0231], [0.07025, -0.0299], [-0.03025, 0.0191], [-0.02965, -0.0299]]),
     }
     return dict(
         base="torso",
@@ -296,11 +293,9 @@ def add_humanoid(
 
     if registered and scene_graph is not None:
         all_ids = [g for ids in collision.values() for g in ids]
-        scene_graph.collision_filter_manager().Apply(
-            CollisionFilterDeclaration().ExcludeWithin(GeometrySet(all_ids)))
+        scene_graph.collision_filter_manager().Apply(CollisionFilterDeclaration().ExcludeWithin(GeometrySet(all_ids)))
 
-    posture = {j: 0.0 for j in groups["legs"] + groups["torso"] + groups["head"]
-               + groups["arms"] + groups["hands"]}
+    posture = {j: 0.0 for j in groups["legs"] + groups["torso"] + groups["head"] + groups["arms"] + groups["hands"]}
     posture.update(info["posture"])
 
     return HumanoidHandles(
@@ -359,9 +354,13 @@ def add_ground(plant: MultibodyPlant, friction: float = 1.0) -> GeometryId:
     X = RigidTransform()
     gid = plant.RegisterCollisionGeometry(plant.world_body(), X, HalfSpace(), "ground", props)
     # Meshcat does not draw half-spaces: the visual is a thin 10 m x 10 m slab.
-    plant.RegisterVisualGeometry(plant.world_body(), RigidTransform([0.0, 0.0, -0.01]),
-                                 Box(10.0, 10.0, 0.02), "ground_visual",
-                                 np.array([0.55, 0.6, 0.55, 1.0]))
+    plant.RegisterVisualGeometry(
+        plant.world_body(),
+        RigidTransform([0.0, 0.0, -0.01]),
+        Box(10.0, 10.0, 0.02),
+        "ground_visual",
+        np.array([0.55, 0.6, 0.55, 1.0]),
+    )
     return gid
 
 

@@ -152,20 +152,70 @@ def _hrp4_leg(side: str) -> tuple[list, list]:
     roll = (-0.5, 0.35) if side == "L" else (-0.35, 0.5)
     yaw = (-0.5, 0.8) if side == "L" else (-0.8, 0.5)
     joints = [
-        Joint(f"{side}_HIP_Y", "waist", f"{side}_HIP_Y_LINK", (0, s * 0.0875, -0.07),
-              (0, 0, 1), *yaw, effort=60, **big),
-        Joint(f"{side}_HIP_R", f"{side}_HIP_Y_LINK", f"{side}_HIP_R_LINK", (0, 0, -0.03),
-              (1, 0, 0), *roll, effort=120, **big),
-        Joint(f"{side}_HIP_P", f"{side}_HIP_R_LINK", f"{side}_HIP_P_LINK", (0, 0, 0),
-              (0, 1, 0), -2.0, 0.8, effort=150, **big),
-        Joint(f"{side}_KNEE_P", f"{side}_HIP_P_LINK", f"{side}_KNEE_P_LINK", (0, 0, -0.3),
-              (0, 1, 0), 0.0, 2.4, effort=200, **big),
-        Joint(f"{side}_ANKLE_P", f"{side}_KNEE_P_LINK", f"{side}_ANKLE_P_LINK",
-              (0, 0, -0.3), (0, 1, 0), -1.3, 0.9, effort=120, **big),
-        Joint(f"{side}_ANKLE_R", f"{side}_ANKLE_P_LINK", f"{side}_ANKLE_R_LINK", (0, 0, 0),
-              (1, 0, 0), -0.6, 0.6, effort=80, **big),
-        Joint(f"{side}_FT_SENSOR", f"{side}_ANKLE_R_LINK", f"{lo}_sole",
-              (0, 0, -(_HRP4_ANKLE_HEIGHT - _HRP4_FT_ABOVE_SOLE)), fixed=True),
+        Joint(
+            f"{side}_HIP_Y", "waist", f"{side}_HIP_Y_LINK", (0, s * 0.0875, -0.07), (0, 0, 1), *yaw, effort=60, **big
+        ),
+        Joint(
+            f"{side}_HIP_R",
+            f"{side}_HIP_Y_LINK",
+            f"{side}_HIP_R_LINK",
+            (0, 0, -0.03),
+            (1, 0, 0),
+            *roll,
+            effort=120,
+            **big,
+        ),
+        Joint(
+            f"{side}_HIP_P",
+            f"{side}_HIP_R_LINK",
+            f"{side}_HIP_P_LINK",
+            (0, 0, 0),
+            (0, 1, 0),
+            -2.0,
+            0.8,
+            effort=150,
+            **big,
+        ),
+        Joint(
+            f"{side}_KNEE_P",
+            f"{side}_HIP_P_LINK",
+            f"{side}_KNEE_P_LINK",
+            (0, 0, -0.3),
+            (0, 1, 0),
+            0.0,
+            2.4,
+            effort=200,
+            **big,
+        ),
+        Joint(
+            f"{side}_ANKLE_P",
+            f"{side}_KNEE_P_LINK",
+            f"{side}_ANKLE_P_LINK",
+            (0, 0, -0.3),
+            (0, 1, 0),
+            -1.3,
+            0.9,
+            effort=120,
+            **big,
+        ),
+        Joint(
+            f"{side}_ANKLE_R",
+            f"{side}_ANKLE_P_LINK",
+            f"{side}_ANKLE_R_LINK",
+            (0, 0, 0),
+            (1, 0, 0),
+            -0.6,
+            0.6,
+            effort=80,
+            **big,
+        ),
+        Joint(
+            f"{side}_FT_SENSOR",
+            f"{side}_ANKLE_R_LINK",
+            f"{lo}_sole",
+            (0, 0, -(_HRP4_ANKLE_HEIGHT - _HRP4_FT_ABOVE_SOLE)),
+            fixed=True,
+        ),
     ]
     return links, joints
 
@@ -189,24 +239,103 @@ def _hrp4_arm(side: str) -> tuple[list, list]:
     roll = (-0.2, 2.8) if side == "L" else (-2.8, 0.2)
     syaw = (-2.0, 2.0)
     joints = [
-        Joint(f"{side}_SHOULDER_P", "CHEST_Y_LINK", f"{side}_SHOULDER_P_LINK",
-              (0, s * 0.18, 0.27), (0, 1, 0), -3.1, 1.0, effort=60, **arm),
-        Joint(f"{side}_SHOULDER_R", f"{side}_SHOULDER_P_LINK", f"{side}_SHOULDER_R_LINK",
-              (0, s * 0.03, 0), (1, 0, 0), *roll, effort=60, **arm),
-        Joint(f"{side}_SHOULDER_Y", f"{side}_SHOULDER_R_LINK", f"{side}_SHOULDER_Y_LINK",
-              (0, 0, 0), (0, 0, 1), *syaw, effort=40, **arm),
-        Joint(f"{side}_ELBOW_P", f"{side}_SHOULDER_Y_LINK", f"{side}_ELBOW_P_LINK",
-              (0, 0, -0.22), (0, 1, 0), -2.5, 0.0, effort=40, **arm),
-        Joint(f"{side}_WRIST_Y", f"{side}_ELBOW_P_LINK", f"{side}_WRIST_Y_LINK",
-              (0, 0, 0), (0, 0, 1), -2.5, 2.5, effort=10, **wrist),
-        Joint(f"{side}_WRIST_P", f"{side}_WRIST_Y_LINK", f"{side}_WRIST_P_LINK",
-              (0, 0, -0.2), (0, 1, 0), -1.4, 1.4, effort=10, **wrist),
-        Joint(f"{side}_WRIST_R", f"{side}_WRIST_P_LINK", f"{side}_WRIST_R_LINK",
-              (0, 0, 0), (1, 0, 0), -1.4, 1.4, effort=10, **wrist),
-        Joint(f"{side}_HAND_J0", f"{side}_WRIST_R_LINK", f"{side}_HAND_J0_LINK",
-              (0.02, 0, -0.09), (0, 1, 0), -1.0, 0.0, effort=2, **hand),
-        Joint(f"{side}_HAND_J1", f"{side}_WRIST_R_LINK", f"{side}_HAND_J1_LINK",
-              (-0.02, 0, -0.09), (0, 1, 0), 0.0, 1.0, effort=2, **hand),
+        Joint(
+            f"{side}_SHOULDER_P",
+            "CHEST_Y_LINK",
+            f"{side}_SHOULDER_P_LINK",
+            (0, s * 0.18, 0.27),
+            (0, 1, 0),
+            -3.1,
+            1.0,
+            effort=60,
+            **arm,
+        ),
+        Joint(
+            f"{side}_SHOULDER_R",
+            f"{side}_SHOULDER_P_LINK",
+            f"{side}_SHOULDER_R_LINK",
+            (0, s * 0.03, 0),
+            (1, 0, 0),
+            *roll,
+            effort=60,
+            **arm,
+        ),
+        Joint(
+            f"{side}_SHOULDER_Y",
+            f"{side}_SHOULDER_R_LINK",
+            f"{side}_SHOULDER_Y_LINK",
+            (0, 0, 0),
+            (0, 0, 1),
+            *syaw,
+            effort=40,
+            **arm,
+        ),
+        Joint(
+            f"{side}_ELBOW_P",
+            f"{side}_SHOULDER_Y_LINK",
+            f"{side}_ELBOW_P_LINK",
+            (0, 0, -0.22),
+            (0, 1, 0),
+            -2.5,
+            0.0,
+            effort=40,
+            **arm,
+        ),
+        Joint(
+            f"{side}_WRIST_Y",
+            f"{side}_ELBOW_P_LINK",
+            f"{side}_WRIST_Y_LINK",
+            (0, 0, 0),
+            (0, 0, 1),
+            -2.5,
+            2.5,
+            effort=10,
+            **wrist,
+        ),
+        Joint(
+            f"{side}_WRIST_P",
+            f"{side}_WRIST_Y_LINK",
+            f"{side}_WRIST_P_LINK",
+            (0, 0, -0.2),
+            (0, 1, 0),
+            -1.4,
+            1.4,
+            effort=10,
+            **wrist,
+        ),
+        Joint(
+            f"{side}_WRIST_R",
+            f"{side}_WRIST_P_LINK",
+            f"{side}_WRIST_R_LINK",
+            (0, 0, 0),
+            (1, 0, 0),
+            -1.4,
+            1.4,
+            effort=10,
+            **wrist,
+        ),
+        Joint(
+            f"{side}_HAND_J0",
+            f"{side}_WRIST_R_LINK",
+            f"{side}_HAND_J0_LINK",
+            (0.02, 0, -0.09),
+            (0, 1, 0),
+            -1.0,
+            0.0,
+            effort=2,
+            **hand,
+        ),
+        Joint(
+            f"{side}_HAND_J1",
+            f"{side}_WRIST_R_LINK",
+            f"{side}_HAND_J1_LINK",
+            (-0.02, 0, -0.09),
+            (0, 1, 0),
+            0.0,
+            1.0,
+            effort=2,
+            **hand,
+        ),
     ]
     return links, joints
 
@@ -215,24 +344,17 @@ def hrp4_like_spec() -> ModelSpec:
     trunk = dict(damping=0.2, rotor_inertia=1.0e-5, gear_ratio=120.0)
     neck = dict(damping=0.02, rotor_inertia=1.0e-6, gear_ratio=100.0)
     links = [
-        Link("waist", 5.5, [Shape("box", (0.16, 0.24, 0.14), (0, 0, -0.01))],
-             color=(0.85, 0.85, 0.9, 1)),
+        Link("waist", 5.5, [Shape("box", (0.16, 0.24, 0.14), (0, 0, -0.01))], color=(0.85, 0.85, 0.9, 1)),
         Link("CHEST_P_LINK", 0.5, [Shape("cylinder", (0.04, 0.1), axis="y")]),
-        Link("CHEST_Y_LINK", 9.0, [Shape("box", (0.2, 0.28, 0.3), (-0.01, 0, 0.17))],
-             color=(0.85, 0.85, 0.9, 1)),
+        Link("CHEST_Y_LINK", 9.0, [Shape("box", (0.2, 0.28, 0.3), (-0.01, 0, 0.17))], color=(0.85, 0.85, 0.9, 1)),
         Link("NECK_Y_LINK", 0.2, [Shape("cylinder", (0.025, 0.04), (0, 0, 0.02))]),
-        Link("NECK_P_LINK", 1.0, [Shape("box", (0.16, 0.14, 0.18), (0.01, 0, 0.11))],
-             color=(0.85, 0.85, 0.9, 1)),
+        Link("NECK_P_LINK", 1.0, [Shape("box", (0.16, 0.14, 0.18), (0.01, 0, 0.11))], color=(0.85, 0.85, 0.9, 1)),
     ]
     joints = [
-        Joint("CHEST_P", "waist", "CHEST_P_LINK", (0, 0, 0.10), (0, 1, 0), -0.3, 0.8,
-              effort=150, **trunk),
-        Joint("CHEST_Y", "CHEST_P_LINK", "CHEST_Y_LINK", (0, 0, 0.02), (0, 0, 1), -1.0, 1.0,
-              effort=100, **trunk),
-        Joint("NECK_Y", "CHEST_Y_LINK", "NECK_Y_LINK", (0, 0, 0.36), (0, 0, 1), -1.4, 1.4,
-              effort=10, **neck),
-        Joint("NECK_P", "NECK_Y_LINK", "NECK_P_LINK", (0, 0, 0.04), (0, 1, 0), -0.5, 0.8,
-              effort=10, **neck),
+        Joint("CHEST_P", "waist", "CHEST_P_LINK", (0, 0, 0.10), (0, 1, 0), -0.3, 0.8, effort=150, **trunk),
+        Joint("CHEST_Y", "CHEST_P_LINK", "CHEST_Y_LINK", (0, 0, 0.02), (0, 0, 1), -1.0, 1.0, effort=100, **trunk),
+        Joint("NECK_Y", "CHEST_Y_LINK", "NECK_Y_LINK", (0, 0, 0.36), (0, 0, 1), -1.4, 1.4, effort=10, **neck),
+        Joint("NECK_P", "NECK_Y_LINK", "NECK_P_LINK", (0, 0, 0.04), (0, 1, 0), -0.5, 0.8, effort=10, **neck),
     ]
     for side in ("R", "L"):
         lk, jt = _hrp4_leg(side)
@@ -250,8 +372,15 @@ def hrp4_like_spec() -> ModelSpec:
         ("head_top", "NECK_P_LINK", (0.01, 0.0, 0.20)),
     ]
     base_height = 0.07 + 0.03 + 0.3 + 0.3 + _HRP4_ANKLE_HEIGHT
-    return ModelSpec("hrp4_like", "waist", base_height, links, joints, frames,
-                     comment="HRP-4-like humanoid, 34 actuated DoF (Kaneko et al. 2011)")
+    return ModelSpec(
+        "hrp4_like",
+        "waist",
+        base_height,
+        links,
+        joints,
+        frames,
+        comment="HRP-4-like humanoid, 34 actuated DoF (Kaneko et al. 2011)",
+    )
 
 
 # --------------------------------------------------------------------------------------
@@ -265,24 +394,41 @@ def hrp4_like_spec() -> ModelSpec:
 # --------------------------------------------------------------------------------------
 
 NAO_DIMS = dict(
-    NeckOffsetZ=0.1265, ShoulderOffsetY=0.098, ShoulderOffsetZ=0.100,
-    UpperArmLength=0.105, ElbowOffsetY=0.015, LowerArmLength=0.05595,
-    HandOffsetX=0.05775, HipOffsetY=0.050, HipOffsetZ=0.085, ThighLength=0.100,
-    TibiaLength=0.1029, FootHeight=0.04519,
+    NeckOffsetZ=0.1265,
+    ShoulderOffsetY=0.098,
+    ShoulderOffsetZ=0.100,
+    UpperArmLength=0.105,
+    ElbowOffsetY=0.015,
+    LowerArmLength=0.05595,
+    HandOffsetX=0.05775,
+    HipOffsetY=0.050,
+    HipOffsetZ=0.085,
+    ThighLength=0.100,
+    TibiaLength=0.1029,
+    FootHeight=0.04519,
 )
 NAO_MASSES = dict(
-    Torso=1.0496, Neck=0.07842, Head=0.60533, Shoulder=0.09304, Biceps=0.15777,
-    Elbow=0.06483, ForeArm=0.07761, Hand=0.18533, Pelvis=0.06981, Hip=0.14053,
-    Thigh=0.38968, Tibia=0.29142, Ankle=0.13416, Foot=0.16184,
+    Torso=1.0496,
+    Neck=0.07842,
+    Head=0.60533,
+    Shoulder=0.09304,
+    Biceps=0.15777,
+    Elbow=0.06483,
+    ForeArm=0.07761,
+    Hand=0.18533,
+    Pelvis=0.06981,
+    Hip=0.14053,
+    Thigh=0.38968,
+    Tibia=0.29142,
+    Ankle=0.13416,
+    Foot=0.16184,
 )
 NAO_TOTAL_MASS = 5.19  # kg, Hawley et al. 2019
 _NAO_FINGER_MASS = 0.01
 #: Documented FSR positions in the foot (sole) frame, m: FL, FR, RL, RR.
 NAO_FSR_XY = {
-    "left": np.array([[0.07025, 0.0299], [0.07025, -0.0231],
-                      [-0.03025, 0.0299], [-0.02965, -0.0191]]),
-    "right": np.array([[0.07025, 0.0231], [0.07025, -0.0299],
-                       [-0.03025, 0.0191], [-0.02965, -0.0299]]),
+    "left": np.array([[0.07025, 0.0299], [0.07025, -0.0231], [-0.03025, 0.0299], [-0.02965, -0.0191]]),
+    "right": np.array([[0.07025, 0.0231], [0.07025, -0.0299], [-0.03025, 0.0191], [-0.02965, -0.0299]]),
 }
 _NAO_SPHERE_R = 0.005
 _NAO_FOOT_CONTACT = _contact(1e5, 20.0, 1.0)
@@ -290,9 +436,24 @@ _NAO_FOOT_CONTACT = _contact(1e5, 20.0, 1.0)
 
 def _nao_torso_mass() -> float:
     m = NAO_MASSES
-    rest = m["Neck"] + m["Head"] + 2 * (
-        m["Shoulder"] + m["Biceps"] + m["Elbow"] + m["ForeArm"] + m["Hand"]
-        + m["Pelvis"] + m["Hip"] + m["Thigh"] + m["Tibia"] + m["Ankle"] + m["Foot"])
+    rest = (
+        m["Neck"]
+        + m["Head"]
+        + 2
+        * (
+            m["Shoulder"]
+            + m["Biceps"]
+            + m["Elbow"]
+            + m["ForeArm"]
+            + m["Hand"]
+            + m["Pelvis"]
+            + m["Hip"]
+            + m["Thigh"]
+            + m["Tibia"]
+            + m["Ankle"]
+            + m["Foot"]
+        )
+    )
     return NAO_TOTAL_MASS - rest
 
 
@@ -305,30 +466,59 @@ def _nao_arm(side: str) -> tuple[list, list]:
         Link(f"{side}Shoulder", m["Shoulder"], [Shape("sphere", (0.02,))]),
         Link(f"{side}Bicep", m["Biceps"], [Shape("capsule", (0.025, 0.06), (0.05, 0, 0), "x")]),
         Link(f"{side}Elbow", m["Elbow"], [Shape("sphere", (0.02,))]),
-        Link(f"{side}ForeArm", m["ForeArm"],
-             [Shape("capsule", (0.02, 0.03), (0.03, 0, 0), "x")]),
-        Link(f"{lo}_wrist", m["Hand"] - _NAO_FINGER_MASS,
-             [Shape("box", (0.06, 0.04, 0.03), (0.03, 0, 0))]),
-        Link(f"{lo}_gripper", _NAO_FINGER_MASS,
-             [Shape("box", (0.03, 0.02, 0.01), (0.015, 0, 0))]),
+        Link(f"{side}ForeArm", m["ForeArm"], [Shape("capsule", (0.02, 0.03), (0.03, 0, 0), "x")]),
+        Link(f"{lo}_wrist", m["Hand"] - _NAO_FINGER_MASS, [Shape("box", (0.06, 0.04, 0.03), (0.03, 0, 0))]),
+        Link(f"{lo}_gripper", _NAO_FINGER_MASS, [Shape("box", (0.03, 0.02, 0.01), (0.015, 0, 0))]),
     ]
     roll = (-0.3142, 1.3265) if side == "L" else (-1.3265, 0.3142)
     eroll = (-1.5446, -0.0349) if side == "L" else (0.0349, 1.5446)
     joints = [
-        Joint(f"{side}ShoulderPitch", "torso", f"{side}Shoulder",
-              (0, s * d["ShoulderOffsetY"], d["ShoulderOffsetZ"]), (0, 1, 0),
-              -2.0857, 2.0857, effort=1.5, **act),
-        Joint(f"{side}ShoulderRoll", f"{side}Shoulder", f"{side}Bicep", (0, 0, 0),
-              (0, 0, 1), *roll, effort=1.5, **act),
-        Joint(f"{side}ElbowYaw", f"{side}Bicep", f"{side}Elbow",
-              (d["UpperArmLength"], s * d["ElbowOffsetY"], 0), (1, 0, 0),
-              -2.0857, 2.0857, effort=1.5, **act),
-        Joint(f"{side}ElbowRoll", f"{side}Elbow", f"{side}ForeArm", (0, 0, 0), (0, 0, 1),
-              *eroll, effort=1.5, **act),
-        Joint(f"{side}WristYaw", f"{side}ForeArm", f"{lo}_wrist",
-              (d["LowerArmLength"], 0, 0), (1, 0, 0), -1.8238, 1.8238, effort=0.4, **act),
-        Joint(f"{side}Hand", f"{lo}_wrist", f"{lo}_gripper", (d["HandOffsetX"], 0, 0),
-              (0, 1, 0), 0.0, 1.0, effort=0.3, **act),
+        Joint(
+            f"{side}ShoulderPitch",
+            "torso",
+            f"{side}Shoulder",
+            (0, s * d["ShoulderOffsetY"], d["ShoulderOffsetZ"]),
+            (0, 1, 0),
+            -2.0857,
+            2.0857,
+            effort=1.5,
+            **act,
+        ),
+        Joint(f"{side}ShoulderRoll", f"{side}Shoulder", f"{side}Bicep", (0, 0, 0), (0, 0, 1), *roll, effort=1.5, **act),
+        Joint(
+            f"{side}ElbowYaw",
+            f"{side}Bicep",
+            f"{side}Elbow",
+            (d["UpperArmLength"], s * d["ElbowOffsetY"], 0),
+            (1, 0, 0),
+            -2.0857,
+            2.0857,
+            effort=1.5,
+            **act,
+        ),
+        Joint(f"{side}ElbowRoll", f"{side}Elbow", f"{side}ForeArm", (0, 0, 0), (0, 0, 1), *eroll, effort=1.5, **act),
+        Joint(
+            f"{side}WristYaw",
+            f"{side}ForeArm",
+            f"{lo}_wrist",
+            (d["LowerArmLength"], 0, 0),
+            (1, 0, 0),
+            -1.8238,
+            1.8238,
+            effort=0.4,
+            **act,
+        ),
+        Joint(
+            f"{side}Hand",
+            f"{lo}_wrist",
+            f"{lo}_gripper",
+            (d["HandOffsetX"], 0, 0),
+            (0, 1, 0),
+            0.0,
+            1.0,
+            effort=0.3,
+            **act,
+        ),
     ]
     return links, joints
 
@@ -341,12 +531,18 @@ def _nao_leg(side: str) -> tuple[list, list]:
     z_s = -d["FootHeight"]
     fsr = NAO_FSR_XY["left" if side == "L" else "right"]
     shapes = [
-        Shape("sphere", (_NAO_SPHERE_R,), (x, y, z_s + _NAO_SPHERE_R),
-              name=f"{lo}_fsr_{n}", contact=_NAO_FOOT_CONTACT)
+        Shape("sphere", (_NAO_SPHERE_R,), (x, y, z_s + _NAO_SPHERE_R), name=f"{lo}_fsr_{n}", contact=_NAO_FOOT_CONTACT)
         for n, (x, y) in zip(FSR_ORDER, fsr)
     ]
-    shapes.append(Shape("box", (0.16, 0.088, 0.04), (0.02, s * 0.0034, z_s + 0.002 + 0.02),
-                        name=f"{lo}_foot_box", contact=_NAO_FOOT_CONTACT))
+    shapes.append(
+        Shape(
+            "box",
+            (0.16, 0.088, 0.04),
+            (0.02, s * 0.0034, z_s + 0.002 + 0.02),
+            name=f"{lo}_foot_box",
+            contact=_NAO_FOOT_CONTACT,
+        )
+    )
     links = [
         Link(f"{side}Pelvis", m["Pelvis"], [Shape("sphere", (0.02,))]),
         Link(f"{side}Hip", m["Hip"], [Shape("sphere", (0.025,))]),
@@ -360,19 +556,42 @@ def _nao_leg(side: str) -> tuple[list, list]:
     hroll = (-0.379, 0.790) if side == "L" else (-0.790, 0.379)
     aroll = (-0.3978, 0.769) if side == "L" else (-0.769, 0.3978)
     joints = [
-        Joint(f"{side}HipYawPitch", "torso", f"{side}Pelvis",
-              (0, s * d["HipOffsetY"], -d["HipOffsetZ"]), hyp_axis, -1.1453, 0.7408,
-              effort=5.0, **act),
-        Joint(f"{side}HipRoll", f"{side}Pelvis", f"{side}Hip", (0, 0, 0), (1, 0, 0), *hroll,
-              effort=5.0, **act),
-        Joint(f"{side}HipPitch", f"{side}Hip", f"{side}Thigh", (0, 0, 0), (0, 1, 0),
-              -1.5359, 0.484, effort=5.0, **act),
-        Joint(f"{side}KneePitch", f"{side}Thigh", f"{side}Tibia", (0, 0, -d["ThighLength"]),
-              (0, 1, 0), -0.0923, 2.1125, effort=5.0, **act),
-        Joint(f"{side}AnklePitch", f"{side}Tibia", f"{side}Ankle",
-              (0, 0, -d["TibiaLength"]), (0, 1, 0), -1.1895, 0.9227, effort=5.0, **act),
-        Joint(f"{side}AnkleRoll", f"{side}Ankle", f"{lo}_ankle", (0, 0, 0), (1, 0, 0),
-              *aroll, effort=5.0, **act),
+        Joint(
+            f"{side}HipYawPitch",
+            "torso",
+            f"{side}Pelvis",
+            (0, s * d["HipOffsetY"], -d["HipOffsetZ"]),
+            hyp_axis,
+            -1.1453,
+            0.7408,
+            effort=5.0,
+            **act,
+        ),
+        Joint(f"{side}HipRoll", f"{side}Pelvis", f"{side}Hip", (0, 0, 0), (1, 0, 0), *hroll, effort=5.0, **act),
+        Joint(f"{side}HipPitch", f"{side}Hip", f"{side}Thigh", (0, 0, 0), (0, 1, 0), -1.5359, 0.484, effort=5.0, **act),
+        Joint(
+            f"{side}KneePitch",
+            f"{side}Thigh",
+            f"{side}Tibia",
+            (0, 0, -d["ThighLength"]),
+            (0, 1, 0),
+            -0.0923,
+            2.1125,
+            effort=5.0,
+            **act,
+        ),
+        Joint(
+            f"{side}AnklePitch",
+            f"{side}Tibia",
+            f"{side}Ankle",
+            (0, 0, -d["TibiaLength"]),
+            (0, 1, 0),
+            -1.1895,
+            0.9227,
+            effort=5.0,
+            **act,
+        ),
+        Joint(f"{side}AnkleRoll", f"{side}Ankle", f"{lo}_ankle", (0, 0, 0), (1, 0, 0), *aroll, effort=5.0, **act),
     ]
     return links, joints
 
@@ -381,17 +600,15 @@ def nao_like_spec() -> ModelSpec:
     d = NAO_DIMS
     act = dict(damping=0.01, rotor_inertia=1.0e-7, gear_ratio=140.0)
     links = [
-        Link("torso", _nao_torso_mass(), [Shape("box", (0.09, 0.13, 0.17), (-0.005, 0, 0.035))],
-             color=(0.9, 0.9, 0.9, 1)),
+        Link(
+            "torso", _nao_torso_mass(), [Shape("box", (0.09, 0.13, 0.17), (-0.005, 0, 0.035))], color=(0.9, 0.9, 0.9, 1)
+        ),
         Link("Neck", NAO_MASSES["Neck"], [Shape("cylinder", (0.015, 0.03), (0, 0, -0.015))]),
-        Link("Head", NAO_MASSES["Head"], [Shape("sphere", (0.059,), (0, 0, 0.055))],
-             color=(0.9, 0.9, 0.9, 1)),
+        Link("Head", NAO_MASSES["Head"], [Shape("sphere", (0.059,), (0, 0, 0.055))], color=(0.9, 0.9, 0.9, 1)),
     ]
     joints = [
-        Joint("HeadYaw", "torso", "Neck", (0, 0, d["NeckOffsetZ"]), (0, 0, 1),
-              -2.0857, 2.0857, effort=1.5, **act),
-        Joint("HeadPitch", "Neck", "Head", (0, 0, 0), (0, 1, 0), -0.672, 0.5149,
-              effort=1.5, **act),
+        Joint("HeadYaw", "torso", "Neck", (0, 0, d["NeckOffsetZ"]), (0, 0, 1), -2.0857, 2.0857, effort=1.5, **act),
+        Joint("HeadPitch", "Neck", "Head", (0, 0, 0), (0, 1, 0), -0.672, 0.5149, effort=1.5, **act),
     ]
     for side in ("L", "R"):
         lk, jt = _nao_arm(side)
@@ -408,8 +625,15 @@ def nao_like_spec() -> ModelSpec:
         ("head_top", "Head", (0.0, 0.0, 0.114)),
     ]
     base_height = d["HipOffsetZ"] + d["ThighLength"] + d["TibiaLength"] + d["FootHeight"]
-    return ModelSpec("nao_like", "torso", base_height, links, joints, frames,
-                     comment="Nao-H25-like humanoid, 26 revolute joints (Aldebaran docs)")
+    return ModelSpec(
+        "nao_like",
+        "torso",
+        base_height,
+        links,
+        joints,
+        frames,
+        comment="Nao-H25-like humanoid, 26 revolute joints (Aldebaran docs)",
+    )
 
 
 SPECS = {"hrp4_like": hrp4_like_spec, "nao_like": nao_like_spec}
@@ -441,8 +665,7 @@ def _geometry_xml(shape: Shape, ind: str) -> str:
     elif shape.kind == "sphere":
         body = f"<sphere><radius>{_f(shape.size[0])}</radius></sphere>"
     elif shape.kind in ("cylinder", "capsule"):
-        body = (f"<{shape.kind}><radius>{_f(shape.size[0])}</radius>"
-                f"<length>{_f(shape.size[1])}</length></{shape.kind}>")
+        body = f"<{shape.kind}><radius>{_f(shape.size[0])}</radius><length>{_f(shape.size[1])}</length></{shape.kind}>"
     else:
         raise ValueError(f"unknown shape kind {shape.kind!r}")
     return f"{ind}<geometry>{body}</geometry>\n"
@@ -456,11 +679,9 @@ def _inertia(link: Link) -> tuple[tuple, np.ndarray]:
     elif shape.kind == "sphere":
         M = SpatialInertia.SolidSphereWithMass(m, shape.size[0])
     elif shape.kind == "cylinder":
-        M = SpatialInertia.SolidCylinderWithMass(m, shape.size[0], shape.size[1],
-                                                 _AXIS_VEC[shape.axis])
+        M = SpatialInertia.SolidCylinderWithMass(m, shape.size[0], shape.size[1], _AXIS_VEC[shape.axis])
     elif shape.kind == "capsule":
-        M = SpatialInertia.SolidCapsuleWithMass(m, shape.size[0], shape.size[1],
-                                                _AXIS_VEC[shape.axis])
+        M = SpatialInertia.SolidCapsuleWithMass(m, shape.size[0], shape.size[1], _AXIS_VEC[shape.axis])
     else:
         raise ValueError(shape.kind)
     return shape.xyz, M.CalcRotationalInertia().CopyToFullMatrix3()
@@ -476,15 +697,19 @@ def _link_xml(link: Link, pose_xml: str) -> str:
         f"        <inertia><ixx>{_f(I[0, 0])}</ixx><ixy>{_f(I[0, 1])}</ixy>"
         f"<ixz>{_f(I[0, 2])}</ixz><iyy>{_f(I[1, 1])}</iyy><iyz>{_f(I[1, 2])}</iyz>"
         f"<izz>{_f(I[2, 2])}</izz></inertia>\n"
-        "      </inertial>\n")
+        "      </inertial>\n"
+    )
     for i, shape in enumerate(link.shapes):
         cname = shape.name or f"{link.name}_collision_{i}"
         pose = f"        <pose>{_vec(shape.xyz)} {_vec(_AXIS_RPY[shape.axis])}</pose>\n"
         color = (0.8, 0.1, 0.1, 1.0) if shape.contact and shape.kind == "sphere" else link.color
-        out.append(f'      <visual name="{cname}_visual">\n' + pose
-                   + _geometry_xml(shape, "        ")
-                   + f"        <material><diffuse>{_vec(color)}</diffuse></material>\n"
-                   "      </visual>\n")
+        out.append(
+            f'      <visual name="{cname}_visual">\n'
+            + pose
+            + _geometry_xml(shape, "        ")
+            + f"        <material><diffuse>{_vec(color)}</diffuse></material>\n"
+            "      </visual>\n"
+        )
         out.append(f'      <collision name="{cname}">\n' + pose + _geometry_xml(shape, "        "))
         if shape.contact:
             out.append("        <drake:proximity_properties>\n")
@@ -498,9 +723,11 @@ def _link_xml(link: Link, pose_xml: str) -> str:
 
 def _joint_xml(j: Joint) -> str:
     if j.fixed:
-        return (f'    <joint name="{j.name}" type="fixed">\n'
-                f"      <parent>{j.parent}</parent>\n      <child>{j.child}</child>\n"
-                "    </joint>\n")
+        return (
+            f'    <joint name="{j.name}" type="fixed">\n'
+            f"      <parent>{j.parent}</parent>\n      <child>{j.child}</child>\n"
+            "    </joint>\n"
+        )
     axis = np.asarray(j.axis, float)
     axis = axis / np.linalg.norm(axis)
     return (
@@ -514,7 +741,8 @@ def _joint_xml(j: Joint) -> str:
         "      </axis>\n"
         f"      <drake:rotor_inertia>{_f(j.rotor_inertia)}</drake:rotor_inertia>\n"
         f"      <drake:gear_ratio>{_f(j.gear_ratio)}</drake:gear_ratio>\n"
-        "    </joint>\n")
+        "    </joint>\n"
+    )
 
 
 def generate(name: str) -> str:
@@ -538,14 +766,15 @@ def generate(name: str) -> str:
     for j in spec.joints:
         out.append(_joint_xml(j))
     for fname, attached, xyz in spec.frames:
-        out.append(f'    <frame name="{fname}" attached_to="{attached}">\n'
-                   f'      <pose relative_to="{attached}">{_vec(xyz)} 0 0 0</pose>\n'
-                   "    </frame>\n")
+        out.append(
+            f'    <frame name="{fname}" attached_to="{attached}">\n'
+            f'      <pose relative_to="{attached}">{_vec(xyz)} 0 0 0</pose>\n'
+            "    </frame>\n"
+        )
     out.append('    <drake:collision_filter_group name="robot_self">\n')
     for link in spec.links:
         out.append(f"      <drake:member>{link.name}</drake:member>\n")
-    out.append("      <drake:ignored_collision_filter_group>robot_self"
-               "</drake:ignored_collision_filter_group>\n")
+    out.append("      <drake:ignored_collision_filter_group>robot_self</drake:ignored_collision_filter_group>\n")
     out.append("    </drake:collision_filter_group>\n")
     out.append("  </model>\n</sdf>\n")
     return "".join(out)

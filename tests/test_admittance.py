@@ -33,8 +33,9 @@ def _chain_plant(time_step=0.0, limits=True):
     for i in range(3):
         link = plant.AddRigidBody(f"link{i}", SpatialInertia.SolidBoxWithMass(1.0, 0.1, 0.1, 0.3))
         kwargs = dict(pos_lower_limit=LOWER[i], pos_upper_limit=UPPER[i]) if limits else {}
-        joint = plant.AddJoint(RevoluteJoint(f"j{i}", parent.body_frame(), link.body_frame(),
-                                             [0.0, 1.0, 0.0], **kwargs))
+        joint = plant.AddJoint(
+            RevoluteJoint(f"j{i}", parent.body_frame(), link.body_frame(), [0.0, 1.0, 0.0], **kwargs)
+        )
         plant.AddJointActuator(f"a{i}", joint, 50.0)
         parent = link
     plant.Finalize()
@@ -134,10 +135,12 @@ def test_first_update_and_initialisation_start_from_measured(chain):
     # In a simulator, the initialisation event sets q_d = measured before any update.
     builder = DiagramBuilder()
     sys = builder.AddSystem(dut)
-    builder.Connect(builder.AddSystem(ConstantVectorSource(np.zeros(3))).get_output_port(),
-                    sys.get_residual_input_port())
-    builder.Connect(builder.AddSystem(ConstantVectorSource(Q0)).get_output_port(),
-                    sys.get_measured_position_input_port())
+    builder.Connect(
+        builder.AddSystem(ConstantVectorSource(np.zeros(3))).get_output_port(), sys.get_residual_input_port()
+    )
+    builder.Connect(
+        builder.AddSystem(ConstantVectorSource(Q0)).get_output_port(), sys.get_measured_position_input_port()
+    )
     diagram = builder.Build()
     sim = Simulator(diagram)
     sim.Initialize()
@@ -152,8 +155,7 @@ def test_first_update_and_initialisation_start_from_measured(chain):
 
 
 def test_dead_band_is_soft_threshold(chain):
-    np.testing.assert_array_equal(soft_threshold([2.0, -3.0, 0.5, -0.5, 0.0], 1.0),
-                                  [1.0, -2.0, 0.0, 0.0, 0.0])
+    np.testing.assert_array_equal(soft_threshold([2.0, -3.0, 0.5, -0.5, 0.0], 1.0), [1.0, -2.0, 0.0, 0.0, 0.0])
     db = np.array([1.0, 1.0, 0.6])  # per joint: the third |r| = 0.5 is inside
     dut = JointAdmittanceController(chain, 0.1, T, dead_band=db, position_limits=None)
     q_d = _step(dut, _context(dut, R, Q0))
@@ -206,8 +208,9 @@ def test_model_limits_with_margin(chain):
 
 def test_custom_limits_and_no_limits(chain):
     lo, hi = np.array([-0.01, -1.0, -np.inf]), np.array([0.2, 0.0, np.inf])
-    dut = JointAdmittanceController(chain, 100.0, T, position_limits=(lo, hi), limit_margin=0.3,
-                                    integrate_from="desired")
+    dut = JointAdmittanceController(
+        chain, 100.0, T, position_limits=(lo, hi), limit_margin=0.3, integrate_from="desired"
+    )
     np.testing.assert_array_equal(dut.position_lower_limits, lo)  # margin not applied
     q_d = _step(dut, _context(dut, [1e3, 1e3, 1e3], Q0), 10)
     np.testing.assert_allclose(q_d, [0.2, 0.0, Q0[2] + 10 * 100.0 * 1e3 * T])
@@ -234,8 +237,9 @@ def hrp4():
 def test_gains_by_group(hrp4):
     plant, handles = hrp4
     names = [j.name() for j in joints_in_velocity_order(plant)]
-    K = admittance_gains_by_group(plant, handles, {"legs": 0.2, "torso": 1.0, "arms": 0.5,
-                                                   "left_arm": 0.7}, default=0.01)
+    K = admittance_gains_by_group(
+        plant, handles, {"legs": 0.2, "torso": 1.0, "arms": 0.5, "left_arm": 0.7}, default=0.01
+    )
     assert K.shape == (len(names),)
     for k, name in enumerate(names):
         if name in handles.joint_groups["left_arm"]:
@@ -309,7 +313,8 @@ def test_closed_loop_desired_mode_moves_with_effort_and_stops_at_limit():
     joint up, in desired mode, until q_d stops at the margin-shrunk upper limit 0 - 0.02
     and the PD brings the joint there; the other joints stay where they were."""
     plant, k, t, q, q_d, q_start = _simulate_push_on_joint(
-        "R_ELBOW_P", 5.0, {"arms": 0.1}, "desired", 1.5)  # K_a r = 0.5 rad/s
+        "R_ELBOW_P", 5.0, {"arms": 0.1}, "desired", 1.5
+    )  # K_a r = 0.5 rad/s
     n = q.shape[0]
     joint = joints_in_velocity_order(plant)[k]
     upper = plant.GetPositionUpperLimits()[joint.position_start()] - 0.02
@@ -339,8 +344,7 @@ def test_closed_loop_measured_mode_moves_with_effort_and_stops_at_limit():
     """Eq. 14 as in the paper (q_d = q + K_a r T): the extra PD torque K_p K_a T r
     (200 * 2 * 1e-3 * 5 = 2 N m) drives R_ELBOW_P along the effort until the clip at the
     shrunk limit holds it there."""
-    plant, k, t, q, q_d, q_start = _simulate_push_on_joint(
-        "R_ELBOW_P", 5.0, {"arms": 2.0}, "measured", 2.0)
+    plant, k, t, q, q_d, q_start = _simulate_push_on_joint("R_ELBOW_P", 5.0, {"arms": 2.0}, "measured", 2.0)
     joint = joints_in_velocity_order(plant)[k]
     upper = plant.GetPositionUpperLimits()[joint.position_start()] - 0.02
     np.testing.assert_allclose(q_d[:, 0], q_start, atol=1e-2)
@@ -367,8 +371,10 @@ def test_closed_loop_measured_mode_moves_with_effort_and_stops_at_limit():
         (dict(gains=0.1, period=0.0), "period must be a positive"),
         (dict(gains=0.1, period=-1e-3), "period must be a positive"),
         (dict(gains=0.1, limit_margin=-0.1), "limit_margin must be finite and non-negative"),
-        (dict(gains=0.1, position_limits=([0.0, 0.5, 0.0], [1.0, 0.4, 1.0])),
-         r"position_limits lower > upper at joint indices \[1\] \(j1\)"),
+        (
+            dict(gains=0.1, position_limits=([0.0, 0.5, 0.0], [1.0, 0.4, 1.0])),
+            r"position_limits lower > upper at joint indices \[1\] \(j1\)",
+        ),
         (dict(gains=0.1, position_limits=([0.0, 0.0], [1.0, 1.0])), "position_limits lower must be"),
         (dict(gains=0.1, position_limits="urdf"), "position_limits must be 'model'"),
         (dict(gains=0.1, position_limits=(0.0,)), "position_limits must be"),
@@ -407,10 +413,13 @@ def test_nan_inputs_raise(chain):
     # Also at initialisation (Simulator.Initialize) from a NaN measured position.
     builder = DiagramBuilder()
     sys = builder.AddSystem(JointAdmittanceController(chain, 0.1))
-    builder.Connect(builder.AddSystem(ConstantVectorSource(np.zeros(3))).get_output_port(),
-                    sys.get_residual_input_port())
-    builder.Connect(builder.AddSystem(ConstantVectorSource([np.nan, 0.0, 0.0])).get_output_port(),
-                    sys.get_measured_position_input_port())
+    builder.Connect(
+        builder.AddSystem(ConstantVectorSource(np.zeros(3))).get_output_port(), sys.get_residual_input_port()
+    )
+    builder.Connect(
+        builder.AddSystem(ConstantVectorSource([np.nan, 0.0, 0.0])).get_output_port(),
+        sys.get_measured_position_input_port(),
+    )
     with pytest.raises(ValueError, match="measured_position"):
         Simulator(builder.Build()).Initialize()
 

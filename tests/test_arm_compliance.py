@@ -11,15 +11,17 @@ from pydrake.multibody.tree import JacobianWrtVariable, MultibodyForces
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from systems.simulation.disturbances import SmoothPiecewise
-from diagrams.station.humanoid_station import add_humanoid_station
+from diagrams.observer.calibration import (
+    identified_motor_constants,
+    motor_constant_identification,
+    settle_standing_state,
+)
 from diagrams.observer.nao_compliant_arms import (
     build_nao_compliant_arms_diagram,
     hand_pushes,
 )
-from diagrams.observer.calibration import identified_motor_constants, motor_constant_identification, settle_standing_state
 from diagrams.observer.nao_force_observer import full_posture, wide_stance
-from systems.simulation.ground_truth import VirtualForceTruth
+from diagrams.station.humanoid_station import add_humanoid_station
 from diagrams.station.standing import default_gains
 from systems.observer.arm_compliance import (
     NAO_ARM_CHAINS,
@@ -30,6 +32,8 @@ from systems.observer.arm_compliance import (
     JointTorqueFromPositionError,
     ObserverHandForce,
 )
+from systems.simulation.disturbances import SmoothPiecewise
+from systems.simulation.ground_truth import VirtualForceTruth
 from systems.simulation.pd_gravity import joint_vector_from_names
 
 ARM_JOINTS = [n for c in NAO_ARM_CHAINS for n in c.joint_names]
@@ -79,8 +83,9 @@ def test_joint_torque_is_km_times_the_position_error(station):
     q_d = rng.standard_normal(len(station.joint_names))
     dut.GetInputPort("desired_position").FixValue(context, q_d)
     dut.GetInputPort("state").FixValue(context, x)
-    expected = [km[n] * (q_d[station.joint_names.index(n)] - x[plant.GetJointByName(n).position_start()])
-                for n in ARM_JOINTS]
+    expected = [
+        km[n] * (q_d[station.joint_names.index(n)] - x[plant.GetJointByName(n).position_start()]) for n in ARM_JOINTS
+    ]
     np.testing.assert_allclose(dut.GetOutputPort("motor_torque").Eval(context), expected, rtol=1e-12)
 
 
@@ -100,13 +105,14 @@ def test_estimator_inverts_drakes_inverse_dynamics_for_a_hand_force(station):
     plant.CalcForceElementsContribution(ctx, forces)  # gravity and joint damping
     F = np.array([[1.2, -0.7, 0.4], [-2.0, 0.3, -0.5]])
     for chain, f in zip(NAO_ARM_CHAINS, F):
-        plant.GetBodyByName(chain.hand_body).AddInForce(ctx, np.asarray(chain.p_HP, float),
-                                                        SpatialForce(np.zeros(3), f), plant.world_frame(), forces)
+        plant.GetBodyByName(chain.hand_body).AddInForce(
+            ctx, np.asarray(chain.p_HP, float), SpatialForce(np.zeros(3), f), plant.world_frame(), forces
+        )
     tau = plant.CalcInverseDynamics(ctx, v_dot, forces)  # the actuation the motion needs
     tau_g = plant.CalcGravityGeneralizedForces(ctx)
     rows = [plant.GetJointByName(n).velocity_start() for n in ARM_JOINTS]
     # The station's PD: u = -tau_g + K_m (q_d - q) - K_d v, so eq. 27 reads u + tau_g + K_d v.
-    tau_m = tau[rows] + tau_g[rows] + np.array([kd[n] for n in ARM_JOINTS]) * x[plant.num_positions():][rows]
+    tau_m = tau[rows] + tau_g[rows] + np.array([kd[n] for n in ARM_JOINTS]) * x[plant.num_positions() :][rows]
     np.testing.assert_allclose(dut.hand_forces(x, tau_m, v_dot), F.reshape(-1), atol=1e-9)
     # Without the inertia term the same data gives a wrong answer: the term matters here.
     assert np.abs(dut.hand_forces(x, tau_m) - F.reshape(-1)).max() > 0.05
@@ -119,7 +125,7 @@ def test_estimator_filter_and_first_sample(station):
     dut = ArmExternalForceEstimator(plant, period=0.01, filter_time_constant=0.1)
     context = dut.CreateDefaultContext()
     x = settle_standing_state(wide_stance()).copy()
-    x[plant.num_positions():] = 0.0
+    x[plant.num_positions() :] = 0.0
     tau_m = np.linspace(-0.2, 0.3, len(ARM_JOINTS))
     dut.GetInputPort("motor_torque").FixValue(context, tau_m)
     dut.GetInputPort("state").FixValue(context, x)
@@ -142,8 +148,9 @@ def test_observer_hand_force_inverts_eq_11(station):
     x = settle_standing_state(wide_stance())
     ctx = plant.CreateDefaultContext()
     plant.SetPositionsAndVelocities(ctx, x)
-    p_hand = np.mean([plant.GetBodyByName(c.hand_body).EvalPoseInWorld(ctx).translation() for c in NAO_ARM_CHAINS],
-                     axis=0)
+    p_hand = np.mean(
+        [plant.GetBodyByName(c.hand_body).EvalPoseInWorld(ctx).translation() for c in NAO_ARM_CHAINS], axis=0
+    )
     p_com = plant.CalcCenterOfMassPositionInWorld(ctx, [humanoid.model_instance])
     ground = humanoid.sole_frames["right"].CalcPoseInWorld(ctx).translation()[2]
     F = np.array([-3.0, 0.8, -1.5])
@@ -194,7 +201,8 @@ def test_controller_targets_and_ik_follow_eq_29(station):
     x = settle_standing_state(wide_stance()).copy()
     yaw, pitch = 0.4, 0.1
     R = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]]) @ np.array(
-        [[np.cos(pitch), 0, np.sin(pitch)], [0, 1, 0], [-np.sin(pitch), 0, np.cos(pitch)]])
+        [[np.cos(pitch), 0, np.sin(pitch)], [0, 1, 0], [-np.sin(pitch), 0, np.cos(pitch)]]
+    )
     x[:4] = RotationMatrix(R).ToQuaternion().wxyz()
     F_W = np.array([-1.0, 0.5, 0.2, -2.0, -0.3, 0.1])
     dut.GetInputPort("hand_forces").FixValue(context, F_W)
@@ -214,15 +222,15 @@ def test_controller_targets_and_ik_follow_eq_29(station):
     torso = humanoid.base_body.body_frame()
     p0 = dut.rest_hand_positions.reshape(2, 3)
     for i, chain in enumerate(NAO_ARM_CHAINS):
-        F_B = R.T @ F_W[3 * i: 3 * i + 3]
+        F_B = R.T @ F_W[3 * i : 3 * i + 3]
         p = plant.CalcPointsPositions(ctx, plant.GetBodyByName(chain.hand_body).body_frame(), np.zeros(3), torso)
         np.testing.assert_allclose(p.ravel(), p0[i] + [F_B[0] / 50.0, 0, 0], atol=2e-5)
-        J = plant.CalcJacobianTranslationalVelocity(ctx, JacobianWrtVariable.kV,
-                                                    plant.GetBodyByName(chain.hand_body).body_frame(),
-                                                    np.zeros(3), torso, torso)
+        J = plant.CalcJacobianTranslationalVelocity(
+            ctx, JacobianWrtVariable.kV, plant.GetBodyByName(chain.hand_body).body_frame(), np.zeros(3), torso, torso
+        )
         cols = [plant.GetJointByName(n).velocity_start() for n in chain.joint_names]
         k = [station.joint_names.index(n) for n in chain.joint_names]
-        np.testing.assert_allclose(q_d[k], q_ik[5 * i: 5 * i + 5] - J[:, cols].T @ F_B / km, atol=1e-9)
+        np.testing.assert_allclose(q_d[k], q_ik[5 * i : 5 * i + 5] - J[:, cols].T @ F_B / km, atol=1e-9)
     # The other joints keep the nominal targets.
     others = [k for k, n in enumerate(station.joint_names) if n not in ARM_JOINTS]
     np.testing.assert_array_equal(q_d[others], q_nominal[others])
@@ -235,7 +243,8 @@ def test_compliance_moves_the_hands_by_f_over_k():
     estimate is within 3 % of the applied force."""
     profile = SmoothPiecewise((0.0, 0.3, 1.0), (0.0, 0.0, 1.5))
     diagram, handles = build_nao_compliant_arms_diagram(
-        hand_pushes(profile), noise=False, constant_k1=0.0, motor_constants=dict(identified_motor_constants()))
+        hand_pushes(profile), noise=False, constant_k1=0.0, motor_constants=dict(identified_motor_constants())
+    )
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
     handles.set_initial_state(context, settle_standing_state(wide_stance()))
@@ -246,8 +255,11 @@ def test_compliance_moves_the_hands_by_f_over_k():
     R_WB = torso.CalcRotationMatrixInWorld(ctx).matrix()
     F_B = R_WB.T @ np.array([-1.5, 0.0, 0.0])
     p0 = handles.controller.rest_hand_positions.reshape(2, 3)
-    estimate = handles.joint_estimator.GetOutputPort("hand_forces").Eval(
-        handles.joint_estimator.GetMyContextFromRoot(context)).reshape(2, 3)
+    estimate = (
+        handles.joint_estimator.GetOutputPort("hand_forces")
+        .Eval(handles.joint_estimator.GetMyContextFromRoot(context))
+        .reshape(2, 3)
+    )
     for i, chain in enumerate(NAO_ARM_CHAINS):
         p = plant.CalcPointsPositions(ctx, plant.GetBodyByName(chain.hand_body).body_frame(), np.zeros(3), torso)
         displacement = p.ravel()[0] - p0[i][0]

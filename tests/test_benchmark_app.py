@@ -6,9 +6,12 @@ from apps import benchmark
 
 
 def test_benchmark_runs_and_reports_every_figure(tmp_path, capsys):
-    assert benchmark.main(
-        ["--model", "nao_like", "--calls", "3", "--batches", "1", "--loop-seconds", "0.08", "--out", str(tmp_path)]
-    ) == 0
+    assert (
+        benchmark.main(
+            ["--model", "nao_like", "--calls", "3", "--batches", "1", "--loop-seconds", "0.08", "--out", str(tmp_path)]
+        )
+        == 0
+    )
     results = json.loads((tmp_path / "benchmark" / "metrics.json").read_text())
     rows = results["floating_base"]
     assert [r["model"] for r in rows] == ["nao_like"]
@@ -20,7 +23,11 @@ def test_benchmark_runs_and_reports_every_figure(tmp_path, capsys):
     (residual,) = results["residual_update"]
     assert residual["model"] == "nao_like" and residual["three_residuals_update_us"] > 0.0
     loops = results["closed_loop"]
-    assert [r["loop"] for r in loops] == ["station: plant + sensors + PD", "push-and-comply, internal residual", "Meshcat recording"]
+    assert [r["loop"] for r in loops] == [
+        "station: plant + sensors + PD",
+        "push-and-comply, internal residual",
+        "Meshcat recording",
+    ]
     assert all(r["wall_us_per_step"] > 0 and r["cpu_us_per_step"] > 0 for r in loops)
     assert "nao_like" in capsys.readouterr().out
 

@@ -40,7 +40,10 @@ def _run_alone(load: PulleyLoad, x: np.ndarray, seconds: float):
     simulator = Simulator(load, context)
     simulator.Initialize()
     simulator.AdvanceTo(seconds)
-    out = {name: load.GetOutputPort(name).Eval(context).copy() for name in ("force_world", "point_world", "tension", "load_height")}
+    out = {
+        name: load.GetOutputPort(name).Eval(context).copy()
+        for name in ("force_world", "point_world", "tension", "load_height")
+    }
     return out
 
 
@@ -69,7 +72,10 @@ def _walk_away(load: PulleyLoad, plant, x: np.ndarray, distance: float, walk_tim
         moved[4] = x[4] + distance * (3 * s * s - 2 * s * s * s)
         port.GetMutableData().set_value(moved)
         simulator.AdvanceTo(i * 1e-3)
-    out = {name: load.GetOutputPort(name).Eval(context).copy() for name in ("force_world", "point_world", "tension", "load_height")}
+    out = {
+        name: load.GetOutputPort(name).Eval(context).copy()
+        for name in ("force_world", "point_world", "tension", "load_height")
+    }
     return out, moved
 
 
@@ -95,7 +101,9 @@ def test_walking_away_lifts_the_load_to_its_static_equilibrium(nao):
     # The paper's setup: about 3 N backwards, about 5 deg from the x axis.
     assert np.linalg.norm(out["force_world"]) == pytest.approx(2.94, abs=0.01)
     angle = math.degrees(math.atan2(-out["force_world"][1], -out["force_world"][0]))
-    assert angle == pytest.approx(math.degrees(math.atan2(0.5 * math.sin(alpha), 0.5 * math.cos(alpha) + 0.05)), abs=1e-3)
+    assert angle == pytest.approx(
+        math.degrees(math.atan2(0.5 * math.sin(alpha), 0.5 * math.cos(alpha) + 0.05)), abs=1e-3
+    )
 
 
 def test_undamped_hanging_load_oscillates_at_the_line_frequency(nao):

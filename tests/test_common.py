@@ -29,8 +29,14 @@ def test_per_joint_scalars_sequences_and_mappings():
         (dict(value=[1.0, np.inf, 1.0], joints=3), r"S: kp has non-finite entries at indices \[1\]"),
         (dict(value={"a": 1.0}, joints=("a", "b")), r"S: kp has no value for \['b'\]"),
         (dict(value={"a": 1.0}, joints=1), "S: kp must be a scalar or 1 values, not a mapping"),
-        (dict(value=[1.0, -1.0], joints=2, sign="non-negative"), r"S: kp must be non-negative; negative at joint indices \[1\]"),
-        (dict(value=[1.0, 0.0], joints=2, sign="positive"), r"S: kp must be positive; not positive at joint indices \[1\]"),
+        (
+            dict(value=[1.0, -1.0], joints=2, sign="non-negative"),
+            r"S: kp must be non-negative; negative at joint indices \[1\]",
+        ),
+        (
+            dict(value=[1.0, 0.0], joints=2, sign="positive"),
+            r"S: kp must be positive; not positive at joint indices \[1\]",
+        ),
     ],
 )
 def test_per_joint_refuses_bad_values_naming_system_and_parameter(kwargs, match):

@@ -19,6 +19,7 @@ from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable, RevoluteJoint
 from pydrake.systems.framework import DiagramBuilder
 
 from models import add_humanoid, set_standing_state
+from systems.dynamics.floating_base import FloatingBaseDynamics
 from systems.residuals.contact_estimation import (
     AMBIGUOUS,
     FORCE_TOO_SMALL,
@@ -29,18 +30,17 @@ from systems.residuals.contact_estimation import (
     ContactForceEstimator,
     ContactLocalizer,
 )
-from systems.simulation.disturbances import Push, PushSource, Step
-from systems.dynamics.floating_base import FloatingBaseDynamics
 from systems.residuals.geometry_intersection import (
     BOX,
     CAPSULE,
     CYLINDER,
     SPHERE,
+    inward_direction,
     line_intersections,
     sample_surface,
-    inward_direction,
     signed_distances,
 )
+from systems.simulation.disturbances import Push, PushSource, Step
 
 # ---------------------------------------------------------------------------------------
 # Fixtures.
@@ -86,7 +86,9 @@ def _primitive_robot():
                 f"{name}_parent", base.body_frame(), RigidTransform(offset)
             )
         )
-        plant.AddJoint(RevoluteJoint(f"{name}_joint", frame, body.body_frame(), np.asarray(axis, float) / np.linalg.norm(axis)))
+        plant.AddJoint(
+            RevoluteJoint(f"{name}_joint", frame, body.body_frame(), np.asarray(axis, float) / np.linalg.norm(axis))
+        )
     plant.Finalize()
     context = plant.CreateDefaultContext()
     q = plant.GetPositions(context)
@@ -137,8 +139,10 @@ def _exact_residuals(plant, context, body, p_B, f_W):
 # ---------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("kind,params", [
-    (SPHERE, [0.1, 0, 0]), (BOX, [0.1, 0.2, 0.05]), (CYLINDER, [0.07, 0.15, 0]), (CAPSULE, [0.05, 0.1, 0])])
+@pytest.mark.parametrize(
+    "kind,params",
+    [(SPHERE, [0.1, 0, 0]), (BOX, [0.1, 0.2, 0.05]), (CYLINDER, [0.07, 0.15, 0]), (CAPSULE, [0.05, 0.1, 0])],
+)
 def test_line_enters_at_sampled_surface_point(kind, params):
     """A line through a surface point along a direction into the surface enters exactly
     there (entry parameter 0) and the signed distance there is 0."""
@@ -194,12 +198,16 @@ def _classical_residual(plant, context, truth, pushes_spec):
     joints = np.zeros(plant.num_velocities() - 6)
     for k, (name, p, _) in enumerate(pushes_spec):
         J = plant.CalcJacobianTranslationalVelocity(
-            context, JacobianWrtVariable.kV, plant.GetBodyByName(name).body_frame(), np.asarray(p, float), world, world)
+            context, JacobianWrtVariable.kV, plant.GetBodyByName(name).body_frame(), np.asarray(p, float), world, world
+        )
         joints += J[:, 6:].T @ truth["forces"][3 * k : 3 * k + 3]
     return np.concatenate((truth["wrench_base"], joints))
 
 
-PUSHES = [("R_ELBOW_P_LINK", [0.0, -0.04, -0.02], [3.0, 14.0, -6.0]), ("L_KNEE_P_LINK", [0.05, 0.0, -0.2], [-20.0, 4.0, 2.0])]
+PUSHES = [
+    ("R_ELBOW_P_LINK", [0.0, -0.04, -0.02], [3.0, 14.0, -6.0]),
+    ("L_KNEE_P_LINK", [0.05, 0.0, -0.2], [-20.0, 4.0, 2.0]),
+]
 
 
 def test_force_estimator_external_mode_eq19(hrp4):
@@ -233,7 +241,8 @@ def test_force_estimator_two_known_points(hrp4, mode, points_on_port):
         dut.GetInputPort("residual").FixValue(c, _classical_residual(plant, context, truth, PUSHES))
     if points_on_port:
         dut.GetInputPort("contact_points").FixValue(
-            c, np.concatenate([[int(plant.GetBodyByName(n).index()), *p] for n, p in points]))
+            c, np.concatenate([[int(plant.GetBodyByName(n).index()), *p] for n, p in points])
+        )
     expected = np.concatenate([f for _, _, f in PUSHES])
     np.testing.assert_allclose(dut.GetOutputPort("contact_forces_world").Eval(c), expected, atol=1e-8)
     assert dut.GetOutputPort("fit_error").Eval(c)[0] < 1e-8
@@ -308,12 +317,15 @@ def _step_detector(dut, context, wrench, residual, t):
 def test_detector_thresholds_and_hysteresis(hrp4):
     plant, _, _, _ = hrp4
     n = plant.num_velocities() - 6
-    dut = ContactDetector(plant, covariance_internal=np.full(n, 0.01), covariance_external_force=np.full(3, 0.3),
-                          release_time=0.005)
+    dut = ContactDetector(
+        plant, covariance_internal=np.full(n, 0.01), covariance_external_force=np.full(3, 0.3), release_time=0.005
+    )
     on_ext, _ = dut.thresholds["on"]
     off_ext, _ = dut.thresholds["off"]
     # chi-square survival function with 3 dof in closed form: erfc(sqrt(x/2)) + sqrt(2x/pi) e^(-x/2).
-    assert math.erfc(math.sqrt(on_ext / 2)) + math.sqrt(2 * on_ext / math.pi) * math.exp(-on_ext / 2) == pytest.approx(1e-9)
+    assert math.erfc(math.sqrt(on_ext / 2)) + math.sqrt(2 * on_ext / math.pi) * math.exp(-on_ext / 2) == pytest.approx(
+        1e-9
+    )
     c = dut.CreateDefaultContext()
     zero_r = np.zeros(n)
     f_on = 0.3 * math.sqrt(on_ext) * 1.01  # just above the on threshold along x
@@ -359,8 +371,18 @@ def _run_localizer_system(localizer, q, v, wrench, residual, detected=1.0):
     update = localizer.EvalUniquePeriodicDiscreteUpdate(c)
     for group in range(update.num_groups()):
         c.SetDiscreteState(group, update.get_vector(group).value())
-    return {name: localizer.GetOutputPort(name).Eval(c).copy() for name in (
-        "contact_body", "contact_point_world", "contact_force_world", "score", "runner_up_score", "valid", "status")}
+    return {
+        name: localizer.GetOutputPort(name).Eval(c).copy()
+        for name in (
+            "contact_body",
+            "contact_point_world",
+            "contact_force_world",
+            "score",
+            "runner_up_score",
+            "valid",
+            "status",
+        )
+    }
 
 
 @pytest.mark.parametrize("link", ["sphere_link", "box_link", "cylinder_link", "capsule_link", "base"])

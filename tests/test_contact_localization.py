@@ -55,8 +55,9 @@ def test_push_detected_and_localized_without_noise():
     tangent = np.cross(n_W, [0.0, 0.0, 1.0])
     tangent /= np.linalg.norm(tangent)
     f_W = 12.0 * (-np.cos(np.radians(30)) * n_W + np.sin(np.radians(30)) * tangent)
-    config = ContactLocalizationScenario(noise=False, push_start=0.2, push_duration=0.5, push_body=body,
-                                push_point=tuple(p_B), push_force=tuple(f_W))
+    config = ContactLocalizationScenario(
+        noise=False, push_start=0.2, push_duration=0.5, push_body=body, push_point=tuple(p_B), push_force=tuple(f_W)
+    )
     handles, root = _simulate(config, 0.7)
     detection = handles.detector.GetOutputPort("detection_time").Eval(handles.detector.GetMyContextFromRoot(root))[0]
     # The external test alone fires once 12 N (1 - (1 - K T)^k) exceeds its threshold, about

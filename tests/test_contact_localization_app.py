@@ -20,15 +20,41 @@ from systems.simulation.visualization import read_static_html
 
 
 def test_app_smoke(tmp_path):
-    code = contact_localization.main([
-        "--trials", "2", "--workers", "2", "--replays", "1", "--headless", "--push-start", "0.2",
-        "--contact-duration", "0.4", "--no-contact-duration", "0.5", "--seed", "3", "--out", str(tmp_path)])
+    code = contact_localization.main(
+        [
+            "--trials",
+            "2",
+            "--workers",
+            "2",
+            "--replays",
+            "1",
+            "--headless",
+            "--push-start",
+            "0.2",
+            "--contact-duration",
+            "0.4",
+            "--no-contact-duration",
+            "0.5",
+            "--seed",
+            "3",
+            "--out",
+            str(tmp_path),
+        ]
+    )
     assert code == 0
     out = tmp_path / "contact_localization"
     metrics = json.loads((out / "metrics.json").read_text())
-    for key in ("detection_rate", "median_detection_delay_s", "false_detections", "correct_link_rate",
-                "median_position_error_m", "p95_position_error_m", "median_force_error_rel",
-                "median_angle_error_deg", "trials"):
+    for key in (
+        "detection_rate",
+        "median_detection_delay_s",
+        "false_detections",
+        "correct_link_rate",
+        "median_position_error_m",
+        "p95_position_error_m",
+        "median_force_error_rel",
+        "median_angle_error_deg",
+        "trials",
+    ):
         assert key in metrics
     assert metrics["trials"] == 2 and len(metrics["per_trial"]) == 2
     assert metrics["no_contact_run"]["duration_s"] == 0.5
@@ -57,25 +83,41 @@ def test_sampled_contacts_are_on_the_outer_surface_and_within_the_cone():
 
 def test_scenario_files_load_into_the_dataclass(tmp_path):
     check_scenario_convention(ContactLocalizationScenario, "contact_localization_default.yaml", tmp_path, "workers")
-    scenario = load_scenario(ContactLocalizationScenario, filename=SCENARIOS / "contact_localization_default.yaml",
-                             text="trials: 40\nno_contact_duration: 0\n"
-                                  "plant_config: {discrete_contact_approximation: lagged}")
+    scenario = load_scenario(
+        ContactLocalizationScenario,
+        filename=SCENARIOS / "contact_localization_default.yaml",
+        text="trials: 40\nno_contact_duration: 0\nplant_config: {discrete_contact_approximation: lagged}",
+    )
     assert (scenario.trials, scenario.no_contact_duration, scenario.seed) == (40, 0.0, 0)  # others keep the defaults
     assert scenario.plant_config.discrete_contact_approximation == "lagged"
     # One trial's run: the study's settings with the trial's push and noise seed.
     spec = {"body": "CHEST_Y_LINK", "point_body": [0.1, 0.0, 0.2], "force_world": [-20.0, 0.0, 0.0], "noise_seed": 17}
     trial = trial_scenario(scenario, spec)
     assert (trial.push_body, trial.push_point, trial.push_force, trial.seed) == (
-        "CHEST_Y_LINK", [0.1, 0.0, 0.2], [-20.0, 0.0, 0.0], 17)
+        "CHEST_Y_LINK",
+        [0.1, 0.0, 0.2],
+        [-20.0, 0.0, 0.0],
+        17,
+    )
     assert trial.plant_config.discrete_contact_approximation == "lagged" and scenario.push_body is None
     quiet = no_contact_scenario(scenario)
     assert quiet.push_body is None and quiet.seed == 99991
 
 
 def test_app_reads_scenario_text_and_reports_errors(tmp_path, capsys):
-    code = contact_localization.main([
-        "--scenario-text", "trials: 1\npush_start: 0.1\npush_duration: 0.3\nno_contact_duration: 0\nseed: 2",
-        "--workers", "1", "--replays", "0", "--headless", "--out", str(tmp_path)])
+    code = contact_localization.main(
+        [
+            "--scenario-text",
+            "trials: 1\npush_start: 0.1\npush_duration: 0.3\nno_contact_duration: 0\nseed: 2",
+            "--workers",
+            "1",
+            "--replays",
+            "0",
+            "--headless",
+            "--out",
+            str(tmp_path),
+        ]
+    )
     assert code == 0
     metrics = json.loads((tmp_path / "contact_localization" / "metrics.json").read_text())
     assert metrics["trials"] == 1 and metrics["no_contact_run"] is None and metrics["seed"] == 2

@@ -66,10 +66,13 @@ def test_fast_equals_reference_on_humanoids(name):
         frame = fast.topology.joints[-1].child_body().body_frame()
         p = rng.normal(size=3) * 0.1
         for spatial in (False, True):
-            assert relative_error(
-                fast.floating_jacobian(q, frame, p, spatial=spatial),
-                reference.floating_jacobian(q, frame, p, spatial=spatial),
-            ) < 1e-8
+            assert (
+                relative_error(
+                    fast.floating_jacobian(q, frame, p, spatial=spatial),
+                    reference.floating_jacobian(q, frame, p, spatial=spatial),
+                )
+                < 1e-8
+            )
 
 
 def _forward_dynamics(plant, context, q, v, tau_joints, body, p_BP, f_W):
@@ -114,9 +117,7 @@ def test_equations_of_motion_with_an_external_force(implementation, num_joints, 
     assert relative_error(R, X_WB.rotation().matrix()) < 1e-12
     P = dynamics.topology.free_joint.frame_on_parent().CalcPoseInWorld(context).rotation().matrix()
     w_B, v_B = terms.v0[:3], terms.v0[3:]
-    a0 = np.concatenate(
-        (R.T @ P @ v_dot[:3], R.T @ P @ v_dot[3:6] - np.cross(w_B, v_B))
-    )
+    a0 = np.concatenate((R.T @ P @ v_dot[:3], R.T @ P @ v_dot[3:6] - np.cross(w_B, v_B)))
     p_P_W = plant.CalcPointsPositions(context, body.body_frame(), p_BP, plant.world_frame()).ravel()
     r_B = R.T @ (p_P_W - X_WB.translation())
     f_B = R.T @ f_W
@@ -177,8 +178,14 @@ def _plant_with(joint_factory=None, *, weld_root=False, second_free_body=False, 
     [
         (lambda: _plant_with(weld_root=True), "no floating base"),
         (lambda: _plant_with(second_free_body=True), "2 floating bases"),
-        (lambda: _plant_with(lambda b, l: BallRpyJoint("shoulder", b.body_frame(), l.body_frame())), "'shoulder' is a 'ball_rpy' joint"),
-        (lambda: _plant_with(lambda b, l: PlanarJoint("slide", b.body_frame(), l.body_frame(), [0, 0, 0])), "'slide' is a 'planar' joint"),
+        (
+            lambda: _plant_with(lambda b, l: BallRpyJoint("shoulder", b.body_frame(), l.body_frame())),
+            "'shoulder' is a 'ball_rpy' joint",
+        ),
+        (
+            lambda: _plant_with(lambda b, l: PlanarJoint("slide", b.body_frame(), l.body_frame(), [0, 0, 0])),
+            "'slide' is a 'planar' joint",
+        ),
         (lambda: _plant_with(finalize=False), "finalized"),
     ],
 )

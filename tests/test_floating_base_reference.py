@@ -15,21 +15,15 @@ Every comparison reports its relative error (||ours - theirs||_F / ||theirs||_F)
 
 from __future__ import annotations
 
-import os
-import sys
-
 import numpy as np
 import pytest
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import FrameIndex, JacobianWrtVariable
+from random_trees import make_random_floating_tree, random_state
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-
-from random_trees import make_random_floating_tree, random_state  # noqa: E402
-
-from systems.dynamics.floating_base import FloatingBaseDynamics  # noqa: E402
-from systems.dynamics.floating_base_reference import RecursiveFloatingBaseDynamics  # noqa: E402
-from systems.common.spatial import skew  # noqa: E402
+from systems.common.spatial import skew
+from systems.dynamics.floating_base import FloatingBaseDynamics
+from systems.dynamics.floating_base_reference import RecursiveFloatingBaseDynamics
 
 TOL_DRAKE = 1e-9
 TOL_FD = 1e-6
@@ -448,7 +442,15 @@ def test_spatial_algebra_matches_drake():
     from pydrake.multibody.math import SpatialForce, SpatialVelocity
     from random_trees import random_spatial_inertia, random_transform
 
-    from systems.common.spatial import crf, crm, force_transform, inverse_motion_transform, plucker, spatial_inertia, transform_inertia
+    from systems.common.spatial import (
+        crf,
+        crm,
+        force_transform,
+        inverse_motion_transform,
+        plucker,
+        spatial_inertia,
+        transform_inertia,
+    )
 
     rng = np.random.default_rng(12)
     for _ in range(5):

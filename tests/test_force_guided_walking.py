@@ -15,9 +15,16 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem
 
 from diagrams.station.standing import default_gains
 from models import add_humanoid, set_standing_state
-from systems.observer.force_guided_walking import (STANDING, STOPPING, WALKING, ForceGuidedWalkingController, ForceTrigger,
-                                          TriggerParameters, stop_step)
 from systems.locomotion.walking_pattern import Footstep
+from systems.observer.force_guided_walking import (
+    STANDING,
+    STOPPING,
+    WALKING,
+    ForceGuidedWalkingController,
+    ForceTrigger,
+    TriggerParameters,
+    stop_step,
+)
 
 
 def _run_trigger(trigger: ForceTrigger, times, forces, walking_direction=None):
@@ -73,9 +80,19 @@ def test_trigger_stops_on_a_reversed_force_and_only_while_walking():
 
 
 def test_closing_step_is_the_one_after_the_step_in_progress():
-    steps = [Footstep(side="right", start=np.zeros(3), end=np.zeros(3), support_position=np.zeros(3),
-                      t_start=0.2 + 0.5 * j, t_lift=0.35 + 0.5 * j, t_land=0.7 + 0.5 * j, swing_height=0.02)
-             for j in range(6)]
+    steps = [
+        Footstep(
+            side="right",
+            start=np.zeros(3),
+            end=np.zeros(3),
+            support_position=np.zeros(3),
+            t_start=0.2 + 0.5 * j,
+            t_lift=0.35 + 0.5 * j,
+            t_land=0.7 + 0.5 * j,
+            swing_height=0.02,
+        )
+        for j in range(6)
+    ]
     assert stop_step(steps, 0.1) == 1  # before the first step: step 1 closes (a step in place)
     assert stop_step(steps, 0.2) == 2  # step 1 has begun
     assert stop_step(steps, 0.69) == 2
@@ -104,9 +121,16 @@ def controller_run():
     set_standing_state(plant, context, humanoid)
     kp, _ = default_gains(plant, humanoid)
     builder = DiagramBuilder()
-    dut = builder.AddSystem(ForceGuidedWalkingController(
-        plant, humanoid, trigger=TriggerParameters(threshold=2.0, start_debounce=0.1, stop_debounce=0.05),
-        initial_positions=plant.GetPositions(context), joint_stiffness=kp, max_steps=12))
+    dut = builder.AddSystem(
+        ForceGuidedWalkingController(
+            plant,
+            humanoid,
+            trigger=TriggerParameters(threshold=2.0, start_debounce=0.1, stop_debounce=0.05),
+            initial_positions=plant.GetPositions(context),
+            joint_stiffness=kp,
+            max_steps=12,
+        )
+    )
     source = builder.AddSystem(_ForceSchedule(4.0, 1.5, 3.33))
     builder.Connect(source.get_output_port(), dut.GetInputPort("force_estimate"))
     diagram = builder.Build()
@@ -117,9 +141,14 @@ def controller_run():
     simulator.Initialize()
     for k in range(1, 701):
         simulator.AdvanceTo(k * 0.01)
-        samples.append((k * 0.01, dut.GetOutputPort("walking_state").Eval(ctx).copy(),
-                        dut.GetOutputPort("desired_position").Eval(ctx).copy(),
-                        dut.GetOutputPort("sole_targets").Eval(ctx).copy()))
+        samples.append(
+            (
+                k * 0.01,
+                dut.GetOutputPort("walking_state").Eval(ctx).copy(),
+                dut.GetOutputPort("desired_position").Eval(ctx).copy(),
+                dut.GetOutputPort("sole_targets").Eval(ctx).copy(),
+            )
+        )
     return dut, samples
 
 
@@ -232,8 +261,10 @@ def test_app_without_force_does_not_start(tmp_path):
 
     from apps import nao_force_guided_walk
 
-    assert nao_force_guided_walk.main(["--out", str(tmp_path), "--headless", "--no-replay", "--seed", "2",
-                                       "--force", "0"]) == 0
+    assert (
+        nao_force_guided_walk.main(["--out", str(tmp_path), "--headless", "--no-replay", "--seed", "2", "--force", "0"])
+        == 0
+    )
     out = tmp_path / "nao_force_guided_walk"
     m = json.loads((out / "metrics.json").read_text())
     assert m["episodes"] == [] and m["false_starts_s"] == []
@@ -253,15 +284,17 @@ def test_scenario_file_text_and_unknown_keys(tmp_path, capsys):
     (the scenario convention, ``tests/scenario_checks.py``); YAML text overrides nested
     fields; an unknown nested key is an error that names it; the app refuses a force below
     the threshold."""
+    from scenario_checks import SCENARIOS, check_scenario_convention
+
     from apps import nao_force_guided_walk
     from diagrams.observer.nao_force_guided_walk import NaoForceGuidedWalkScenario
     from diagrams.scenarios import ScenarioError, load_scenario
-    from scenario_checks import SCENARIOS, check_scenario_convention
 
     check_scenario_convention(NaoForceGuidedWalkScenario, "nao_force_guided_walk_default.yaml", tmp_path)
     path = SCENARIOS / "nao_force_guided_walk_default.yaml"
-    scenario = load_scenario(NaoForceGuidedWalkScenario, filename=path,
-                             text="trigger: {threshold: 1.0}\nepisodes: [[1.0, 3.0, -1.0]]")
+    scenario = load_scenario(
+        NaoForceGuidedWalkScenario, filename=path, text="trigger: {threshold: 1.0}\nepisodes: [[1.0, 3.0, -1.0]]"
+    )
     assert scenario.trigger.threshold == 1.0 and scenario.trigger.stop_debounce == 0.05
     assert scenario.profile().plateaus == ((1.0, 3.0, -3.0),)
     with pytest.raises(ScenarioError, match="treshold"):

@@ -35,7 +35,11 @@ def test_published_recordings_ship_with_the_repository(monkeypatch):
     assert directory == Path(__file__).resolve().parents[1] / "data" / "hawley2019-nao"
     for name in RECORDINGS:
         assert sorted(p.name for p in (directory / name).iterdir()) == [
-            "Acc.mat", "CoM_Pos.mat", "ZMP.mat", "reference_F.csv", "total_force.mat"
+            "Acc.mat",
+            "CoM_Pos.mat",
+            "ZMP.mat",
+            "reference_F.csv",
+            "total_force.mat",
         ]
     notice = (directory / "README.md").read_text()
     assert "wael-suleiman-UdeS/External_Force_ROS_Package" in notice and "GPL-2.0" in notice
@@ -50,11 +54,16 @@ def test_environment_variable_points_at_other_recordings_or_fails_clearly(monkey
     assert nao_dataset.published_dataset_dir() == mine
 
     shutil.rmtree(mine / "Force_Z_data")
-    with pytest.raises(nao_dataset.DatasetError, match=re.escape(f"'{mine / 'Force_Z_data'}' is not a folder") + f".*{variable}"):
+    with pytest.raises(
+        nao_dataset.DatasetError, match=re.escape(f"'{mine / 'Force_Z_data'}' is not a folder") + f".*{variable}"
+    ):
         nao_dataset.published_dataset_dir()
 
     monkeypatch.setenv(variable, str(tmp_path / "nowhere"))
-    with pytest.raises(nao_dataset.DatasetError, match=re.escape(f"'{tmp_path / 'nowhere' / 'datasets' / 'hawley2019-nao'}' is not a folder")):
+    with pytest.raises(
+        nao_dataset.DatasetError,
+        match=re.escape(f"'{tmp_path / 'nowhere' / 'datasets' / 'hawley2019-nao'}' is not a folder"),
+    ):
         nao_dataset.published_dataset_dir()
 
 

@@ -9,12 +9,12 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
 import systems.simulation.sensors as sensors_module
-from diagrams.station.humanoid_station import add_humanoid_station
 from diagrams.residuals.residual_comparison import (
     ResidualComparisonScenario,
     build_residual_comparison_diagram,
     set_initial_state,
 )
+from diagrams.station.humanoid_station import add_humanoid_station
 
 
 def _station_diagram(noise: bool):
@@ -84,5 +84,7 @@ def test_set_initial_state_checks_the_state():
     crouched = station.initial_state.copy()
     crouched[-1] = 0.1
     station.set_initial_state(context, crouched)
-    np.testing.assert_array_equal(station.sensed_state_hold.get_output_port().Eval(
-        station.sensed_state_hold.GetMyContextFromRoot(context)), crouched)
+    np.testing.assert_array_equal(
+        station.sensed_state_hold.get_output_port().Eval(station.sensed_state_hold.GetMyContextFromRoot(context)),
+        crouched,
+    )

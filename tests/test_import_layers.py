@@ -78,13 +78,24 @@ def layer_violations(source: str, module: str, *, is_package: bool = False) -> l
         for upper in FORBIDDEN[layer]:
             if _within(name, upper):
                 out.append(f"{module}:{line}: imports {name} ({layer} must not import {upper})")
-        if _within(module, "systems.common") and _within(name, "systems") and name != "systems" \
-                and not _within(name, "systems.common"):
+        if (
+            _within(module, "systems.common")
+            and _within(name, "systems")
+            and name != "systems"
+            and not _within(name, "systems.common")
+        ):
             out.append(f"{module}:{line}: imports {name} (systems.common must not import other systems sub-packages)")
-        if layer == "apps" and _within(name, "apps") and name != "apps" and not _within(name, module) \
-                and not any(_within(name, shared) for shared in SHARED_APP_MODULES):
-            out.append(f"{module}:{line}: imports {name} (an app must not import another app; move what it "
-                       "needs down to diagrams/ or systems/)")
+        if (
+            layer == "apps"
+            and _within(name, "apps")
+            and name != "apps"
+            and not _within(name, module)
+            and not any(_within(name, shared) for shared in SHARED_APP_MODULES)
+        ):
+            out.append(
+                f"{module}:{line}: imports {name} (an app must not import another app; move what it "
+                "needs down to diagrams/ or systems/)"
+            )
     return sorted(set(out))
 
 
@@ -106,21 +117,44 @@ def test_no_upward_import():
     assert violations == [], "upward imports:\n" + "\n".join(violations)
 
 
-@pytest.mark.parametrize("module, source, expected", [
-    ("systems.observer.arm_compliance",
-     "def f():\n    from diagrams.station.humanoid_station import add_humanoid_station\n", "systems must not import diagrams"),
-    ("systems.simulation.cable", "import apps.nao_walk\n", "systems must not import apps"),
-    ("models.generate_sdf", "from systems.common import checks\n", "models must not import systems"),
-    ("diagrams.observer.nao_force_observer", "if True:\n    from apps import common\n", "diagrams must not import apps"),
-    ("diagrams.observer.nao_sensing", "from ..residuals import contact_localization\nimport apps\n",
-     "diagrams must not import apps"),
-    ("systems.common.checks", "from systems.dynamics.base_state import checked_state\n",
-     "systems.common must not import other systems sub-packages"),
-    ("systems.common.checks", "from ..dynamics import base_state\n",
-     "systems.common must not import other systems sub-packages"),
-    ("apps.benchmark", "from apps.contact_localization import sample_trials\n", "an app must not import another app"),
-    ("apps.benchmark", "from . import replay_nao_dataset\n", "an app must not import another app"),
-])
+@pytest.mark.parametrize(
+    "module, source, expected",
+    [
+        (
+            "systems.observer.arm_compliance",
+            "def f():\n    from diagrams.station.humanoid_station import add_humanoid_station\n",
+            "systems must not import diagrams",
+        ),
+        ("systems.simulation.cable", "import apps.nao_walk\n", "systems must not import apps"),
+        ("models.generate_sdf", "from systems.common import checks\n", "models must not import systems"),
+        (
+            "diagrams.observer.nao_force_observer",
+            "if True:\n    from apps import common\n",
+            "diagrams must not import apps",
+        ),
+        (
+            "diagrams.observer.nao_sensing",
+            "from ..residuals import contact_localization\nimport apps\n",
+            "diagrams must not import apps",
+        ),
+        (
+            "systems.common.checks",
+            "from systems.dynamics.base_state import checked_state\n",
+            "systems.common must not import other systems sub-packages",
+        ),
+        (
+            "systems.common.checks",
+            "from ..dynamics import base_state\n",
+            "systems.common must not import other systems sub-packages",
+        ),
+        (
+            "apps.benchmark",
+            "from apps.contact_localization import sample_trials\n",
+            "an app must not import another app",
+        ),
+        ("apps.benchmark", "from . import replay_nao_dataset\n", "an app must not import another app"),
+    ],
+)
 def test_the_checker_catches_upward_imports(module, source, expected):
     """Positive control: synthetic sources with an upward import fail the check (so
     ``test_no_upward_import`` cannot pass vacuously)."""
@@ -128,13 +162,25 @@ def test_the_checker_catches_upward_imports(module, source, expected):
     assert len(violations) >= 1 and all(expected in v for v in violations), violations
 
 
-@pytest.mark.parametrize("module, source", [
-    ("apps.nao_walk", "from apps.common import replay_meshcat\nfrom diagrams.locomotion.nao_walk import walking_floors\n"),
-    ("diagrams.observer.nao_walk_pulled", "from diagrams.locomotion.nao_walk import ContactZmp\nimport systems\n"),
-    ("systems.observer.force_observer", "from systems.locomotion.walking_pattern import smoothstep5\nimport models\n"),
-    ("systems.common.topology", "from systems.common.checks import vector3\nfrom pydrake.multibody.plant import MultibodyPlant\n"),
-    ("models", "import numpy\n"),
-])
+@pytest.mark.parametrize(
+    "module, source",
+    [
+        (
+            "apps.nao_walk",
+            "from apps.common import replay_meshcat\nfrom diagrams.locomotion.nao_walk import walking_floors\n",
+        ),
+        ("diagrams.observer.nao_walk_pulled", "from diagrams.locomotion.nao_walk import ContactZmp\nimport systems\n"),
+        (
+            "systems.observer.force_observer",
+            "from systems.locomotion.walking_pattern import smoothstep5\nimport models\n",
+        ),
+        (
+            "systems.common.topology",
+            "from systems.common.checks import vector3\nfrom pydrake.multibody.plant import MultibodyPlant\n",
+        ),
+        ("models", "import numpy\n"),
+    ],
+)
 def test_the_checker_accepts_downward_and_sideways_imports(module, source):
     assert layer_violations(source, module, is_package=module == "models") == []
 

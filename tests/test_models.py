@@ -1,19 +1,30 @@
 """Tests of the humanoid models and their loader (models/)."""
 
+import dataclasses
 import shutil
 
 import numpy as np
 import pytest
-from pydrake.multibody.plant import MultibodyPlantConfig, AddMultibodyPlant
+from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.multibody.tree import JointIndex
 from pydrake.systems.framework import DiagramBuilder
 
 import models
-from models import FSR_ORDER, MODEL_NAMES, add_ground, add_humanoid, set_standing_state
-from models import generate_sdf
+from models import FSR_ORDER, MODEL_NAMES, add_ground, add_humanoid, generate_sdf, set_standing_state
 
-GROUP_KEYS = {"left_leg", "right_leg", "legs", "torso", "head", "left_arm", "right_arm",
-              "arms", "left_hand", "right_hand", "hands"}
+GROUP_KEYS = {
+    "left_leg",
+    "right_leg",
+    "legs",
+    "torso",
+    "head",
+    "left_arm",
+    "right_arm",
+    "arms",
+    "left_hand",
+    "right_hand",
+    "hands",
+}
 EXPECTED = {
     # revolute joints, welds, mass kg, head-top height straight / nominal posture (m)
     "hrp4_like": dict(revolute=34, welds=2, mass=39.0, height=1.51),
@@ -28,8 +39,8 @@ NAO_FSR = {
 def _build(name, with_scene_graph=True):
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(
-        MultibodyPlantConfig(time_step=1e-3, discrete_contact_approximation="sap",
-                             contact_model="point"), builder)
+        MultibodyPlantConfig(time_step=1e-3, discrete_contact_approximation="sap", contact_model="point"), builder
+    )
     handles = add_humanoid(plant, name, scene_graph=scene_graph if with_scene_graph else None)
     add_ground(plant)
     plant.Finalize()
@@ -42,17 +53,14 @@ def loaded(request):
 
 
 def _model_joints(plant, handles):
-    return [plant.get_joint(JointIndex(int(i)))
-            for i in plant.GetJointIndices(handles.model_instance)]
+    return [plant.get_joint(JointIndex(int(i))) for i in plant.GetJointIndices(handles.model_instance)]
 
 
 def test_generator_output_equals_committed_files():
     for name in MODEL_NAMES:
         committed = models.model_file(name).read_text()
-        assert committed == generate_sdf.generate(name), (
-            f"{name}.sdf is stale: run `python -m models.generate_sdf`")
-    assert (models.MODELS_DIR / "package.xml").read_text().count(
-        "<name>humanoid_contact_observers_models</name>") == 1
+        assert committed == generate_sdf.generate(name), f"{name}.sdf is stale: run `python -m models.generate_sdf`"
+    assert (models.MODELS_DIR / "package.xml").read_text().count("<name>humanoid_contact_observers_models</name>") == 1
 
 
 def test_joint_counts(loaded):
@@ -66,8 +74,7 @@ def test_joint_counts(loaded):
     assert plant.num_actuated_dofs(h.model_instance) == exp["revolute"]
     assert plant.num_velocities() == exp["revolute"] + 6  # floating base, not welded
     assert h.base_body.is_floating_base_body()
-    actuated = {plant.get_joint_actuator(i).joint().name()
-                for i in plant.GetJointActuatorIndices(h.model_instance)}
+    actuated = {plant.get_joint_actuator(i).joint().name() for i in plant.GetJointActuatorIndices(h.model_instance)}
     assert actuated == {j.name() for j in revolute}
     for i in plant.GetJointActuatorIndices(h.model_instance):
         assert 0 < plant.get_joint_actuator(i).effort_limit() < np.inf
@@ -115,8 +122,7 @@ def test_every_body_has_collision_and_visual(loaded):
         body = plant.get_body(i)
         assert len(plant.GetCollisionGeometriesForBody(body)) >= 1, body.name()
         assert len(plant.GetVisualGeometriesForBody(body)) >= 1, body.name()
-        assert h.collision_geometries[body.name()] == tuple(
-            plant.GetCollisionGeometriesForBody(body))
+        assert h.collision_geometries[body.name()] == tuple(plant.GetCollisionGeometriesForBody(body))
 
 
 def test_fsr_spheres(loaded):
@@ -173,8 +179,7 @@ def test_self_collisions_filtered(loaded):
     plant, scene_graph, h = loaded
     inspector = scene_graph.model_inspector()
     ids = [g for gs in h.collision_geometries.values() for g in gs]
-    ground = [g for g in inspector.GetAllGeometryIds()
-              if inspector.GetName(g) == "ground"]
+    ground = [g for g in inspector.GetAllGeometryIds() if inspector.GetName(g) == "ground"]
     assert len(ground) == 1
     for a in ids[::3]:
         for b in ids[1::3]:
@@ -204,8 +209,7 @@ def test_handles_complete(loaded):
     assert len(every) == len(set(every)) == EXPECTED[h.name]["revolute"]
     assert set(every) == {j.name() for j in _model_joints(plant, h) if j.num_velocities() == 1}
     if h.name == "hrp4_like":
-        assert g["right_leg"] == ("R_HIP_Y", "R_HIP_R", "R_HIP_P", "R_KNEE_P", "R_ANKLE_P",
-                                  "R_ANKLE_R")
+        assert g["right_leg"] == ("R_HIP_Y", "R_HIP_R", "R_HIP_P", "R_KNEE_P", "R_ANKLE_P", "R_ANKLE_R")
         assert len(g["left_arm"]) == 7 and len(g["left_hand"]) == 2
         assert g["torso"] == ("CHEST_P", "CHEST_Y") and g["head"] == ("NECK_Y", "NECK_P")
         assert h.base_body.name() == "waist"
@@ -220,15 +224,14 @@ def test_handles_complete(loaded):
         axis_l = plant.GetJointByName("LHipYawPitch", mi).revolute_axis()
         np.testing.assert_allclose(axis_l, [0, np.sqrt(0.5), -np.sqrt(0.5)], atol=1e-12)
     assert h.imu_frame.body().index() == h.base_body.index()
-    assert set(h.sole_frames) == set(h.shoulder_bodies) == set(h.fsr_geometries) == {
-        "left", "right"}
+    assert set(h.sole_frames) == set(h.shoulder_bodies) == set(h.fsr_geometries) == {"left", "right"}
     for side in ("left", "right"):
         assert h.fsr_positions[side].shape == (4, 2)
     assert set(h.nominal_posture) == set(every)
     for jname, angle in h.nominal_posture.items():
         joint = plant.GetJointByName(jname, mi)
         assert joint.position_lower_limits()[0] <= angle <= joint.position_upper_limits()[0]
-    with pytest.raises(Exception):  # frozen dataclass
+    with pytest.raises(dataclasses.FrozenInstanceError):
         h.name = "other"
 
 

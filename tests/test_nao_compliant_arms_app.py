@@ -66,8 +66,10 @@ def test_bad_arguments(capsys):
 def test_scenario_file_text_overrides_and_unknown_keys(tmp_path, capsys):
     check_scenario_convention(NaoCompliantArmsScenario, "nao_compliant_arms_default.yaml", tmp_path, "push_force")
     overridden = load_scenario(
-        NaoCompliantArmsScenario, filename=SCENARIOS / "nao_compliant_arms_default.yaml",
-        text="cases: [b]\nlean: -0.2\nplant_config: {discrete_contact_approximation: lagged}")
+        NaoCompliantArmsScenario,
+        filename=SCENARIOS / "nao_compliant_arms_default.yaml",
+        text="cases: [b]\nlean: -0.2\nplant_config: {discrete_contact_approximation: lagged}",
+    )
     assert (overridden.cases, overridden.lean, overridden.force) == (["b"], -0.2, DEFAULT_FORCE)
     assert overridden.plant_config.discrete_contact_approximation == "lagged"
     assert nao_compliant_arms.main(["--scenario-text", "push_force: 2.0", "--no-replay", "--out", str(tmp_path)]) == 2

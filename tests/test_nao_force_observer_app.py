@@ -19,7 +19,8 @@ from systems.simulation.visualization import read_static_html
 def app_output(tmp_path_factory):
     out = tmp_path_factory.mktemp("nao_force_observer")
     code = nao_force_observer.main(
-        ["--out", str(out), "--headless", "--experiment", "3", "--time-scale", "0.5", "--seed", "2"])
+        ["--out", str(out), "--headless", "--experiment", "3", "--time-scale", "0.5", "--seed", "2"]
+    )
     assert code == 0
     return out / "nao_force_observer"
 
@@ -75,7 +76,7 @@ def test_bad_arguments_and_schedules(capsys):
     # vector evaluations of a profile agree.
     for number in (1, 2, 3):
         experiment = make_experiment(number)
-        for t0, t1 in experiment.windows:
+        for _t0, t1 in experiment.windows:
             times = np.linspace(t1 - 1.0, t1, 50)
             for push in experiment.pushes:
                 values = push.profile.value(times)
@@ -87,8 +88,10 @@ def test_bad_arguments_and_schedules(capsys):
 def test_scenario_file_text_overrides_and_unknown_keys(tmp_path):
     check_scenario_convention(NaoForceObserverScenario, "nao_force_observer_default.yaml", tmp_path, "load_kg")
     overridden = load_scenario(
-        NaoForceObserverScenario, filename=SCENARIOS / "nao_force_observer_default.yaml",
-        text="experiments: [2]\nramp: 0.1\nplant_config: {discrete_contact_approximation: lagged}")
+        NaoForceObserverScenario,
+        filename=SCENARIOS / "nao_force_observer_default.yaml",
+        text="experiments: [2]\nramp: 0.1\nplant_config: {discrete_contact_approximation: lagged}",
+    )
     assert (overridden.experiments, overridden.ramp, overridden.seed) == ([2], 0.1, 0)
     assert overridden.plant_config.discrete_contact_approximation == "lagged"
     assert overridden.plant_config.time_step == 1e-3

@@ -11,13 +11,11 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
-from diagrams.station.humanoid_station import add_humanoid_station
 from diagrams.observer.calibration import settle_standing_state
 from diagrams.observer.nao_force_observer import build_nao_force_observer_diagram, wide_stance
 from diagrams.observer.nao_sensing import OBSERVER_PERIOD
+from diagrams.station.humanoid_station import add_humanoid_station
 from models import add_ground, add_humanoid
-from systems.simulation.disturbances import Push
-from systems.simulation.ground_truth import VirtualForceTruth
 from systems.observer.force_observer import STANDING, LipForceObserver, transition_matrices
 from systems.observer.fsr_sensing import (
     FSR_NAMES,
@@ -27,6 +25,8 @@ from systems.observer.fsr_sensing import (
     ImuComAcceleration,
     SupportFootCom,
 )
+from systems.simulation.disturbances import Push
+from systems.simulation.ground_truth import VirtualForceTruth
 
 GRAVITY = 9.81
 
@@ -94,12 +94,17 @@ def test_fsr_readings_saturate_and_never_go_negative():
     def hook(builder, station):
         plant, humanoid = station.plant, station.humanoid
         out = {}
-        for name, kwargs in {"low_range": dict(saturation=5.0, noise_std=0.0),
-                             "noisy": dict(noise_std=20.0, seed=7)}.items():
+        for name, kwargs in {
+            "low_range": dict(saturation=5.0, noise_std=0.0),
+            "noisy": dict(noise_std=20.0, seed=7),
+        }.items():
             fsr = builder.AddSystem(FsrArray(plant, humanoid, **kwargs))
             builder.Connect(plant.get_contact_results_output_port(), fsr.GetInputPort("contact_results"))
-            out[name] = (fsr, LogVectorOutput(fsr.GetOutputPort("fsr_forces"), builder, 0.01),
-                         LogVectorOutput(fsr.GetOutputPort("true_fsr_forces"), builder, 0.01))
+            out[name] = (
+                fsr,
+                LogVectorOutput(fsr.GetOutputPort("fsr_forces"), builder, 0.01),
+                LogVectorOutput(fsr.GetOutputPort("true_fsr_forces"), builder, 0.01),
+            )
         return out
 
     _, systems, context = _station_with(hook)
@@ -241,8 +246,11 @@ def test_virtual_force_truth_follows_eq_11():
     d = np.array([0.06, -0.12, 0.0])
     F = np.array([0.0, 0.0, -11.0])
     wrench = np.concatenate((np.cross(p_WCm + d, F), F))
-    np.testing.assert_allclose(VirtualForceTruth.virtual_force(wrench, p_WCm, 0.0),
-                               [-d[0] * F[2] / 0.25, -d[1] * F[2] / 0.25, F[2]], rtol=1e-12)
+    np.testing.assert_allclose(
+        VirtualForceTruth.virtual_force(wrench, p_WCm, 0.0),
+        [-d[0] * F[2] / 0.25, -d[1] * F[2] / 0.25, F[2]],
+        rtol=1e-12,
+    )
 
 
 def test_statics_of_a_pushed_robot_match_the_virtual_force():
@@ -298,8 +306,12 @@ def _textbook_observer(c, a, p, fn, parameters=STANDING):
 
     out = []
     for k in range(len(fn)):
-        step(2, np.array([[1, 0, 0, 0, 0], [0, 0, 1, 0, 0], [0, 0, -M, 1, 0]], float), Rz,
-             np.array([c[k, 2], a[k, 2], fn[k] + M * g]))
+        step(
+            2,
+            np.array([[1, 0, 0, 0, 0], [0, 0, 1, 0, 0], [0, 0, -M, 1, 0]], float),
+            Rz,
+            np.array([c[k, 2], a[k, 2], fn[k] + M * g]),
+        )
         z, zdd, Fz = X[2][0], X[2][2], X[2][3]
         fn_hat = -M * g - M * zdd + Fz
         C = np.array([[1, 0, 0, 0, 0], [0, 0, 1, 0, 0], [1, 0, M * z / fn_hat, -z / fn_hat, 0]], float)

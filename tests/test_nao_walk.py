@@ -6,6 +6,7 @@ import json
 import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
+from scenario_checks import SCENARIOS, check_scenario_convention
 
 from apps import nao_walk
 from diagrams.locomotion.nao_walk import (
@@ -17,7 +18,6 @@ from diagrams.locomotion.nao_walk import (
 )
 from diagrams.scenarios import ScenarioError, load_scenario
 from systems.locomotion.walking_pattern import WalkingParameters
-from scenario_checks import SCENARIOS, check_scenario_convention
 
 
 @pytest.fixture(scope="module")
@@ -138,8 +138,11 @@ def test_scenario_file_text_and_unknown_keys(tmp_path):
     convention, ``tests/scenario_checks.py``); YAML text overrides nested fields; an unknown
     nested key is an error that names it."""
     check_scenario_convention(NaoWalkScenario, "nao_walk_default.yaml", tmp_path)
-    scenario = load_scenario(NaoWalkScenario, filename=SCENARIOS / "nao_walk_default.yaml",
-                             text="seed: 3\nwalking: {num_steps: 4}\nplant_config: {time_step: 0.002}")
+    scenario = load_scenario(
+        NaoWalkScenario,
+        filename=SCENARIOS / "nao_walk_default.yaml",
+        text="seed: 3\nwalking: {num_steps: 4}\nplant_config: {time_step: 0.002}",
+    )
     assert scenario.seed == 3 and scenario.walking.num_steps == 4 and scenario.plant_config.time_step == 0.002
     assert scenario.walking.step_length == WalkingParameters().step_length
     with pytest.raises(ScenarioError, match="walk_speed"):

@@ -17,7 +17,9 @@ import numpy as np
 import pytest
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.analysis import Simulator
+from scenario_checks import SCENARIOS, check_scenario_convention
 
+from diagrams.locomotion.nao_walk import walking_metrics
 from diagrams.observer.nao_walk_pulled import (
     CableSetup,
     NaoWalkPulledScenario,
@@ -25,12 +27,10 @@ from diagrams.observer.nao_walk_pulled import (
     observer_metrics,
 )
 from diagrams.scenarios import ScenarioError, load_scenario
-from systems.simulation.ground_truth import CableVirtualForceTruth
-from diagrams.locomotion.nao_walk import walking_metrics
 from models import add_humanoid, set_standing_state
-from systems.observer.fsr_sensing import CenterOfPressure, SupportFootCom
 from systems.locomotion.walking_pattern import WalkingParameters
-from scenario_checks import SCENARIOS, check_scenario_convention
+from systems.observer.fsr_sensing import CenterOfPressure, SupportFootCom
+from systems.simulation.ground_truth import CableVirtualForceTruth
 
 G = 9.81
 
@@ -65,8 +65,9 @@ def test_fixed_frame_measurements_match_kinematics(nao):
     for side in ("left", "right"):
         X = handles.sole_frames[side].CalcPoseInWorld(context)
         points += [X.multiply(np.array([px, py, 0.0])) - origin for px, py in handles.fsr_positions[side]]
-    np.testing.assert_allclose(cop.GetOutputPort("zmp").Eval(cop_ctx), forces @ np.array(points)[:, :2] / forces.sum(),
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        cop.GetOutputPort("zmp").Eval(cop_ctx), forces @ np.array(points)[:, :2] / forces.sum(), atol=1e-12
+    )
     cop.GetInputPort("fsr_forces").FixValue(cop_ctx, np.zeros(8))
     np.testing.assert_array_equal(cop.GetOutputPort("zmp").Eval(cop_ctx), np.zeros(2))
     with pytest.raises(ValueError, match="origin_W"):
@@ -90,8 +91,9 @@ def test_cable_virtual_force_follows_eq_11(nao):
     # 5 cm above the CoM: F_x counts (z_c + 0.05) / z_c times (tau_y = 0.05 F_x), F_y too.
     dut.GetInputPort("point_world").FixValue(ctx, com + [0.0, 0.0, 0.05])
     scale = (com[2] + 0.05) / com[2]
-    np.testing.assert_allclose(dut.GetOutputPort("virtual_force").Eval(ctx),
-                               [force[0] * scale, force[1] * scale, force[2]], atol=1e-12)
+    np.testing.assert_allclose(
+        dut.GetOutputPort("virtual_force").Eval(ctx), [force[0] * scale, force[1] * scale, force[2]], atol=1e-12
+    )
 
 
 def test_bad_cable_setups_are_refused():
@@ -101,19 +103,27 @@ def test_bad_cable_setups_are_refused():
         CableSetup(lateral_angle_deg=60.0)
     # A low pulley: the load would be lifted into it.
     with pytest.raises(ValueError, match="into the pulley"):
-        build_nao_walk_pulled_diagram(NaoWalkPulledScenario(
-            walking=WalkingParameters(num_steps=12), cable=CableSetup(pulley_height=0.3, tighten_distance=0.05),
-            noise=False))
+        build_nao_walk_pulled_diagram(
+            NaoWalkPulledScenario(
+                walking=WalkingParameters(num_steps=12),
+                cable=CableSetup(pulley_height=0.3, tighten_distance=0.05),
+                noise=False,
+            )
+        )
     with pytest.raises(ValueError, match="never tightens"):
-        build_nao_walk_pulled_diagram(NaoWalkPulledScenario(
-            walking=WalkingParameters(num_steps=4), cable=CableSetup(tighten_distance=0.5), noise=False))
+        build_nao_walk_pulled_diagram(
+            NaoWalkPulledScenario(
+                walking=WalkingParameters(num_steps=4), cable=CableSetup(tighten_distance=0.5), noise=False
+            )
+        )
 
 
 @pytest.fixture(scope="module")
 def pulled_walk():
     """The app's configuration (defaults), sensor noise on, seed 0, no replay."""
-    diagram, handles = build_nao_walk_pulled_diagram(NaoWalkPulledScenario(
-        walking=WalkingParameters(), cable=CableSetup(), noise=True, seed=0))
+    diagram, handles = build_nao_walk_pulled_diagram(
+        NaoWalkPulledScenario(walking=WalkingParameters(), cable=CableSetup(), noise=True, seed=0)
+    )
     simulator = Simulator(diagram)  # Build() refused any algebraic loop
     handles.set_initial_state(simulator.get_mutable_context())
     simulator.Initialize()
@@ -168,7 +178,11 @@ def test_app_short_walk_without_pull(tmp_path):
 
     from apps import nao_walk_pulled
 
-    assert nao_walk_pulled.main(["--out", str(tmp_path), "--headless", "--no-replay", "--steps", "2", "--no-pull",
-                                 "--no-noise"]) == 0
+    assert (
+        nao_walk_pulled.main(
+            ["--out", str(tmp_path), "--headless", "--no-replay", "--steps", "2", "--no-pull", "--no-noise"]
+        )
+        == 0
+    )
     m = json.loads((tmp_path / "nao_walk_pulled" / "metrics.json").read_text())
     assert m["walking"]["steps_planned"] == 2 and m["cable"] is None and m["scenario"]["pull"] is False

@@ -68,11 +68,15 @@ def _case_standing() -> None:
 
     for model in ("hrp4_like", "nao_like"):
         diagram, handles = build_standing_diagram(model, meshcat=_meshcat())
-        _simulate(diagram, lambda context: set_initial_state(diagram, context, handles))
+        _simulate(diagram, lambda context, d=diagram, h=handles: set_initial_state(d, context, h))
 
 
 def _case_residual_comparison() -> None:
-    from diagrams.residuals.residual_comparison import ResidualComparisonScenario, build_residual_comparison_diagram, set_initial_state
+    from diagrams.residuals.residual_comparison import (
+        ResidualComparisonScenario,
+        build_residual_comparison_diagram,
+        set_initial_state,
+    )
 
     diagram, handles = build_residual_comparison_diagram(ResidualComparisonScenario(), _meshcat())
     _simulate(diagram, lambda context: set_initial_state(diagram, context, handles))
@@ -122,8 +126,9 @@ def _case_nao_compliant_arms() -> None:
     from diagrams.observer.calibration import identified_motor_constants
     from diagrams.observer.nao_compliant_arms import build_nao_compliant_arms_diagram
 
-    diagram, handles = build_nao_compliant_arms_diagram(motor_constants=dict(identified_motor_constants()),
-                                                        meshcat=_meshcat())
+    diagram, handles = build_nao_compliant_arms_diagram(
+        motor_constants=dict(identified_motor_constants()), meshcat=_meshcat()
+    )
     _simulate(diagram, handles.set_initial_state)
 
 
@@ -133,8 +138,9 @@ def _case_force_guided_walking() -> None:
     from systems.observer.force_observer import WALKING
 
     # GuidanceProfile()'s 5 N episodes, TriggerParameters()'s threshold, the walking preset.
-    scenario = NaoForceGuidedWalkScenario(force=5.0, trigger=TriggerParameters(), preset="walking",
-                                          force_rate_variance=WALKING.force_rate_variance)
+    scenario = NaoForceGuidedWalkScenario(
+        force=5.0, trigger=TriggerParameters(), preset="walking", force_rate_variance=WALKING.force_rate_variance
+    )
     diagram, handles = build_force_guided_diagram(scenario, meshcat=_meshcat())
     _simulate(diagram, handles["station"].set_initial_state)
 
@@ -158,8 +164,8 @@ def _control_deprecated_binding() -> None:
     Simulator(ConstantVectorSource([1.0])).set_publish_every_time_step(False)
 
 
-CASES = {name[len("_case_"):]: f for name, f in list(globals().items()) if name.startswith("_case_")}
-CONTROLS = {name[len("_control_"):]: f for name, f in list(globals().items()) if name.startswith("_control_")}
+CASES = {name[len("_case_") :]: f for name, f in list(globals().items()) if name.startswith("_case_")}
+CONTROLS = {name[len("_control_") :]: f for name, f in list(globals().items()) if name.startswith("_control_")}
 
 
 def _run_in_this_process(name: str) -> dict:
@@ -206,8 +212,9 @@ _results: dict[str, dict] = {}
 
 def _start(name: str) -> subprocess.Popen:
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, (str(ROOT), os.environ.get("PYTHONPATH")))))
-    return subprocess.Popen([sys.executable, __file__, name], cwd=ROOT, env=env, text=True,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    return subprocess.Popen(
+        [sys.executable, __file__, name], cwd=ROOT, env=env, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
 
 
 def _result(name: str) -> dict:
@@ -226,9 +233,15 @@ def _result(name: str) -> dict:
                 process.kill()
                 out, err = process.communicate()
             lines = [line for line in out.splitlines() if line.startswith("{")]
-            _results[n] = json.loads(lines[-1]) if process.returncode == 0 and lines else {
-                "drake_deprecated": [], "deprecation_warning": None,
-                "error": f"child process exited with {process.returncode}:\n{err[-4000:]}"}
+            _results[n] = (
+                json.loads(lines[-1])
+                if process.returncode == 0 and lines
+                else {
+                    "drake_deprecated": [],
+                    "deprecation_warning": None,
+                    "error": f"child process exited with {process.returncode}:\n{err[-4000:]}",
+                }
+            )
     return _results[name]
 
 
@@ -249,7 +262,9 @@ def test_warning_channel_positive_control():
 def test_diagram_uses_no_deprecated_drake_feature(case):
     result = _result(case)
     assert result["error"] is None, f"building or stepping '{case}' failed:\n{result['error']}"
-    assert result["deprecation_warning"] is None, f"'{case}' raised a DrakeDeprecationWarning:\n{result['deprecation_warning']}"
+    assert result["deprecation_warning"] is None, (
+        f"'{case}' raised a DrakeDeprecationWarning:\n{result['deprecation_warning']}"
+    )
     assert not result["drake_deprecated"], f"'{case}' logged: {result['drake_deprecated']}"
 
 

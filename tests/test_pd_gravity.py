@@ -3,9 +3,8 @@
 import numpy as np
 import pytest
 from pydrake.math import RigidTransform, RollPitchYaw
-from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.math import SpatialVelocity
-from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
+from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
 from pydrake.multibody.tree import RevoluteJoint, SpatialInertia
 from pydrake.systems.framework import DiagramBuilder
 
@@ -24,8 +23,7 @@ def _small_ball(mass, p_BoBcm_B):
     return SpatialInertia.SolidSphereWithMass(mass, 0.01).Shift(-np.asarray(p_BoBcm_B))
 
 
-def _chain_plant(actuator_order, effort_limits=(np.inf, np.inf, np.inf), masses=(1.0, 2.0, 3.0),
-                 lever=0.3):
+def _chain_plant(actuator_order, effort_limits=(np.inf, np.inf, np.inf), masses=(1.0, 2.0, 3.0), lever=0.3):
     """Floating base + a chain of 3 links on revolute-y joints, CoM at `lever` along x.
 
     Actuators are added in `actuator_order` (indices of joints), so the actuation order
@@ -37,8 +35,7 @@ def _chain_plant(actuator_order, effort_limits=(np.inf, np.inf, np.inf), masses=
     joints = []
     for i, m in enumerate(masses):
         link = plant.AddRigidBody(f"link{i}", _small_ball(m, [lever, 0.0, 0.0]))
-        joint = plant.AddJoint(RevoluteJoint(f"j{i}", parent.body_frame(), link.body_frame(),
-                                             [0.0, 1.0, 0.0]))
+        joint = plant.AddJoint(RevoluteJoint(f"j{i}", parent.body_frame(), link.body_frame(), [0.0, 1.0, 0.0]))
         joints.append(joint)
         parent = link
     for i in actuator_order:
@@ -77,8 +74,7 @@ def test_single_link_hand_computed():
     plant = MultibodyPlant(0.0)
     base = plant.AddRigidBody("base", SpatialInertia.SolidBoxWithMass(5.0, 0.2, 0.2, 0.2))
     link = plant.AddRigidBody("link", _small_ball(m, [l, 0.0, 0.0]))
-    joint = plant.AddJoint(RevoluteJoint("j", base.body_frame(), link.body_frame(),
-                                         [0.0, 1.0, 0.0]))
+    joint = plant.AddJoint(RevoluteJoint("j", base.body_frame(), link.body_frame(), [0.0, 1.0, 0.0]))
     plant.AddJointActuator("a", joint, 100.0)
     plant.Finalize()
     kp, kd = 40.0, 3.0
@@ -88,8 +84,7 @@ def test_single_link_hand_computed():
     plant.SetFreeBodyPose(ctx_p, base, RigidTransform([0.1, 0.2, 1.0]))
     joint.set_angle(ctx_p, theta)
     joint.set_angular_rate(ctx_p, theta_dot)
-    plant.SetFreeBodySpatialVelocity(ctx_p, base,
-                                     SpatialVelocity([0.1, 0.0, 0.2], [0.3, 0.0, 0.0]))
+    plant.SetFreeBodySpatialVelocity(ctx_p, base, SpatialVelocity([0.1, 0.0, 0.2], [0.3, 0.0, 0.0]))
     x = plant.GetPositionsAndVelocities(ctx_p)
     ctx = _fixed_context(dut, [theta_d], x)
     u = dut.get_output_port(0).Eval(ctx)
@@ -143,8 +138,7 @@ def test_gravity_compensation_on_humanoid_matches_actuation_matrix():
     q = plant.GetPositions(ctx_p)
     q[7:] = rng.uniform(-0.3, 0.3, plant.num_positions() - 7)
     plant.SetPositions(ctx_p, q)
-    plant.SetFreeBodyPose(ctx_p, h.base_body, RigidTransform(RollPitchYaw(0.1, -0.2, 0.3),
-                                                              [0.0, 0.0, 0.8]))
+    plant.SetFreeBodyPose(ctx_p, h.base_body, RigidTransform(RollPitchYaw(0.1, -0.2, 0.3), [0.0, 0.0, 0.8]))
     x = plant.GetPositionsAndVelocities(ctx_p)
     q_joints = np.array([j.GetOnePosition(ctx_p) for j in joints_in_velocity_order(plant)])
     u = dut.get_output_port(0).Eval(_fixed_context(dut, q_joints, x))

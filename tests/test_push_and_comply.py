@@ -11,12 +11,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pydrake.multibody.plant import MultibodyPlantConfig
 
 from apps import push_and_comply
 from apps.push_and_comply import run_once
-from pydrake.multibody.plant import MultibodyPlantConfig
-from diagrams.scenarios import scenario_as_dict
 from diagrams.residuals.push_and_comply import PushAndComplyScenario, build_push_and_comply_diagram, load_scenario
+from diagrams.scenarios import scenario_as_dict
 from systems.simulation.visualization import read_static_html
 
 SCENARIOS = Path(push_and_comply.__file__).parent / "scenarios"
@@ -30,9 +30,13 @@ def test_scenario_files_load_into_the_dataclass(tmp_path):
     default = scenario_as_dict(PushAndComplyScenario())
     assert scenario_as_dict(load_scenario(None)) == default
     assert scenario_as_dict(load_scenario(SCENARIOS / "push_and_comply_default.yaml")) == default
-    overridden = load_scenario(SCENARIOS / "paper_5N.yaml", text="seed: 7\nplant_config: {discrete_contact_approximation: lagged}")
+    overridden = load_scenario(
+        SCENARIOS / "paper_5N.yaml", text="seed: 7\nplant_config: {discrete_contact_approximation: lagged}"
+    )
     assert (overridden.push_peak_force, overridden.seed) == (5.0, 7)
-    assert overridden.plant_config.discrete_contact_approximation == "lagged" and overridden.plant_config.time_step == 1e-3
+    assert (
+        overridden.plant_config.discrete_contact_approximation == "lagged" and overridden.plant_config.time_step == 1e-3
+    )
     paper = load_scenario(SCENARIOS / "paper_5N.yaml")
     assert paper.push_peak_force == 5.0 and paper.duration == 15.0  # other keys keep the defaults
     with pytest.raises(ValueError, match="does not exist"):
@@ -50,7 +54,14 @@ def test_scenario_files_load_into_the_dataclass(tmp_path):
     with pytest.raises(ValueError, match="unknown residual"):
         build_push_and_comply_diagram(PushAndComplyScenario(), "magic")
     with pytest.raises(ValueError, match="unknown contact approximation 'ode'"):
-        build_push_and_comply_diagram(PushAndComplyScenario(plant_config=MultibodyPlantConfig(time_step=1e-3, contact_model="point", discrete_contact_approximation="ode")), "internal")
+        build_push_and_comply_diagram(
+            PushAndComplyScenario(
+                plant_config=MultibodyPlantConfig(
+                    time_step=1e-3, contact_model="point", discrete_contact_approximation="ode"
+                )
+            ),
+            "internal",
+        )
 
 
 @pytest.fixture(scope="module")
@@ -78,7 +89,14 @@ def test_the_scenario_uses_sap_and_deprecated_tamsi_is_refused():
     asking for TAMSI gets a message that says why, not a Drake deprecation warning."""
     assert PushAndComplyScenario().plant_config.discrete_contact_approximation == "sap"
     with pytest.raises(ValueError, match="deprecated the TAMSI solver"):
-        build_push_and_comply_diagram(PushAndComplyScenario(plant_config=MultibodyPlantConfig(time_step=1e-3, contact_model="point", discrete_contact_approximation="tamsi")), "internal")
+        build_push_and_comply_diagram(
+            PushAndComplyScenario(
+                plant_config=MultibodyPlantConfig(
+                    time_step=1e-3, contact_model="point", discrete_contact_approximation="tamsi"
+                )
+            ),
+            "internal",
+        )
 
 
 def test_residual_follows_the_true_effort_in_the_loop(short_runs):
@@ -93,7 +111,9 @@ def test_residual_follows_the_true_effort_in_the_loop(short_runs):
 def app_output(tmp_path_factory):
     out = tmp_path_factory.mktemp("push_and_comply")
     scenario = out / "short.yaml"
-    scenario.write_text("".join(f"{k}: {v}\n" for k, v in {**SHORT, "duration": 1.5, "push_end": 1.4, "push_peak_time": 0.9}.items()))
+    scenario.write_text(
+        "".join(f"{k}: {v}\n" for k, v in {**SHORT, "duration": 1.5, "push_end": 1.4, "push_peak_time": 0.9}.items())
+    )
     assert push_and_comply.main(["--headless", "--out", str(out), "--scenario", str(scenario), "--seed", "4"]) == 0
     return out / "push_and_comply"
 
@@ -153,10 +173,21 @@ def test_replay_renders_the_robot_in_headless_chromium(app_output, tmp_path):
     log_tail = ""
     for attempt in range(3):
         command = [
-            chromium, "--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic", "--disable-dev-shm-usage",
-            "--disable-background-networking", "--disable-component-update", "--no-first-run", "--disable-sync",
-            "--window-size=1280,800", "--virtual-time-budget=1000", f"--user-data-dir={tmp_path / f'profile{attempt}'}",
-            f"--screenshot={screenshot}", (app_output / "internal.html").resolve().as_uri(),
+            chromium,
+            "--headless=new",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-quic",
+            "--disable-dev-shm-usage",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--no-first-run",
+            "--disable-sync",
+            "--window-size=1280,800",
+            "--virtual-time-budget=1000",
+            f"--user-data-dir={tmp_path / f'profile{attempt}'}",
+            f"--screenshot={screenshot}",
+            (app_output / "internal.html").resolve().as_uri(),
         ]
         log = tmp_path / f"chromium{attempt}.log"
         with log.open("w") as stderr:

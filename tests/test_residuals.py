@@ -14,8 +14,8 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource, LogVectorOutput
 
 from models import MODEL_NAMES, add_humanoid, set_standing_state
-from systems.simulation.pd_gravity import PdGravityController
 from systems.residuals.momentum_residuals import ClassicalResidual, ExternalResidual, InternalResidual, ResidualModel
+from systems.simulation.pd_gravity import PdGravityController
 
 T = 1e-3
 
@@ -86,14 +86,20 @@ def _run(plant, pushes, residuals, duration, *, torque=None, initial_state=None)
         if residual.HasInputPort("measured_torque"):
             n = residual.GetInputPort("measured_torque").size()
             tau = np.zeros(n) if torque is None else torque
-            builder.Connect(builder.AddSystem(ConstantVectorSource(tau)).get_output_port(), residual.GetInputPort("measured_torque"))
+            builder.Connect(
+                builder.AddSystem(ConstantVectorSource(tau)).get_output_port(), residual.GetInputPort("measured_torque")
+            )
         port = residual.GetOutputPort("residual" if residual.HasOutputPort("residual") else "external_wrench_base")
         logs[name] = LogVectorOutput(port, builder, publish_period=T)
         if residual.HasOutputPort("external_wrench_world"):
-            logs[name + "_world"] = LogVectorOutput(residual.GetOutputPort("external_wrench_world"), builder, publish_period=T)
+            logs[name + "_world"] = LogVectorOutput(
+                residual.GetOutputPort("external_wrench_world"), builder, publish_period=T
+            )
     logs["plant_state"] = LogVectorOutput(plant.get_state_output_port(), builder, publish_period=T)
     if torque is not None and plant.num_actuated_dofs() > 0:
-        builder.Connect(builder.AddSystem(ConstantVectorSource(torque)).get_output_port(), plant.get_actuation_input_port())
+        builder.Connect(
+            builder.AddSystem(ConstantVectorSource(torque)).get_output_port(), plant.get_actuation_input_port()
+        )
     diagram = builder.Build()
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
@@ -236,7 +242,9 @@ def test_internal_and_external_residuals_on_a_humanoid_in_zero_gravity(name):
     builder = DiagramBuilder()
     builder.AddSystem(plant)
     builder.Connect(
-        builder.AddSystem(ConstantValueSource(AbstractValue.Make([_push(plant, shoulder, p_B, f_W)]))).get_output_port(),
+        builder.AddSystem(
+            ConstantValueSource(AbstractValue.Make([_push(plant, shoulder, p_B, f_W)]))
+        ).get_output_port(),
         plant.get_applied_spatial_force_input_port(),
     )
     n = plant.num_velocities() - 6
@@ -253,7 +261,7 @@ def test_internal_and_external_residuals_on_a_humanoid_in_zero_gravity(name):
     torque = builder.AddSystem(_ActuationToJointTorque(plant))
     builder.Connect(plant.get_net_actuation_output_port(), torque.get_input_port())
     loggers = {}
-    for key, residual in residuals.items():
+    for residual in residuals.values():
         builder.AddSystem(residual)
         builder.Connect(plant.get_state_output_port(), residual.GetInputPort("state"))
         if residual.HasInputPort("measured_torque"):
@@ -271,9 +279,15 @@ def test_internal_and_external_residuals_on_a_humanoid_in_zero_gravity(name):
     assert np.linalg.norm(internal - true_fb) < 0.03 * np.linalg.norm(true_fb)
     legs = [model.dynamics.topology.joints.index(plant.GetJointByName(j)) for j in handles.joint_groups["legs"]]
     assert np.linalg.norm(true_fb[legs]) > 0.2 * np.linalg.norm(true_fb)  # the legs feel it
-    classical = residuals["classical"].GetOutputPort("residual").Eval(residuals["classical"].GetMyContextFromRoot(context))
+    classical = (
+        residuals["classical"].GetOutputPort("residual").Eval(residuals["classical"].GetMyContextFromRoot(context))
+    )
     assert np.abs(classical[6:][legs]).max() < 1e-3 * np.linalg.norm(f_W)  # the classical one does not
-    external = residuals["external"].GetOutputPort("external_wrench_world").Eval(residuals["external"].GetMyContextFromRoot(context))
+    external = (
+        residuals["external"]
+        .GetOutputPort("external_wrench_world")
+        .Eval(residuals["external"].GetMyContextFromRoot(context))
+    )
     assert np.linalg.norm(external[3:] - f_W) < 0.02 * np.linalg.norm(f_W)
     del loggers, n
 
@@ -312,7 +326,9 @@ def test_bad_inputs_give_clear_errors():
         InternalResidual(plant, 10.0, model=ResidualModel(other))
     with pytest.raises(ValueError, match="no floating base"):
         fixed = MultibodyPlant(T)
-        fixed.WeldFrames(fixed.world_frame(), fixed.AddRigidBody("b", SpatialInertia.SolidBoxWithMass(1, 1, 1, 1)).body_frame())
+        fixed.WeldFrames(
+            fixed.world_frame(), fixed.AddRigidBody("b", SpatialInertia.SolidBoxWithMass(1, 1, 1, 1)).body_frame()
+        )
         fixed.Finalize()
         ExternalResidual(fixed, 10.0)
 
@@ -368,9 +384,16 @@ def test_classical_residual_on_a_fixed_base_arm():
     plant = MultibodyPlant(time_step=0.0)
     upper = plant.AddRigidBody("upper", SpatialInertia.SolidCylinderWithMass(2.0, 0.04, 0.4, [0, 0, 1]))
     lower = plant.AddRigidBody("lower", SpatialInertia.SolidCylinderWithMass(1.0, 0.03, 0.3, [0, 0, 1]))
-    plant.AddJoint(RevoluteJoint("shoulder", plant.world_frame(), plant.AddFrame(_offset("u_top", upper, [0, 0, 0.2])), [0, 1, 0]))
     plant.AddJoint(
-        RevoluteJoint("elbow", plant.AddFrame(_offset("u_bottom", upper, [0, 0, -0.2])), plant.AddFrame(_offset("l_top", lower, [0, 0, 0.15])), [0, 1, 0])
+        RevoluteJoint("shoulder", plant.world_frame(), plant.AddFrame(_offset("u_top", upper, [0, 0, 0.2])), [0, 1, 0])
+    )
+    plant.AddJoint(
+        RevoluteJoint(
+            "elbow",
+            plant.AddFrame(_offset("u_bottom", upper, [0, 0, -0.2])),
+            plant.AddFrame(_offset("l_top", lower, [0, 0, 0.15])),
+            [0, 1, 0],
+        )
     )
     plant.Finalize()
     tip = np.array([0.0, 0.0, -0.15])

@@ -25,9 +25,9 @@ from pydrake.systems.primitives import ConstantVectorSource
 
 from diagrams.station.standing import default_gains
 from models import add_ground, add_humanoid, set_standing_state
+from systems.simulation import sensors as sensor_defaults
 from systems.simulation.noise import BLOCK_SIZE, NoisyVector, SampledNoise
 from systems.simulation.pd_gravity import PdGravityController, joint_vector_from_names
-from systems.simulation import sensors as sensor_defaults
 from systems.simulation.sensors import (
     BaseStateEstimator,
     FootForceTorqueSensors,
@@ -64,15 +64,14 @@ def _branched_plant(time_step=0.0):
     a = plant.AddRigidBody("a", _box(1.0))
     b = plant.AddRigidBody("b", _box(2.0))
     c = plant.AddRigidBody("c", _box(3.0))
-    sole = plant.AddRigidBody(
-        "sole", SpatialInertia.SolidSphereWithMass(0.7, 0.02).Shift([-0.01, 0.02, -0.03]))
+    sole = plant.AddRigidBody("sole", SpatialInertia.SolidSphereWithMass(0.7, 0.02).Shift([-0.01, 0.02, -0.03]))
     plant.AddJoint(PrismaticJoint("jb", a.body_frame(), b.body_frame(), [1.0, 0.0, 0.0]))
     ja = plant.AddJoint(RevoluteJoint("ja", base.body_frame(), a.body_frame(), [0.0, 1.0, 0.0]))
     jc = plant.AddJoint(RevoluteJoint("jc", base.body_frame(), c.body_frame(), [1.0, 0.0, 0.0]))
-    S = plant.AddFrame(FixedOffsetFrame(
-        "S", sole.body_frame(), RigidTransform(RollPitchYaw(0.3, -0.2, 0.5), [0.05, -0.02, 0.04])))
-    plant.AddJoint(WeldJoint("ft", c.body_frame(), S,
-                             RigidTransform(RollPitchYaw(0.1, 0.0, 0.0), [0.0, 0.0, -0.2])))
+    S = plant.AddFrame(
+        FixedOffsetFrame("S", sole.body_frame(), RigidTransform(RollPitchYaw(0.3, -0.2, 0.5), [0.05, -0.02, 0.04]))
+    )
+    plant.AddJoint(WeldJoint("ft", c.body_frame(), S, RigidTransform(RollPitchYaw(0.1, 0.0, 0.0), [0.0, 0.0, -0.2])))
     plant.AddJointActuator("ac", jc)
     plant.AddJointActuator("aa", ja)
     plant.Finalize()
@@ -262,8 +261,7 @@ def test_joint_encoders_noise_free_equal_truth_in_velocity_order():
     pctx = _random_branched_state(plant, seed=1)
     dut = JointEncoders(plant, position_noise_std=0.0, velocity_noise_std=0.0)
     assert [dut.get_input_port(i).get_name() for i in range(dut.num_input_ports())] == ["state"]
-    assert [dut.get_output_port(i).get_name() for i in range(dut.num_output_ports())] == [
-        "position", "velocity"]
+    assert [dut.get_output_port(i).get_name() for i in range(dut.num_output_ports())] == ["position", "velocity"]
     ctx = dut.CreateDefaultContext()
     dut.GetInputPort("state").FixValue(ctx, plant.GetPositionsAndVelocities(pctx))
     ctx.SetTime(0.777)
@@ -278,10 +276,10 @@ def test_joint_encoders_noise_statistics(hrp4_plant):
     ctx = dut.CreateDefaultContext()
     pctx = plant.CreateDefaultContext()
     x = plant.GetPositionsAndVelocities(pctx)
-    x[plant.num_positions():] = np.linspace(-1.0, 1.0, plant.num_velocities())
+    x[plant.num_positions() :] = np.linspace(-1.0, 1.0, plant.num_velocities())
     dut.GetInputPort("state").FixValue(ctx, x)
     nq = plant.num_positions()
-    q_true, v_true = x[7:nq], x[nq + 6:]
+    q_true, v_true = x[7:nq], x[nq + 6 :]
     eq, ev = [], []
     for t in _stats_times(700):  # 700 x 34 joints = 23800 samples each
         ctx.SetTime(t)
@@ -344,18 +342,19 @@ def _weld_test_plant():
     Continuous plant, no degrees of freedom: everything is static."""
     plant = MultibodyPlant(0.0)
     ankle = plant.AddRigidBody("ankle", _box(1.0))
-    sole = plant.AddRigidBody("sole", SpatialInertia.SolidBoxWithMass(2.0, 0.2, 0.1, 0.02).Shift(
-        [-0.03, 0.01, 0.02]))
+    sole = plant.AddRigidBody("sole", SpatialInertia.SolidBoxWithMass(2.0, 0.2, 0.1, 0.02).Shift([-0.03, 0.01, 0.02]))
     toe = plant.AddRigidBody("toe", SpatialInertia.SolidSphereWithMass(0.5, 0.01))
-    plant.WeldFrames(plant.world_frame(), ankle.body_frame(),
-                     RigidTransform(RollPitchYaw(0.2, -0.4, 0.9), [0.3, -0.1, 0.8]))
-    S = plant.AddFrame(FixedOffsetFrame(
-        "S", sole.body_frame(), RigidTransform(RollPitchYaw(-0.5, 0.3, 1.1), [0.04, 0.06, -0.05])))
-    F = plant.AddFrame(FixedOffsetFrame(
-        "F", ankle.body_frame(), RigidTransform(RollPitchYaw(0.0, 0.7, 0.0), [0.0, 0.02, -0.1])))
+    plant.WeldFrames(
+        plant.world_frame(), ankle.body_frame(), RigidTransform(RollPitchYaw(0.2, -0.4, 0.9), [0.3, -0.1, 0.8])
+    )
+    S = plant.AddFrame(
+        FixedOffsetFrame("S", sole.body_frame(), RigidTransform(RollPitchYaw(-0.5, 0.3, 1.1), [0.04, 0.06, -0.05]))
+    )
+    F = plant.AddFrame(
+        FixedOffsetFrame("F", ankle.body_frame(), RigidTransform(RollPitchYaw(0.0, 0.7, 0.0), [0.0, 0.02, -0.1]))
+    )
     ft = plant.AddJoint(WeldJoint("ft", F, S, RigidTransform(RollPitchYaw(0.3, 0.0, -0.2), [0.01, 0, 0])))
-    plant.AddJoint(WeldJoint("toe_weld", sole.body_frame(), toe.body_frame(),
-                             RigidTransform([0.12, 0.0, 0.0])))
+    plant.AddJoint(WeldJoint("toe_weld", sole.body_frame(), toe.body_frame(), RigidTransform([0.12, 0.0, 0.0])))
     plant.Finalize()
     return plant, ft, sole, toe
 
@@ -399,15 +398,14 @@ def test_reaction_force_convention_and_ft_wrench_static():
     ctx = dut.CreateDefaultContext()
     dut.GetInputPort("reaction_forces").FixValue(ctx, reactions)
     dut.GetInputPort("state").FixValue(ctx, plant.GetPositionsAndVelocities(pctx))
-    np.testing.assert_allclose(dut.GetOutputPort("wrenches").Eval(ctx),
-                               np.concatenate([M_applied, f_W]), atol=1e-10)
-    raw = FootForceTorqueSensors(plant, [ft], force_noise_std=0.0, moment_noise_std=0.0,
-                                 compensate_sole_weight=False)
+    np.testing.assert_allclose(dut.GetOutputPort("wrenches").Eval(ctx), np.concatenate([M_applied, f_W]), atol=1e-10)
+    raw = FootForceTorqueSensors(plant, [ft], force_noise_std=0.0, moment_noise_std=0.0, compensate_sole_weight=False)
     rctx = raw.CreateDefaultContext()
     raw.GetInputPort("reaction_forces").FixValue(rctx, reactions)
     raw.GetInputPort("state").FixValue(rctx, plant.GetPositionsAndVelocities(pctx))
-    np.testing.assert_allclose(raw.GetOutputPort("wrenches").Eval(rctx),
-                               np.concatenate([M_applied + M_gravity, f_W + F_gravity]), atol=1e-10)
+    np.testing.assert_allclose(
+        raw.GetOutputPort("wrenches").Eval(rctx), np.concatenate([M_applied + M_gravity, f_W + F_gravity]), atol=1e-10
+    )
 
 
 def test_ft_wrench_dynamic_equals_applied_minus_sole_inertia():
@@ -415,9 +413,10 @@ def test_ft_wrench_dynamic_equals_applied_minus_sole_inertia():
     reads the applied wrench minus the sole's rate of momentum change (about So)."""
     plant = MultibodyPlant(0.0)
     ankle = plant.AddRigidBody("ankle", _box(3.0))
-    sole = plant.AddRigidBody("sole", SpatialInertia.SolidBoxWithMass(1.5, 0.2, 0.1, 0.03).Shift(
-        [0.02, -0.01, 0.015]))
-    S = plant.AddFrame(FixedOffsetFrame("S", sole.body_frame(), RigidTransform(RollPitchYaw(0.2, 0.1, -0.3), [0.0, 0.01, 0.03])))
+    sole = plant.AddRigidBody("sole", SpatialInertia.SolidBoxWithMass(1.5, 0.2, 0.1, 0.03).Shift([0.02, -0.01, 0.015]))
+    S = plant.AddFrame(
+        FixedOffsetFrame("S", sole.body_frame(), RigidTransform(RollPitchYaw(0.2, 0.1, -0.3), [0.0, 0.01, 0.03]))
+    )
     ft = plant.AddJoint(WeldJoint("ft", ankle.body_frame(), S, RigidTransform([0.0, 0.0, -0.15])))
     plant.Finalize()
     pctx = plant.CreateDefaultContext()
@@ -489,8 +488,12 @@ def test_ft_noise_statistics_and_validation():
     bad = list(reactions)
     bad[int(ft.index())] = SpatialForce([0.0, np.nan, 0.0], [0.0, 0.0, 0.0])
     dut.GetInputPort("reaction_forces").FixValue(ctx, bad)
-    with pytest.raises(ValueError, match=re.escape(
-            f"FootForceTorqueSensors: input 'reaction_forces' has NaN or inf at indices [{int(ft.index())}]")):
+    with pytest.raises(
+        ValueError,
+        match=re.escape(
+            f"FootForceTorqueSensors: input 'reaction_forces' has NaN or inf at indices [{int(ft.index())}]"
+        ),
+    ):
         dut.GetOutputPort("wrenches").Eval(ctx)
 
 
@@ -508,8 +511,13 @@ def test_base_state_estimator_noise_free_and_statistics():
     truth_pose = np.concatenate([quat, free.get_translation(pctx)])
     truth_vel = np.concatenate([free.get_angular_velocity(pctx), free.get_translational_velocity(pctx)])
 
-    quiet = BaseStateEstimator(plant, orientation_noise_std=0.0, position_noise_std=0.0,
-                               angular_velocity_noise_std=0.0, linear_velocity_noise_std=0.0)
+    quiet = BaseStateEstimator(
+        plant,
+        orientation_noise_std=0.0,
+        position_noise_std=0.0,
+        angular_velocity_noise_std=0.0,
+        linear_velocity_noise_std=0.0,
+    )
     ctx = quiet.CreateDefaultContext()
     quiet.GetInputPort("state").FixValue(ctx, x)
     ctx.SetTime(0.5)
@@ -527,9 +535,13 @@ def test_base_state_estimator_noise_free_and_statistics():
         assert abs(np.linalg.norm(pose[:4]) - 1.0) < 1e-12
         # Rotation error in the base frame: R_true^T R_noisy = exp([phi]x), small.
         w, qx, qy, qz = pose[:4]
-        R = np.array([[1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - w * qz), 2 * (qx * qz + w * qy)],
-                      [2 * (qx * qy + w * qz), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - w * qx)],
-                      [2 * (qx * qz - w * qy), 2 * (qy * qz + w * qx), 1 - 2 * (qx * qx + qy * qy)]])
+        R = np.array(
+            [
+                [1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - w * qz), 2 * (qx * qz + w * qy)],
+                [2 * (qx * qy + w * qz), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - w * qx)],
+                [2 * (qx * qz - w * qy), 2 * (qy * qz + w * qx), 1 - 2 * (qx * qx + qy * qy)],
+            ]
+        )
         E = R_true.T @ R
         phis.append(0.5 * np.array([E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]]))
         dps.append(pose[4:] - truth_pose[4:])
@@ -554,9 +566,11 @@ def test_assembler_round_trip_on_branched_plant():
     ctx = dut.CreateDefaultContext()
     q, v = _joint_truth(plant, pctx)
     dut.GetInputPort("base_pose").FixValue(
-        ctx, np.concatenate([free.get_quaternion(pctx).wxyz(), free.get_translation(pctx)]))
+        ctx, np.concatenate([free.get_quaternion(pctx).wxyz(), free.get_translation(pctx)])
+    )
     dut.GetInputPort("base_velocity").FixValue(
-        ctx, np.concatenate([free.get_angular_velocity(pctx), free.get_translational_velocity(pctx)]))
+        ctx, np.concatenate([free.get_angular_velocity(pctx), free.get_translational_velocity(pctx)])
+    )
     dut.GetInputPort("joint_position").FixValue(ctx, q)
     dut.GetInputPort("joint_velocity").FixValue(ctx, v)
     np.testing.assert_array_equal(dut.GetOutputPort("state").Eval(ctx), x)
@@ -566,8 +580,9 @@ def test_assembler_round_trip_on_branched_plant():
     enc.GetInputPort("state").FixValue(ectx, x)
     np.testing.assert_array_equal(enc.GetOutputPort("position").Eval(ectx), q)
     dut.GetInputPort("joint_velocity").FixValue(ctx, [np.inf, 0.0, 0.0])
-    with pytest.raises(ValueError, match=re.escape(
-            "SensedStateAssembler: input 'joint_velocity' has NaN or inf at indices [0]")):
+    with pytest.raises(
+        ValueError, match=re.escape("SensedStateAssembler: input 'joint_velocity' has NaN or inf at indices [0]")
+    ):
         dut.GetOutputPort("state").Eval(ctx)
 
 
@@ -579,14 +594,14 @@ def test_nan_inputs_and_constructor_errors():
         dut = cls(plant)
         ctx = dut.CreateDefaultContext()
         dut.GetInputPort("state").FixValue(ctx, x)
-        with pytest.raises(ValueError, match=re.escape(
-                f"{cls.__name__}: input 'state' has NaN or inf at indices [9]")):
+        with pytest.raises(ValueError, match=re.escape(f"{cls.__name__}: input 'state' has NaN or inf at indices [9]")):
             dut.get_output_port(0).Eval(ctx)
     torque = MotorTorqueSensor(plant)
     ctx = torque.CreateDefaultContext()
     torque.GetInputPort("actuation").FixValue(ctx, [0.0, np.nan])
-    with pytest.raises(ValueError, match=re.escape(
-            "MotorTorqueSensor: input 'actuation' has NaN or inf at indices [1]")):
+    with pytest.raises(
+        ValueError, match=re.escape("MotorTorqueSensor: input 'actuation' has NaN or inf at indices [1]")
+    ):
         torque.GetOutputPort("measured_torque").Eval(ctx)
 
     unfinalized = MultibodyPlant(0.0)
@@ -624,8 +639,7 @@ def test_nan_inputs_and_constructor_errors():
 def hrp4_standing():
     """hrp4_like standing 1.5 s under PD + gravity, sensors without noise (add_sensors)."""
     builder = DiagramBuilder()
-    config = MultibodyPlantConfig(time_step=1e-3, discrete_contact_approximation="sap",
-                                  contact_model="point")
+    config = MultibodyPlantConfig(time_step=1e-3, discrete_contact_approximation="sap", contact_model="point")
     plant, scene_graph = AddMultibodyPlant(config, builder)
     humanoid = add_humanoid(plant, "hrp4_like", scene_graph=scene_graph)
     add_ground(plant)
@@ -643,8 +657,15 @@ def hrp4_standing():
     set_standing_state(plant, plant.GetMyMutableContextFromRoot(context), humanoid)
     simulator = Simulator(diagram, context)
     simulator.AdvanceTo(1.5)
-    return dict(diagram=diagram, context=context, plant=plant, humanoid=humanoid,
-                controller=controller, sensors=sensors, noisy=noisy)
+    return dict(
+        diagram=diagram,
+        context=context,
+        plant=plant,
+        humanoid=humanoid,
+        controller=controller,
+        sensors=sensors,
+        noisy=noisy,
+    )
 
 
 def _eval(port, system, context):
@@ -684,10 +705,12 @@ def test_standing_ft_forces_sum_to_weight_and_match_contacts(hrp4_standing):
             moment += np.cross(info.contact_point() - p_WSo, f)
         assert count == 4
         np.testing.assert_allclose(wrench[3:], force, rtol=0, atol=0.01 * np.linalg.norm(force))
-        np.testing.assert_allclose(wrench[:3], moment, rtol=0,
-                                   atol=0.01 * max(np.linalg.norm(moment), 0.01 * np.linalg.norm(force)))
+        np.testing.assert_allclose(
+            wrench[:3], moment, rtol=0, atol=0.01 * max(np.linalg.norm(moment), 0.01 * np.linalg.norm(force))
+        )
     assert tuple(f.name() for f in sensors.ft_frames) == tuple(
-        humanoid.ft_sensor_frames[side].name() for side in ("left", "right"))
+        humanoid.ft_sensor_frames[side].name() for side in ("left", "right")
+    )
 
 
 def test_standing_imu_at_rest(hrp4_standing):
@@ -730,14 +753,13 @@ def test_standing_noisy_sensors_differ_by_noise_only(hrp4_standing):
     context, quiet, noisy = s["context"], s["sensors"], s["noisy"]
     assert len(set(noisy.seeds.values())) == 5
     assert set(noisy.seeds.values()).isdisjoint(quiet.seeds.values())
-    d_state = (_eval(noisy.state, noisy.assembler, context)
-               - _eval(quiet.state, quiet.assembler, context))
+    d_state = _eval(noisy.state, noisy.assembler, context) - _eval(quiet.state, quiet.assembler, context)
     assert 0 < np.abs(d_state).max() < 0.02
-    d_ft = (_eval(noisy.ft_wrenches, noisy.ft_sensors, context)
-            - _eval(quiet.ft_wrenches, quiet.ft_sensors, context))
+    d_ft = _eval(noisy.ft_wrenches, noisy.ft_sensors, context) - _eval(quiet.ft_wrenches, quiet.ft_sensors, context)
     assert 0 < np.abs(d_ft).max() < 5 * 0.5
-    d_acc = (_eval(noisy.imu.linear_acceleration, noisy.imu.accel_noise, context)
-             - _eval(quiet.imu.linear_acceleration, quiet.imu.accel_noise, context))
+    d_acc = _eval(noisy.imu.linear_acceleration, noisy.imu.accel_noise, context) - _eval(
+        quiet.imu.linear_acceleration, quiet.imu.accel_noise, context
+    )
     assert 0 < np.abs(d_acc).max() < 5 * 0.02
 
 

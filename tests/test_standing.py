@@ -31,8 +31,7 @@ def test_stands_still_with_feet_flat(model_name):
     m = standing_metrics(handles, context, settle_time=SETTLE)
     assert not m.fell
     assert m.base_drift_m < 0.01, f"base moved {100 * m.base_drift_m:.3f} cm after {SETTLE} s"
-    assert m.base_drift_rad < np.radians(1.0), (
-        f"base turned {np.degrees(m.base_drift_rad):.3f} deg after {SETTLE} s")
+    assert m.base_drift_rad < np.radians(1.0), f"base turned {np.degrees(m.base_drift_rad):.3f} deg after {SETTLE} s"
     for side in ("left", "right"):
         assert m.sole_tilt_rad[side] < np.radians(1.0), side
         # Point-contact penetration under load stays well below 1 mm.
@@ -49,10 +48,12 @@ def test_stands_still_with_feet_flat(model_name):
     # The logger recorded the whole run, and the joints hold the nominal posture.
     log = handles.state_logger.FindLog(context)
     assert log.sample_times()[-1] == pytest.approx(DURATION, abs=0.011)
-    q_joints = np.array([
-        plant.GetJointByName(j, handles.humanoid.model_instance).get_angle(
-            plant.GetMyContextFromRoot(context))
-        for j in handles.humanoid.nominal_posture])
+    q_joints = np.array(
+        [
+            plant.GetJointByName(j, handles.humanoid.model_instance).get_angle(plant.GetMyContextFromRoot(context))
+            for j in handles.humanoid.nominal_posture
+        ]
+    )
     q_nominal = np.array(list(handles.humanoid.nominal_posture.values()))
     assert np.max(np.abs(q_joints - q_nominal)) < np.radians(3.0)
 

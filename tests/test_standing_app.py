@@ -12,8 +12,7 @@ from diagrams.station.standing import StandingScenario, build_standing_diagram
 
 
 def test_stand_app_runs_and_reports(tmp_path, capsys):
-    status = stand.main(["--model", "all", "--duration", "1", "--no-meshcat",
-                         "--out", str(tmp_path)])
+    status = stand.main(["--model", "all", "--duration", "1", "--no-meshcat", "--out", str(tmp_path)])
     out = capsys.readouterr().out
     assert status == 0
     assert "standing simulation of the humanoids" in out
@@ -36,20 +35,34 @@ def test_stand_app_rejects_bad_arguments(tmp_path):
 
 def test_scenario_files_load_into_the_dataclass(tmp_path):
     check_scenario_convention(StandingScenario, "standing_default.yaml", tmp_path, "model")
-    scenario = load_scenario(StandingScenario, filename=SCENARIOS / "standing_default.yaml",
-                             text="models: [nao_like]\nplant_config: {discrete_contact_approximation: lagged}")
+    scenario = load_scenario(
+        StandingScenario,
+        filename=SCENARIOS / "standing_default.yaml",
+        text="models: [nao_like]\nplant_config: {discrete_contact_approximation: lagged}",
+    )
     assert scenario.models == ["nao_like"] and scenario.duration == 10.0  # other keys keep the defaults
     assert scenario.plant_config.discrete_contact_approximation == "lagged"
     with pytest.raises(ValueError, match="deprecated the TAMSI solver"):
-        build_standing_diagram("nao_like", plant_config=MultibodyPlantConfig(
-            time_step=1e-3, contact_model="point", discrete_contact_approximation="tamsi"))
+        build_standing_diagram(
+            "nao_like",
+            plant_config=MultibodyPlantConfig(
+                time_step=1e-3, contact_model="point", discrete_contact_approximation="tamsi"
+            ),
+        )
 
 
 def test_stand_app_reads_scenario_file_and_text(tmp_path, capsys):
     scenario = tmp_path / "short.yaml"
     scenario.write_text("models: [hrp4_like]\nduration: 0.3\n")
-    args = ["--scenario", str(scenario), "--scenario-text", "models: [nao_like]", "--no-meshcat",
-            "--out", str(tmp_path)]
+    args = [
+        "--scenario",
+        str(scenario),
+        "--scenario-text",
+        "models: [nao_like]",
+        "--no-meshcat",
+        "--out",
+        str(tmp_path),
+    ]
     assert stand.main(args) == 0
     assert not (tmp_path / "standing" / "hrp4_like.json").exists()
     row = json.loads((tmp_path / "standing" / "nao_like.json").read_text())

@@ -46,8 +46,9 @@ def _random_state(plant, handles, rng):
     for name in handles.joint_names():
         joint = plant.GetJointByName(name)
         joint.set_angle(context, rng.uniform(-0.5, 0.5))
-    plant.SetFreeBodyPose(context, handles.base_body,
-                          RigidTransform(RollPitchYaw(rng.uniform(-0.3, 0.3, 3)), rng.uniform(-1, 1, 3)))
+    plant.SetFreeBodyPose(
+        context, handles.base_body, RigidTransform(RollPitchYaw(rng.uniform(-0.3, 0.3, 3)), rng.uniform(-1, 1, 3))
+    )
     return context, plant.GetPositionsAndVelocities(context)
 
 
@@ -153,13 +154,16 @@ def test_arrows_point_along_force_and_hide_at_zero(meshcat):
         np.testing.assert_allclose(X[:3, :3] @ head[:3, 3] + X[:3, 3], p, atol=1e-12)
         np.testing.assert_allclose(head[:3, 2], [0.0, 0.0, -1.0], atol=1e-12)  # cone opens backwards
         c = min(1.0, length / 0.1)
-        np.testing.assert_allclose(scene.properties[f"/drake/forces/{i}/shaft"]["scale"],
-                                   [c, c, length - c * 0.05], atol=1e-12)
+        np.testing.assert_allclose(
+            scene.properties[f"/drake/forces/{i}/shaft"]["scale"], [c, c, length - c * 0.05], atol=1e-12
+        )
         assert scene.properties[f"/drake/forces/{i}"]["visible"] is True
         assert meshcat.HasPath(f"forces/{i}/head/cone") and meshcat.HasPath(f"forces/{i}/shaft/cylinder")
     assert scene.properties["/drake/forces/2"]["visible"] is False
     # Lengths are proportional to |f|: 20 N -> 0.4 m, 10 N -> 0.2 m.
-    assert scene.transforms["/drake/forces/0/head"][2, 3] == pytest.approx(2 * scene.transforms["/drake/forces/1/head"][2, 3])
+    assert scene.transforms["/drake/forces/0/head"][2, 3] == pytest.approx(
+        2 * scene.transforms["/drake/forces/1/head"][2, 3]
+    )
 
     # The force goes to zero: the arrow is hidden.
     dut.get_force_world_input_port().FixValue(context, np.zeros(9))
@@ -180,9 +184,17 @@ def test_recorded_replay_animates_markers_and_arrows(meshcat):
     force = builder.AddSystem(Sine(np.array([0.0, 0.0, 30.0]), 2 * np.pi * np.ones(3), np.zeros(3)))
     point = builder.AddSystem(ConstantVectorSource([0.0, -0.2, 1.3]))
     out = add_effort_visualization(
-        builder, plant, meshcat, effort.get_output_port(0), plant.get_state_output_port(),
-        ["R_KNEE_P", "L_SHOULDER_R"], max_effort=10.0, force_port=force.get_output_port(0),
-        point_port=point.get_output_port(), prefix="internal/")
+        builder,
+        plant,
+        meshcat,
+        effort.get_output_port(0),
+        plant.get_state_output_port(),
+        ["R_KNEE_P", "L_SHOULDER_R"],
+        max_effort=10.0,
+        force_port=force.get_output_port(0),
+        point_port=point.get_output_port(),
+        prefix="internal/",
+    )
     assert set(out) == {"effort_overlay", "force_arrows"}
     diagram = builder.Build()
     simulator = Simulator(diagram)
@@ -192,8 +204,14 @@ def test_recorded_replay_animates_markers_and_arrows(meshcat):
     meshcat.PublishRecording()
     html = meshcat.StaticHtml()
     scene = read_static_html(html)
-    for path in ("effort/R_KNEE_P", "effort/R_KNEE_P/marker", "effort/L_SHOULDER_R", "forces/0", "forces/0/head",
-                 "forces/0/shaft"):
+    for path in (
+        "effort/R_KNEE_P",
+        "effort/R_KNEE_P/marker",
+        "effort/L_SHOULDER_R",
+        "forces/0",
+        "forces/0/head",
+        "forces/0/shaft",
+    ):
         assert f"/drake/internal/{path}" in scene.tracks
 
     scale = scene.tracks["/drake/internal/effort/R_KNEE_P/marker"]["scale"]
@@ -246,18 +264,34 @@ def test_bad_inputs_raise_value_errors(meshcat):
     builder.AddSystem(plant)
     wrong = builder.AddSystem(ConstantVectorSource(np.zeros(plant.num_velocities())))
     with pytest.raises(ValueError, match="residual.*size 40.*expected 34.*includes_base"):
-        add_effort_visualization(builder, plant, meshcat, wrong.get_output_port(), plant.get_state_output_port(),
-                                 ["L_KNEE_P"], max_effort=1.0)
+        add_effort_visualization(
+            builder,
+            plant,
+            meshcat,
+            wrong.get_output_port(),
+            plant.get_state_output_port(),
+            ["L_KNEE_P"],
+            max_effort=1.0,
+        )
     good = builder.AddSystem(ConstantVectorSource(np.zeros(n)))
     with pytest.raises(ValueError, match="state.*expected"):
-        add_effort_visualization(builder, plant, meshcat, good.get_output_port(), good.get_output_port(),
-                                 ["L_KNEE_P"], max_effort=1.0)
+        add_effort_visualization(
+            builder, plant, meshcat, good.get_output_port(), good.get_output_port(), ["L_KNEE_P"], max_effort=1.0
+        )
     three = builder.AddSystem(ConstantVectorSource(np.zeros(3)))
     six = builder.AddSystem(ConstantVectorSource(np.zeros(6)))
     with pytest.raises(ValueError, match="force_port"):
-        add_effort_visualization(builder, plant, meshcat, good.get_output_port(), plant.get_state_output_port(),
-                                 ["L_KNEE_P"], max_effort=1.0, force_port=three.get_output_port(),
-                                 point_port=six.get_output_port())
+        add_effort_visualization(
+            builder,
+            plant,
+            meshcat,
+            good.get_output_port(),
+            plant.get_state_output_port(),
+            ["L_KNEE_P"],
+            max_effort=1.0,
+            force_port=three.get_output_port(),
+            point_port=six.get_output_port(),
+        )
 
     # NaN inputs name the port.
     dut = JointEffortOverlay(plant, meshcat, ["L_KNEE_P"], max_effort=1.0)

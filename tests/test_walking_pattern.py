@@ -84,8 +84,9 @@ def test_preview_gains_reject_bad_arguments():
 
 
 def test_footstep_plan_geometry_and_timing():
-    params = WalkingParameters(num_steps=5, step_length=0.04, step_width=0.11, step_duration=0.6,
-                               double_support_ratio=0.25, initial_wait=0.8)
+    params = WalkingParameters(
+        num_steps=5, step_length=0.04, step_width=0.11, step_duration=0.6, double_support_ratio=0.25, initial_wait=0.8
+    )
     steps = plan_footsteps(params, LEFT0, RIGHT0)
     assert [s.side for s in steps] == ["right", "left", "right", "left", "right"]
     np.testing.assert_allclose([s.end[0] for s in steps], [0.04, 0.08, 0.12, 0.16, 0.16], atol=1e-12)
@@ -95,7 +96,9 @@ def test_footstep_plan_geometry_and_timing():
         assert s.t_lift == pytest.approx(s.t_start + 0.15) and s.t_land == pytest.approx(s.t_start + 0.6)
         other = "left" if s.side == "right" else "right"
         previous = [p.end for p in steps[:k] if p.side == other]
-        np.testing.assert_allclose(s.support_position, previous[-1] if previous else {"left": LEFT0, "right": RIGHT0}[other])
+        np.testing.assert_allclose(
+            s.support_position, previous[-1] if previous else {"left": LEFT0, "right": RIGHT0}[other]
+        )
     # Last step closes the stance: both feet at the same x.
     assert steps[-1].end[0] == pytest.approx(steps[-2].end[0])
 
@@ -107,9 +110,13 @@ def test_zmp_reference_lies_in_the_support_foot_during_single_support():
         during = (pattern.t > step.t_lift + 1e-9) & (pattern.t < step.t_land - 1e-9)
         offset = pattern.zmp_reference[during] - step.support_position[:2]
         inward = 1.0 if step.side == "left" else -1.0
-        np.testing.assert_allclose(offset, np.tile([params.zmp_offset_x, inward * params.zmp_offset_y],
-                                                   (during.sum(), 1)), atol=1e-12)
-        assert not pattern.contact[step.side][during].any() and pattern.contact[{"left": "right", "right": "left"}[step.side]][during].all()
+        np.testing.assert_allclose(
+            offset, np.tile([params.zmp_offset_x, inward * params.zmp_offset_y], (during.sum(), 1)), atol=1e-12
+        )
+        assert (
+            not pattern.contact[step.side][during].any()
+            and pattern.contact[{"left": "right", "right": "left"}[step.side]][during].all()
+        )
 
 
 def test_swing_trajectory_is_smooth_with_zero_touchdown_velocity():
@@ -129,18 +136,21 @@ def test_swing_trajectory_is_smooth_with_zero_touchdown_velocity():
     assert np.all(p[:, 2] >= 0)
 
 
-@pytest.mark.parametrize("change, message", [
-    (dict(step_duration=-0.5), "step_duration"),
-    (dict(step_length=0.2), "out of reach"),
-    (dict(double_support_ratio=1.0), "double_support_ratio"),
-    (dict(num_steps=0), "num_steps"),
-    (dict(step_width=0.02), "step_width"),
-    (dict(swing_height=-0.01), "swing_height"),
-    (dict(com_height=0.5), "com_height"),
-    (dict(step_duration=0.01, double_support_ratio=0.5), "single-support"),
-    (dict(first_swing_foot="middle"), "first_swing_foot"),
-    (dict(step_length=float("nan")), "finite"),
-])
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (dict(step_duration=-0.5), "step_duration"),
+        (dict(step_length=0.2), "out of reach"),
+        (dict(double_support_ratio=1.0), "double_support_ratio"),
+        (dict(num_steps=0), "num_steps"),
+        (dict(step_width=0.02), "step_width"),
+        (dict(swing_height=-0.01), "swing_height"),
+        (dict(com_height=0.5), "com_height"),
+        (dict(step_duration=0.01, double_support_ratio=0.5), "single-support"),
+        (dict(first_swing_foot="middle"), "first_swing_foot"),
+        (dict(step_length=float("nan")), "finite"),
+    ],
+)
 def test_bad_walking_parameters_raise(change, message):
     with pytest.raises(ValueError, match=message):
         WalkingParameters(**change)
@@ -216,8 +226,9 @@ def test_controller_targets_put_soles_and_com_on_the_pattern(nao):
     assert len(joints) == 26 and dut.GetOutputPort("desired_position").size() == 26
     # t = 0: the standing posture (no jump at the start).
     names_q0 = {j: plant.GetJointByName(j).get_angle(_ctx(plant, q0)) for j in joints}
-    np.testing.assert_allclose(dut.GetOutputPort("desired_position").Eval(context),
-                               [names_q0[j] for j in joints], atol=1e-9)
+    np.testing.assert_allclose(
+        dut.GetOutputPort("desired_position").Eval(context), [names_q0[j] for j in joints], atol=1e-9
+    )
     mid_swing = 0.5 * (dut.pattern.steps[1].t_lift + dut.pattern.steps[1].t_land)
     for t in (0.3, mid_swing, dut.pattern.steps[2].t_start + 0.05):
         context.SetTime(t)
@@ -231,7 +242,7 @@ def test_controller_targets_put_soles_and_com_on_the_pattern(nao):
         soles = dut.GetOutputPort("sole_targets").Eval(context)
         for i, side in enumerate(("left", "right")):
             X = humanoid.sole_frames[side].CalcPoseInWorld(plant_context)
-            np.testing.assert_allclose(X.translation(), soles[3 * i:3 * i + 3], atol=1e-9)
+            np.testing.assert_allclose(X.translation(), soles[3 * i : 3 * i + 3], atol=1e-9)
             np.testing.assert_allclose(X.rotation().matrix(), np.eye(3), atol=1e-9)
         com = plant.CalcCenterOfMassPositionInWorld(plant_context)
         np.testing.assert_allclose(com, dut.GetOutputPort("com_reference").Eval(context), atol=5e-4)
@@ -298,9 +309,12 @@ def test_multibody_zmp_correction(nao):
     np.testing.assert_allclose(corrected.cart_table_pattern.com, raw.pattern.com)
     # Standing still (first samples, before the CoM moves): ZMP = CoM (x, y).
     q0 = standing_positions(plant, humanoid)
-    still = dataclasses.replace(raw.trajectory, t=raw.trajectory.t[:20],
-                                q_joints=np.tile(raw.trajectory.q_joints[0], (20, 1)),
-                                torso_position=np.tile(raw.trajectory.torso_position[0], (20, 1)))
+    still = dataclasses.replace(
+        raw.trajectory,
+        t=raw.trajectory.t[:20],
+        q_joints=np.tile(raw.trajectory.q_joints[0], (20, 1)),
+        torso_position=np.tile(raw.trajectory.torso_position[0], (20, 1)),
+    )
     p = multibody_zmp(plant, humanoid, still, q0)
     np.testing.assert_allclose(p, np.tile(COM0[:2], (20, 1)), atol=2e-4)
     with pytest.raises(ValueError, match="zmp_correction_passes"):

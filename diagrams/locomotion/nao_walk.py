@@ -27,9 +27,10 @@ from diagrams.scenarios import check_common_fields
 from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station
 from diagrams.station.plant_config import default_plant_config
 from diagrams.station.standing import default_gains
-from systems.simulation.disturbances import Push, PushSource
 from systems.locomotion.contact_zmp import MIN_NORMAL_FORCE, ContactZmp
 from systems.locomotion.walking_pattern import NaoWalkingController, WalkingParameters
+from systems.simulation.disturbances import Push, PushSource
+
 
 @dataclass
 class NaoWalkHandles:
@@ -59,8 +60,13 @@ class NaoWalkHandles:
         self.station.set_initial_state(root_context)
 
 
-def add_walking_loggers(builder: DiagramBuilder, plant: MultibodyPlant, controller: NaoWalkingController,
-                        contact_zmp: ContactZmp, log_period: float) -> dict[str, VectorLogSink]:
+def add_walking_loggers(
+    builder: DiagramBuilder,
+    plant: MultibodyPlant,
+    controller: NaoWalkingController,
+    contact_zmp: ContactZmp,
+    log_period: float,
+) -> dict[str, VectorLogSink]:
     """Loggers of a walking diagram, every ``log_period`` s: the plant's ``state``, the
     contact ZMP's ``zmp``, ``foot_normal_forces`` and ``normal_force``, and the controller's
     ``zmp_reference``, ``com_reference``, ``sole_targets``, ``planned_contact`` and
@@ -138,23 +144,31 @@ def build_nao_walk_diagram(
     stiffness_compensation, velocity_lead = scenario.stiffness_compensation, scenario.velocity_lead
     zmp_correction_passes = scenario.zmp_correction_passes
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, "nao_like", plant_config=scenario.plant_config, noise=scenario.noise,
-                                   seed=scenario.seed)
+    station = add_humanoid_station(
+        builder, "nao_like", plant_config=scenario.plant_config, noise=scenario.noise, seed=scenario.seed
+    )
     plant, humanoid = station.plant, station.humanoid
     kp, kd = default_gains(plant, humanoid)
-    controller = builder.AddSystem(NaoWalkingController(
-        plant, humanoid, parameters, initial_positions=station.initial_state[: plant.num_positions()],
-        joint_stiffness=kp if stiffness_compensation else None,
-        joint_damping=kd if (stiffness_compensation and velocity_lead) else None,
-        zmp_correction_passes=zmp_correction_passes))
+    controller = builder.AddSystem(
+        NaoWalkingController(
+            plant,
+            humanoid,
+            parameters,
+            initial_positions=station.initial_state[: plant.num_positions()],
+            joint_stiffness=kp if stiffness_compensation else None,
+            joint_damping=kd if (stiffness_compensation and velocity_lead) else None,
+            zmp_correction_passes=zmp_correction_passes,
+        )
+    )
     controller.set_name("nao_walking_controller")
     builder.Connect(controller.GetOutputPort("desired_position"), station.desired_position)
     push_source = None
     if pushes:
         push_source = builder.AddSystem(PushSource(plant, list(pushes)))
         push_source.set_name("push_source")
-        builder.Connect(push_source.GetOutputPort("applied_spatial_forces"),
-                        plant.get_applied_spatial_force_input_port())
+        builder.Connect(
+            push_source.GetOutputPort("applied_spatial_forces"), plant.get_applied_spatial_force_input_port()
+        )
         builder.Connect(plant.get_state_output_port(), push_source.GetInputPort("state"))
     contact_zmp = builder.AddSystem(ContactZmp(plant, humanoid))
     contact_zmp.set_name("contact_zmp")
@@ -165,11 +179,18 @@ def build_nao_walk_diagram(
     visualizer = None
     if meshcat is not None:
         visualizer = MeshcatVisualizer.AddToBuilder(
-            builder, station.scene_graph, meshcat, MeshcatVisualizerParams(publish_period=1.0 / 32.0))
+            builder, station.scene_graph, meshcat, MeshcatVisualizerParams(publish_period=1.0 / 32.0)
+        )
     diagram = builder.Build()
     diagram.set_name("nao_walk")
-    return diagram, NaoWalkHandles(station=station, controller=controller, contact_zmp=contact_zmp,
-                                      loggers=loggers, push_source=push_source, meshcat_visualizer=visualizer)
+    return diagram, NaoWalkHandles(
+        station=station,
+        controller=controller,
+        contact_zmp=contact_zmp,
+        loggers=loggers,
+        push_source=push_source,
+        meshcat_visualizer=visualizer,
+    )
 
 
 # ---------------------------------------------------------------------------------------
@@ -335,17 +356,35 @@ def walking_metrics(handles: NaoWalkHandles, root_context: Context) -> dict:
         "zmp_in_support_fraction": float(in_support.mean()) if in_support.size else 0.0,
         "zmp_margin_p05_m": float(np.nanpercentile(margins[valid & started], 5)) if in_support.size else float("nan"),
         "zmp_margin_min_m": float(np.nanmin(margins[valid & started])) if in_support.size else float("nan"),
-        "zmp_loaded_margin_p05_m": float(np.nanpercentile(loaded_margins[valid & started], 5)) if in_support.size else float("nan"),
-        "zmp_loaded_margin_min_m": float(np.nanmin(loaded_margins[valid & started])) if in_support.size else float("nan"),
-        "zmp_tracking_rms_m": (float(np.sqrt(np.mean(np.sum((zmp[valid & after] - zmp_ref[valid & after]) ** 2, axis=1))))
-                               if np.any(valid & after) else float("nan")),
+        "zmp_loaded_margin_p05_m": float(np.nanpercentile(loaded_margins[valid & started], 5))
+        if in_support.size
+        else float("nan"),
+        "zmp_loaded_margin_min_m": float(np.nanmin(loaded_margins[valid & started]))
+        if in_support.size
+        else float("nan"),
+        "zmp_tracking_rms_m": (
+            float(np.sqrt(np.mean(np.sum((zmp[valid & after] - zmp_ref[valid & after]) ** 2, axis=1))))
+            if np.any(valid & after)
+            else float("nan")
+        ),
         "samples_without_contact": int(np.sum(~valid & started)),
         "max_footprint_error_m": float(max(footprint_errors)) if footprint_errors else 0.0,
         "max_stride_error_m": float(max(stride_errors)) if stride_errors else 0.0,
         "max_com_model_error_m": float(controller.trajectory.com_error.max()),
-        "signals": {"t": t, "com": com, "tilt_deg": tilt, "yaw_deg": yaw, "zmp": zmp, "zmp_reference": zmp_ref,
-                    "zmp_margin": margins, "com_reference": logs["com_reference"].data().T,
-                    "foot_normal_forces": feet.T, "planned_contact": planned, "planned_support": planned_support, "fsr_world": fsr_world},
+        "signals": {
+            "t": t,
+            "com": com,
+            "tilt_deg": tilt,
+            "yaw_deg": yaw,
+            "zmp": zmp,
+            "zmp_reference": zmp_ref,
+            "zmp_margin": margins,
+            "com_reference": logs["com_reference"].data().T,
+            "foot_normal_forces": feet.T,
+            "planned_contact": planned,
+            "planned_support": planned_support,
+            "fsr_world": fsr_world,
+        },
     }
 
 
@@ -366,27 +405,38 @@ def walking_floors(metrics: dict) -> dict:
     }
 
 
-def nao_walk_metrics(scenario: NaoWalkScenario, handles: NaoWalkHandles, root_context: Context,
-                     wall_time_s: float) -> dict:
+def nao_walk_metrics(
+    scenario: NaoWalkScenario, handles: NaoWalkHandles, root_context: Context, wall_time_s: float
+) -> dict:
     """The app's metrics: ``walking_metrics`` (with its ``signals``), the floors
     (``walking_floors``, ``meets_floors``), the wall time and real-time factor, and the
     scenario's walking parameters, ZMP correction passes, noise and seed."""
     m = walking_metrics(handles, root_context)
     checks = walking_floors(m)
     params = scenario.walking
-    m.update({
-        "floors": checks,
-        "meets_floors": all(checks.values()),
-        "wall_time_s": wall_time_s,
-        "real_time_factor": m["duration_s"] / wall_time_s,
-        "parameters": dataclasses.asdict(params),
-        "zmp_correction_passes": scenario.zmp_correction_passes,
-        "noise": scenario.noise,
-        "seed": scenario.seed,
-    })
+    m.update(
+        {
+            "floors": checks,
+            "meets_floors": all(checks.values()),
+            "wall_time_s": wall_time_s,
+            "real_time_factor": m["duration_s"] / wall_time_s,
+            "parameters": dataclasses.asdict(params),
+            "zmp_correction_passes": scenario.zmp_correction_passes,
+            "noise": scenario.noise,
+            "seed": scenario.seed,
+        }
+    )
     return m
 
 
-__all__ = ["walking_floors", "detect_steps", "NaoWalkHandles", "NaoWalkScenario", "add_walking_loggers",
-           "build_nao_walk_diagram", "nao_walk_metrics",
-           "signed_distance_to_polygon", "walking_metrics"]
+__all__ = [
+    "walking_floors",
+    "detect_steps",
+    "NaoWalkHandles",
+    "NaoWalkScenario",
+    "add_walking_loggers",
+    "build_nao_walk_diagram",
+    "nao_walk_metrics",
+    "signed_distance_to_polygon",
+    "walking_metrics",
+]

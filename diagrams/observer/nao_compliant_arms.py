@@ -25,10 +25,11 @@ from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
-from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station, default_plant_config
-from diagrams.station.standing import default_gains
 from diagrams.observer.nao_force_observer import full_posture, wide_stance
 from diagrams.observer.nao_sensing import OBSERVER_PERIOD, add_observer_pipeline
+from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station, default_plant_config
+from diagrams.station.standing import default_gains
+from systems.locomotion.posture_schedule import PostureSchedule
 from systems.observer.arm_compliance import (
     DEFAULT_PERIOD,
     DEFAULT_STIFFNESS,
@@ -40,11 +41,10 @@ from systems.observer.arm_compliance import (
     JointTorqueFromPositionError,
     ObserverHandForce,
 )
-from systems.simulation.disturbances import Push, PushSource, SmoothPiecewise
-from systems.simulation.ground_truth import VirtualForceTruth
-from systems.locomotion.posture_schedule import PostureSchedule
 from systems.observer.force_observer import LipForceObserverSystem
 from systems.observer.fsr_sensing import CenterOfPressure, FsrArray, ImuComAcceleration, SupportFootCom
+from systems.simulation.disturbances import Push, PushSource, SmoothPiecewise
+from systems.simulation.ground_truth import VirtualForceTruth
 from systems.simulation.pd_gravity import joint_vector_from_names
 from systems.simulation.visualization import ForceArrows
 
@@ -160,8 +160,10 @@ def build_nao_compliant_arms_diagram(
         meshcat: adds a visualizer and force arrows (red: applied, blue: blended estimate).
     """
     if motor_constants is None:
-        raise ValueError("build_nao_compliant_arms_diagram: motor_constants is required ({arm joint: K_m}, N m/rad): "
-                         "pass dict(diagrams.observer.calibration.identified_motor_constants()) or your own")
+        raise ValueError(
+            "build_nao_compliant_arms_diagram: motor_constants is required ({arm joint: K_m}, N m/rad): "
+            "pass dict(diagrams.observer.calibration.identified_motor_constants()) or your own"
+        )
     builder = DiagramBuilder()
     station = add_humanoid_station(builder, "nao_like", plant_config=plant_config, noise=noise, seed=seed)
     plant, humanoid = station.plant, station.humanoid
@@ -183,9 +185,16 @@ def build_nao_compliant_arms_diagram(
     kd_by_name = dict(zip(station.joint_names, kd.tolist()))
     damping = [kd_by_name[n] for n in names]
 
-    controller = builder.AddSystem(HandComplianceController(
-        plant, q_nominal, NAO_ARM_CHAINS, stiffness=stiffness,
-        motor_constants=motor_constants if compensate_deflection else None, period=period))
+    controller = builder.AddSystem(
+        HandComplianceController(
+            plant,
+            q_nominal,
+            NAO_ARM_CHAINS,
+            stiffness=stiffness,
+            motor_constants=motor_constants if compensate_deflection else None,
+            period=period,
+        )
+    )
     controller.set_name("hand_compliance_controller")
     builder.Connect(schedule.get_output_port(), controller.GetInputPort("nominal_position"))
     builder.Connect(controller.GetOutputPort("desired_position"), station.desired_position)
@@ -201,28 +210,45 @@ def build_nao_compliant_arms_diagram(
     joint_torque.set_name("joint_torque_from_position_error")
     builder.Connect(controller.GetOutputPort("desired_position"), joint_torque.GetInputPort("desired_position"))
     builder.Connect(station.sensed_state, joint_torque.GetInputPort("state"))
-    estimator = builder.AddSystem(ArmExternalForceEstimator(
-        plant, NAO_ARM_CHAINS, damping=damping, period=period, filter_time_constant=filter_time_constant))
+    estimator = builder.AddSystem(
+        ArmExternalForceEstimator(
+            plant, NAO_ARM_CHAINS, damping=damping, period=period, filter_time_constant=filter_time_constant
+        )
+    )
     estimator.set_name("arm_external_force_estimator")
     builder.Connect(joint_torque.GetOutputPort("motor_torque"), estimator.GetInputPort("motor_torque"))
     builder.Connect(station.sensed_state, estimator.GetInputPort("state"))
 
     # Observer pipeline (as diagrams.observer.nao_force_observer).
-    pipeline = add_observer_pipeline(builder, station, support_foot=support_foot, noise=noise, seed=seed,
-                                     observer_period=OBSERVER_PERIOD)
-    fsr, cop, com, acc = pipeline.fsr_array, pipeline.center_of_pressure, pipeline.support_foot_com, pipeline.imu_com_acceleration
+    pipeline = add_observer_pipeline(
+        builder, station, support_foot=support_foot, noise=noise, seed=seed, observer_period=OBSERVER_PERIOD
+    )
+    fsr, cop, com, acc = (
+        pipeline.fsr_array,
+        pipeline.center_of_pressure,
+        pipeline.support_foot_com,
+        pipeline.imu_com_acceleration,
+    )
     observer = pipeline.observer
-    hand_force = builder.AddSystem(ObserverHandForce(plant, humanoid.sole_frames[support_foot], NAO_ARM_CHAINS,
-                                                     model_instances=[humanoid.model_instance]))
+    hand_force = builder.AddSystem(
+        ObserverHandForce(
+            plant, humanoid.sole_frames[support_foot], NAO_ARM_CHAINS, model_instances=[humanoid.model_instance]
+        )
+    )
     hand_force.set_name("observer_hand_force")
     builder.Connect(observer.GetOutputPort("virtual_force"), hand_force.GetInputPort("virtual_force"))
     builder.Connect(station.sensed_state, hand_force.GetInputPort("state"))
 
     # Eq. (28) and into eq. (29).
     size = 3 * len(NAO_ARM_CHAINS)
-    blender = builder.AddSystem(CompliantArmBlender(
-        size, fsr_threshold=fsr_threshold, constant_k1=constant_k1,
-        saturation_guard=fsr.saturation if saturation_guard else None))
+    blender = builder.AddSystem(
+        CompliantArmBlender(
+            size,
+            fsr_threshold=fsr_threshold,
+            constant_k1=constant_k1,
+            saturation_guard=fsr.saturation if saturation_guard else None,
+        )
+    )
     blender.set_name("compliant_arm_blender")
     builder.Connect(hand_force.GetOutputPort("hand_forces"), blender.GetInputPort("observer_force"))
     builder.Connect(estimator.GetOutputPort("hand_forces"), blender.GetInputPort("joint_force"))
@@ -257,15 +283,23 @@ def build_nao_compliant_arms_diagram(
     visualizer = None
     if meshcat is not None:
         visualizer = MeshcatVisualizer.AddToBuilder(
-            builder, station.scene_graph, meshcat, MeshcatVisualizerParams(publish_period=1.0 / 32.0))
+            builder, station.scene_graph, meshcat, MeshcatVisualizerParams(publish_period=1.0 / 32.0)
+        )
         applied = builder.AddSystem(ForceArrows(meshcat, len(pushes), path="applied_forces", newtons_per_meter=20.0))
         applied.set_name("applied_force_arrows")
         builder.Connect(push_source.GetOutputPort("force_world"), applied.get_force_world_input_port())
         builder.Connect(push_source.GetOutputPort("point_world"), applied.get_point_world_input_port())
         if len(pushes) == len(NAO_ARM_CHAINS):
-            estimate = builder.AddSystem(ForceArrows(meshcat, len(NAO_ARM_CHAINS), path="estimated_hand_forces",
-                                                     newtons_per_meter=20.0, rgba=Rgba(0.1, 0.3, 0.9, 0.9),
-                                                     min_force=0.2))
+            estimate = builder.AddSystem(
+                ForceArrows(
+                    meshcat,
+                    len(NAO_ARM_CHAINS),
+                    path="estimated_hand_forces",
+                    newtons_per_meter=20.0,
+                    rgba=Rgba(0.1, 0.3, 0.9, 0.9),
+                    min_force=0.2,
+                )
+            )
             estimate.set_name("estimated_force_arrows")
             builder.Connect(blender.GetOutputPort("blended_force"), estimate.get_force_world_input_port())
             builder.Connect(push_source.GetOutputPort("point_world"), estimate.get_point_world_input_port())
@@ -273,18 +307,31 @@ def build_nao_compliant_arms_diagram(
     diagram = builder.Build()
     diagram.set_name("nao_compliant_arms")
     return diagram, NaoCompliantArmsHandles(
-        station=station, pushes=tuple(pushes), push_source=push_source, posture_schedule=schedule,
-        fsr_array=fsr, center_of_pressure=cop, support_foot_com=com, imu_com_acceleration=acc,
-        observer=observer, observer_hand_force=hand_force, joint_torque=joint_torque, joint_estimator=estimator,
-        blender=blender, controller=controller, truth=truth, motor_constants=dict(motor_constants),
-        loggers=loggers, meshcat_visualizer=visualizer)
+        station=station,
+        pushes=tuple(pushes),
+        push_source=push_source,
+        posture_schedule=schedule,
+        fsr_array=fsr,
+        center_of_pressure=cop,
+        support_foot_com=com,
+        imu_com_acceleration=acc,
+        observer=observer,
+        observer_hand_force=hand_force,
+        joint_torque=joint_torque,
+        joint_estimator=estimator,
+        blender=blender,
+        controller=controller,
+        truth=truth,
+        motor_constants=dict(motor_constants),
+        loggers=loggers,
+        meshcat_visualizer=visualizer,
+    )
 
 
 def hand_pushes(profile, direction=(-1.0, 0.0, 0.0)) -> list[Push]:
     """The same push on both hands (gripper origins, the chains' hand points), world
     ``direction``, magnitude ``profile`` per hand, N."""
     return [Push(c.hand_body, c.p_HP, direction, profile) for c in NAO_ARM_CHAINS]
-
 
 
 # --- Scenarios a and b of Sec. 6.4 (Fig. 14) ---------------------------------------------
@@ -349,8 +396,9 @@ class HandPushCase:
     lean: float | None
 
     def pushes(self) -> list[Push]:
-        profile = SmoothPiecewise((0.0, PUSH_ON, PUSH_FULL, PUSH_OFF, PUSH_GONE),
-                                  (0.0, 0.0, self.force, self.force, 0.0))
+        profile = SmoothPiecewise(
+            (0.0, PUSH_ON, PUSH_FULL, PUSH_OFF, PUSH_GONE), (0.0, 0.0, self.force, self.force, 0.0)
+        )
         return hand_pushes(profile, direction=(-1.0, 0.0, 0.0))
 
     def posture_knots(self) -> tuple:
@@ -410,10 +458,17 @@ def build_case_diagram(
     ``dict(diagrams.observer.calibration.identified_motor_constants())``). Its initial state
     is the caller's too: ``settle_standing_state(wide_stance(), plant_config=...)``."""
     return build_nao_compliant_arms_diagram(
-        case.pushes(), posture_knots=case.posture_knots(), stiffness=scenario.stiffness,
-        motor_constants=dict(motor_constants), compensate_deflection=scenario.compensate_deflection,
-        saturation_guard=scenario.saturation_guard, noise=scenario.noise, seed=scenario.seed,
-        plant_config=scenario.plant_config, meshcat=meshcat)
+        case.pushes(),
+        posture_knots=case.posture_knots(),
+        stiffness=scenario.stiffness,
+        motor_constants=dict(motor_constants),
+        compensate_deflection=scenario.compensate_deflection,
+        saturation_guard=scenario.saturation_guard,
+        noise=scenario.noise,
+        seed=scenario.seed,
+        plant_config=scenario.plant_config,
+        meshcat=meshcat,
+    )
 
 
 def true_hand_kinematics(run: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -432,7 +487,7 @@ def true_hand_kinematics(run: dict) -> tuple[np.ndarray, np.ndarray]:
     for i, x in enumerate(X):
         plant.SetPositions(ctx, x[:nq])
         for j, (frame, point) in enumerate(zip(frames, points, strict=True)):
-            p[i, 3 * j: 3 * j + 3] = plant.CalcPointsPositions(ctx, frame, point, base).reshape(-1)
+            p[i, 3 * j : 3 * j + 3] = plant.CalcPointsPositions(ctx, frame, point, base).reshape(-1)
         R[i] = base.CalcRotationMatrixInWorld(ctx).matrix()
     return p, R
 
@@ -475,8 +530,10 @@ def scenario_metrics(case: HandPushCase, run: dict, stiffness: float = DEFAULT_S
         errors = {}
         for name, F in estimates.items():
             e = F[:, x] - F_true[:, x]
-            errors[name] = {"steady_state_mean_error_N": float(e[steady].mean()),
-                            "hold_rms_error_N": float(np.sqrt(np.mean(e[hold] ** 2)))}
+            errors[name] = {
+                "steady_state_mean_error_N": float(e[steady].mean()),
+                "hold_rms_error_N": float(np.sqrt(np.mean(e[hold] ** 2))),
+            }
         hands[side] = {
             "displacement_m": disp,
             "F_true_x_N": f_true,
@@ -521,8 +578,11 @@ def arms_summary(scenario: NaoCompliantArmsScenario, metrics: dict, motor_consta
         "seed": scenario.seed,
         "motor_constants_N_m_per_rad": dict(motor_constants),
         "controller": f"eq. 29 with k = {scenario.stiffness:g} N/m, damped least-squares arm IK, "
-                      + ("deflection compensation K_m^-1 J^T F" if scenario.compensate_deflection
-                         else "no deflection compensation (ablation)"),
+        + (
+            "deflection compensation K_m^-1 J^T F"
+            if scenario.compensate_deflection
+            else "no deflection compensation (ablation)"
+        ),
         "deflection_compensation": scenario.compensate_deflection,
         "blend": "eq. 28, K1 = K_a / 8, FSR in contact above 1 N",
         "lean_rad": scenario.lean,

@@ -32,12 +32,17 @@ from diagrams.station.plant_config import default_plant_config
 from diagrams.station.standing import default_gains
 from systems.locomotion.contact_zmp import ContactZmp
 from systems.locomotion.walking_pattern import WalkingParameters
-from systems.observer.arm_compliance import (NAO_ARM_CHAINS, ArmExternalForceEstimator, CompliantArmBlender,
-                                             JointTorqueFromPositionError, ObserverHandForce)
+from systems.observer.arm_compliance import (
+    NAO_ARM_CHAINS,
+    ArmExternalForceEstimator,
+    CompliantArmBlender,
+    JointTorqueFromPositionError,
+    ObserverHandForce,
+)
 from systems.observer.force_guided_walking import GUIDED_WALKING, ForceGuidedWalkingController, TriggerParameters
 from systems.observer.force_observer import STANDING, WALKING
-from systems.simulation.disturbances import Push, PushSource
 from systems.observer.hand_guidance import GuidanceProfile, ScaledProfile
+from systems.simulation.disturbances import Push, PushSource
 
 #: Floors of issue 7 (force-guided walking).
 MAX_START_LATENCY = 0.5  # s
@@ -107,8 +112,9 @@ class NaoForceGuidedWalkScenario:
         """Raises ValueError on a bad value (the message names it)."""
         check_common_fields(self)
         if not (self.force > self.trigger.threshold or self.force == 0.0):
-            raise ValueError(f"force ({self.force} N) must exceed the trigger's threshold ({self.trigger.threshold} N),"
-                             " or be 0")
+            raise ValueError(
+                f"force ({self.force} N) must exceed the trigger's threshold ({self.trigger.threshold} N), or be 0"
+            )
         if self.preset not in ("walking", "standing"):
             raise ValueError(f"preset must be 'walking' or 'standing', got {self.preset!r}")
         if self.trigger_source not in TRIGGER_SOURCES:
@@ -121,12 +127,17 @@ class NaoForceGuidedWalkScenario:
         with ``force`` 0."""
         if self.force == 0.0:
             return GuidanceProfile(plateaus=(), ramp=self.ramp)
-        return GuidanceProfile(plateaus=tuple((t_on, t_off, sign * self.force) for t_on, t_off, sign in self.episodes),
-                               ramp=self.ramp)
+        return GuidanceProfile(
+            plateaus=tuple((t_on, t_off, sign * self.force) for t_on, t_off, sign in self.episodes), ramp=self.ramp
+        )
 
 
-def build_force_guided_diagram(scenario: NaoForceGuidedWalkScenario | None = None, *, meshcat: Meshcat | None = None,
-                               motor_constants: dict | None = None) -> tuple[Diagram, dict]:
+def build_force_guided_diagram(
+    scenario: NaoForceGuidedWalkScenario | None = None,
+    *,
+    meshcat: Meshcat | None = None,
+    motor_constants: dict | None = None,
+) -> tuple[Diagram, dict]:
     """Station + hand pushes (``scenario.profile()``: the total F_x, half per hand) + observer
     pipeline (``diagrams.observer.nao_sensing``, in ``diagrams.observer.nao_walk_pulled``'s
     fixed stance frame F0) + joint-level hand force estimate (eqs. 25-27) +
@@ -145,18 +156,37 @@ def build_force_guided_diagram(scenario: NaoForceGuidedWalkScenario | None = Non
     """
     scenario = scenario if scenario is not None else NaoForceGuidedWalkScenario()
     scenario.check()
-    profile, trigger, preset, trigger_source = scenario.profile(), scenario.trigger, scenario.preset, scenario.trigger_source
-    noise, seed, walking, max_steps, log_period = (scenario.noise, scenario.seed, scenario.walking, scenario.max_steps,
-                                                   scenario.log_period)
+    profile, trigger, preset, trigger_source = (
+        scenario.profile(),
+        scenario.trigger,
+        scenario.preset,
+        scenario.trigger_source,
+    )
+    noise, seed, walking, max_steps, log_period = (
+        scenario.noise,
+        scenario.seed,
+        scenario.walking,
+        scenario.max_steps,
+        scenario.log_period,
+    )
     force_rate_variance = scenario.force_rate_variance
     builder = DiagramBuilder()
     station = add_humanoid_station(builder, "nao_like", plant_config=scenario.plant_config, noise=noise, seed=seed)
     plant, humanoid = station.plant, station.humanoid
     kp, _ = default_gains(plant, humanoid)
     q0 = station.initial_state[: plant.num_positions()]
-    controller = builder.AddSystem(ForceGuidedWalkingController(
-        plant, humanoid, walking, trigger, initial_positions=q0, joint_stiffness=kp, max_steps=max_steps,
-        max_lean=scenario.max_lean))
+    controller = builder.AddSystem(
+        ForceGuidedWalkingController(
+            plant,
+            humanoid,
+            walking,
+            trigger,
+            initial_positions=q0,
+            joint_stiffness=kp,
+            max_steps=max_steps,
+            max_lean=scenario.max_lean,
+        )
+    )
     controller.set_name("force_guided_walking_controller")
     builder.Connect(controller.GetOutputPort("desired_position"), station.desired_position)
     pushes = [Push(body, np.zeros(3), np.array([1.0, 0.0, 0.0]), ScaledProfile(profile, 0.5)) for body in HAND_BODIES]
@@ -191,8 +221,14 @@ def build_force_guided_diagram(scenario: NaoForceGuidedWalkScenario | None = Non
     joint_torque.set_name("joint_torque_from_position_error")
     builder.Connect(controller.GetOutputPort("desired_position"), joint_torque.GetInputPort("desired_position"))
     builder.Connect(station.sensed_state, joint_torque.GetInputPort("state"))
-    estimator = builder.AddSystem(ArmExternalForceEstimator(
-        plant, NAO_ARM_CHAINS, damping=[kd_by_name[n] for n in names], filter_time_constant=JOINT_FILTER_TIME_CONSTANT))
+    estimator = builder.AddSystem(
+        ArmExternalForceEstimator(
+            plant,
+            NAO_ARM_CHAINS,
+            damping=[kd_by_name[n] for n in names],
+            filter_time_constant=JOINT_FILTER_TIME_CONSTANT,
+        )
+    )
     estimator.set_name("arm_external_force_estimator")
     builder.Connect(joint_torque.GetOutputPort("motor_torque"), estimator.GetInputPort("motor_torque"))
     builder.Connect(station.sensed_state, estimator.GetInputPort("state"))
@@ -201,8 +237,9 @@ def build_force_guided_diagram(scenario: NaoForceGuidedWalkScenario | None = Non
     builder.Connect(estimator.GetOutputPort("hand_forces"), total.get_input_port())
     # Eq. 28's blend (K1 = K_a / 8) of the observer's estimate read as a force on the hands
     # (eq. 11 inverted; the ground is the world's z = 0 plane) and the joint-level estimate.
-    hand_force = builder.AddSystem(ObserverHandForce(plant, plant.world_frame(), NAO_ARM_CHAINS,
-                                                     model_instances=[humanoid.model_instance]))
+    hand_force = builder.AddSystem(
+        ObserverHandForce(plant, plant.world_frame(), NAO_ARM_CHAINS, model_instances=[humanoid.model_instance])
+    )
     builder.Connect(observer.GetOutputPort("virtual_force"), hand_force.GetInputPort("virtual_force"))
     builder.Connect(station.sensed_state, hand_force.GetInputPort("state"))
     blender = builder.AddSystem(CompliantArmBlender(3 * len(NAO_ARM_CHAINS)))
@@ -211,8 +248,11 @@ def build_force_guided_diagram(scenario: NaoForceGuidedWalkScenario | None = Non
     builder.Connect(fsr.GetOutputPort("fsr_forces"), blender.GetInputPort("fsr_forces"))
     blended_total = builder.AddSystem(MatrixGain(np.hstack([np.eye(3)] * len(NAO_ARM_CHAINS))))
     builder.Connect(blender.GetOutputPort("blended_force"), blended_total.get_input_port())
-    source_port = {"observer": observer.GetOutputPort("virtual_force"), "joint": total.get_output_port(),
-                   "blend": blended_total.get_output_port()}[trigger_source]
+    source_port = {
+        "observer": observer.GetOutputPort("virtual_force"),
+        "joint": total.get_output_port(),
+        "blend": blended_total.get_output_port(),
+    }[trigger_source]
     builder.Connect(source_port, controller.GetInputPort("force_estimate"))
 
     loggers = {
@@ -226,12 +266,18 @@ def build_force_guided_diagram(scenario: NaoForceGuidedWalkScenario | None = Non
         "com_reference": LogVectorOutput(controller.GetOutputPort("com_reference"), builder, log_period),
     }
     if meshcat is not None:
-        MeshcatVisualizer.AddToBuilder(builder, station.scene_graph, meshcat,
-                                       MeshcatVisualizerParams(publish_period=1.0 / 32.0))
+        MeshcatVisualizer.AddToBuilder(
+            builder, station.scene_graph, meshcat, MeshcatVisualizerParams(publish_period=1.0 / 32.0)
+        )
     diagram = builder.Build()
     diagram.set_name("nao_force_guided_walk")
-    return diagram, {"station": station, "controller": controller, "loggers": loggers, "parameters": parameters,
-                     "push_source": push_source}
+    return diagram, {
+        "station": station,
+        "controller": controller,
+        "loggers": loggers,
+        "parameters": parameters,
+        "push_source": push_source,
+    }
 
 
 def guided_metrics(handles: dict, context, profile: GuidanceProfile, trigger: TriggerParameters) -> dict:
@@ -264,14 +310,17 @@ def guided_metrics(handles: dict, context, profile: GuidanceProfile, trigger: Tr
         yaw[k] = math.degrees(math.atan2(R[1, 0], R[0, 0]))
     episodes = []
     crossings = profile.crossings(trigger.threshold)
-    windows = [(t_on, next((c[0] for c in crossings[i + 1:] if c[1] == "off"), math.inf))
-               for i, (t_on, kind, _) in enumerate(crossings) if kind == "on"]
+    windows = [
+        (t_on, next((c[0] for c in crossings[i + 1 :] if c[1] == "off"), math.inf))
+        for i, (t_on, kind, _) in enumerate(crossings)
+        if kind == "on"
+    ]
     # A false start: a start decision outside every episode's window [t_on, t_off + 0.5 s).
     false_starts = [te for te, _ in starts if not any(a <= te < b + 0.5 for a, b in windows)]
     for i, (t_on, kind, sign) in enumerate(crossings):
         if kind != "on":
             continue
-        t_off = next((c[0] for c in crossings[i + 1:] if c[1] == "off"), math.inf)
+        t_off = next((c[0] for c in crossings[i + 1 :] if c[1] == "off"), math.inf)
         e = {"direction": sign, "force_on_s": t_on, "force_off_s": t_off}
         start = next(((te, d) for te, d in starts if t_on <= te < t_off + 0.5), None)
         e["start_decision_s"] = start[0] if start else None
@@ -283,7 +332,7 @@ def guided_metrics(handles: dict, context, profile: GuidanceProfile, trigger: Tr
         e["stop_decision_latency_s"] = (stop[0] - t_off) if stop else None
         e["closing_step"] = stop[1].get("closing_step") if stop else None
         e["com_difference_at_switch_m"] = stop[1].get("com_difference_at_switch_m") if stop else None
-        nxt = next((c[0] for c in crossings[i + 1:] if c[1] == "on"), math.inf)
+        nxt = next((c[0] for c in crossings[i + 1 :] if c[1] == "on"), math.inf)
         after = (lift_offs > t_off) & (lift_offs < nxt)
         e["lift_offs_after_drop"] = int(after.sum())
         e["steps_begun_after_drop"] = int(((lift_offs > t_off + ds) & (lift_offs < nxt)).sum())
@@ -293,8 +342,9 @@ def guided_metrics(handles: dict, context, profile: GuidanceProfile, trigger: Tr
         e["steps_during"] = int(during.sum())
         k0, k1 = np.searchsorted(t, t_on), min(np.searchsorted(t, min(nxt, t[-1])), t.size - 1)
         e["com_x_displacement_m"] = float(com[k1, 0] - com[k0, 0])
-        e["moved_in_force_direction"] = bool(np.sign(e["com_x_displacement_m"]) == sign and
-                                             abs(e["com_x_displacement_m"]) > 0.02)
+        e["moved_in_force_direction"] = bool(
+            np.sign(e["com_x_displacement_m"]) == sign and abs(e["com_x_displacement_m"]) > 0.02
+        )
         e["start_ok"] = bool(start is not None and start[0] - t_on <= MAX_START_LATENCY)
         e["stop_ok"] = bool(e["steps_begun_after_drop"] <= MAX_STEPS_AFTER_DROP and stop is not None)
         episodes.append(e)
@@ -304,31 +354,53 @@ def guided_metrics(handles: dict, context, profile: GuidanceProfile, trigger: Tr
     # observer settle), split into pushed / no force.
     applied_x = logs["applied"].data()[0] + logs["applied"].data()[3]
     walking = logs["walking_state"].data()[0] > 0.5
-    edges = np.array([e for t_on, t_off, _ in profile.plateaus for e in (t_on, t_on + profile.ramp, t_off,
-                                                                         t_off + profile.ramp)])
+    edges = np.array(
+        [e for t_on, t_off, _ in profile.plateaus for e in (t_on, t_on + profile.ramp, t_off, t_off + profile.ramp)]
+    )
     far = np.ones(t.size, bool) if edges.size == 0 else np.abs(t[:, None] - edges[None, :]).min(axis=1) >= EDGE_MARGIN
     estimate_errors = {}
     for name, log in (("joint", "joint_estimate"), ("observer", "estimate"), ("blend", "blended_estimate")):
         error = logs[log].data()[0] - applied_x
-        for case, mask in (("pushed", walking & far & (np.abs(applied_x) > 1e-6)),
-                           ("no_force", walking & far & (np.abs(applied_x) <= 1e-6))):
+        for case, mask in (
+            ("pushed", walking & far & (np.abs(applied_x) > 1e-6)),
+            ("no_force", walking & far & (np.abs(applied_x) <= 1e-6)),
+        ):
             e = error[mask]
-            estimate_errors[f"{name}_{case}"] = ({"samples": int(e.size), "mean_N": float(e.mean()),
-                                                  "std_N": float(e.std()), "max_abs_N": float(np.abs(e).max())}
-                                                 if e.size else {"samples": 0})
-    return {"episodes": episodes, "false_starts_s": false_starts, "estimate_errors_while_walking": estimate_errors,
-            "steps_detected": len(steps), "fell": fell, "max_base_tilt_deg": float(tilt.max()),
-            "max_abs_yaw_deg": float(np.abs(yaw).max()), "events": [(te, n, d) for te, n, d in controller.events],
-            "segments_built": len(controller.plans) - 1,
-            "signals": {"t": t, "com": com, "feet": feet.T, "estimate": logs["estimate"].data().T,
-                        "joint_estimate": logs["joint_estimate"].data().T,
-                        "blended_estimate": logs["blended_estimate"].data().T,
-                        "applied": logs["applied"].data().T, "walking_state": logs["walking_state"].data().T,
-                        "tilt": tilt}}
+            estimate_errors[f"{name}_{case}"] = (
+                {
+                    "samples": int(e.size),
+                    "mean_N": float(e.mean()),
+                    "std_N": float(e.std()),
+                    "max_abs_N": float(np.abs(e).max()),
+                }
+                if e.size
+                else {"samples": 0}
+            )
+    return {
+        "episodes": episodes,
+        "false_starts_s": false_starts,
+        "estimate_errors_while_walking": estimate_errors,
+        "steps_detected": len(steps),
+        "fell": fell,
+        "max_base_tilt_deg": float(tilt.max()),
+        "max_abs_yaw_deg": float(np.abs(yaw).max()),
+        "events": [(te, n, d) for te, n, d in controller.events],
+        "segments_built": len(controller.plans) - 1,
+        "signals": {
+            "t": t,
+            "com": com,
+            "feet": feet.T,
+            "estimate": logs["estimate"].data().T,
+            "joint_estimate": logs["joint_estimate"].data().T,
+            "blended_estimate": logs["blended_estimate"].data().T,
+            "applied": logs["applied"].data().T,
+            "walking_state": logs["walking_state"].data().T,
+            "tilt": tilt,
+        },
+    }
 
 
-def force_guided_walk_metrics(scenario: NaoForceGuidedWalkScenario, handles: dict, context,
-                              wall_time_s: float) -> dict:
+def force_guided_walk_metrics(scenario: NaoForceGuidedWalkScenario, handles: dict, context, wall_time_s: float) -> dict:
     """The app's metrics: ``guided_metrics`` (with its ``signals``), the wall and simulated
     time, the floors per episode (start within 0.5 s, stop within one step, moved in the
     force's direction), no false start, no fall, and the scenario's threshold, force,
@@ -343,9 +415,17 @@ def force_guided_walk_metrics(scenario: NaoForceGuidedWalkScenario, handles: dic
         checks[f"episode{i}_moved_in_force_direction"] = e["moved_in_force_direction"]
     checks["no_false_start"] = not m["false_starts_s"]
     checks["no_fall"] = not m["fell"]
-    m.update(floors=checks, meets_floors=all(checks.values()), threshold_N=scenario.trigger.threshold,
-             force_N=scenario.force, trigger_source=scenario.trigger_source, preset=scenario.preset,
-             noise=scenario.noise, seed=scenario.seed, walking_parameters=dataclasses.asdict(scenario.walking))
+    m.update(
+        floors=checks,
+        meets_floors=all(checks.values()),
+        threshold_N=scenario.trigger.threshold,
+        force_N=scenario.force,
+        trigger_source=scenario.trigger_source,
+        preset=scenario.preset,
+        noise=scenario.noise,
+        seed=scenario.seed,
+        walking_parameters=dataclasses.asdict(scenario.walking),
+    )
     return m
 
 

@@ -37,13 +37,12 @@ from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, Ve
 from diagrams.observer.nao_sensing import OBSERVER_PERIOD, add_observer_pipeline
 from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station, default_plant_config
 from models import HumanoidHandles
-from systems.simulation.disturbances import Push, PushSource, SmoothPiecewise
-from systems.simulation.ground_truth import VirtualForceTruth
 from systems.observer.force_observer import LipForceObserverSystem, LipObserverParameters
 from systems.observer.fsr_sensing import CenterOfPressure, FsrArray, ImuComAcceleration, SupportFootCom
+from systems.simulation.disturbances import Push, PushSource, SmoothPiecewise
+from systems.simulation.ground_truth import VirtualForceTruth
 from systems.simulation.pd_gravity import joint_vector_from_names
 from systems.simulation.visualization import ForceArrows
-
 
 
 @dataclass
@@ -138,9 +137,21 @@ def build_nao_force_observer_diagram(
     builder.Connect(plant.get_state_output_port(), push_source.GetInputPort("state"))
 
     # Measurement pipeline (sensors only) and the observer (``diagrams.observer.nao_sensing``).
-    pipeline = add_observer_pipeline(builder, station, support_foot=support_foot, noise=noise, seed=seed,
-                                     fsr_noise_std=fsr_noise_std, observer_period=observer_period)
-    fsr, cop, com, acc = pipeline.fsr_array, pipeline.center_of_pressure, pipeline.support_foot_com, pipeline.imu_com_acceleration
+    pipeline = add_observer_pipeline(
+        builder,
+        station,
+        support_foot=support_foot,
+        noise=noise,
+        seed=seed,
+        fsr_noise_std=fsr_noise_std,
+        observer_period=observer_period,
+    )
+    fsr, cop, com, acc = (
+        pipeline.fsr_array,
+        pipeline.center_of_pressure,
+        pipeline.support_foot_com,
+        pipeline.imu_com_acceleration,
+    )
     parameters, observer = pipeline.parameters, pipeline.observer
 
     truth = builder.AddSystem(VirtualForceTruth(plant, humanoid, support_foot=support_foot))
@@ -169,13 +180,22 @@ def build_nao_force_observer_diagram(
     visualizer = None
     if meshcat is not None:
         visualizer = MeshcatVisualizer.AddToBuilder(
-            builder, station.scene_graph, meshcat, MeshcatVisualizerParams(publish_period=1.0 / 32.0))
+            builder, station.scene_graph, meshcat, MeshcatVisualizerParams(publish_period=1.0 / 32.0)
+        )
         applied = builder.AddSystem(ForceArrows(meshcat, len(pushes), path="applied_forces", newtons_per_meter=40.0))
         applied.set_name("applied_force_arrows")
         builder.Connect(push_source.GetOutputPort("force_world"), applied.get_force_world_input_port())
         builder.Connect(push_source.GetOutputPort("point_world"), applied.get_point_world_input_port())
-        estimate = builder.AddSystem(ForceArrows(meshcat, 1, path="estimated_virtual_force", newtons_per_meter=40.0,
-                                                 rgba=Rgba(0.1, 0.3, 0.9, 0.9), min_force=0.3))
+        estimate = builder.AddSystem(
+            ForceArrows(
+                meshcat,
+                1,
+                path="estimated_virtual_force",
+                newtons_per_meter=40.0,
+                rgba=Rgba(0.1, 0.3, 0.9, 0.9),
+                min_force=0.3,
+            )
+        )
         estimate.set_name("estimated_force_arrow")
         builder.Connect(observer.GetOutputPort("virtual_force"), estimate.get_force_world_input_port())
         builder.Connect(truth.GetOutputPort("com_world"), estimate.get_point_world_input_port())
@@ -217,7 +237,6 @@ def full_posture(humanoid: HumanoidHandles, posture: dict[str, float] | None) ->
             raise ValueError(f"unknown joint {name!r} in the posture")
         out[name] = float(angle)
     return out
-
 
 
 # --- The simulated experiments 1-3 of Hawley, Rahem and Suleiman (2019), Sec. 6.1-6.2 -----
@@ -379,9 +398,14 @@ def make_experiment(
         windows = [(a, b) for (a, b) in magnitude.plateaus(STEADY_WINDOW) if (a, b) in angle.plateaus(STEADY_WINDOW)]
         windows.append((t, duration))
         angles_text = ", ".join(f"{a:g}" for a in torso_angles_deg)
-        return Experiment(1, f"Experiment 1: {torso_force:g} N through the torso at theta = {angles_text} deg (eq. 23)",
-                          pushes, duration, [w for w in windows if w[1] - w[0] >= STEADY_WINDOW],
-                          "torso point (0.05, 0, -0.05) m in the torso frame; F = |F| (cos theta, 0, sin theta)")
+        return Experiment(
+            1,
+            f"Experiment 1: {torso_force:g} N through the torso at theta = {angles_text} deg (eq. 23)",
+            pushes,
+            duration,
+            [w for w in windows if w[1] - w[0] >= STEADY_WINDOW],
+            "torso point (0.05, 0, -0.05) m in the torso frame; F = |F| (cos theta, 0, sin theta)",
+        )
     weight = load_mass * GRAVITY
     r, hold, tail = ramp * s, 6.0 * s, 5.0 * s
     t_loaded, t_off = start + r, start + r + hold
@@ -394,9 +418,14 @@ def make_experiment(
         body, point = HAND_POINT
         direction, title = (0.0, 0.0, -1.0), f"Experiment 3: {load_mass:g} kg load hanging from the right hand"
     windows = profile.plateaus(STEADY_WINDOW) + [(t_off + r, duration)]
-    return Experiment(number, title, [Push(body, point, direction, profile)], duration,
-                      [w for w in windows if w[1] - w[0] >= STEADY_WINDOW],
-                      f"{weight:.2f} N at {body} {point}, ramps of {r:g} s")
+    return Experiment(
+        number,
+        title,
+        [Push(body, point, direction, profile)],
+        duration,
+        [w for w in windows if w[1] - w[0] >= STEADY_WINDOW],
+        f"{weight:.2f} N at {body} {point}, ramps of {r:g} s",
+    )
 
 
 def scenario_experiments(scenario: NaoForceObserverScenario) -> list[Experiment]:
@@ -413,8 +442,14 @@ def scenario_experiments(scenario: NaoForceObserverScenario) -> list[Experiment]
     if scenario.support_foot not in ("left", "right"):
         raise ValueError(f"unknown support foot {scenario.support_foot!r}; choose left or right")
     return [
-        make_experiment(number, time_scale=scenario.time_scale, ramp=scenario.ramp, load_mass=scenario.load_mass,
-                        torso_force=scenario.torso_force, torso_angles_deg=scenario.torso_angles_deg)
+        make_experiment(
+            number,
+            time_scale=scenario.time_scale,
+            ramp=scenario.ramp,
+            load_mass=scenario.load_mass,
+            torso_force=scenario.torso_force,
+            torso_angles_deg=scenario.torso_angles_deg,
+        )
         for number in scenario.experiments
     ]
 
@@ -427,8 +462,14 @@ def build_experiment_diagram(
     ``settle_standing_state(scenario.posture(), plant_config=scenario.plant_config)``
     (``diagrams.observer.calibration``)."""
     return build_nao_force_observer_diagram(
-        experiment.pushes, posture=scenario.posture(), support_foot=scenario.support_foot, noise=scenario.noise,
-        seed=scenario.seed, plant_config=scenario.plant_config, meshcat=meshcat)
+        experiment.pushes,
+        posture=scenario.posture(),
+        support_foot=scenario.support_foot,
+        noise=scenario.noise,
+        seed=scenario.seed,
+        plant_config=scenario.plant_config,
+        meshcat=meshcat,
+    )
 
 
 def aligned(signals: dict) -> dict:
@@ -461,12 +502,14 @@ def experiment_metrics(experiment: Experiment, run: dict) -> dict:
     windows = []
     for _t0, t1 in experiment.windows:
         inside = (t > t1 - STEADY_WINDOW - 1e-9) & (t <= t1 + 1e-9)
-        windows.append({
-            "window_s": [float(t1 - STEADY_WINDOW), float(t1)],
-            "expected_N": a["expected"][inside].mean(axis=0).tolist(),
-            "estimate_N": a["estimate"][inside].mean(axis=0).tolist(),
-            "error_N": error[inside].mean(axis=0).tolist(),
-        })
+        windows.append(
+            {
+                "window_s": [float(t1 - STEADY_WINDOW), float(t1)],
+                "expected_N": a["expected"][inside].mean(axis=0).tolist(),
+                "estimate_N": a["estimate"][inside].mean(axis=0).tolist(),
+                "error_N": error[inside].mean(axis=0).tolist(),
+            }
+        )
     steady = np.max(np.abs([w["error_N"] for w in windows]), axis=0)
     handles = run["handles"]
     plant = handles.station.plant

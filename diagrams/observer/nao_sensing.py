@@ -34,7 +34,9 @@ OBSERVER_PERIOD = 1.0 / 60.0
 FSR_SEED_OFFSET = 5
 
 
-def nao_observer_parameters(plant: MultibodyPlant, instance=None, *, period: float = OBSERVER_PERIOD) -> LipObserverParameters:
+def nao_observer_parameters(
+    plant: MultibodyPlant, instance=None, *, period: float = OBSERVER_PERIOD
+) -> LipObserverParameters:
     """The paper's standing parameters (eq. 21) with the robot's model mass and gravity and
     the period ``period``: the robot knows its own mass from its model (5.19 kg for
     ``nao_like``, the paper's M_c)."""
@@ -84,7 +86,9 @@ def add_nao_measurement_pipeline(
     """
     plant, humanoid = station.plant, station.humanoid
     if station.sensors is None or humanoid is None or humanoid.imu_frame is None:
-        raise ValueError("add_nao_measurement_pipeline: the station needs a humanoid with its sensors and IMU (e.g. nao_like)")
+        raise ValueError(
+            "add_nao_measurement_pipeline: the station needs a humanoid with its sensors and IMU (e.g. nao_like)"
+        )
     std = (FSR_NOISE_STD if fsr_noise_std is None else fsr_noise_std) if noise else 0.0
     fsr = builder.AddSystem(FsrArray(plant, humanoid, noise_std=std, seed=SEEDS_PER_CALL * seed + FSR_SEED_OFFSET))
     fsr.set_name("fsr_array")
@@ -110,10 +114,13 @@ def add_lip_force_observer(
     observer = builder.AddSystem(LipForceObserverSystem(parameters))
     observer.set_name("lip_force_observer")
     builder.Connect(measurements.support_foot_com.GetOutputPort("com_position"), observer.GetInputPort("com_position"))
-    builder.Connect(measurements.imu_com_acceleration.GetOutputPort("com_acceleration"),
-                    observer.GetInputPort("com_acceleration"))
+    builder.Connect(
+        measurements.imu_com_acceleration.GetOutputPort("com_acceleration"), observer.GetInputPort("com_acceleration")
+    )
     builder.Connect(measurements.center_of_pressure.GetOutputPort("zmp"), observer.GetInputPort("zmp"))
-    builder.Connect(measurements.center_of_pressure.GetOutputPort("normal_force"), observer.GetInputPort("normal_force"))
+    builder.Connect(
+        measurements.center_of_pressure.GetOutputPort("normal_force"), observer.GetInputPort("normal_force")
+    )
     return observer
 
 
@@ -151,13 +158,26 @@ def add_observer_pipeline(
         parameters: the observer's parameters; default eq. (21) with the model's mass at
             ``observer_period`` (``nao_observer_parameters``).
     """
-    measurements = add_nao_measurement_pipeline(builder, station, support_foot=support_foot, origin_W=origin_W,
-                                                noise=noise, seed=seed, fsr_noise_std=fsr_noise_std)
+    measurements = add_nao_measurement_pipeline(
+        builder,
+        station,
+        support_foot=support_foot,
+        origin_W=origin_W,
+        noise=noise,
+        seed=seed,
+        fsr_noise_std=fsr_noise_std,
+    )
     if parameters is None:
         parameters = nao_observer_parameters(station.plant, station.humanoid.model_instance, period=observer_period)
     observer = add_lip_force_observer(builder, measurements, parameters)
-    return ObserverPipeline(measurements.fsr_array, measurements.center_of_pressure, measurements.support_foot_com,
-                            measurements.imu_com_acceleration, parameters, observer)
+    return ObserverPipeline(
+        measurements.fsr_array,
+        measurements.center_of_pressure,
+        measurements.support_foot_com,
+        measurements.imu_com_acceleration,
+        parameters,
+        observer,
+    )
 
 
 __all__ = [

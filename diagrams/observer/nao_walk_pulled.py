@@ -15,8 +15,8 @@ the encoders.
     sensed state ─► SupportFootCom ─► com_position   ├─► LipForceObserverSystem
     IMU ─► ImuComAcceleration ─────────────► com_acceleration┘    (WALKING, T = 1/60 s)
 
-Frame convention while walking (``origin_W`` of ``CenterOfPressure`` and ``SupportFootCom``): the observer's CoM position
-and ZMP are both expressed in ONE frame F0, world-aligned (x forward, z up), fixed for the
+Frame convention while walking (``origin_W`` of ``CenterOfPressure`` and ``SupportFootCom``):
+the observer's CoM position and ZMP are both expressed in ONE frame F0, world-aligned (x forward, z up), fixed for the
 whole run, with its origin at the right sole frame's origin at t = 0 (on the ground). The
 support foot changes every step, so a frame at the current support foot would make the
 Kalman state x_c jump by a step length at every support switch; F0 does not move, and
@@ -56,19 +56,24 @@ from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
+from diagrams.locomotion.nao_walk import NaoWalkHandles, add_walking_loggers, walking_floors, walking_metrics
+from diagrams.observer.nao_sensing import (
+    OBSERVER_PERIOD,
+    ObserverPipeline,
+    add_observer_pipeline,
+    nao_observer_parameters,
+)
 from diagrams.scenarios import check_common_fields
 from diagrams.station.humanoid_station import add_humanoid_station
 from diagrams.station.plant_config import default_plant_config
-from diagrams.observer.nao_sensing import OBSERVER_PERIOD, ObserverPipeline, add_observer_pipeline, nao_observer_parameters
-from diagrams.locomotion.nao_walk import NaoWalkHandles, add_walking_loggers, walking_floors, walking_metrics
 from diagrams.station.standing import default_gains
-from systems.simulation.cable import PulleyLoad
-from systems.simulation.ground_truth import CableVirtualForceTruth
 from systems.locomotion.contact_zmp import ContactZmp
+from systems.locomotion.walking_pattern import NaoWalkingController, WalkingParameters
 from systems.observer.force_observer import WALKING, LipForceObserverSystem, LipObserverParameters
 from systems.observer.fsr_sensing import FsrArray, ImuComAcceleration
+from systems.simulation.cable import PulleyLoad
+from systems.simulation.ground_truth import CableVirtualForceTruth
 from systems.simulation.visualization import ForceArrows
-from systems.locomotion.walking_pattern import NaoWalkingController, WalkingParameters
 
 #: The paper's lifted mass, kg (m0 ~ 300 g).
 LOAD_MASS = 0.3
@@ -209,7 +214,12 @@ def build_nao_walk_pulled_diagram(
     scenario = scenario if scenario is not None else NaoWalkPulledScenario()
     scenario.check()
     parameters, setup, pull = scenario.walking, scenario.cable, scenario.pull
-    noise, seed, observer_period, log_period = scenario.noise, scenario.seed, scenario.observer_period, scenario.log_period
+    noise, seed, observer_period, log_period = (
+        scenario.noise,
+        scenario.seed,
+        scenario.observer_period,
+        scenario.log_period,
+    )
     builder = DiagramBuilder()
     station = add_humanoid_station(builder, "nao_like", plant_config=scenario.plant_config, noise=noise, seed=seed)
     plant, humanoid = station.plant, station.humanoid
@@ -225,8 +235,13 @@ def build_nao_walk_pulled_diagram(
     p_BA = np.array([-setup.attachment_back, 0.0, dz])
     A_plan = torso + p_BA  # the torso stays level with heading 0 in the plan
     alpha = math.radians(setup.lateral_angle_deg)
-    pulley = np.array([A_plan[0, 0] - setup.pulley_distance * math.cos(alpha),
-                       A_plan[0, 1] - setup.pulley_distance * math.sin(alpha), setup.pulley_height])
+    pulley = np.array(
+        [
+            A_plan[0, 0] - setup.pulley_distance * math.cos(alpha),
+            A_plan[0, 1] - setup.pulley_distance * math.sin(alpha),
+            setup.pulley_height,
+        ]
+    )
     reach = np.linalg.norm(A_plan - pulley, axis=1)  # |A - P| along the plan
     d_tight = float(np.interp(A_plan[0, 0] + setup.tighten_distance, A_plan[:, 0], reach))
     # Natural length: taut (stretch 0) when the load is on the ground and |A - P| = d_tight.
@@ -234,11 +249,15 @@ def build_nao_walk_pulled_diagram(
     stretch_hang = setup.load_mass * parameters.gravity / setup.stiffness
     lift = reach - d_tight - stretch_hang  # planned load height (quasi-static), m
     if reach.max() <= d_tight:
-        raise ValueError("CableSetup: the line never tightens during the planned walk "
-                         f"(tighten_distance {setup.tighten_distance} m >= the planned torso travel)")
+        raise ValueError(
+            "CableSetup: the line never tightens during the planned walk "
+            f"(tighten_distance {setup.tighten_distance} m >= the planned torso travel)"
+        )
     if lift.max() > setup.pulley_height - setup.min_clearance:
-        raise ValueError(f"CableSetup: the load would rise {lift.max():.3f} m, into the pulley at "
-                         f"{setup.pulley_height} m: raise the pulley or tighten later")
+        raise ValueError(
+            f"CableSetup: the load would rise {lift.max():.3f} m, into the pulley at "
+            f"{setup.pulley_height} m: raise the pulley or tighten later"
+        )
     planned_tighten = float(t_plan[np.argmax(reach >= d_tight)])
     planned_lift = float(t_plan[np.argmax(lift > 0)])
 
@@ -248,10 +267,19 @@ def build_nao_walk_pulled_diagram(
 
     cable = None
     if pull:
-        cable = builder.AddSystem(PulleyLoad(plant, humanoid.base_body.name(), p_BA, pulley,
-                                             load_mass=setup.load_mass, cable_length=cable_length,
-                                             stiffness=setup.stiffness, damping=setup.damping,
-                                             gravity=parameters.gravity))
+        cable = builder.AddSystem(
+            PulleyLoad(
+                plant,
+                humanoid.base_body.name(),
+                p_BA,
+                pulley,
+                load_mass=setup.load_mass,
+                cable_length=cable_length,
+                stiffness=setup.stiffness,
+                damping=setup.damping,
+                gravity=parameters.gravity,
+            )
+        )
         cable.set_name("pulley_load")
         builder.Connect(plant.get_state_output_port(), cable.GetInputPort("state"))
         mux = builder.AddSystem(ExternallyAppliedSpatialForceMultiplexer(1))
@@ -299,21 +327,31 @@ def build_nao_walk_pulled_diagram(
     if cable is not None:
         for name in ("force_world", "tension", "load_height"):
             observer_loggers["cable_" + name if name == "force_world" else name] = LogVectorOutput(
-                cable.GetOutputPort(name), builder, T)
+                cable.GetOutputPort(name), builder, T
+            )
     for name, logger in observer_loggers.items():
         logger.set_name(f"log_observer_{name}")
 
     visualizer = None
     if meshcat is not None:
         visualizer = MeshcatVisualizer.AddToBuilder(
-            builder, station.scene_graph, meshcat, MeshcatVisualizerParams(publish_period=1.0 / 32.0))
+            builder, station.scene_graph, meshcat, MeshcatVisualizerParams(publish_period=1.0 / 32.0)
+        )
         if cable is not None:
             arrows = builder.AddSystem(ForceArrows(meshcat, 1, path="cable_force", newtons_per_meter=20.0))
             arrows.set_name("cable_force_arrow")
             builder.Connect(cable.GetOutputPort("force_world"), arrows.get_force_world_input_port())
             builder.Connect(cable.GetOutputPort("point_world"), arrows.get_point_world_input_port())
-        estimate = builder.AddSystem(ForceArrows(meshcat, 1, path="estimated_virtual_force", newtons_per_meter=20.0,
-                                                 rgba=Rgba(0.1, 0.3, 0.9, 0.9), min_force=0.3))
+        estimate = builder.AddSystem(
+            ForceArrows(
+                meshcat,
+                1,
+                path="estimated_virtual_force",
+                newtons_per_meter=20.0,
+                rgba=Rgba(0.1, 0.3, 0.9, 0.9),
+                min_force=0.3,
+            )
+        )
         estimate.set_name("estimated_force_arrow")
         builder.Connect(observer.GetOutputPort("virtual_force"), estimate.get_force_world_input_port())
         builder.Connect(truth.GetOutputPort("com_world"), estimate.get_point_world_input_port())
@@ -321,11 +359,25 @@ def build_nao_walk_pulled_diagram(
     diagram = builder.Build()
     diagram.set_name("nao_walk_pulled")
     return diagram, NaoWalkPulledHandles(
-        station=station, controller=controller, contact_zmp=contact_zmp, loggers=loggers,
-        meshcat_visualizer=visualizer, cable=cable, setup=setup, slack_length=cable_length,
-        planned_tighten_time=planned_tighten, planned_lift_time=planned_lift, frame_origin=origin,
-        pipeline=pipeline, fsr_array=fsr, imu_com_acceleration=acc, observer=observer, truth=truth,
-        parameters=obs_params, observer_loggers=observer_loggers)
+        station=station,
+        controller=controller,
+        contact_zmp=contact_zmp,
+        loggers=loggers,
+        meshcat_visualizer=visualizer,
+        cable=cable,
+        setup=setup,
+        slack_length=cable_length,
+        planned_tighten_time=planned_tighten,
+        planned_lift_time=planned_lift,
+        frame_origin=origin,
+        pipeline=pipeline,
+        fsr_array=fsr,
+        imu_com_acceleration=acc,
+        observer=observer,
+        truth=truth,
+        parameters=obs_params,
+        observer_loggers=observer_loggers,
+    )
 
 
 def observer_metrics(handles: NaoWalkPulledHandles, root_context: Context, *, settle_time: float = 1.0) -> dict:
@@ -356,8 +408,14 @@ def observer_metrics(handles: NaoWalkPulledHandles, root_context: Context, *, se
     walk_end = params.walk_end
     cable = logs.get("cable_force_world")
     pull = cable.data().T if cable is not None else np.zeros_like(truth)
-    signals = {"t": t, "estimate": est_k, "virtual_truth": truth, "pull": pull,
-               "normal_force": logs["normal_force"].data()[0], "valid": logs["valid"].data()[0]}
+    signals = {
+        "t": t,
+        "estimate": est_k,
+        "virtual_truth": truth,
+        "pull": pull,
+        "normal_force": logs["normal_force"].data()[0],
+        "valid": logs["valid"].data()[0],
+    }
     if "load_height" in logs:
         height = logs["load_height"].data()[0]
         tension = logs["tension"].data()[0]
@@ -369,7 +427,11 @@ def observer_metrics(handles: NaoWalkPulledHandles, root_context: Context, *, se
         window = lifted & (t >= t_lift + settle_time) & (t <= walk_end)
     else:
         window = (t >= params.walk_start + settle_time) & (t <= walk_end)
-    before = (t >= params.walk_start + settle_time) & (t < handles.planned_tighten_time) & (np.linalg.norm(pull, axis=1) == 0)
+    before = (
+        (t >= params.walk_start + settle_time)
+        & (t < handles.planned_tighten_time)
+        & (np.linalg.norm(pull, axis=1) == 0)
+    )
     k = np.flatnonzero(window)
     out["window_s"] = [float(t[k[0]]), float(t[k[-1]])] if k.size else [float("nan")] * 2
     out["window_samples"] = int(k.size)
@@ -392,8 +454,10 @@ def observer_metrics(handles: NaoWalkPulledHandles, root_context: Context, *, se
         # What the FSRs miss in the window (saturation at 25 N, noise clipped at 0), N.
         out["fsr_missing_force_mean_N"] = float((true_fsr[:, k].sum(axis=0) - fsr[:, k].sum(axis=0)).mean())
         out["fsr_saturated_fraction"] = float(np.mean(np.any(true_fsr[:, k] > handles.fsr_array.saturation, axis=0)))
-    out["normal_force_range_N"] = [float(np.percentile(signals["normal_force"][t > 0.1], 1)),
-                                   float(np.percentile(signals["normal_force"][t > 0.1], 99))]
+    out["normal_force_range_N"] = [
+        float(np.percentile(signals["normal_force"][t > 0.1], 1)),
+        float(np.percentile(signals["normal_force"][t > 0.1], 99)),
+    ]
     out["signals"] = signals
     out["window_mask"] = window
     return out
@@ -415,8 +479,9 @@ def pulled_floors(walking: dict, observer: dict, pull: bool = True) -> dict:
     return checks
 
 
-def nao_walk_pulled_metrics(scenario: NaoWalkPulledScenario, handles: NaoWalkPulledHandles, root_context: Context,
-                            wall_time_s: float) -> dict:
+def nao_walk_pulled_metrics(
+    scenario: NaoWalkPulledScenario, handles: NaoWalkPulledHandles, root_context: Context, wall_time_s: float
+) -> dict:
     """The app's metrics: ``walking`` (``walking_metrics``) and ``observer``
     (``observer_metrics``), both with their signals, the floors (``pulled_floors``), the
     cable as built, the observer's parameters, the frame, noise, seed, the wall time and
@@ -430,13 +495,26 @@ def nao_walk_pulled_metrics(scenario: NaoWalkPulledScenario, handles: NaoWalkPul
         "observer": o,
         "floors": checks,
         "meets_floors": all(checks.values()),
-        "cable": ({"pulley_world_m": h.cable.pulley.tolist(), "natural_length_m": h.slack_length,
-                   "planned_tighten_time_s": h.planned_tighten_time, "planned_lift_time_s": h.planned_lift_time,
-                   **dataclasses.asdict(h.setup)} if h.cable is not None else None),
-        "observer_parameters": {"mass": h.parameters.mass, "period": h.parameters.period,
-                                "jerk_variance": h.parameters.jerk_variance,
-                                "force_rate_variance": h.parameters.force_rate_variance,
-                                "R_z": h.parameters.R_z, "R_xy": h.parameters.R_xy, "preset": "WALKING (eq. 22)"},
+        "cable": (
+            {
+                "pulley_world_m": h.cable.pulley.tolist(),
+                "natural_length_m": h.slack_length,
+                "planned_tighten_time_s": h.planned_tighten_time,
+                "planned_lift_time_s": h.planned_lift_time,
+                **dataclasses.asdict(h.setup),
+            }
+            if h.cable is not None
+            else None
+        ),
+        "observer_parameters": {
+            "mass": h.parameters.mass,
+            "period": h.parameters.period,
+            "jerk_variance": h.parameters.jerk_variance,
+            "force_rate_variance": h.parameters.force_rate_variance,
+            "R_z": h.parameters.R_z,
+            "R_xy": h.parameters.R_xy,
+            "preset": "WALKING (eq. 22)",
+        },
         "frame": "F0: world-aligned, origin at the right sole at t = 0 (fixed for the run)",
         "noise": scenario.noise,
         "seed": scenario.seed,
@@ -446,6 +524,15 @@ def nao_walk_pulled_metrics(scenario: NaoWalkPulledScenario, handles: NaoWalkPul
     }
 
 
-__all__ = ["CableSetup", "LOAD_MASS", "MAX_MEAN_ERROR_X", "MAX_RMS_ERROR_X", "NaoWalkPulledHandles",
-           "NaoWalkPulledScenario", "build_nao_walk_pulled_diagram", "nao_walk_pulled_metrics", "observer_metrics",
-           "pulled_floors"]
+__all__ = [
+    "CableSetup",
+    "LOAD_MASS",
+    "MAX_MEAN_ERROR_X",
+    "MAX_RMS_ERROR_X",
+    "NaoWalkPulledHandles",
+    "NaoWalkPulledScenario",
+    "build_nao_walk_pulled_diagram",
+    "nao_walk_pulled_metrics",
+    "observer_metrics",
+    "pulled_floors",
+]

@@ -47,8 +47,8 @@ from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, Ve
 from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station, default_plant_config
 from systems.residuals.contact_estimation import ContactDetector, ContactLocalizer, GatedEstimate
 from systems.residuals.geometry_intersection import inward_direction, sample_surface, surface_areas
-from systems.simulation.disturbances import Push, PushSource, Step
 from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual, ResidualModel
+from systems.simulation.disturbances import Push, PushSource, Step
 from systems.simulation.visualization import ForceArrows
 
 TRUE_RGBA = Rgba(0.1, 0.8, 0.1, 0.5)  # wide and translucent: the estimate shows inside it
@@ -153,9 +153,13 @@ def build_contact_localization_diagram(
     if scenario.push_duration <= 0 or scenario.push_start < 0 or scenario.log_period <= 0:
         raise ValueError("push_duration and log_period must be positive, push_start non-negative")
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, scenario.model, plant_config=scenario.plant_config, noise=scenario.noise, seed=scenario.seed)
+    station = add_humanoid_station(
+        builder, scenario.model, plant_config=scenario.plant_config, noise=scenario.noise, seed=scenario.seed
+    )
     if station.humanoid is None or not station.known_wrench_frames:
-        raise ValueError(f"the contact study needs a humanoid with foot F/T sensors (hrp4_like), got {scenario.model!r}")
+        raise ValueError(
+            f"the contact study needs a humanoid with foot F/T sensors (hrp4_like), got {scenario.model!r}"
+        )
     plant = station.plant
     builder.Connect(builder.AddSystem(ConstantVectorSource(station.q_hold)).get_output_port(), station.desired_position)
     excluded = sole_bodies(station)
@@ -168,8 +172,14 @@ def build_contact_localization_diagram(
         magnitude = float(np.linalg.norm(force))
         if magnitude == 0.0:
             raise ValueError("push_force must be non-zero (use push_body=None for no contact)")
-        pushes.append(Push(scenario.push_body, np.asarray(scenario.push_point, dtype=float), force / magnitude,
-                           Step(magnitude, scenario.push_start, scenario.push_start + scenario.push_duration)))
+        pushes.append(
+            Push(
+                scenario.push_body,
+                np.asarray(scenario.push_point, dtype=float),
+                force / magnitude,
+                Step(magnitude, scenario.push_start, scenario.push_start + scenario.push_duration),
+            )
+        )
     push_source = builder.AddSystem(PushSource(plant, pushes))
     push_source.set_name("push_source")
     builder.Connect(push_source.GetOutputPort("applied_spatial_forces"), plant.get_applied_spatial_force_input_port())
@@ -188,14 +198,28 @@ def build_contact_localization_diagram(
     builder.Connect(station.measured_torque, internal.GetInputPort("measured_torque"))
 
     nq = plant.num_positions()
-    detector = builder.AddSystem(ContactDetector(
-        plant, internal_gain=scenario.internal_gain, external_gain=scenario.external_gain, known_wrench_frames=frames,
-        nominal_positions=station.initial_state[:nq], period=scenario.period))
+    detector = builder.AddSystem(
+        ContactDetector(
+            plant,
+            internal_gain=scenario.internal_gain,
+            external_gain=scenario.external_gain,
+            known_wrench_frames=frames,
+            nominal_positions=station.initial_state[:nq],
+            period=scenario.period,
+        )
+    )
     detector.set_name("contact_detector")
     builder.Connect(external.GetOutputPort("external_wrench_world"), detector.GetInputPort("external_wrench_world"))
     builder.Connect(internal.GetOutputPort("residual"), detector.GetInputPort("residual"))
-    localizer = builder.AddSystem(ContactLocalizer(
-        plant, station.scene_graph, exclude_bodies=excluded, period=scenario.period, settle_time=scenario.settle_time))
+    localizer = builder.AddSystem(
+        ContactLocalizer(
+            plant,
+            station.scene_graph,
+            exclude_bodies=excluded,
+            period=scenario.period,
+            settle_time=scenario.settle_time,
+        )
+    )
     localizer.set_name("contact_localizer")
     builder.Connect(station.sensed_state, localizer.GetInputPort("state"))
     builder.Connect(external.GetOutputPort("external_wrench_world"), localizer.GetInputPort("external_wrench_world"))
@@ -215,25 +239,38 @@ def build_contact_localization_diagram(
     visualizer = None
     if meshcat is not None:
         visualizer = MeshcatVisualizer.AddToBuilder(builder, station.scene_graph, meshcat)
-        true_arrows = builder.AddSystem(ForceArrows(meshcat, 1, path="true_force", rgba=TRUE_RGBA, min_force=0.5,
-                                                    shaft_radius=0.016, head_radius=0.035))
+        true_arrows = builder.AddSystem(
+            ForceArrows(
+                meshcat, 1, path="true_force", rgba=TRUE_RGBA, min_force=0.5, shaft_radius=0.016, head_radius=0.035
+            )
+        )
         builder.Connect(push_source.GetOutputPort("force_world"), true_arrows.get_force_world_input_port())
         builder.Connect(push_source.GetOutputPort("point_world"), true_arrows.get_point_world_input_port())
         gate = builder.AddSystem(GatedEstimate())
         builder.Connect(localizer.GetOutputPort("contact_force_world"), gate.GetInputPort("force"))
         builder.Connect(localizer.GetOutputPort("contact_point_world"), gate.GetInputPort("point"))
         builder.Connect(localizer.GetOutputPort("valid"), gate.GetInputPort("valid"))
-        estimate_arrows = builder.AddSystem(ForceArrows(meshcat, 1, path="estimated_force", rgba=ESTIMATE_RGBA,
-                                                        min_force=0.5, shaft_radius=0.005))
+        estimate_arrows = builder.AddSystem(
+            ForceArrows(meshcat, 1, path="estimated_force", rgba=ESTIMATE_RGBA, min_force=0.5, shaft_radius=0.005)
+        )
         builder.Connect(gate.GetOutputPort("force_world"), estimate_arrows.get_force_world_input_port())
         builder.Connect(gate.GetOutputPort("point_world"), estimate_arrows.get_point_world_input_port())
     diagram = builder.Build()
     diagram.set_name("contact_localization")
     return diagram, ContactLocalizationHandles(
-        plant=plant, scene_graph=station.scene_graph, station=station, push_source=push_source, model=model,
-        internal=internal, external=external, detector=detector, localizer=localizer, excluded_bodies=excluded,
-        loggers=loggers, meshcat_visualizer=visualizer)
-
+        plant=plant,
+        scene_graph=station.scene_graph,
+        station=station,
+        push_source=push_source,
+        model=model,
+        internal=internal,
+        external=external,
+        detector=detector,
+        localizer=localizer,
+        excluded_bodies=excluded,
+        loggers=loggers,
+        meshcat_visualizer=visualizer,
+    )
 
 
 def sample_trials(model: str, trials: int, seed: int) -> list[dict]:
@@ -271,23 +308,30 @@ def sample_trials(model: str, trials: int, seed: int) -> list[dict]:
         X = X_WB[int(np.searchsorted(geo.bodies, link))]
         p_B = X[:, :3].T @ (p_W - X[:, 3])
         force = rng.uniform(MIN_FORCE, MAX_FORCE) * inward_direction(n_W, rng, MAX_ANGLE_DEG)
-        specs.append({
-            "trial": i,
-            "body": body.name(),
-            "body_index": int(link),
-            "geometry": geo.names[g],
-            "point_body": p_B.tolist(),
-            "point_world_nominal": p_W.tolist(),
-            "force_world": force.tolist(),
-            "noise_seed": (seed * 100003 + i) % (2**31 - 1),
-        })
+        specs.append(
+            {
+                "trial": i,
+                "body": body.name(),
+                "body_index": int(link),
+                "geometry": geo.names[g],
+                "point_body": p_B.tolist(),
+                "point_world_nominal": p_W.tolist(),
+                "force_world": force.tolist(),
+                "noise_seed": (seed * 100003 + i) % (2**31 - 1),
+            }
+        )
     return specs
 
 
 def trial_scenario(scenario: ContactLocalizationScenario, spec: dict) -> ContactLocalizationScenario:
     """The run of the trial ``spec`` (``sample_trials``): ``scenario`` with its push and noise seed."""
-    return dataclasses.replace(scenario, push_body=spec["body"], push_point=list(spec["point_body"]),
-                               push_force=list(spec["force_world"]), seed=spec["noise_seed"])
+    return dataclasses.replace(
+        scenario,
+        push_body=spec["body"],
+        push_point=list(spec["point_body"]),
+        push_force=list(spec["force_world"]),
+        seed=spec["noise_seed"],
+    )
 
 
 def no_contact_scenario(scenario: ContactLocalizationScenario) -> ContactLocalizationScenario:
@@ -319,8 +363,13 @@ def time_localizer_update(handles: ContactLocalizationHandles, context: Context,
     return float(np.median(samples))
 
 
-def trial_result(scenario: ContactLocalizationScenario, spec: dict, handles: ContactLocalizationHandles,
-                 context: Context, wall_time_s: float) -> dict:
+def trial_result(
+    scenario: ContactLocalizationScenario,
+    spec: dict,
+    handles: ContactLocalizationHandles,
+    context: Context,
+    wall_time_s: float,
+) -> dict:
     """The results of the trial ``spec`` run as ``scenario`` (``trial_scenario``) up to the end
     of its push, from the simulator's root ``context``: detection and its delay, the
     localized link and point, the force errors, and the localizer's update time (module
@@ -346,7 +395,8 @@ def trial_result(scenario: ContactLocalizationScenario, spec: dict, handles: Con
         "status_reason": estimate.reason,
         "estimated_body_index": estimate.body_index,
         "estimated_body": handles.plant.get_body(BodyIndex(estimate.body_index)).name()
-        if estimate.body_index >= 0 else None,
+        if estimate.body_index >= 0
+        else None,
         "correct_link": estimate.body_index == spec["body_index"],
         "position_error_m": None,
         "force_error_rel": None,
@@ -371,8 +421,9 @@ def trial_result(scenario: ContactLocalizationScenario, spec: dict, handles: Con
     return result
 
 
-def no_contact_result(scenario: ContactLocalizationScenario, handles: ContactLocalizationHandles,
-                      context: Context) -> dict:
+def no_contact_result(
+    scenario: ContactLocalizationScenario, handles: ContactLocalizationHandles, context: Context
+) -> dict:
     """The run without contact (``no_contact_scenario``) of ``scenario.no_contact_duration`` s:
     the number of OFF->ON switches of the detector, and the largest test statistics."""
     log = handles.loggers["contact_detected"].FindLog(context)
@@ -423,10 +474,15 @@ def contact_localization_metrics(results: list[dict], no_contact: dict | None) -
         "p95_angle_error_deg": float(np.percentile(angles, 95)) if angles else None,
         "median_localizer_update_ms": float(np.median(updates)) if n else None,
         "max_localizer_update_ms": float(np.max(updates)) if n else None,
-        "status_counts": {reason: sum(r["status_reason"] == reason for r in results)
-                          for reason in sorted({r["status_reason"] for r in results})},
-        "wrong_links": [{"trial": r["trial"], "true": r["body"], "estimated": r["estimated_body"],
-                         "status": r["status_reason"]} for r in results if not r["correct_link"]],
+        "status_counts": {
+            reason: sum(r["status_reason"] == reason for r in results)
+            for reason in sorted({r["status_reason"] for r in results})
+        },
+        "wrong_links": [
+            {"trial": r["trial"], "true": r["body"], "estimated": r["estimated_body"], "status": r["status_reason"]}
+            for r in results
+            if not r["correct_link"]
+        ],
     }
     checks = {}
     for key, (op, floor) in FLOORS.items():

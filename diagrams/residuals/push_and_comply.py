@@ -11,23 +11,22 @@ Scenarios are YAML files loaded into ``PushAndComplyScenario`` with
 ``pydrake.common.yaml.yaml_load_typed``; the default is the paper's.
 """
 
-
 import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams
 from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.analysis import SimulatorConfig
-from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
 from diagrams.scenarios import load_scenario as _load_scenario
 from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station, default_plant_config
 from systems.residuals.admittance import JointAdmittanceController, admittance_gains_by_group, joint_position_selector
-from systems.simulation.disturbances import PolynomialRampUpDown, Push, PushSource
 from systems.residuals.momentum_residuals import ClassicalResidual, InternalResidual
+from systems.simulation.disturbances import PolynomialRampUpDown, Push, PushSource
 
 RESIDUAL_KINDS = ("internal", "classical")
 #: A run counts as upright while the pelvis keeps this fraction of its height and tilts less.
@@ -148,7 +147,9 @@ def build_push_and_comply_diagram(
         raise ValueError("push-and-comply needs one of the humanoid models (its shoulders and joint groups)")
 
     # Two downward forces on the shoulders, polynomial profile (the paper's Sec. IV).
-    profile = PolynomialRampUpDown(scenario.push_peak_force, scenario.push_start, scenario.push_peak_time, scenario.push_end)
+    profile = PolynomialRampUpDown(
+        scenario.push_peak_force, scenario.push_start, scenario.push_peak_time, scenario.push_end
+    )
     pushes = [
         Push(body.name(), np.asarray(scenario.push_point, float), np.asarray(scenario.push_direction, float), profile)
         for body in (humanoid.shoulder_bodies["right"], humanoid.shoulder_bodies["left"])
@@ -161,7 +162,9 @@ def build_push_and_comply_diagram(
     # The residual, from the sensors only.
     residual_type = InternalResidual if residual_kind == "internal" else ClassicalResidual
     residual = builder.AddSystem(
-        residual_type(plant, scenario.residual_gain, known_wrench_frames=station.known_wrench_frames, model=station.dynamics_model)
+        residual_type(
+            plant, scenario.residual_gain, known_wrench_frames=station.known_wrench_frames, model=station.dynamics_model
+        )
     )
     residual.set_name(f"{residual_kind}_residual")
     builder.Connect(station.sensed_state, residual.GetInputPort("state"))
@@ -244,7 +247,9 @@ def push_and_comply_metrics(
     q = np.array([x[j.position_start()] for j in station.topology.joints])
     reference = int(np.searchsorted(t, scenario.push_start))  # posture when the push begins
     displacement = q - q[:, [reference]]
-    max_displacement_deg = {n: float(np.degrees(np.abs(displacement[k, reference:]).max())) for k, n in enumerate(names)}
+    max_displacement_deg = {
+        n: float(np.degrees(np.abs(displacement[k, reference:]).max())) for k, n in enumerate(names)
+    }
     knees = [n for n in names if "KNEE" in n.upper()]
     flexion = {n: float(np.degrees(displacement[names.index(n), reference:].max())) for n in knees}
 
@@ -259,7 +264,9 @@ def push_and_comply_metrics(
         for side, frame in humanoid.sole_frames.items():
             soles[side].append(frame.CalcPoseInWorld(context).translation())
     com_z, pelvis_z = np.array(com_z), np.array(pelvis_z)
-    slip = {side: float(np.linalg.norm(np.array(p)[:, :2] - np.array(p)[0, :2], axis=1).max()) for side, p in soles.items()}
+    slip = {
+        side: float(np.linalg.norm(np.array(p)[:, :2] - np.array(p)[0, :2], axis=1).max()) for side, p in soles.items()
+    }
     upright = bool(pelvis_z.min() > UPRIGHT_HEIGHT_FRACTION * pelvis_z[0] and max(tilt_deg) < UPRIGHT_MAX_TILT_DEG)
     return {
         "residual": handles.residual_kind,

@@ -121,11 +121,11 @@ def build_residual_comparison_diagram(
     if scenario.duration <= 0 or scenario.push_frequency < 0 or scenario.log_period <= 0:
         raise ValueError("duration and log_period must be positive, push_frequency non-negative")
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, scenario.model, plant_config=scenario.plant_config, noise=scenario.noise, seed=scenario.seed)
-    plant, humanoid = station.plant, station.humanoid
-    builder.Connect(
-        builder.AddSystem(ConstantVectorSource(station.q_hold)).get_output_port(), station.desired_position
+    station = add_humanoid_station(
+        builder, scenario.model, plant_config=scenario.plant_config, noise=scenario.noise, seed=scenario.seed
     )
+    plant, humanoid = station.plant, station.humanoid
+    builder.Connect(builder.AddSystem(ConstantVectorSource(station.q_hold)).get_output_port(), station.desired_position)
     amplitude = scenario.push_amplitude
     if amplitude is None:
         mass = plant.CalcTotalMass(plant.CreateDefaultContext())
@@ -154,10 +154,20 @@ def build_residual_comparison_diagram(
     # The three residuals, sharing one model (one dynamics computation per update).
     # The station's model: the PD's gravity comes from the same per-state computation.
     model = station.dynamics_model if station.dynamics_model is not None else ResidualModel(plant)
-    classical = builder.AddSystem(ClassicalResidual(plant, scenario.classical_gain, scenario.period, known_frames, model=model))
-    internal = builder.AddSystem(InternalResidual(plant, scenario.internal_gain, scenario.period, known_frames, model=model))
-    external = builder.AddSystem(ExternalResidual(plant, scenario.external_gain, scenario.period, known_frames, model=model))
-    for name, residual in (("classical_residual", classical), ("internal_residual", internal), ("external_residual", external)):
+    classical = builder.AddSystem(
+        ClassicalResidual(plant, scenario.classical_gain, scenario.period, known_frames, model=model)
+    )
+    internal = builder.AddSystem(
+        InternalResidual(plant, scenario.internal_gain, scenario.period, known_frames, model=model)
+    )
+    external = builder.AddSystem(
+        ExternalResidual(plant, scenario.external_gain, scenario.period, known_frames, model=model)
+    )
+    for name, residual in (
+        ("classical_residual", classical),
+        ("internal_residual", internal),
+        ("external_residual", external),
+    ):
         residual.set_name(name)
         builder.Connect(sensed_state, residual.GetInputPort("state"))
         if residual.HasInputPort("measured_torque"):
@@ -270,30 +280,48 @@ def residual_comparison_metrics(
         "model": scenario.model,
         "push_body": handles.push_source.pushes[0].body_name,
         "noise": scenario.noise,
-        "sensors": "simulated sensors" if handles.sensors is not None else "true state (no sensor model for this robot)",
+        "sensors": "simulated sensors"
+        if handles.sensors is not None
+        else "true state (no sensor model for this robot)",
         "seed": scenario.seed,
         "duration_s": scenario.duration,
         "skip_s": skip,
-        "gains_per_s": {"classical": scenario.classical_gain, "internal": scenario.internal_gain, "external": scenario.external_gain},
+        "gains_per_s": {
+            "classical": scenario.classical_gain,
+            "internal": scenario.internal_gain,
+            "external": scenario.external_gain,
+        },
         "internal_rel_rms_error": relative_rms_error(internal[:, window], truth[:, window]),
         "internal_rel_rms_error_per_joint": per_joint(internal, truth),
-        "internal_rel_rms_error_vs_filtered_truth": relative_rms_error(internal[:, window], internal_truth_filtered[:, window]),
+        "internal_rel_rms_error_vs_filtered_truth": relative_rms_error(
+            internal[:, window], internal_truth_filtered[:, window]
+        ),
         "internal_rel_rms_error_per_joint_vs_filtered_truth": per_joint(internal, internal_truth_filtered),
         "classical_rel_rms_error": relative_rms_error(classical[:, window], truth[:, window]),
         "classical_rel_rms_error_per_joint": per_joint(classical, truth),
-        "classical_rel_rms_error_vs_filtered_truth": relative_rms_error(classical[:, window], classical_truth_filtered[:, window]),
+        "classical_rel_rms_error_vs_filtered_truth": relative_rms_error(
+            classical[:, window], classical_truth_filtered[:, window]
+        ),
         "external_force_rel_rms_error": relative_rms_error(force_estimate[:, window], force_truth[:, window]),
         "external_force_rel_rms_error_vs_filtered_truth": relative_rms_error(
             force_estimate[:, window], force_truth_filtered[:, window]
         ),
-        "external_wrench_base_rel_rms_error": relative_rms_error(signals["external_base"][:, window], wrench_base_truth[:, window]),
+        "external_wrench_base_rel_rms_error": relative_rms_error(
+            signals["external_base"][:, window], wrench_base_truth[:, window]
+        ),
         "external_wrench_base_rel_rms_error_vs_filtered_truth": relative_rms_error(
             signals["external_base"][:, window], wrench_base_filtered[:, window]
         ),
-        "rms_true_joint_effort_Nm": {name: float(np.sqrt(np.mean(truth[k, window] ** 2))) for k, name in enumerate(names)},
-        "rms_classical_joint_effort_Nm": {name: float(np.sqrt(np.mean(classical[k, window] ** 2))) for k, name in enumerate(names)},
+        "rms_true_joint_effort_Nm": {
+            name: float(np.sqrt(np.mean(truth[k, window] ** 2))) for k, name in enumerate(names)
+        },
+        "rms_classical_joint_effort_Nm": {
+            name: float(np.sqrt(np.mean(classical[k, window] ** 2))) for k, name in enumerate(names)
+        },
         "rms_internal_noise_before_push_Nm": {
-            name: float(np.sqrt(np.mean(internal[k, before & (t > 0.05)] ** 2))) if np.any(before & (t > 0.05)) else None
+            name: float(np.sqrt(np.mean(internal[k, before & (t > 0.05)] ** 2)))
+            if np.any(before & (t > 0.05))
+            else None
             for k, name in enumerate(names)
         },
         "wall_time_s": wall_time_s,

@@ -30,10 +30,10 @@ from models import (
     point_contact_scene_graph_config,
     set_standing_state,
 )
-from systems.simulation.pd_gravity import PdGravityController
-from systems.residuals.momentum_residuals import ResidualModel
-from systems.simulation.sensors import SensorHandles, add_sensors
 from systems.common.topology import FloatingBaseTopology, floating_base_topology
+from systems.residuals.momentum_residuals import ResidualModel
+from systems.simulation.pd_gravity import PdGravityController
+from systems.simulation.sensors import SensorHandles, add_sensors
 
 
 @dataclass

@@ -161,8 +161,9 @@ def build_standing_diagram(
     plant.Finalize()
 
     kp_default, kd_default = default_gains(plant, humanoid)
-    controller = builder.AddSystem(PdGravityController(
-        plant, kp_default if kp is None else kp, kd_default if kd is None else kd))
+    controller = builder.AddSystem(
+        PdGravityController(plant, kp_default if kp is None else kp, kd_default if kd is None else kd)
+    )
     controller.set_name("pd_gravity_controller")
     q_desired = joint_vector_from_names(plant, humanoid.nominal_posture)
     source = builder.AddSystem(ConstantVectorSource(q_desired))
@@ -177,8 +178,7 @@ def build_standing_diagram(
         visualizer = MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)
     diagram = builder.Build()
     diagram.set_name(f"standing_{model_name}")
-    return diagram, StandingHandles(plant, scene_graph, humanoid, controller, logger,
-                                    q_desired, visualizer)
+    return diagram, StandingHandles(plant, scene_graph, humanoid, controller, logger, q_desired, visualizer)
 
 
 def set_initial_state(diagram: Diagram, context: Context, handles: StandingHandles) -> None:
@@ -192,8 +192,9 @@ def set_initial_state(diagram: Diagram, context: Context, handles: StandingHandl
 # ---------------------------------------------------------------------------------------
 
 
-def foot_sphere_normal_forces(plant: MultibodyPlant, plant_context: Context,
-                              humanoid: HumanoidHandles) -> dict[str, np.ndarray]:
+def foot_sphere_normal_forces(
+    plant: MultibodyPlant, plant_context: Context, humanoid: HumanoidHandles
+) -> dict[str, np.ndarray]:
     """Ground normal force (N, along the contact normal: world z on flat ground; the
     convention of ``systems.common.contact_results``) on each foot contact sphere, FSR order.
 
@@ -202,8 +203,10 @@ def foot_sphere_normal_forces(plant: MultibodyPlant, plant_context: Context,
     results = plant.get_contact_results_output_port().Eval(plant_context)
     spheres = {g for ids in humanoid.fsr_geometries.values() for g in ids}
     contacts = robot_point_contacts(results, spheres, "foot_sphere_normal_forces")
-    return {side: contacts.summed({g: i for i, g in enumerate(ids)}, len(ids))
-            for side, ids in humanoid.fsr_geometries.items()}
+    return {
+        side: contacts.summed({g: i for i, g in enumerate(ids)}, len(ids))
+        for side, ids in humanoid.fsr_geometries.items()
+    }
 
 
 @dataclass
@@ -223,13 +226,14 @@ class StandingMetrics:
 
     @property
     def feet_flat(self) -> bool:
-        return (max(self.sole_tilt_rad.values()) < np.radians(1.0)
-                and max(abs(h) for h in self.sole_height_m.values()) < 1e-3
-                and self.min_sphere_force_N > 0.0)
+        return (
+            max(self.sole_tilt_rad.values()) < np.radians(1.0)
+            and max(abs(h) for h in self.sole_height_m.values()) < 1e-3
+            and self.min_sphere_force_N > 0.0
+        )
 
 
-def standing_metrics(handles: StandingHandles, context: Context, settle_time: float = 1.0
-                     ) -> StandingMetrics:
+def standing_metrics(handles: StandingHandles, context: Context, settle_time: float = 1.0) -> StandingMetrics:
     """Base drift after ``settle_time`` from the state log, and the final foot contact."""
     plant = handles.plant
     plant_context = plant.GetMyContextFromRoot(context)
@@ -238,8 +242,8 @@ def standing_metrics(handles: StandingHandles, context: Context, settle_time: fl
     base = handles.humanoid.base_body
     q_start = base.floating_positions_start()
     keep = t >= settle_time - 1e-9
-    quats = x[q_start:q_start + 4, keep]
-    pos = x[q_start + 4:q_start + 7, keep]
+    quats = x[q_start : q_start + 4, keep]
+    pos = x[q_start + 4 : q_start + 7, keep]
     drift_m, drift_rad = 0.0, 0.0
     if pos.shape[1] > 0:
         drift_m = float(np.max(np.linalg.norm(pos - pos[:, :1], axis=0)))
@@ -258,8 +262,9 @@ def standing_metrics(handles: StandingHandles, context: Context, settle_time: fl
     return StandingMetrics(drift_m, drift_rad, tilt, height, forces, fell)
 
 
-def standing_run_metrics(scenario: StandingScenario, handles: StandingHandles, context: Context,
-                         wall_time_s: float) -> dict:
+def standing_run_metrics(
+    scenario: StandingScenario, handles: StandingHandles, context: Context, wall_time_s: float
+) -> dict:
     """The metrics of one finished run of ``scenario`` (``context``: the simulator's root
     context, ``wall_time_s``: the wall time it took) as plain data: base drift after the
     settle time (cm, deg), the final foot contact (sole tilt, deg; sole height, mm; sphere

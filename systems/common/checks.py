@@ -77,8 +77,16 @@ def vector3(value, name: str) -> np.ndarray:
     return x
 
 
-def per_joint(value, joints: int | Sequence[str], name: str, *, who: str | None = None,
-              allow_inf: bool = False, sign: str | None = None, entry: str = "joint") -> np.ndarray:
+def per_joint(
+    value,
+    joints: int | Sequence[str],
+    name: str,
+    *,
+    who: str | None = None,
+    allow_inf: bool = False,
+    sign: str | None = None,
+    entry: str = "joint",
+) -> np.ndarray:
     """``value`` as a new (n,) float array, one entry per joint (or per ``entry``).
 
     Args:
@@ -124,7 +132,9 @@ def per_joint(value, joints: int | Sequence[str], name: str, *, who: str | None 
         wrong = np.flatnonzero(arr < 0.0 if sign == "non-negative" else arr <= 0.0)
         if wrong.size:
             what = "negative" if sign == "non-negative" else "not positive"
-            raise ValueError(f"{prefix} must be {sign}; {what} at {entry} indices {wrong.tolist()}: {arr[wrong].tolist()}")
+            raise ValueError(
+                f"{prefix} must be {sign}; {what} at {entry} indices {wrong.tolist()}: {arr[wrong].tolist()}"
+            )
     return arr
 
 
@@ -141,8 +151,9 @@ def check_plant(plant, who: str) -> MultibodyPlant:
     return plant
 
 
-def resolve_body(plant: MultibodyPlant, body, who: str, *, model_instance: str | None = None,
-                 allow_world: bool = False) -> RigidBody:
+def resolve_body(
+    plant: MultibodyPlant, body, who: str, *, model_instance: str | None = None, allow_world: bool = False
+) -> RigidBody:
     """The plant's body given as a RigidBody, a name (in ``model_instance`` if given) or an index.
 
     Raises:
@@ -168,8 +179,9 @@ def resolve_body(plant: MultibodyPlant, body, who: str, *, model_instance: str |
             try:
                 resolved = plant.GetBodyByName(body)
             except RuntimeError as error:  # the name exists in several model instances
-                raise ValueError(f"{who}: the body name {body!r} is ambiguous ({error}); "
-                                 "give its model instance") from None
+                raise ValueError(
+                    f"{who}: the body name {body!r} is ambiguous ({error}); give its model instance"
+                ) from None
     elif isinstance(body, (int, np.integer, BodyIndex)):
         index = int(body)
         if not 0 <= index < plant.num_bodies():

@@ -43,8 +43,9 @@ class RobotPointContacts:
         return out
 
 
-def robot_point_contacts(results: ContactResults, robot_geometries: Container, who: str = "robot_point_contacts"
-                         ) -> RobotPointContacts:
+def robot_point_contacts(
+    results: ContactResults, robot_geometries: Container, who: str = "robot_point_contacts"
+) -> RobotPointContacts:
     """The point contacts of ``results`` in which a geometry of ``robot_geometries`` takes
     part (a pair of two robot geometries is read from geometry A's side), with f_n by the
     module's convention.
@@ -68,7 +69,9 @@ def robot_point_contacts(results: ContactResults, robot_geometries: Container, w
     for c in range(results.num_hydroelastic_contacts()):
         surface = results.hydroelastic_contact_info(c).contact_surface()
         if surface.id_M() in robot_geometries or surface.id_N() in robot_geometries:
-            raise ValueError(f"{who}: hydroelastic contact on a robot geometry is not supported; "
-                             "use point contact for it")
-    return RobotPointContacts(np.array(points, dtype=float).reshape(-1, 3), np.array(forces, dtype=float),
-                              tuple(geometries))
+            raise ValueError(
+                f"{who}: hydroelastic contact on a robot geometry is not supported; use point contact for it"
+            )
+    return RobotPointContacts(
+        np.array(points, dtype=float).reshape(-1, 3), np.array(forces, dtype=float), tuple(geometries)
+    )

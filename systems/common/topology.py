@@ -16,8 +16,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from pydrake.multibody.plant import MultibodyPlant
 import numpy as np
+from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Frame, Joint, ModelInstanceIndex, RigidBody
 
 #: Joint type names (``Joint.type_name()``) accepted as the tree's 1-DoF joints.
@@ -84,8 +84,7 @@ def floating_base_topology(plant: MultibodyPlant) -> FloatingBaseTopology:
     if len(free_joints) > 1:
         names = ", ".join(f"'{j.child_body().name()}'" for j in free_joints)
         raise ValueError(
-            f"the plant has {len(free_joints)} floating bases ({names}); the floating-base "
-            "dynamics need exactly one"
+            f"the plant has {len(free_joints)} floating bases ({names}); the floating-base dynamics need exactly one"
         )
     free_joint = free_joints[0]
     if free_joint.parent_body().index() != plant.world_body().index():

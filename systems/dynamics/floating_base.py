@@ -25,15 +25,16 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Frame, JacobianWrtVariable
 from pydrake.systems.framework import Context
 
-from systems.dynamics.floating_base_terms import FloatingBaseTerms, reduce_to_floating_terms
-from systems.dynamics.base_state import checked_state, quaternion_to_rotation
 from systems.common.topology import floating_base_topology, uniform_gravity
+from systems.dynamics.base_state import checked_state, quaternion_to_rotation
+from systems.dynamics.floating_base_terms import FloatingBaseTerms, reduce_to_floating_terms
 
 IMPLEMENTATIONS = ("fast", "reference")
 
 #: Length of the configuration-space step of the mass-matrix central difference [rad or m].
 #: Truncation error ~ step^2, rounding error ~ 1e-16 / step: 1e-5 balances both (~1e-10).
 MASS_MATRIX_DERIVATIVE_STEP = 1e-5
+
 
 class DrakeFloatingBaseDynamics:
     """The ``"fast"`` implementation: Drake's mass matrix, bias and gravity kernels.
@@ -126,9 +127,7 @@ class DrakeFloatingBaseDynamics:
             v0=v0,
         )
 
-    def floating_jacobian(
-        self, q: np.ndarray, frame: Frame, p_FoP: np.ndarray, *, spatial: bool = False
-    ) -> np.ndarray:
+    def floating_jacobian(self, q: np.ndarray, frame: Frame, p_FoP: np.ndarray, *, spatial: bool = False) -> np.ndarray:
         """J^fb of point P fixed in ``frame``, in world coordinates (eq. 12: tau = J^fb^T f_W).
 
         Args:
@@ -196,8 +195,6 @@ class FloatingBaseDynamics:
         """All terms of eq. (9) and their derivatives at (q, v) (Drake's coordinates in)."""
         return self._impl.compute(q, v)
 
-    def floating_jacobian(
-        self, q: np.ndarray, frame: Frame, p_FoP: np.ndarray, *, spatial: bool = False
-    ) -> np.ndarray:
+    def floating_jacobian(self, q: np.ndarray, frame: Frame, p_FoP: np.ndarray, *, spatial: bool = False) -> np.ndarray:
         """J^fb (3 x n, or 6 x n with ``spatial``) of a point fixed in ``frame``, world coordinates."""
         return self._impl.floating_jacobian(q, frame, p_FoP, spatial=spatial)

@@ -42,10 +42,10 @@ from pydrake.math import RigidTransform
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Frame
 
-from systems.dynamics.floating_base_terms import FloatingBaseTerms, reduce_to_floating_terms
 from systems.common.spatial import crf, crm, plucker, skew, spatial_inertia, transform_inertia
-from systems.dynamics.base_state import checked_state, quaternion_to_rotation
 from systems.common.topology import floating_base_topology, uniform_gravity
+from systems.dynamics.base_state import checked_state, quaternion_to_rotation
+from systems.dynamics.floating_base_terms import FloatingBaseTerms, reduce_to_floating_terms
 
 _REVOLUTE = "revolute"
 _PRISMATIC = "prismatic"
@@ -180,7 +180,6 @@ class RecursiveFloatingBaseDynamics:
             inertia[k] += transform_inertia(_motion_transform(X_LB.inverse()), I_B)
         self._I = inertia
 
-
         # Actuator reflected inertia (rotor inertia x gear ratio^2), which Drake adds to the
         # diagonal of the mass matrix; constant, so it adds nothing to H_dot.
         self._reflected = np.zeros(self._n)
@@ -311,9 +310,7 @@ class RecursiveFloatingBaseDynamics:
         H, F, I0c, H_dot, F_dot, I0c_dot = self._algorithm2(Xup, qdot)
         return reduce_to_floating_terms(H, F, I0c, C_hat, p_hat, H_dot, F_dot, I0c_dot, R_WB, v0)
 
-    def floating_jacobian(
-        self, q: np.ndarray, frame: Frame, p_FoP: np.ndarray, *, spatial: bool = False
-    ) -> np.ndarray:
+    def floating_jacobian(self, q: np.ndarray, frame: Frame, p_FoP: np.ndarray, *, spatial: bool = False) -> np.ndarray:
         """Floating Jacobian J^fb of a point P fixed in ``frame`` (paper eq. 12).
 
         ``J^fb,T = J_{0,c}^T - F^T (I0c)^-1`` acts on the F0 spatial force ``^0X*_ref f``;
@@ -337,7 +334,9 @@ class RecursiveFloatingBaseDynamics:
             raise ValueError(f"p_FoP must be 3 finite numbers, got {p_FoP}")
         body = frame.body()
         if body.index() not in self._body_link:
-            raise ValueError(f"frame '{frame.name()}' is on body '{body.name()}', which is not part of the floating-base tree")
+            raise ValueError(
+                f"frame '{frame.name()}' is on body '{body.name()}', which is not part of the floating-base tree"
+            )
         link, X_LB = self._body_link[body.index()]
         X_BFr = frame.CalcPoseInBodyFrame(self._default_context)
         p_L = X_LB.multiply(X_BFr).multiply(p_FoP)

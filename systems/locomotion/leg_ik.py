@@ -66,13 +66,14 @@ class NaoLegGeometry:
         return self.thigh + self.tibia
 
     @classmethod
-    def from_plant(cls, plant: MultibodyPlant, model_instance=None) -> "NaoLegGeometry":
+    def from_plant(cls, plant: MultibodyPlant, model_instance=None) -> NaoLegGeometry:
         """Reads the leg dimensions from a finalized plant holding ``nao_like``.
 
         Raises:
             ValueError: if the legs do not have the structure of the module docstring
                 (joint offsets, axes, identity joint frame rotations, symmetric sides).
         """
+
         def joint(name):
             if model_instance is None:
                 return plant.GetJointByName(name)
@@ -84,11 +85,18 @@ class NaoLegGeometry:
             pos = {n: j[n].frame_on_parent().GetFixedPoseInBodyFrame() for n in LEG_JOINTS}
             for n in LEG_JOINTS:
                 child = j[n].frame_on_child().GetFixedPoseInBodyFrame()
-                if not (np.allclose(pos[n].rotation().matrix(), np.eye(3), atol=1e-12)
-                        and np.allclose(child.GetAsMatrix4(), np.eye(4), atol=1e-12)):
+                if not (
+                    np.allclose(pos[n].rotation().matrix(), np.eye(3), atol=1e-12)
+                    and np.allclose(child.GetAsMatrix4(), np.eye(4), atol=1e-12)
+                ):
                     raise ValueError(f"leg joint {prefix + n}: joint frames are not aligned with its parent")
-            axes = {"HipRoll": (1, 0, 0), "HipPitch": (0, 1, 0), "KneePitch": (0, 1, 0),
-                    "AnklePitch": (0, 1, 0), "AnkleRoll": (1, 0, 0)}
+            axes = {
+                "HipRoll": (1, 0, 0),
+                "HipPitch": (0, 1, 0),
+                "KneePitch": (0, 1, 0),
+                "AnklePitch": (0, 1, 0),
+                "AnkleRoll": (1, 0, 0),
+            }
             for n, axis in axes.items():
                 if not np.allclose(j[n].revolute_axis(), axis, atol=1e-12):
                     raise ValueError(f"leg joint {prefix + n}: axis {j[n].revolute_axis()} is not {axis}")
@@ -99,17 +107,25 @@ class NaoLegGeometry:
             if not (np.allclose(knee[:2], 0.0) and np.allclose(ankle[:2], 0.0)):
                 raise ValueError(f"{side} leg: thigh/tibia not along -z")
             frame_name = f"{prefix.lower()}_sole_frame"
-            frame = (plant.GetFrameByName(frame_name) if model_instance is None
-                     else plant.GetFrameByName(frame_name, model_instance))
+            frame = (
+                plant.GetFrameByName(frame_name)
+                if model_instance is None
+                else plant.GetFrameByName(frame_name, model_instance)
+            )
             X = frame.GetFixedPoseInBodyFrame()
             if frame.body().index() != j["AnkleRoll"].child_body().index():
                 raise ValueError(f"{frame_name} is not on the ankle roll body")
-            if not (np.allclose(X.rotation().matrix(), np.eye(3), atol=1e-12)
-                    and np.allclose(X.translation()[:2], 0.0)):
+            if not (
+                np.allclose(X.rotation().matrix(), np.eye(3), atol=1e-12) and np.allclose(X.translation()[:2], 0.0)
+            ):
                 raise ValueError(f"{frame_name} is not straight below the ankle roll axis")
             sole = -X.translation()[2]
-            out[side] = (tuple(float(c) for c in pos["HipYawPitch"].translation()), float(-knee[2]),
-                         float(-ankle[2]), float(sole))
+            out[side] = (
+                tuple(float(c) for c in pos["HipYawPitch"].translation()),
+                float(-knee[2]),
+                float(-ankle[2]),
+                float(sole),
+            )
         left, right = out["left"], out["right"]
         mirrored = (left[0][0], -left[0][1], left[0][2])
         if not (np.allclose(right[0], mirrored) and np.allclose(left[1:], right[1:])):
@@ -154,7 +170,8 @@ def leg_ik(geometry: NaoLegGeometry, p_torso_sole: np.ndarray, side: str) -> np.
         dist = np.sqrt(ux * ux + uz * uz)
         raise ValueError(
             f"leg_ik: {side} sole target out of reach: hip-ankle distance {dist.max():.4f} m "
-            f"(min {dist.min():.4f} m) outside [{abs(L1 - L2):.4f}, {L1 + L2:.4f}] m")
+            f"(min {dist.min():.4f} m) outside [{abs(L1 - L2):.4f}, {L1 + L2:.4f}] m"
+        )
     q_k = np.arccos(cos_k)
     wx, wz = -L2 * np.sin(q_k), -L1 - L2 * np.cos(q_k)
     q_hp = np.arctan2(ux, uz) - np.arctan2(wx, wz)  # (IK-4)

@@ -67,9 +67,9 @@ from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import BasicVector, Context, LeafSystem
 
 from models import HumanoidHandles, set_standing_state
-from systems.locomotion.leg_ik import LEG_JOINTS, NaoLegGeometry, leg_ik
 from systems.common.smoothing import smoothstep5
 from systems.common.topology import floating_base_topology
+from systems.locomotion.leg_ik import LEG_JOINTS, NaoLegGeometry, leg_ik
 
 SIDES = ("left", "right")
 #: Largest step length accepted before the IK check, m (the straight leg reaches about
@@ -136,9 +136,23 @@ class WalkingParameters:
 
     def check(self) -> None:
         """Raises ValueError on a bad value (the message names it)."""
-        for name in ("step_length", "step_width", "step_duration", "double_support_ratio", "swing_height",
-                     "com_height", "zmp_offset_x", "zmp_offset_y", "initial_wait", "final_wait", "preview_time",
-                     "sample_period", "zmp_weight", "jerk_weight", "gravity"):
+        for name in (
+            "step_length",
+            "step_width",
+            "step_duration",
+            "double_support_ratio",
+            "swing_height",
+            "com_height",
+            "zmp_offset_x",
+            "zmp_offset_y",
+            "initial_wait",
+            "final_wait",
+            "preview_time",
+            "sample_period",
+            "zmp_weight",
+            "jerk_weight",
+            "gravity",
+        ):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value)):
                 raise ValueError(f"WalkingParameters.{name} must be a finite number, got {value!r}")
@@ -149,8 +163,10 @@ class WalkingParameters:
         if not (isinstance(self.num_steps, (int, np.integer)) and self.num_steps >= 1):
             raise ValueError(f"num_steps must be an integer >= 1, got {self.num_steps!r}")
         if abs(self.step_length) > MAX_STEP_LENGTH:
-            raise ValueError(f"step_length {self.step_length} m is out of reach of nao_like's legs "
-                             f"(|step_length| <= {MAX_STEP_LENGTH} m)")
+            raise ValueError(
+                f"step_length {self.step_length} m is out of reach of nao_like's legs "
+                f"(|step_length| <= {MAX_STEP_LENGTH} m)"
+            )
         if not (0.06 <= self.step_width <= 0.20):
             raise ValueError(f"step_width must be in [0.06, 0.20] m (feet must not overlap), got {self.step_width}")
         if not (0.0 <= self.swing_height <= 0.05):
@@ -160,8 +176,10 @@ class WalkingParameters:
         if self.sample_period <= 0 or self.preview_time < self.sample_period:
             raise ValueError("sample_period must be positive and preview_time >= sample_period")
         if self.single_support_time < 2 * self.sample_period:
-            raise ValueError(f"the single-support time {self.single_support_time} s is shorter than two "
-                             f"samples ({self.sample_period} s): lower double_support_ratio or lengthen the step")
+            raise ValueError(
+                f"the single-support time {self.single_support_time} s is shorter than two "
+                f"samples ({self.sample_period} s): lower double_support_ratio or lengthen the step"
+            )
         if not (-0.02 <= self.zmp_offset_y <= 0.5 * self.step_width - 0.01):
             raise ValueError(f"zmp_offset_y must be in [-0.02, step_width/2 - 0.01] m, got {self.zmp_offset_y}")
         if self.initial_wait < 0 or self.final_wait < 0:
@@ -239,24 +257,32 @@ def plan_footsteps(params: WalkingParameters, left0: np.ndarray, right0: np.ndar
         n = k if k < params.num_steps else k - 1  # the last step closes the stance
         end = np.array([mid[0] + n * params.step_length, y_side[swing], mid[2]])
         t_start = params.walk_start + (k - 1) * params.step_duration
-        steps.append(Footstep(side=swing, start=feet[swing].copy(), end=end,
-                              support_position=feet[support].copy(), t_start=t_start,
-                              t_lift=t_start + params.double_support_time,
-                              t_land=t_start + params.step_duration,
-                              swing_height=params.swing_height))
+        steps.append(
+            Footstep(
+                side=swing,
+                start=feet[swing].copy(),
+                end=end,
+                support_position=feet[support].copy(),
+                t_start=t_start,
+                t_lift=t_start + params.double_support_time,
+                t_land=t_start + params.step_duration,
+                swing_height=params.swing_height,
+            )
+        )
         feet[swing] = end
         swing = support
     return steps
 
 
-def zmp_reference_knots(params: WalkingParameters, steps: list[Footstep], com0_xy: np.ndarray,
-                        left0: np.ndarray, right0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def zmp_reference_knots(
+    params: WalkingParameters, steps: list[Footstep], com0_xy: np.ndarray, left0: np.ndarray, right0: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Knots (times (M,), points (M, 2)) of the piecewise-linear ZMP reference, world, m.
 
     From the initial CoM (x, y) it moves to the feet's mid-point (+ offset) during
     ``initial_wait``; each step's double support moves it to the support sole (+
-    ``zmp_offset_x`` forward, + ``zmp_offset_y`` inwards), where it stays during single support; it returns to the final feet's mid-point in one
-    step duration and stays there.
+    ``zmp_offset_x`` forward, + ``zmp_offset_y`` inwards), where it stays during single
+    support; it returns to the final feet's mid-point in one step duration and stays there.
     """
     off = np.array([params.zmp_offset_x, 0.0])
     mid0 = 0.5 * (np.asarray(left0, float)[:2] + np.asarray(right0, float)[:2]) + off
@@ -287,13 +313,16 @@ def interpolate_knots(t: np.ndarray, times: np.ndarray, points: np.ndarray) -> n
     return np.column_stack([np.interp(t, times, points[:, i]) for i in range(points.shape[1])])
 
 
-def foot_trajectories(t: np.ndarray, steps: list[Footstep], left0: np.ndarray, right0: np.ndarray
-                      ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+def foot_trajectories(
+    t: np.ndarray, steps: list[Footstep], left0: np.ndarray, right0: np.ndarray
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """Sole positions (world, m) at times t (K,) per side, (K, 3), with the swing
     trajectory of eq. S-1, and the planned contact flag per side (K,) (False in swing)."""
     t = np.asarray(t, float)
-    pos = {"left": np.tile(np.asarray(left0, float), (t.size, 1)),
-           "right": np.tile(np.asarray(right0, float), (t.size, 1))}
+    pos = {
+        "left": np.tile(np.asarray(left0, float), (t.size, 1)),
+        "right": np.tile(np.asarray(right0, float), (t.size, 1)),
+    }
     contact = {side: np.ones(t.size, dtype=bool) for side in SIDES}
     for step in steps:
         p = pos[step.side]
@@ -335,21 +364,33 @@ class PreviewGains:
     gravity: float
 
 
-def preview_gains(sample_period: float, com_height: float, preview_time: float, *,
-                  zmp_weight: float = 1.0, jerk_weight: float = 1e-6, gravity: float = 9.81) -> PreviewGains:
+def preview_gains(
+    sample_period: float,
+    com_height: float,
+    preview_time: float,
+    *,
+    zmp_weight: float = 1.0,
+    jerk_weight: float = 1e-6,
+    gravity: float = 9.81,
+) -> PreviewGains:
     """The gains of eqs. K-3..K-4 from the discrete algebraic Riccati equation.
 
     Raises:
         ValueError: non-positive period, height, horizon or weights.
     """
-    for name, value in (("sample_period", sample_period), ("com_height", com_height),
-                        ("preview_time", preview_time), ("zmp_weight", zmp_weight),
-                        ("jerk_weight", jerk_weight), ("gravity", gravity)):
+    for name, value in (
+        ("sample_period", sample_period),
+        ("com_height", com_height),
+        ("preview_time", preview_time),
+        ("zmp_weight", zmp_weight),
+        ("jerk_weight", jerk_weight),
+        ("gravity", gravity),
+    ):
         if not (math.isfinite(value) and value > 0):
             raise ValueError(f"preview_gains: {name} must be positive, got {value}")
     T = float(sample_period)
     A = np.array([[1.0, T, T * T / 2.0], [0.0, 1.0, T], [0.0, 0.0, 1.0]])
-    B = np.array([T ** 3 / 6.0, T * T / 2.0, T])
+    B = np.array([T**3 / 6.0, T * T / 2.0, T])
     C = np.array([1.0, 0.0, -com_height / gravity])
     At = np.zeros((4, 4))
     At[0, 0] = 1.0
@@ -370,8 +411,9 @@ def preview_gains(sample_period: float, com_height: float, preview_time: float, 
     for j in range(1, n_preview):
         Gp[j] = float(Bt[:, 0] @ X) / S
         X = Ac.T @ X
-    return PreviewGains(A=A, B=B, C=C, Gi=Gi, Gx=Gx, Gp=Gp, sample_period=T,
-                        com_height=float(com_height), gravity=float(gravity))
+    return PreviewGains(
+        A=A, B=B, C=C, Gi=Gi, Gx=Gx, Gp=Gp, sample_period=T, com_height=float(com_height), gravity=float(gravity)
+    )
 
 
 def preview_control(gains: PreviewGains, zmp_ref: np.ndarray, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -407,7 +449,7 @@ def preview_control(gains: PreviewGains, zmp_ref: np.ndarray, x0: np.ndarray) ->
         p = C @ x
         states[k], zmp[k] = x, p
         error_sum += p - ref[k]
-        u = -Gi * error_sum - Gx @ x - Gp @ padded[k + 1:k + 1 + N]
+        u = -Gi * error_sum - Gx @ x - Gp @ padded[k + 1 : k + 1 + N]
         x = A @ x + np.outer(B, u)
     return states, zmp
 
@@ -447,8 +489,9 @@ class WalkingPattern:
     gains: PreviewGains
 
 
-def make_walking_pattern(params: WalkingParameters, left0: np.ndarray, right0: np.ndarray,
-                         com0: np.ndarray) -> WalkingPattern:
+def make_walking_pattern(
+    params: WalkingParameters, left0: np.ndarray, right0: np.ndarray, com0: np.ndarray
+) -> WalkingPattern:
     """Footsteps, ZMP reference, preview CoM and swing trajectories (no robot model).
 
     Args:
@@ -464,17 +507,33 @@ def make_walking_pattern(params: WalkingParameters, left0: np.ndarray, right0: n
     t = np.arange(K) * T
     knots_t, knots_p = zmp_reference_knots(params, steps, com0[:2], left0, right0)
     zmp_ref = interpolate_knots(t, knots_t, knots_p)
-    gains = preview_gains(T, params.com_height, params.preview_time, zmp_weight=params.zmp_weight,
-                          jerk_weight=params.jerk_weight, gravity=params.gravity)
+    gains = preview_gains(
+        T,
+        params.com_height,
+        params.preview_time,
+        zmp_weight=params.zmp_weight,
+        jerk_weight=params.jerk_weight,
+        gravity=params.gravity,
+    )
     states, zmp = preview_control(gains, zmp_ref, com0[:2])
     ground = 0.5 * (left0[2] + right0[2])
     lower_time = 0.5 * params.initial_wait
     blend = smoothstep5(t / lower_time) if lower_time > 0 else np.ones_like(t)
     z = com0[2] + (ground + params.com_height - com0[2]) * blend
     soles, contact = foot_trajectories(t, steps, left0, right0)
-    return WalkingPattern(params=params, t=t, steps=steps, zmp_reference=zmp_ref, zmp=zmp,
-                          com=np.column_stack([states[:, 0, :], z]), com_velocity=states[:, 1, :],
-                          com_acceleration=states[:, 2, :], soles=soles, contact=contact, gains=gains)
+    return WalkingPattern(
+        params=params,
+        t=t,
+        steps=steps,
+        zmp_reference=zmp_ref,
+        zmp=zmp,
+        com=np.column_stack([states[:, 0, :], z]),
+        com_velocity=states[:, 1, :],
+        com_acceleration=states[:, 2, :],
+        soles=soles,
+        contact=contact,
+        gains=gains,
+    )
 
 
 # ---------------------------------------------------------------------------------------
@@ -504,10 +563,16 @@ class WholeBodyTrajectory:
     compensation: np.ndarray
 
 
-def whole_body_trajectory(plant: MultibodyPlant, humanoid: HumanoidHandles, pattern: WalkingPattern,
-                          initial_positions: np.ndarray, *, iterations: int = 3,
-                          joint_stiffness: np.ndarray | None = None,
-                          joint_damping: np.ndarray | None = None) -> WholeBodyTrajectory:
+def whole_body_trajectory(
+    plant: MultibodyPlant,
+    humanoid: HumanoidHandles,
+    pattern: WalkingPattern,
+    initial_positions: np.ndarray,
+    *,
+    iterations: int = 3,
+    joint_stiffness: np.ndarray | None = None,
+    joint_damping: np.ndarray | None = None,
+) -> WholeBodyTrajectory:
     """Joint targets that put the soles on ``pattern.soles`` and the multibody CoM on
     ``pattern.com`` (eq. W-1), legs by ``systems.locomotion.leg_ik``, other joints at their values in
     ``initial_positions``.
@@ -560,18 +625,19 @@ def whole_body_trajectory(plant: MultibodyPlant, humanoid: HumanoidHandles, patt
     q = np.tile(q_joints0, (K, 1))
     free_start = topology.free_joint.position_start()
     positions = np.tile(q0, (K, 1))
-    positions[:, free_start:free_start + 4] = [1.0, 0.0, 0.0, 0.0]
+    positions[:, free_start : free_start + 4] = [1.0, 0.0, 0.0, 0.0]
 
     def solve_legs(torso_pos):
         for side in SIDES:
             try:
                 q[:, leg_cols[side]] = leg_ik(geometry, pattern.soles[side] - torso_pos, side)
             except ValueError as error:
-                raise ValueError(f"walking pattern: {error} (step_length {pattern.params.step_length} m, "
-                                 f"com_height {pattern.params.com_height} m: shorten the step or lower the CoM)"
-                                 ) from None
+                raise ValueError(
+                    f"walking pattern: {error} (step_length {pattern.params.step_length} m, "
+                    f"com_height {pattern.params.com_height} m: shorten the step or lower the CoM)"
+                ) from None
         positions[:, q_start] = q
-        positions[:, free_start + 4:free_start + 7] = torso_pos
+        positions[:, free_start + 4 : free_start + 7] = torso_pos
 
     def com_of_all():
         out = np.empty((K, 3))
@@ -605,10 +671,18 @@ def whole_body_trajectory(plant: MultibodyPlant, humanoid: HumanoidHandles, patt
     bad = (q < lower - 1e-9) | (q > upper + 1e-9)
     if bad.any():
         k, j = np.argwhere(bad)[0]
-        raise ValueError(f"walking pattern: joint {names[j]} target {q[k, j]:.3f} rad at t = {pattern.t[k]:.3f} s "
-                         f"is outside its limits [{lower[j]:.3f}, {upper[j]:.3f}]")
-    return WholeBodyTrajectory(t=pattern.t.copy(), q_joints=q.copy(), torso_position=torso.copy(),
-                               com_error=com_error, joint_names=names, compensation=compensation)
+        raise ValueError(
+            f"walking pattern: joint {names[j]} target {q[k, j]:.3f} rad at t = {pattern.t[k]:.3f} s "
+            f"is outside its limits [{lower[j]:.3f}, {upper[j]:.3f}]"
+        )
+    return WholeBodyTrajectory(
+        t=pattern.t.copy(),
+        q_joints=q.copy(),
+        torso_position=torso.copy(),
+        com_error=com_error,
+        joint_names=names,
+        compensation=compensation,
+    )
 
 
 def planned_ground_forces(pattern: WalkingPattern, mass: float) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -642,8 +716,14 @@ def planned_ground_forces(pattern: WalkingPattern, mass: float) -> dict[str, tup
     return out
 
 
-def stiffness_compensation(plant: MultibodyPlant, humanoid: HumanoidHandles, pattern: WalkingPattern,
-                           positions: np.ndarray, joint_stiffness: np.ndarray, mass: float) -> np.ndarray:
+def stiffness_compensation(
+    plant: MultibodyPlant,
+    humanoid: HumanoidHandles,
+    pattern: WalkingPattern,
+    positions: np.ndarray,
+    joint_stiffness: np.ndarray,
+    mass: float,
+) -> np.ndarray:
     """Joint target offsets that cancel the static deflection of the PD-controlled joints
     under the planned ground reaction (eq. W-2).
 
@@ -691,8 +771,9 @@ def standing_positions(plant: MultibodyPlant, humanoid: HumanoidHandles) -> np.n
     return plant.GetPositions(context)
 
 
-def multibody_zmp(plant: MultibodyPlant, humanoid: HumanoidHandles, trajectory: WholeBodyTrajectory,
-                  initial_positions: np.ndarray) -> np.ndarray:
+def multibody_zmp(
+    plant: MultibodyPlant, humanoid: HumanoidHandles, trajectory: WholeBodyTrajectory, initial_positions: np.ndarray
+) -> np.ndarray:
     """ZMP (world x, y on the ground z = 0, m) of the planned whole-body motion (eq. Z-1).
 
     With the total ground reaction f = m (c_ddot + g e_z) and the rate of the centroidal
@@ -715,11 +796,11 @@ def multibody_zmp(plant: MultibodyPlant, humanoid: HumanoidHandles, trajectory: 
     t = trajectory.t
     K = t.size
     positions = np.tile(np.asarray(initial_positions, float), (K, 1))
-    positions[:, free_q:free_q + 4] = [1.0, 0.0, 0.0, 0.0]
-    positions[:, free_q + 4:free_q + 7] = trajectory.torso_position
+    positions[:, free_q : free_q + 4] = [1.0, 0.0, 0.0, 0.0]
+    positions[:, free_q + 4 : free_q + 7] = trajectory.torso_position
     positions[:, q_index] = trajectory.q_joints
     velocities = np.zeros((K, plant.num_velocities()))
-    velocities[:, free_v + 3:free_v + 6] = np.gradient(trajectory.torso_position, t, axis=0)
+    velocities[:, free_v + 3 : free_v + 6] = np.gradient(trajectory.torso_position, t, axis=0)
     velocities[:, v_index] = np.gradient(trajectory.q_joints, t, axis=0)
     context = plant.CreateDefaultContext()
     instances = [humanoid.model_instance]
@@ -733,8 +814,12 @@ def multibody_zmp(plant: MultibodyPlant, humanoid: HumanoidHandles, trajectory: 
     gravity = float(-plant.gravity_field().gravity_vector()[2])
     f = mass * (np.gradient(np.gradient(com, t, axis=0), t, axis=0) + np.array([0.0, 0.0, gravity]))
     L_dot = np.gradient(momentum, t, axis=0)
-    return np.column_stack([com[:, 0] - (com[:, 2] * f[:, 0] + L_dot[:, 1]) / f[:, 2],
-                            com[:, 1] - (com[:, 2] * f[:, 1] - L_dot[:, 0]) / f[:, 2]])
+    return np.column_stack(
+        [
+            com[:, 0] - (com[:, 2] * f[:, 0] + L_dot[:, 1]) / f[:, 2],
+            com[:, 1] - (com[:, 2] * f[:, 1] - L_dot[:, 0]) / f[:, 2],
+        ]
+    )
 
 
 def correct_for_multibody_zmp(pattern: WalkingPattern, zmp_multibody: np.ndarray) -> WalkingPattern:
@@ -743,12 +828,19 @@ def correct_for_multibody_zmp(pattern: WalkingPattern, zmp_multibody: np.ndarray
     ZMP is ~e; the returned pattern has CoM c + dc (x, y; velocity and acceleration too)."""
     error = pattern.zmp_reference - zmp_multibody
     states, zmp = preview_control(pattern.gains, error, np.zeros(2))
-    return WalkingPattern(params=pattern.params, t=pattern.t, steps=pattern.steps,
-                          zmp_reference=pattern.zmp_reference, zmp=pattern.zmp + zmp,
-                          com=pattern.com + np.column_stack([states[:, 0, :], np.zeros(pattern.t.size)]),
-                          com_velocity=pattern.com_velocity + states[:, 1, :],
-                          com_acceleration=pattern.com_acceleration + states[:, 2, :],
-                          soles=pattern.soles, contact=pattern.contact, gains=pattern.gains)
+    return WalkingPattern(
+        params=pattern.params,
+        t=pattern.t,
+        steps=pattern.steps,
+        zmp_reference=pattern.zmp_reference,
+        zmp=pattern.zmp + zmp,
+        com=pattern.com + np.column_stack([states[:, 0, :], np.zeros(pattern.t.size)]),
+        com_velocity=pattern.com_velocity + states[:, 1, :],
+        com_acceleration=pattern.com_acceleration + states[:, 2, :],
+        soles=pattern.soles,
+        contact=pattern.contact,
+        gains=pattern.gains,
+    )
 
 
 class NaoWalkingController(LeafSystem):
@@ -768,10 +860,18 @@ class NaoWalkingController(LeafSystem):
     Before t = 0 and after the pattern's end the first / last sample is held.
     """
 
-    def __init__(self, plant: MultibodyPlant, humanoid: HumanoidHandles,
-                 parameters: WalkingParameters | None = None, *, initial_positions: np.ndarray | None = None,
-                 iterations: int = 3, joint_stiffness: np.ndarray | None = None,
-                 joint_damping: np.ndarray | None = None, zmp_correction_passes: int = 1):
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        humanoid: HumanoidHandles,
+        parameters: WalkingParameters | None = None,
+        *,
+        initial_positions: np.ndarray | None = None,
+        iterations: int = 3,
+        joint_stiffness: np.ndarray | None = None,
+        joint_damping: np.ndarray | None = None,
+        zmp_correction_passes: int = 1,
+    ):
         """Builds the pattern and the joint targets.
 
         Args:
@@ -810,10 +910,20 @@ class NaoWalkingController(LeafSystem):
             trajectory = whole_body_trajectory(plant, humanoid, pattern, q0, iterations=iterations)
             pattern = correct_for_multibody_zmp(pattern, multibody_zmp(plant, humanoid, trajectory, q0))
         self.pattern = pattern
-        self.trajectory = whole_body_trajectory(plant, humanoid, self.pattern, q0, iterations=iterations,
-                                                joint_stiffness=joint_stiffness, joint_damping=joint_damping)
-        plain = (self.trajectory if joint_stiffness is None else
-                 whole_body_trajectory(plant, humanoid, self.pattern, q0, iterations=iterations))
+        self.trajectory = whole_body_trajectory(
+            plant,
+            humanoid,
+            self.pattern,
+            q0,
+            iterations=iterations,
+            joint_stiffness=joint_stiffness,
+            joint_damping=joint_damping,
+        )
+        plain = (
+            self.trajectory
+            if joint_stiffness is None
+            else whole_body_trajectory(plant, humanoid, self.pattern, q0, iterations=iterations)
+        )
         #: (K, 2) ZMP of the planned whole-body motion (eq. Z-1), m.
         self.planned_multibody_zmp = multibody_zmp(plant, humanoid, plain, q0)
         p = self.pattern

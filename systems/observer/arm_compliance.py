@@ -24,9 +24,9 @@ Drake's arm rows of M v_dot + C v = tau_g + u + J^T F, the proportional torque i
 so tau_hat of eq. 25 keeps the inertia, Coriolis/centrifugal and damping terms and drops
 gravity (``gravity_compensated=True``, the default; set it False for a controller without
 gravity feed-forward, then tau_hat also holds g(q) = -tau_g). At rest K_m identifies as K_p
-(``diagrams.observer.calibration.identify_motor_constant``). Sign: the paper's F^ext (eq. 25, tau_m = tau_hat + J^T F^ext)
-is the force the hand exerts on the environment; the systems here output the force applied
-TO the hand (the push), F = -F^ext.
+(``diagrams.observer.calibration.identify_motor_constant``). Sign: the paper's F^ext
+(eq. 25, tau_m = tau_hat + J^T F^ext) is the force the hand exerts on the environment; the
+systems here output the force applied TO the hand (the push), F = -F^ext.
 """
 
 from __future__ import annotations
@@ -229,9 +229,17 @@ class ArmExternalForceEstimator(LeafSystem):
         ValueError: bad plant/chains/parameters; NaN/inf on an input.
     """
 
-    def __init__(self, plant: MultibodyPlant, chains: Sequence[ArmChain] = NAO_ARM_CHAINS, *, damping=0.0,
-                 gravity_compensated: bool = True, period: float = DEFAULT_PERIOD,
-                 filter_time_constant: float = 0.1, rcond: float = 1e-3):
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        chains: Sequence[ArmChain] = NAO_ARM_CHAINS,
+        *,
+        damping=0.0,
+        gravity_compensated: bool = True,
+        period: float = DEFAULT_PERIOD,
+        filter_time_constant: float = 0.1,
+        rcond: float = 1e-3,
+    ):
         super().__init__()
         who = type(self).__name__
         self._who = who
@@ -245,7 +253,8 @@ class ArmExternalForceEstimator(LeafSystem):
         self._kd = per_joint(damping, names, "damping", who=who, sign="non-negative")
         # The model's viscous joint damping (SDFormat <damping>), part of tau_hat as well.
         self._joint_damping = np.concatenate(
-            [[plant.GetJointByName(n).default_damping_vector()[0] for n in r.chain.joint_names] for r in self._chains])
+            [[plant.GetJointByName(n).default_damping_vector()[0] for n in r.chain.joint_names] for r in self._chains]
+        )
         self._gravity_compensated = bool(gravity_compensated)
         self._period = positive_number(period, f"{who}: period")
         tau_f = positive_number(filter_time_constant, f"{who}: filter_time_constant", allow_zero=True)
@@ -273,7 +282,7 @@ class ArmExternalForceEstimator(LeafSystem):
         tau_m = np.asarray(motor_torque, dtype=float)
         plant, ctx = self._plant, self._plant_context
         plant.SetPositionsAndVelocities(ctx, x)
-        v = x[self._nq:]
+        v = x[self._nq :]
         tau_hat = plant.CalcBiasTerm(ctx)[self._rows] + (self._kd + self._joint_damping) * v[self._rows]
         if v_dot is not None:
             tau_hat += plant.CalcMassMatrix(ctx)[self._rows] @ np.asarray(v_dot, dtype=float)
@@ -284,16 +293,17 @@ class ArmExternalForceEstimator(LeafSystem):
         start = 0
         for i, chain in enumerate(self._chains):
             J = plant.CalcJacobianTranslationalVelocity(
-                ctx, JacobianWrtVariable.kV, chain.frame, chain.p_HP, self._world, self._world)[:, chain.v_index]
+                ctx, JacobianWrtVariable.kV, chain.frame, chain.p_HP, self._world, self._world
+            )[:, chain.v_index]
             m = chain.v_index.size
-            out[3 * i: 3 * i + 3] = -np.linalg.pinv(J.T, rcond=self._rcond) @ residual[start: start + m]
+            out[3 * i : 3 * i + 3] = -np.linalg.pinv(J.T, rcond=self._rcond) @ residual[start : start + m]
             start += m
         return out
 
     def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
         tau_m = eval_finite_input(self._who, self._torque, context)
         x = eval_finite_input(self._who, self._state, context)
-        v = x[self._nq:]
+        v = x[self._nq :]
         if context.get_discrete_state(self._initialised_index).GetAtIndex(0) == 0.0:  # the first sample
             force = self.hand_forces(x, tau_m)
         else:
@@ -337,8 +347,14 @@ class ObserverHandForce(LeafSystem):
             hand at or below the ground plane (h <= 1 cm).
     """
 
-    def __init__(self, plant: MultibodyPlant, support_frame: Frame, chains: Sequence[ArmChain] = NAO_ARM_CHAINS,
-                 *, model_instances=None):
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        support_frame: Frame,
+        chains: Sequence[ArmChain] = NAO_ARM_CHAINS,
+        *,
+        model_instances=None,
+    ):
         super().__init__()
         who = type(self).__name__
         self._who = who
@@ -355,8 +371,9 @@ class ObserverHandForce(LeafSystem):
         self.DeclareVectorOutputPort("hand_forces", 3 * len(self._chains), self._CalcForces)
 
     @staticmethod
-    def hand_force_from_virtual(virtual_force: np.ndarray, p_com: np.ndarray, p_hand: np.ndarray,
-                                ground_height: float) -> np.ndarray:
+    def hand_force_from_virtual(
+        virtual_force: np.ndarray, p_com: np.ndarray, p_hand: np.ndarray, ground_height: float
+    ) -> np.ndarray:
         """Eq. (11) inverted for a force F at ``p_hand`` (world, m) given the CoM ``p_com``
         (world, m) and the height of the ZMP plane, m. Returns F, N."""
         Fv = np.asarray(virtual_force, dtype=float)
@@ -373,8 +390,11 @@ class ObserverHandForce(LeafSystem):
         x = eval_finite_input(self._who, self._state, context)
         plant, ctx = self._plant, self._plant_context
         plant.SetPositions(ctx, x[: self._nq])
-        p_com = (plant.CalcCenterOfMassPositionInWorld(ctx) if self._instances is None
-                 else plant.CalcCenterOfMassPositionInWorld(ctx, self._instances))
+        p_com = (
+            plant.CalcCenterOfMassPositionInWorld(ctx)
+            if self._instances is None
+            else plant.CalcCenterOfMassPositionInWorld(ctx, self._instances)
+        )
         p_hand = np.mean([c.frame.CalcPoseInWorld(ctx) @ c.p_HP for c in self._chains], axis=0)
         ground = float(self._support.CalcPoseInWorld(ctx).translation()[2])
         F = self.hand_force_from_virtual(Fv, p_com, p_hand, ground)
@@ -414,8 +434,15 @@ class CompliantArmBlender(LeafSystem):
         ValueError: bad parameters; NaN/inf on an input.
     """
 
-    def __init__(self, size: int = 6, *, total_fsr: int = NAO_FSR_COUNT, fsr_threshold: float = FSR_CONTACT_THRESHOLD,
-                 constant_k1: float | None = None, saturation_guard: float | None = None):
+    def __init__(
+        self,
+        size: int = 6,
+        *,
+        total_fsr: int = NAO_FSR_COUNT,
+        fsr_threshold: float = FSR_CONTACT_THRESHOLD,
+        constant_k1: float | None = None,
+        saturation_guard: float | None = None,
+    ):
         super().__init__()
         who = type(self).__name__
         self._who = who
@@ -431,7 +458,9 @@ class CompliantArmBlender(LeafSystem):
                 raise ValueError(f"{who}: constant_k1 must be in [0, 1], got {constant_k1!r}")
             constant_k1 = k1
         self._constant = constant_k1
-        self._saturation = None if saturation_guard is None else positive_number(saturation_guard, f"{who}: saturation_guard")
+        self._saturation = (
+            None if saturation_guard is None else positive_number(saturation_guard, f"{who}: saturation_guard")
+        )
         self._observer = self.DeclareVectorInputPort("observer_force", int(size))
         self._joint = self.DeclareVectorInputPort("joint_force", int(size))
         self._fsr = self.DeclareVectorInputPort("fsr_forces", self._total)
@@ -508,10 +537,19 @@ class HandComplianceController(LeafSystem):
         ValueError: bad parameters; NaN/inf on an input.
     """
 
-    def __init__(self, plant: MultibodyPlant, nominal_position: np.ndarray,
-                 chains: Sequence[ArmChain] = NAO_ARM_CHAINS, *, stiffness: float = DEFAULT_STIFFNESS,
-                 motor_constants=None, period: float = DEFAULT_PERIOD, ik_iterations: int = 3,
-                 ik_damping: float = 1e-3, max_displacement: float = 0.1):
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        nominal_position: np.ndarray,
+        chains: Sequence[ArmChain] = NAO_ARM_CHAINS,
+        *,
+        stiffness: float = DEFAULT_STIFFNESS,
+        motor_constants=None,
+        period: float = DEFAULT_PERIOD,
+        ik_iterations: int = 3,
+        ik_damping: float = 1e-3,
+        max_displacement: float = 0.1,
+    ):
         super().__init__()
         who = type(self).__name__
         self._who = who
@@ -530,8 +568,11 @@ class HandComplianceController(LeafSystem):
         self._max_dx = positive_number(max_displacement, f"{who}: max_displacement")
         names = _joint_names(self._chains)
         self._m = len(names)
-        self._km = None if motor_constants is None else per_joint(motor_constants, names, "motor_constants", who=who,
-                                                                    sign="positive")
+        self._km = (
+            None
+            if motor_constants is None
+            else per_joint(motor_constants, names, "motor_constants", who=who, sign="positive")
+        )
         self._plant = plant
         self._base = topology.base_body.body_frame()
         self._nq = plant.num_positions()
@@ -553,11 +594,18 @@ class HandComplianceController(LeafSystem):
         self._xd = self.DeclareDiscreteState(initial)
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._Update)
         xd = {self.xd_ticket()}
-        self.DeclareVectorOutputPort("desired_position", self._n, self._CalcDesired,
-                                     {self.xd_ticket(), self.input_port_ticket(self._nominal_port.get_index())})
         self.DeclareVectorOutputPort(
-            "hand_target", self._nf,
-            lambda c, o: o.SetFromVector(c.get_discrete_state(self._xd).get_value()[2 * self._m:]), xd)
+            "desired_position",
+            self._n,
+            self._CalcDesired,
+            {self.xd_ticket(), self.input_port_ticket(self._nominal_port.get_index())},
+        )
+        self.DeclareVectorOutputPort(
+            "hand_target",
+            self._nf,
+            lambda c, o: o.SetFromVector(c.get_discrete_state(self._xd).get_value()[2 * self._m :]),
+            xd,
+        )
         self.DeclareVectorOutputPort("hand_position", self._nf, self._CalcHandPosition)
 
     @property
@@ -577,15 +625,20 @@ class HandComplianceController(LeafSystem):
         start = 0
         for chain in self._chains:
             m = chain.q_index.size
-            q[chain.q_index] = q_arm[start: start + m]
+            q[chain.q_index] = q_arm[start : start + m]
             start += m
         plant.SetPositions(ctx, q)
-        p = np.concatenate([plant.CalcPointsPositions(ctx, c.frame, c.p_HP, self._base).reshape(-1)
-                            for c in self._chains])
+        p = np.concatenate(
+            [plant.CalcPointsPositions(ctx, c.frame, c.p_HP, self._base).reshape(-1) for c in self._chains]
+        )
         if not jacobians:
             return p, None
-        J = [plant.CalcJacobianTranslationalVelocity(ctx, JacobianWrtVariable.kV, c.frame, c.p_HP, self._base,
-                                                     self._base)[:, c.v_index] for c in self._chains]
+        J = [
+            plant.CalcJacobianTranslationalVelocity(
+                ctx, JacobianWrtVariable.kV, c.frame, c.p_HP, self._base, self._base
+            )[:, c.v_index]
+            for c in self._chains
+        ]
         return p, J
 
     def hand_targets(self, hand_forces_B: np.ndarray) -> np.ndarray:
@@ -607,8 +660,8 @@ class HandComplianceController(LeafSystem):
             start = 0
             for i, Jc in enumerate(J):
                 m = Jc.shape[1]
-                e = target[3 * i: 3 * i + 3] - p[3 * i: 3 * i + 3]
-                q[start: start + m] += Jc.T @ np.linalg.solve(Jc @ Jc.T + self._lambda2 * np.eye(3), e)
+                e = target[3 * i : 3 * i + 3] - p[3 * i : 3 * i + 3]
+                q[start : start + m] += Jc.T @ np.linalg.solve(Jc @ Jc.T + self._lambda2 * np.eye(3), e)
                 start += m
             q = np.clip(q, lower, upper)
         _, J = self._hand_positions(q, jacobians=True)
@@ -631,7 +684,7 @@ class HandComplianceController(LeafSystem):
             start = 0
             for i, Jc in enumerate(J):
                 mc = Jc.shape[1]
-                q_d[start: start + mc] -= (Jc.T @ F_B[i]) / self._km[start: start + mc]
+                q_d[start : start + mc] -= (Jc.T @ F_B[i]) / self._km[start : start + mc]
                 start += mc
         discrete_state.set_value(self._xd, np.concatenate([q_ik, q_d, target]))
 
@@ -640,15 +693,18 @@ class HandComplianceController(LeafSystem):
             q = np.array(eval_finite_input(self._who, self._nominal_port, context), dtype=float)
         else:
             q = self._nominal.copy()
-        q[self._k] = context.get_discrete_state(self._xd).get_value()[self._m: 2 * self._m]
+        q[self._k] = context.get_discrete_state(self._xd).get_value()[self._m : 2 * self._m]
         output.SetFromVector(q)
 
     def _CalcHandPosition(self, context: Context, output: BasicVector) -> None:
         x = eval_finite_input(self._who, self._state, context)
         plant, ctx = self._plant, self._sensed_context
         plant.SetPositions(ctx, x[: self._nq])
-        output.SetFromVector(np.concatenate(
-            [plant.CalcPointsPositions(ctx, c.frame, c.p_HP, self._base).reshape(-1) for c in self._chains]))
+        output.SetFromVector(
+            np.concatenate(
+                [plant.CalcPointsPositions(ctx, c.frame, c.p_HP, self._base).reshape(-1) for c in self._chains]
+            )
+        )
 
 
 # ---------------------------------------------------------------------------------------
@@ -709,8 +765,9 @@ def fit_motor_constants(
     loads = np.asarray(loads, dtype=float)
     rest_states = np.asarray(rest_states, dtype=float)
     if loads.ndim != 2 or loads.shape[1] != 3 or rest_states.shape != (len(loads), plant.num_multibody_states()):
-        raise ValueError(f"fit_motor_constants: need one [q; v] per load, got loads {loads.shape} and states "
-                         f"{rest_states.shape}")
+        raise ValueError(
+            f"fit_motor_constants: need one [q; v] per load, got loads {loads.shape} and states {rest_states.shape}"
+        )
     quaternion = topology.free_joint.position_start()
     q_index = np.concatenate([r.q_index for r in resolved])
     v_index = np.concatenate([r.v_index for r in resolved])
@@ -719,12 +776,13 @@ def fit_motor_constants(
     point = np.asarray(load_point, dtype=float)
     for F, x_mean in zip(loads, rest_states):
         x_mean = x_mean.copy()
-        x_mean[quaternion: quaternion + 4] /= np.linalg.norm(x_mean[quaternion: quaternion + 4])
+        x_mean[quaternion : quaternion + 4] /= np.linalg.norm(x_mean[quaternion : quaternion + 4])
         plant.SetPositionsAndVelocities(ctx, x_mean)
         tau = np.zeros(plant.num_velocities())
         for c in resolved:
-            J = plant.CalcJacobianTranslationalVelocity(ctx, JacobianWrtVariable.kV, c.frame, point,
-                                                        plant.world_frame(), plant.world_frame())
+            J = plant.CalcJacobianTranslationalVelocity(
+                ctx, JacobianWrtVariable.kV, c.frame, point, plant.world_frame(), plant.world_frame()
+            )
             tau += J.T @ F
         errors.append(np.asarray(q_desired)[k_all] - x_mean[q_index])
         torques.append(tau[v_index])

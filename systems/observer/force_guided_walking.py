@@ -64,10 +64,16 @@ from pydrake.systems.framework import BasicVector, Context, DiscreteValues, Leaf
 
 from models import HumanoidHandles
 from systems.common.checks import eval_finite_input
-from systems.common.topology import floating_base_topology
 from systems.common.smoothing import smoothstep5
-from systems.locomotion.walking_pattern import (SIDES, NaoWalkingController, WalkingParameters, WalkingPattern,
-                                     preview_gains, whole_body_trajectory)
+from systems.common.topology import floating_base_topology
+from systems.locomotion.walking_pattern import (
+    SIDES,
+    NaoWalkingController,
+    WalkingParameters,
+    WalkingPattern,
+    preview_gains,
+    whole_body_trajectory,
+)
 
 #: Default segment parameters: the committed walk (0.05 m, 0.5 s steps) with a short
 #: initial wait (the first step's double support starts 0.2 s after the start decision),
@@ -124,8 +130,9 @@ class ForceTrigger:
     def initial_memory() -> tuple[float, float, float]:
         return (math.nan, 0.0, math.nan)
 
-    def update(self, memory: tuple[float, float, float], t: float, force: float, direction: float
-               ) -> tuple[tuple[float, float, float], int]:
+    def update(
+        self, memory: tuple[float, float, float], t: float, force: float, direction: float
+    ) -> tuple[tuple[float, float, float], int]:
         """One sample.
 
         Args:
@@ -208,8 +215,8 @@ def _final_positions(plant: MultibodyPlant, q0: np.ndarray, torso: np.ndarray, q
     topology = floating_base_topology(plant)
     out = np.asarray(q0, float).copy()
     free = topology.free_joint.position_start()
-    out[free:free + 4] = [1.0, 0.0, 0.0, 0.0]
-    out[free + 4:free + 7] = torso
+    out[free : free + 4] = [1.0, 0.0, 0.0, 0.0]
+    out[free + 4 : free + 7] = torso
     out[[j.position_start() for j in topology.joints]] = q_joints
     return out
 
@@ -217,15 +224,28 @@ def _final_positions(plant: MultibodyPlant, q0: np.ndarray, torso: np.ndarray, q
 def plan_from_controller(plant: MultibodyPlant, controller: NaoWalkingController, q0: np.ndarray) -> Plan:
     """The tables of a ``NaoWalkingController`` (built, not added to a diagram) as a Plan."""
     p, tr = controller.pattern, controller.trajectory
-    return Plan(t=p.t, q=tr.q_joints, zmp=p.zmp_reference, com=p.com,
-                soles=np.hstack([p.soles["left"], p.soles["right"]]),
-                contact=np.column_stack([p.contact["left"], p.contact["right"]]).astype(float), steps=list(p.steps),
-                final_positions=_final_positions(plant, q0, tr.torso_position[-1], tr.q_joints[-1] - tr.compensation[-1]),
-                sample_period=controller.parameters.sample_period, initial_positions=np.asarray(q0, float).copy())
+    return Plan(
+        t=p.t,
+        q=tr.q_joints,
+        zmp=p.zmp_reference,
+        com=p.com,
+        soles=np.hstack([p.soles["left"], p.soles["right"]]),
+        contact=np.column_stack([p.contact["left"], p.contact["right"]]).astype(float),
+        steps=list(p.steps),
+        final_positions=_final_positions(plant, q0, tr.torso_position[-1], tr.q_joints[-1] - tr.compensation[-1]),
+        sample_period=controller.parameters.sample_period,
+        initial_positions=np.asarray(q0, float).copy(),
+    )
 
 
-def crouch_plan(plant: MultibodyPlant, humanoid: HumanoidHandles, parameters: WalkingParameters, q0: np.ndarray,
-                duration: float, joint_stiffness: np.ndarray | None) -> Plan:
+def crouch_plan(
+    plant: MultibodyPlant,
+    humanoid: HumanoidHandles,
+    parameters: WalkingParameters,
+    q0: np.ndarray,
+    duration: float,
+    joint_stiffness: np.ndarray | None,
+) -> Plan:
     """Quasi-static lowering from ``q0`` (standing, soles on the ground) to the walking CoM
     height z_c above the feet's mid-point plus ``zmp_offset_x`` (where a segment's ZMP
     reference starts), along a 5th-order smoothstep over ``duration`` s (eq. W-1 targets)."""
@@ -243,16 +263,31 @@ def crouch_plan(plant: MultibodyPlant, humanoid: HumanoidHandles, parameters: Wa
     com = com0 + s * (goal - com0)
     K = t.size
     pattern = WalkingPattern(
-        params=parameters, t=t, steps=[], zmp_reference=com[:, :2].copy(), zmp=com[:, :2].copy(), com=com,
-        com_velocity=np.zeros((K, 2)), com_acceleration=np.zeros((K, 2)),
+        params=parameters,
+        t=t,
+        steps=[],
+        zmp_reference=com[:, :2].copy(),
+        zmp=com[:, :2].copy(),
+        com=com,
+        com_velocity=np.zeros((K, 2)),
+        com_acceleration=np.zeros((K, 2)),
         soles={side: np.tile(soles[side], (K, 1)) for side in SIDES},
         contact={side: np.ones(K, dtype=bool) for side in SIDES},
-        gains=preview_gains(T, parameters.com_height, parameters.preview_time))
+        gains=preview_gains(T, parameters.com_height, parameters.preview_time),
+    )
     tr = whole_body_trajectory(plant, humanoid, pattern, q0, joint_stiffness=joint_stiffness)
-    return Plan(t=t, q=tr.q_joints, zmp=pattern.zmp_reference, com=com,
-                soles=np.hstack([pattern.soles["left"], pattern.soles["right"]]), contact=np.ones((K, 2)), steps=[],
-                final_positions=_final_positions(plant, q0, tr.torso_position[-1], tr.q_joints[-1] - tr.compensation[-1]),
-                sample_period=T, initial_positions=np.asarray(q0, float).copy())
+    return Plan(
+        t=t,
+        q=tr.q_joints,
+        zmp=pattern.zmp_reference,
+        com=com,
+        soles=np.hstack([pattern.soles["left"], pattern.soles["right"]]),
+        contact=np.ones((K, 2)),
+        steps=[],
+        final_positions=_final_positions(plant, q0, tr.torso_position[-1], tr.q_joints[-1] - tr.compensation[-1]),
+        sample_period=T,
+        initial_positions=np.asarray(q0, float).copy(),
+    )
 
 
 def stop_step(steps: list, elapsed: float) -> int:
@@ -287,10 +322,20 @@ class ForceGuidedWalkingController(LeafSystem):
     The outputs depend only on the state and time (no feedthrough from the input).
     """
 
-    def __init__(self, plant: MultibodyPlant, humanoid: HumanoidHandles, parameters: WalkingParameters | None = None,
-                 trigger: TriggerParameters | None = None, *, initial_positions: np.ndarray,
-                 joint_stiffness: np.ndarray | None = None, max_steps: int = 20, crouch_time: float = 1.0,
-                 period: float = 0.01, max_lean: float = 0.0):
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        humanoid: HumanoidHandles,
+        parameters: WalkingParameters | None = None,
+        trigger: TriggerParameters | None = None,
+        *,
+        initial_positions: np.ndarray,
+        joint_stiffness: np.ndarray | None = None,
+        max_steps: int = 20,
+        crouch_time: float = 1.0,
+        period: float = 0.01,
+        max_lean: float = 0.0,
+    ):
         """Args:
             plant, humanoid: the finalized plant with ``nao_like`` and its handles.
             parameters: walking parameters of every segment: |step_length| (its sign is
@@ -358,10 +403,15 @@ class ForceGuidedWalkingController(LeafSystem):
         return -float(np.clip(p.com_height * force / (self._mass * p.gravity), -self._max_lean, self._max_lean))
 
     def _segment(self, q0: np.ndarray, direction: int, num_steps: int, lean: float) -> Plan:
-        params = replace(self._params, step_length=direction * self._params.step_length, num_steps=num_steps,
-                         zmp_offset_x=self._params.zmp_offset_x + lean)
-        controller = NaoWalkingController(self._plant, self._humanoid, params, initial_positions=q0,
-                                          joint_stiffness=self._kp)
+        params = replace(
+            self._params,
+            step_length=direction * self._params.step_length,
+            num_steps=num_steps,
+            zmp_offset_x=self._params.zmp_offset_x + lean,
+        )
+        controller = NaoWalkingController(
+            self._plant, self._humanoid, params, initial_positions=q0, joint_stiffness=self._kp
+        )
         return plan_from_controller(self._plant, controller, q0)
 
     def _sample(self, context: Context, name: str) -> np.ndarray:
@@ -411,8 +461,9 @@ class ForceGuidedWalkingController(LeafSystem):
                 k = stop_step(current.steps, elapsed)
                 if k >= len(current.steps):  # the segment's own last step closes the stance
                     s[_MODE] = STOPPING
-                    self.events.append((t, "stop", {"closing_step": len(current.steps), "force": force,
-                                                    "variant": False}))
+                    self.events.append(
+                        (t, "stop", {"closing_step": len(current.steps), "force": force, "variant": False})
+                    )
                 else:
                     self.plans.append(self._segment(current.initial_positions, int(s[_DIR]), k, float(s[_LEAN])))
                     variant = self.plans[-1]
@@ -420,10 +471,22 @@ class ForceGuidedWalkingController(LeafSystem):
                     s[_B1] = s[_T0] + variant.steps[k - 1].t_lift - 0.02
                     s[_TEND] = s[_T0] + variant.duration
                     s[_MODE] = STOPPING
-                    jump = float(np.abs(variant.sample(variant.com, elapsed) - current.sample(current.com, elapsed)).max())
-                    self.events.append((t, "stop", {"closing_step": k, "force": force, "variant": True,
-                                                    "com_difference_at_switch_m": jump,
-                                                    "blend_until": float(s[_B1])}))
+                    jump = float(
+                        np.abs(variant.sample(variant.com, elapsed) - current.sample(current.com, elapsed)).max()
+                    )
+                    self.events.append(
+                        (
+                            t,
+                            "stop",
+                            {
+                                "closing_step": k,
+                                "force": force,
+                                "variant": True,
+                                "com_difference_at_switch_m": jump,
+                                "blend_until": float(s[_B1]),
+                            },
+                        )
+                    )
             elif t >= s[_TEND]:  # out of steps: stand (a new segment starts after the debounce)
                 s[_MODE] = STANDING
                 self.events.append((t, "segment_end", {}))
@@ -435,5 +498,16 @@ class ForceGuidedWalkingController(LeafSystem):
         discrete_state.set_value(self._state, s)
 
 
-__all__ = ["GUIDED_WALKING", "STANDING", "WALKING", "STOPPING", "ForceGuidedWalkingController", "ForceTrigger", "Plan",
-           "TriggerParameters", "crouch_plan", "plan_from_controller", "stop_step"]
+__all__ = [
+    "GUIDED_WALKING",
+    "STANDING",
+    "WALKING",
+    "STOPPING",
+    "ForceGuidedWalkingController",
+    "ForceTrigger",
+    "Plan",
+    "TriggerParameters",
+    "crouch_plan",
+    "plan_from_controller",
+    "stop_step",
+]

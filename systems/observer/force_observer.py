@@ -119,7 +119,7 @@ class _KalmanState:
         self.p = tuple(float(P[i, j]) for i, j in _UPPER)
 
     @classmethod
-    def from_entries(cls, row) -> "_KalmanState":
+    def from_entries(cls, row) -> _KalmanState:
         """From 20 floats: x (5) then p (15), as ``entries``."""
         state = cls.__new__(cls)
         state.x, state.p = tuple(row[:5]), tuple(row[5:])
@@ -341,7 +341,9 @@ class LipForceObserver:
         """
         s = np.asarray(state, dtype=float)
         if s.shape != (3, FILTER_STATE_SIZE) or not math.isfinite(float(s.sum())):
-            raise ValueError(f"LipForceObserver: state must be a finite (3, {FILTER_STATE_SIZE}) array, got shape {s.shape}")
+            raise ValueError(
+                f"LipForceObserver: state must be a finite (3, {FILTER_STATE_SIZE}) array, got shape {s.shape}"
+            )
         self._filters = [_KalmanState.from_entries(row) for row in s.tolist()]
 
     def update(
@@ -419,11 +421,17 @@ def estimate_virtual_forces(
     zmp = np.asarray(zmp, dtype=float)
     normal_force = np.asarray(normal_force, dtype=float).reshape(-1)
     n = len(normal_force)
-    for name, array, columns in (("com_position", com_position, 3), ("com_acceleration", com_acceleration, 3), ("zmp", zmp, 2)):
+    for name, array, columns in (
+        ("com_position", com_position, 3),
+        ("com_acceleration", com_acceleration, 3),
+        ("zmp", zmp, 2),
+    ):
         if array.shape != (n, columns):
             raise ValueError(f"{name} has shape {array.shape}; expected ({n}, {columns})")
         if not np.all(np.isfinite(array)):
-            raise ValueError(f"{name} has NaN or inf in rows {np.flatnonzero(~np.all(np.isfinite(array), axis=1)).tolist()}")
+            raise ValueError(
+                f"{name} has NaN or inf in rows {np.flatnonzero(~np.all(np.isfinite(array), axis=1)).tolist()}"
+            )
     if not np.all(np.isfinite(normal_force)):
         raise ValueError(f"normal_force has NaN or inf at {np.flatnonzero(~np.isfinite(normal_force)).tolist()}")
     observer = LipForceObserver(parameters)

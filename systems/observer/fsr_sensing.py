@@ -68,8 +68,7 @@ def _check_handles(handles, who: str) -> HumanoidHandles:
 
 def _support_frame(handles: HumanoidHandles, support_foot, who: str) -> Frame:
     if support_foot not in handles.sole_frames:
-        raise ValueError(
-            f"{who}: unknown support foot {support_foot!r}; choose one of {sorted(handles.sole_frames)}")
+        raise ValueError(f"{who}: unknown support foot {support_foot!r}; choose one of {sorted(handles.sole_frames)}")
     return handles.sole_frames[support_foot]
 
 
@@ -104,8 +103,16 @@ class FsrArray(LeafSystem):
             a hydroelastic contact on an FSR sphere.
     """
 
-    def __init__(self, plant: MultibodyPlant, handles: HumanoidHandles, *, noise_std=FSR_NOISE_STD,
-                 saturation: float = FSR_SATURATION, period: float = FSR_NOISE_PERIOD, seed: int = 0):
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        handles: HumanoidHandles,
+        *,
+        noise_std=FSR_NOISE_STD,
+        saturation: float = FSR_SATURATION,
+        period: float = FSR_NOISE_PERIOD,
+        seed: int = 0,
+    ):
         super().__init__()
         who = type(self).__name__
         check_plant(plant, who)
@@ -114,8 +121,10 @@ class FsrArray(LeafSystem):
         for side in FSR_SIDES:
             side_ids = tuple(handles.fsr_geometries.get(side, ()))
             if len(side_ids) != len(FSR_ORDER):
-                raise ValueError(f"{who}: the humanoid has no 4 FSR geometries on the {side} foot "
-                                 "(was the plant registered with a SceneGraph?)")
+                raise ValueError(
+                    f"{who}: the humanoid has no 4 FSR geometries on the {side} foot "
+                    "(was the plant registered with a SceneGraph?)"
+                )
             ids.extend(side_ids)
         self._index = {gid: i for i, gid in enumerate(ids)}
         try:
@@ -227,21 +236,33 @@ class CenterOfPressure(_KinematicsSystem):
             input at evaluation.
     """
 
-    def __init__(self, plant: MultibodyPlant, handles: HumanoidHandles, *, support_foot: str = "right",
-                 origin_W: np.ndarray | None = None, min_contact_force: float = MIN_CONTACT_FORCE):
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        handles: HumanoidHandles,
+        *,
+        support_foot: str = "right",
+        origin_W: np.ndarray | None = None,
+        min_contact_force: float = MIN_CONTACT_FORCE,
+    ):
         super().__init__(plant, type(self).__name__)
         _check_handles(handles, self._who)
         self._frame_origin(handles, support_foot, origin_W)
         self._soles = [self._check_frame(handles.sole_frames[side], f"sole_frames['{side}']") for side in FSR_SIDES]
         # FSR positions in their sole frame, homogeneous: (4, 3) per side, z = 0 (sole plane).
-        self._fsr_S = [np.column_stack((np.asarray(handles.fsr_positions[side], float), np.zeros(4)))
-                       for side in FSR_SIDES]
+        self._fsr_S = [
+            np.column_stack((np.asarray(handles.fsr_positions[side], float), np.zeros(4))) for side in FSR_SIDES
+        ]
         self._min_force = float(min_contact_force)
         if not (np.isfinite(self._min_force) and self._min_force > 0.0):
             raise ValueError(f"{self._who}: min_contact_force must be positive, got {min_contact_force}")
         self._fsr = self.DeclareVectorInputPort("fsr_forces", len(FSR_NAMES))
-        self.DeclareVectorOutputPort("normal_force", 1, self._CalcNormalForce,
-                                     prerequisites_of_calc={self.input_port_ticket(self._fsr.get_index())})
+        self.DeclareVectorOutputPort(
+            "normal_force",
+            1,
+            self._CalcNormalForce,
+            prerequisites_of_calc={self.input_port_ticket(self._fsr.get_index())},
+        )
         self.DeclareVectorOutputPort("zmp", 2, self._CalcZmp)
 
     def fsr_positions(self, context: Context) -> np.ndarray:
@@ -289,8 +310,14 @@ class SupportFootCom(_KinematicsSystem):
         ValueError: unfinalized plant, unknown support foot, bad origin; NaN/inf on ``state``.
     """
 
-    def __init__(self, plant: MultibodyPlant, handles: HumanoidHandles, *, support_foot: str = "right",
-                 origin_W: np.ndarray | None = None):
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        handles: HumanoidHandles,
+        *,
+        support_foot: str = "right",
+        origin_W: np.ndarray | None = None,
+    ):
         super().__init__(plant, type(self).__name__)
         if not isinstance(handles, HumanoidHandles):
             raise ValueError(f"{self._who}: handles must be HumanoidHandles, got {type(handles).__name__}")

@@ -60,11 +60,17 @@ def published_dataset_dir() -> Path:
     if root:
         directory = Path(root) / "datasets" / "hawley2019-nao"
         origin = f"set by the environment variable {DATA_DIR_VARIABLE}={root!r}"
-        hint = f"point {DATA_DIR_VARIABLE} at a folder holding datasets/hawley2019-nao/, or unset it to use {BUNDLED_DATASET_DIR}"
+        hint = (
+            f"point {DATA_DIR_VARIABLE} at a folder holding datasets/hawley2019-nao/,"
+            f" or unset it to use {BUNDLED_DATASET_DIR}"
+        )
     else:
         directory = BUNDLED_DATASET_DIR
         origin = "the recordings shipped with the repository"
-        hint = f"restore data/hawley2019-nao from the repository, or set {DATA_DIR_VARIABLE} (see apps/replay_nao_dataset.py)"
+        hint = (
+            f"restore data/hawley2019-nao from the repository,"
+            f" or set {DATA_DIR_VARIABLE} (see apps/replay_nao_dataset.py)"
+        )
     for folder in (directory, *(directory / name for name in RECORDINGS)):
         if not folder.is_dir():
             raise DatasetError(f"Nao recordings not found: '{folder}' is not a folder ({origin}); {hint}")

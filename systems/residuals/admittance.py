@@ -76,8 +76,9 @@ def soft_threshold(r: np.ndarray, dead_band) -> np.ndarray:
     return np.copysign(out, r, out=out)  # a new array; this runs at every step
 
 
-def admittance_gains_by_group(plant: MultibodyPlant, handles, gains: Mapping[str, float],
-                              default: float = 0.0) -> np.ndarray:
+def admittance_gains_by_group(
+    plant: MultibodyPlant, handles, gains: Mapping[str, float], default: float = 0.0
+) -> np.ndarray:
     """Per-joint admittance gains K_a (v[6:] order) from gains per joint group.
 
     Args:
@@ -113,7 +114,8 @@ def admittance_gains_by_group(plant: MultibodyPlant, handles, gains: Mapping[str
     for group, gain in gains.items():
         if group not in groups:
             raise ValueError(
-                f"{who}: unknown joint group or joint {group!r}; valid groups: {', '.join(sorted(handles.joint_groups))}"
+                f"{who}: unknown joint group or joint {group!r};"
+                f" valid groups: {', '.join(sorted(handles.joint_groups))}"
             )
         try:
             gain = float(gain)
@@ -172,10 +174,20 @@ class JointAdmittanceController(LeafSystem):
     with base = the measured q ("measured", eq. 14) or the previous q_d ("desired").
     """
 
-    def __init__(self, plant: MultibodyPlant, gains, period: float = DEFAULT_PERIOD, *,
-                 residual_includes_base: bool = False, dead_band=0.0, max_rate=None,
-                 position_limits="model", limit_margin: float = DEFAULT_LIMIT_MARGIN,
-                 initial_position=None, integrate_from: str = "measured"):
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        gains,
+        period: float = DEFAULT_PERIOD,
+        *,
+        residual_includes_base: bool = False,
+        dead_band=0.0,
+        max_rate=None,
+        position_limits="model",
+        limit_margin: float = DEFAULT_LIMIT_MARGIN,
+        initial_position=None,
+        integrate_from: str = "measured",
+    ):
         """Constructs the controller.
 
         Args:
@@ -271,8 +283,9 @@ class JointAdmittanceController(LeafSystem):
             return np.full(n, -np.inf), np.full(n, np.inf)
         if isinstance(position_limits, str):
             if position_limits != "model":
-                raise ValueError(f"{_WHO}: position_limits must be 'model', None or (lower, upper), "
-                                 f"got {position_limits!r}")
+                raise ValueError(
+                    f"{_WHO}: position_limits must be 'model', None or (lower, upper), got {position_limits!r}"
+                )
             q_index = np.array([j.position_start() for j in joints], dtype=int)
             lower = plant.GetPositionLowerLimits()[q_index] + margin
             upper = plant.GetPositionUpperLimits()[q_index] - margin
@@ -289,8 +302,10 @@ class JointAdmittanceController(LeafSystem):
         upper = per_joint(upper, n, "position_limits upper", who=_WHO, allow_inf=True)
         bad = np.flatnonzero(lower > upper)
         if bad.size:
-            raise ValueError(f"{_WHO}: position_limits lower > upper at joint indices {bad.tolist()} "
-                             f"({', '.join(joints[k].name() for k in bad)})")
+            raise ValueError(
+                f"{_WHO}: position_limits lower > upper at joint indices {bad.tolist()} "
+                f"({', '.join(joints[k].name() for k in bad)})"
+            )
         return lower, upper
 
     @property
@@ -354,8 +369,9 @@ class JointAdmittanceController(LeafSystem):
         np.maximum(rate, self._neg_max_rate, out=rate)
         return rate
 
-    def CalcNextDesiredPosition(self, residual: np.ndarray, measured_position: np.ndarray,
-                                previous_desired: np.ndarray) -> np.ndarray:
+    def CalcNextDesiredPosition(
+        self, residual: np.ndarray, measured_position: np.ndarray, previous_desired: np.ndarray
+    ) -> np.ndarray:
         """One update: q_d = base + q̇_d T clipped into the limits (a previous q_d
         outside them is not pulled in, see the module doc),
         base = measured q or previous q_d.
@@ -390,8 +406,7 @@ class JointAdmittanceController(LeafSystem):
         previous = context.get_discrete_state(self._q_d_index).get_value()
         residual = self._eval_input(self._residual_port, context)
         measured = self._eval_input(self._measured_port, context)
-        discrete_state.set_value(self._q_d_index,
-                                 self.CalcNextDesiredPosition(residual, measured, previous))
+        discrete_state.set_value(self._q_d_index, self.CalcNextDesiredPosition(residual, measured, previous))
 
 
 __all__ = [

@@ -30,24 +30,24 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from pydrake.common.containers import namedview
+from pydrake.common.value import AbstractValue
 from pydrake.geometry import SceneGraph, SceneGraphInspector
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable, RigidBody
-from pydrake.common.containers import namedview
-from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem, ValueProducer
 from scipy.stats import chi2
 
-from systems.simulation import sensors as _sensors
+from systems.common.checks import eval_finite_input, positive_number, resolve_body
+from systems.common.spatial import cross, skew
+from systems.common.topology import floating_base_topology
 from systems.residuals.geometry_intersection import (
     RobotGeometry,
     line_intersections,
     outward_normals,
     signed_distances,
 )
-from systems.common.checks import eval_finite_input, positive_number, resolve_body
-from systems.common.spatial import cross, skew
-from systems.common.topology import floating_base_topology
+from systems.simulation import sensors as _sensors
 
 DEFAULT_PERIOD = 1e-3  # s
 
@@ -119,8 +119,10 @@ class _SensedConfiguration:
 
 #: ContactDetector's state: contact (1/0), detection time (s, -1: none), consecutive samples
 #: above the on-thresholds, time below the off-thresholds (s), the two test statistics.
-_DetectorState = namedview("_DetectorState", ("detected", "detection_time", "samples_above", "time_below",
-                                              "statistic_external", "statistic_internal"))
+_DetectorState = namedview(
+    "_DetectorState",
+    ("detected", "detection_time", "samples_above", "time_below", "statistic_external", "statistic_internal"),
+)
 
 
 def _weights(value, size: int, what: str) -> np.ndarray:
@@ -128,7 +130,9 @@ def _weights(value, size: int, what: str) -> np.ndarray:
     if w.ndim == 0:
         w = np.full(size, float(w))
     if w.shape != (size,) or not np.all(np.isfinite(w)) or np.any(w < 0.0):
-        raise ValueError(f"{what} must be a non-negative scalar or {size} non-negative finite numbers, got shape {w.shape}")
+        raise ValueError(
+            f"{what} must be a non-negative scalar or {size} non-negative finite numbers, got shape {w.shape}"
+        )
     return w
 
 
@@ -251,7 +255,8 @@ class ContactForceEstimator(LeafSystem):
         self._solution = self.DeclareCacheEntry(
             "forces and fit error",
             ValueProducer(allocate=lambda: AbstractValue.Make(np.zeros(3 * k + 1)), calc=self._CalcSolution),
-            prerequisites_of_calc={self.all_input_ports_ticket()})
+            prerequisites_of_calc={self.all_input_ports_ticket()},
+        )
         self.DeclareVectorOutputPort("contact_forces_world", 3 * k, self._CalcForces, {self.all_input_ports_ticket()})
         self.DeclareVectorOutputPort("fit_error", 1, self._CalcFitError, {self.all_input_ports_ticket()})
 
@@ -271,11 +276,20 @@ class ContactForceEstimator(LeafSystem):
         out = []
         for i, row in enumerate(raw):
             if row[0] != round(row[0]):
-                raise ValueError(f"{self._who}: input 'contact_points' entry {i}: body index {row[0]} is not an integer")
-            out.append((resolve_body(plant, int(round(row[0])), f"{self._who}: input 'contact_points' entry {i}"), row[1:].copy()))
+                raise ValueError(
+                    f"{self._who}: input 'contact_points' entry {i}: body index {row[0]} is not an integer"
+                )
+            out.append(
+                (
+                    resolve_body(plant, int(round(row[0])), f"{self._who}: input 'contact_points' entry {i}"),
+                    row[1:].copy(),
+                )
+            )
         return out
 
-    def system_matrix(self, q: np.ndarray, points: Sequence[tuple[RigidBody, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    def system_matrix(
+        self, q: np.ndarray, points: Sequence[tuple[RigidBody, np.ndarray]]
+    ) -> tuple[np.ndarray, np.ndarray]:
         """(A, w): the linear map from the stacked forces [f_1; ..; f_k] (world) to the
         residuals this mode reads, and the row weights. Mode "stacked": (6 + n) rows;
         "classical": nv rows."""
@@ -493,7 +507,10 @@ class ContactDetector(LeafSystem):
         n = kin.n
         if not (use_external or use_internal):
             raise ValueError(f"{who}: at least one of use_external, use_internal must be True")
-        for name, p in (("false_alarm_probability", false_alarm_probability), ("release_probability", release_probability)):
+        for name, p in (
+            ("false_alarm_probability", false_alarm_probability),
+            ("release_probability", release_probability),
+        ):
             if not 0.0 < float(p) < 1.0:
                 raise ValueError(f"{who}: {name} must be in (0, 1), got {p}")
         if not float(release_probability) > float(false_alarm_probability):
@@ -507,8 +524,13 @@ class ContactDetector(LeafSystem):
         self._on_samples = int(on_samples)
         if covariance_internal is None or covariance_external_force is None:
             cov_int, cov_ext = predicted_residual_covariances(
-                plant, internal_gain=internal_gain, external_gain=external_gain, period=self._period,
-                q=nominal_positions, known_wrench_frames=known_wrench_frames)
+                plant,
+                internal_gain=internal_gain,
+                external_gain=external_gain,
+                period=self._period,
+                q=nominal_positions,
+                known_wrench_frames=known_wrench_frames,
+            )
             if covariance_internal is None:
                 covariance_internal = cov_int
             if covariance_external_force is None:
@@ -526,8 +548,12 @@ class ContactDetector(LeafSystem):
         xd = {self.xd_ticket()}
         self.DeclareVectorOutputPort("contact_detected", 1, lambda c, o: o.SetFromVector([self._s(c).detected]), xd)
         self.DeclareVectorOutputPort("detection_time", 1, lambda c, o: o.SetFromVector([self._s(c).detection_time]), xd)
-        self.DeclareVectorOutputPort("test_statistics", 2, lambda c, o: o.SetFromVector(
-            [self._s(c).statistic_external, self._s(c).statistic_internal]), xd)
+        self.DeclareVectorOutputPort(
+            "test_statistics",
+            2,
+            lambda c, o: o.SetFromVector([self._s(c).statistic_external, self._s(c).statistic_internal]),
+            xd,
+        )
 
     def _whitener(self, cov, size: int, name: str) -> np.ndarray:
         """W with W^T W = cov^-1 (inverse Cholesky factor), from a covariance or stds."""
@@ -535,7 +561,9 @@ class ContactDetector(LeafSystem):
         if c.shape == (size,):
             c = np.diag(c**2)
         if c.shape != (size, size) or not np.all(np.isfinite(c)):
-            raise ValueError(f"{self._who}: {name} must be {size} stds or a {size}x{size} covariance, got shape {c.shape}")
+            raise ValueError(
+                f"{self._who}: {name} must be {size} stds or a {size}x{size} covariance, got shape {c.shape}"
+            )
         c = 0.5 * (c + c.T)
         try:
             L = np.linalg.cholesky(c)
@@ -554,7 +582,7 @@ class ContactDetector(LeafSystem):
         z_int = self._L_int @ np.asarray(residual)
         return float(z_ext @ z_ext), float(z_int @ z_int)
 
-    def _s(self, context: Context) -> "_DetectorState":
+    def _s(self, context: Context) -> _DetectorState:
         return _DetectorState(context.get_discrete_state(self._state_index).get_value())
 
     def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
@@ -725,17 +753,28 @@ class ContactLocalizer(LeafSystem):
         candidates = [b for b in candidates if int(b.index()) not in excluded]
         if not candidates:
             raise ValueError(f"{who}: no candidate link left")
-        self._geometry = RobotGeometry.from_plant(plant, inspector, candidates, skip_unsupported=skip_unsupported_shapes)
+        self._geometry = RobotGeometry.from_plant(
+            plant, inspector, candidates, skip_unsupported=skip_unsupported_shapes
+        )
         self._bodies = [plant.get_body(BodyIndex(int(i))) for i in self._geometry.bodies]
         self._period = positive_number(period, f"{who}: period")
         self._min_force = positive_number(min_force, f"{who}: min_force")
         self._settle_time = float(settle_time)
         if not math.isfinite(self._settle_time) or self._settle_time < 0.0:
             raise ValueError(f"{who}: settle_time must be >= 0")
-        self._tau = None if averaging_time_constant is None else positive_number(averaging_time_constant, f"{who}: averaging_time_constant")
+        self._tau = (
+            None
+            if averaging_time_constant is None
+            else positive_number(averaging_time_constant, f"{who}: averaging_time_constant")
+        )
         self._margin = float(ambiguity_margin)
         self._tolerance = float(surface_tolerance)
-        if not (math.isfinite(self._margin) and self._margin >= 0.0 and math.isfinite(self._tolerance) and self._tolerance >= 0.0):
+        if not (
+            math.isfinite(self._margin)
+            and self._margin >= 0.0
+            and math.isfinite(self._tolerance)
+            and self._tolerance >= 0.0
+        ):
             raise ValueError(f"{who}: ambiguity_margin and surface_tolerance must be non-negative")
         n, nq, nv = kin.n, kin.nq, kin.nv
         self._score_w = _weights(score_weights, n, f"{who}: score_weights")
@@ -753,9 +792,17 @@ class ContactLocalizer(LeafSystem):
         self._n, self._nq = n, nq
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._Update)
         ticket = {self.xd_ticket()}
-        for name, lo, hi in (("contact_body", 1, 2), ("contact_point_world", 2, 5), ("contact_force_world", 5, 8),
-                             ("score", 8, 9), ("runner_up_score", 9, 10), ("status", 0, 1)):
-            self.DeclareVectorOutputPort(name, hi - lo, lambda c, o, lo=lo, hi=hi: o.SetFromVector(self._r(c)[lo:hi]), ticket)
+        for name, lo, hi in (
+            ("contact_body", 1, 2),
+            ("contact_point_world", 2, 5),
+            ("contact_force_world", 5, 8),
+            ("score", 8, 9),
+            ("runner_up_score", 9, 10),
+            ("status", 0, 1),
+        ):
+            self.DeclareVectorOutputPort(
+                name, hi - lo, lambda c, o, lo=lo, hi=hi: o.SetFromVector(self._r(c)[lo:hi]), ticket
+            )
         self.DeclareVectorOutputPort("valid", 1, lambda c, o: o.SetFromVector([float(self._r(c)[0] == VALID)]), ticket)
 
     # -- public ---------------------------------------------------------------------------
@@ -848,7 +895,9 @@ class ContactLocalizer(LeafSystem):
         t = context.get_time()
         if not detected:
             discrete_state.set_value(self._avg_index, np.zeros(len(_Averaging.get_fields())))
-            discrete_state.set_value(self._result_index, self._pack(LocalizationResult(NO_CONTACT, force_W=np.array(w[3:]))))
+            discrete_state.set_value(
+                self._result_index, self._pack(LocalizationResult(NO_CONTACT, force_W=np.array(w[3:])))
+            )
             return
         if avg.active < 0.5:
             avg.active, avg.count, avg.onset = 1.0, 0.0, t
@@ -869,9 +918,14 @@ class ContactLocalizer(LeafSystem):
 
     @staticmethod
     def _pack(result: LocalizationResult) -> np.ndarray:
-        return np.concatenate((
-            [float(result.status), float(result.body_index)], result.point_W, result.force_W,
-            [result.score, result.runner_up_score]))
+        return np.concatenate(
+            (
+                [float(result.status), float(result.body_index)],
+                result.point_W,
+                result.force_W,
+                [result.score, result.runner_up_score],
+            )
+        )
 
 
 class GatedEstimate(LeafSystem):

@@ -88,7 +88,9 @@ def _radial_interval(o: np.ndarray, d: np.ndarray, r: np.ndarray) -> tuple[np.nd
     return lo, hi
 
 
-def outward_normals(points: np.ndarray, kinds: np.ndarray, params: np.ndarray, planes: np.ndarray | None = None) -> np.ndarray:
+def outward_normals(
+    points: np.ndarray, kinds: np.ndarray, params: np.ndarray, planes: np.ndarray | None = None
+) -> np.ndarray:
     """Outward unit normals of the primitives at (or near) surface points, geometry frames.
 
     Args:
@@ -118,8 +120,11 @@ def outward_normals(points: np.ndarray, kinds: np.ndarray, params: np.ndarray, p
         radial = np.hypot(pc[:, 0], pc[:, 1]) - r[m]
         cap = np.abs(pc[:, 2]) - params[m, 1]
         side = radial >= cap
-        nc = np.where(side[:, None], pc * np.array([1.0, 1.0, 0.0]), np.stack(
-            [np.zeros(len(pc)), np.zeros(len(pc)), np.sign(pc[:, 2])], axis=1))
+        nc = np.where(
+            side[:, None],
+            pc * np.array([1.0, 1.0, 0.0]),
+            np.stack([np.zeros(len(pc)), np.zeros(len(pc)), np.sign(pc[:, 2])], axis=1),
+        )
         n[m] = nc
     m = kinds == CAPSULE
     if np.any(m):
@@ -202,7 +207,9 @@ def line_intersections(
     return l_in, l_out, hit
 
 
-def signed_distances(points: np.ndarray, kinds: np.ndarray, params: np.ndarray, planes: np.ndarray | None = None) -> np.ndarray:
+def signed_distances(
+    points: np.ndarray, kinds: np.ndarray, params: np.ndarray, planes: np.ndarray | None = None
+) -> np.ndarray:
     """Signed distance of points to primitives (negative inside), m.
 
     Args:
@@ -357,7 +364,7 @@ class RobotGeometry:
         bodies=None,
         *,
         skip_unsupported: bool = False,
-    ) -> "RobotGeometry":
+    ) -> RobotGeometry:
         """Collects the collision geometries of ``bodies`` (default: every body but the world).
 
         Raises:

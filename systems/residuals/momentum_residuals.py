@@ -59,10 +59,10 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Frame, JacobianWrtVariable
 from pydrake.systems.framework import Context, DiscreteValues, LeafSystem
 
-from systems.dynamics.floating_base import FloatingBaseDynamics
-from systems.dynamics.floating_base_terms import FloatingBaseTerms
 from systems.common.checks import eval_finite_input
 from systems.common.topology import uniform_gravity
+from systems.dynamics.floating_base import FloatingBaseDynamics
+from systems.dynamics.floating_base_terms import FloatingBaseTerms
 
 #: Default update period of the residuals [s].
 DEFAULT_PERIOD = 1e-3
@@ -211,8 +211,10 @@ def check_wrench_frames(plant: MultibodyPlant, frames: Sequence[Frame | str]) ->
             frame = plant.GetFrameByName(frame)
         if not isinstance(frame, Frame):
             raise ValueError(f"known wrench frames must be Frame objects or names, got {type(frame).__name__}")
-        if int(frame.index()) >= plant.num_frames() or plant.get_frame(frame.index()).name() != frame.name() or (
-            plant.get_frame(frame.index()).body().name() != frame.body().name()
+        if (
+            int(frame.index()) >= plant.num_frames()
+            or plant.get_frame(frame.index()).name() != frame.name()
+            or (plant.get_frame(frame.index()).body().name() != frame.body().name())
         ):
             raise ValueError(f"known wrench frame '{frame.name()}' does not belong to this plant")
         if frame.body().index() == plant.world_body().index():
@@ -479,7 +481,6 @@ class ClassicalResidual(_MomentumResidual):
         return momentum, model_rate, measured
 
 
-
 class InternalResidual(_MomentumResidual):
     """Internal (floating-base) residual, paper eq. (11), with tau_bar_c of eq. (10).
 
@@ -526,7 +527,6 @@ class InternalResidual(_MomentumResidual):
             w_F0, tau_joints = known
             measured = tau_m + tau_joints - terms.I0c_inv_F.T @ w_F0  # tau_bar_c = J^fb^T w (eq. 10)
         return momentum, model_rate, measured
-
 
 
 class ExternalResidual(_MomentumResidual):

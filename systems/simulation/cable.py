@@ -126,11 +126,17 @@ class PulleyLoad(LeafSystem):
             self._CalcApplied,
             {self.xd_ticket()},
         )
-        self.DeclareVectorOutputPort("force_world", 3, lambda c, o: o.SetFromVector(self._held(c)[:3]), {self.xd_ticket()})
-        self.DeclareVectorOutputPort("point_world", 3, lambda c, o: o.SetFromVector(self._held(c)[3:6]), {self.xd_ticket()})
+        self.DeclareVectorOutputPort(
+            "force_world", 3, lambda c, o: o.SetFromVector(self._held(c)[:3]), {self.xd_ticket()}
+        )
+        self.DeclareVectorOutputPort(
+            "point_world", 3, lambda c, o: o.SetFromVector(self._held(c)[3:6]), {self.xd_ticket()}
+        )
         self.DeclareVectorOutputPort("tension", 1, lambda c, o: o.SetFromVector(self._held(c)[6:7]), {self.xd_ticket()})
         self.DeclareVectorOutputPort(
-            "load_height", 1, lambda c, o: o.SetFromVector(c.get_discrete_state(self._load_index).get_value()[:1]),
+            "load_height",
+            1,
+            lambda c, o: o.SetFromVector(c.get_discrete_state(self._load_index).get_value()[:1]),
             {self.xd_ticket()},
         )
 

@@ -28,21 +28,22 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Protocol, Sequence, Union, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
-from scipy.linalg import lapack
 from pydrake.common.value import AbstractValue, Value
 from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import ExternallyAppliedSpatialForce, MultibodyPlant
 from pydrake.multibody.tree import JacobianWrtVariable, RigidBody
 from pydrake.systems.framework import BasicVector, Context, LeafSystem, ValueProducer
+from scipy.linalg import lapack
 
-from systems.dynamics.floating_base import FloatingBaseDynamics
 from systems.common.checks import resolve_body, vector3
 from systems.common.smoothing import smoothstep5
 from systems.common.spatial import cross
+from systems.dynamics.floating_base import FloatingBaseDynamics
 
 __all__ = [
     "ForceProfile",
@@ -160,8 +161,8 @@ class PolynomialRampUpDown:
             object.__setattr__(self, name, _finite(name, getattr(self, name)))
         if not (self.t_start < self.t_peak < self.t_end):
             raise ValueError(
-                f"need t_start < t_peak < t_end, got t_start={self.t_start}, "
-                f"t_peak={self.t_peak}, t_end={self.t_end}")
+                f"need t_start < t_peak < t_end, got t_start={self.t_start}, t_peak={self.t_peak}, t_end={self.t_end}"
+            )
 
     def value(self, t):
         """Magnitude [N] at t [s]: float for a scalar t, array for an array t."""
@@ -247,11 +248,14 @@ class SmoothPiecewise:
 
     def plateaus(self, min_length: float) -> list[tuple[float, float]]:
         """Intervals between consecutive equal-valued knots lasting >= min_length, s."""
-        return [(a, b) for (a, va), (b, vb) in zip(zip(self.times, self.values), zip(self.times[1:], self.values[1:]))
-                if va == vb and b - a >= min_length]
+        return [
+            (a, b)
+            for (a, va), (b, vb) in zip(zip(self.times, self.values), zip(self.times[1:], self.values[1:]))
+            if va == vb and b - a >= min_length
+        ]
 
 
-Profile = Union[Sinusoid, PolynomialRampUpDown, Step, SmoothPiecewise, ForceProfile]
+Profile = Sinusoid | PolynomialRampUpDown | Step | SmoothPiecewise | ForceProfile
 
 
 # ---------------------------------------------------------------------------------------
@@ -313,15 +317,24 @@ class Push:
     def __eq__(self, other):
         if not isinstance(other, Push):
             return NotImplemented
-        return (self.body_name == other.body_name
-                and self.model_instance_name == other.model_instance_name
-                and np.array_equal(self.p_BoP_B, other.p_BoP_B)
-                and np.array_equal(self.direction_W, other.direction_W)
-                and self.profile == other.profile)
+        return (
+            self.body_name == other.body_name
+            and self.model_instance_name == other.model_instance_name
+            and np.array_equal(self.p_BoP_B, other.p_BoP_B)
+            and np.array_equal(self.direction_W, other.direction_W)
+            and self.profile == other.profile
+        )
 
     def __hash__(self):
-        return hash((self.body_name, self.model_instance_name, tuple(self.p_BoP_B.tolist()),
-                     tuple(self.direction_W.tolist()), self.profile))
+        return hash(
+            (
+                self.body_name,
+                self.model_instance_name,
+                tuple(self.p_BoP_B.tolist()),
+                tuple(self.direction_W.tolist()),
+                self.profile,
+            )
+        )
 
 
 # ---------------------------------------------------------------------------------------
@@ -344,8 +357,13 @@ class _PushGroundTruth:
 
 
 def _push_body(plant: MultibodyPlant, push: Push) -> RigidBody:
-    return resolve_body(plant, push.body_name, f"push on body {push.body_name!r}",
-                        model_instance=push.model_instance_name, allow_world=True)
+    return resolve_body(
+        plant,
+        push.body_name,
+        f"push on body {push.body_name!r}",
+        model_instance=push.model_instance_name,
+        allow_world=True,
+    )
 
 
 def _tree_bodies(plant: MultibodyPlant, root: RigidBody) -> set:
@@ -400,8 +418,7 @@ class PushSource(LeafSystem):
     elimination so that k pushes need one mass matrix rather than k.
     """
 
-    def __init__(self, plant: MultibodyPlant, pushes: Sequence[Push], *,
-                 dynamics: FloatingBaseDynamics | None = None):
+    def __init__(self, plant: MultibodyPlant, pushes: Sequence[Push], *, dynamics: FloatingBaseDynamics | None = None):
         """Constructs the source.
 
         Args:
@@ -459,23 +476,33 @@ class PushSource(LeafSystem):
         time_only = {self.time_ticket()}
         truth = {self.time_ticket(), self.input_port_ticket(self._state_port.get_index())}
         self._forces_port = self.DeclareAbstractOutputPort(
-            "applied_spatial_forces", lambda: _ForceListValue(list(self._template)),
-            self._CalcAppliedForces, prerequisites_of_calc=time_only)
+            "applied_spatial_forces",
+            lambda: _ForceListValue(list(self._template)),
+            self._CalcAppliedForces,
+            prerequisites_of_calc=time_only,
+        )
         self._kinematics = self.DeclareCacheEntry(
             "push ground truth (forces, points)",
-            ValueProducer(allocate=lambda: AbstractValue.Make(_PushGroundTruth(k, self._nq)),
-                          calc=self._CalcKinematics),
-            prerequisites_of_calc=truth)
+            ValueProducer(
+                allocate=lambda: AbstractValue.Make(_PushGroundTruth(k, self._nq)), calc=self._CalcKinematics
+            ),
+            prerequisites_of_calc=truth,
+        )
         self._force_world_port = self.DeclareVectorOutputPort(
-            "force_world", 3 * k, self._CalcForceWorld, prerequisites_of_calc=time_only)
+            "force_world", 3 * k, self._CalcForceWorld, prerequisites_of_calc=time_only
+        )
         self._point_world_port = self.DeclareVectorOutputPort(
-            "point_world", 3 * k, self._CalcPointWorld, prerequisites_of_calc=truth)
+            "point_world", 3 * k, self._CalcPointWorld, prerequisites_of_calc=truth
+        )
         self._wrench_world_port = self.DeclareVectorOutputPort(
-            "total_wrench_world", 6, self._CalcWrenchWorld, prerequisites_of_calc=truth)
+            "total_wrench_world", 6, self._CalcWrenchWorld, prerequisites_of_calc=truth
+        )
         self._wrench_base_port = self.DeclareVectorOutputPort(
-            "total_wrench_base", 6, self._CalcWrenchBase, prerequisites_of_calc=truth)
+            "total_wrench_base", 6, self._CalcWrenchBase, prerequisites_of_calc=truth
+        )
         self._tau_port = self.DeclareVectorOutputPort(
-            "tau_c_real", self._n, self._CalcTauCReal, prerequisites_of_calc=truth)
+            "tau_c_real", self._n, self._CalcTauCReal, prerequisites_of_calc=truth
+        )
 
     # -- accessors ------------------------------------------------------------------------
 
@@ -605,8 +632,8 @@ class PushSource(LeafSystem):
         g = np.zeros(plant.num_velocities())
         for i in use:
             J = plant.CalcJacobianTranslationalVelocity(
-                ctx, JacobianWrtVariable.kV, self._bodies[i].body_frame(), self._pushes[i].p_BoP_B,
-                world, world)
+                ctx, JacobianWrtVariable.kV, self._bodies[i].body_frame(), self._pushes[i].p_BoP_B, world, world
+            )
             g += J.T @ kin.forces[i]
         M = plant.CalcMassMatrix(ctx)
         _, y, info = lapack.dposv(M[:6, :6], g[:6])

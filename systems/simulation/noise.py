@@ -82,8 +82,7 @@ class SampledNoise:
     """
 
     def __init__(self, dimension: int, std, period: float, seed: int):
-        if isinstance(dimension, (bool, np.bool_)) or not isinstance(dimension, (int, np.integer)) \
-                or dimension < 0:
+        if isinstance(dimension, (bool, np.bool_)) or not isinstance(dimension, (int, np.integer)) or dimension < 0:
             raise ValueError(f"dimension must be a non-negative integer, got {dimension!r}")
         self._dimension = int(dimension)
         self._std = as_std_vector(std, self._dimension, "std")

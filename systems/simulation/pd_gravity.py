@@ -24,9 +24,9 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Joint, JointActuatorIndex
 from pydrake.systems.framework import BasicVector, Context, LeafSystem
 
-from systems.dynamics.base_state import QUATERNION_NORM_TOLERANCE
 from systems.common.checks import eval_finite_input, per_joint
 from systems.common.topology import floating_base_topology
+from systems.dynamics.base_state import QUATERNION_NORM_TOLERANCE
 
 
 def joints_in_velocity_order(plant: MultibodyPlant) -> list[Joint]:
@@ -39,8 +39,7 @@ def joints_in_velocity_order(plant: MultibodyPlant) -> list[Joint]:
     return list(floating_base_topology(plant).joints)
 
 
-def joint_vector_from_names(plant: MultibodyPlant, values: dict[str, float],
-                            default: float = 0.0) -> np.ndarray:
+def joint_vector_from_names(plant: MultibodyPlant, values: dict[str, float], default: float = 0.0) -> np.ndarray:
     """Packs ``{joint name: value}`` into a vector in the v[6:] joint order.
 
     Joints missing from ``values`` get ``default``. Unknown names raise ValueError.
@@ -97,8 +96,10 @@ class PdGravityController(LeafSystem):
         if gravity_model is not None and (
             getattr(gravity_model, "plant", None) is not plant or not hasattr(gravity_model, "gravity_joint_torques")
         ):
-            raise ValueError("PdGravityController: gravity_model must have gravity_joint_torques(x) and be "
-                             "built on the controller's plant")
+            raise ValueError(
+                "PdGravityController: gravity_model must have gravity_joint_torques(x) and be "
+                "built on the controller's plant"
+            )
         self._gravity_model = gravity_model
         joints = joints_in_velocity_order(plant)
         n = len(joints)
@@ -126,13 +127,13 @@ class PdGravityController(LeafSystem):
         if effort_limits is None:
             self._limits = model_limits
         else:
-            self._limits = per_joint(effort_limits, n, "effort_limits", who="PdGravityController", allow_inf=True,
-                                     sign="non-negative")
+            self._limits = per_joint(
+                effort_limits, n, "effort_limits", who="PdGravityController", allow_inf=True, sign="non-negative"
+            )
         self._neg_limits = -self._limits
 
         self._desired_port = self.DeclareVectorInputPort("desired_position", n)
-        self._state_port = self.DeclareVectorInputPort(
-            "state", plant.num_positions() + plant.num_velocities())
+        self._state_port = self.DeclareVectorInputPort("state", plant.num_positions() + plant.num_velocities())
         self.DeclareVectorOutputPort("actuation", na, self._CalcActuation)
 
     @property
@@ -149,7 +150,7 @@ class PdGravityController(LeafSystem):
     def CalcJointTorques(self, q_desired: np.ndarray, x: np.ndarray) -> np.ndarray:
         """Returns the clipped joint torques (n, v[6:] order) for desired q and state x."""
         q = x[: self._nq]
-        v = x[self._nq:]
+        v = x[self._nq :]
         if self._gravity_model is not None:
             tau_g = self._gravity_model.gravity_joint_torques(x)
         else:

@@ -29,9 +29,9 @@ discrete plant the port is sampled: it reads zero until the first step.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-import math
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -43,6 +43,8 @@ from pydrake.systems.framework import BasicVector, Context, DiagramBuilder, Leaf
 from pydrake.systems.sensors import Accelerometer, Gyroscope
 
 from models import HumanoidHandles
+from systems.common.checks import check_plant
+from systems.common.topology import floating_base_topology
 from systems.simulation.noise import (
     NoisyVector,
     SampledNoise,
@@ -51,8 +53,6 @@ from systems.simulation.noise import (
     check_period,
     check_seed,
 )
-from systems.common.checks import check_plant
-from systems.common.topology import floating_base_topology
 
 #: Default noise standard deviations (SI) of the sensors: white Gaussian noise, sampled and
 #: held at 1 kHz. A momentum residual passes noise on the momentum (velocities) to its output
@@ -112,12 +112,14 @@ def _quaternion_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product of quaternions [w, x, y, z]."""
     aw, ax, ay, az = a
     bw, bx, by, bz = b
-    return np.array([
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    ])
+    return np.array(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ]
+    )
 
 
 def rotation_vector_to_quaternion(phi: np.ndarray) -> np.ndarray:
@@ -125,8 +127,7 @@ def rotation_vector_to_quaternion(phi: np.ndarray) -> np.ndarray:
     phi = np.asarray(phi, dtype=float)
     angle = float(np.linalg.norm(phi))
     if angle < 1e-12:
-        return np.array([1.0, 0.5 * phi[0], 0.5 * phi[1], 0.5 * phi[2]]) / np.sqrt(
-            1.0 + 0.25 * angle * angle)
+        return np.array([1.0, 0.5 * phi[0], 0.5 * phi[1], 0.5 * phi[2]]) / np.sqrt(1.0 + 0.25 * angle * angle)
     s = np.sin(0.5 * angle) / angle
     return np.array([np.cos(0.5 * angle), s * phi[0], s * phi[1], s * phi[2]])
 
@@ -151,10 +152,15 @@ class JointEncoders(LeafSystem):
     ``velocity_noise_std``, held over ``period``; one stream seeded by ``seed``.
     """
 
-    def __init__(self, plant: MultibodyPlant, *,
-                 position_noise_std=ENCODER_POSITION_NOISE_STD,
-                 velocity_noise_std=ENCODER_VELOCITY_NOISE_STD,
-                 period: float = DEFAULT_PERIOD, seed: int = 0):
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        *,
+        position_noise_std=ENCODER_POSITION_NOISE_STD,
+        velocity_noise_std=ENCODER_VELOCITY_NOISE_STD,
+        period: float = DEFAULT_PERIOD,
+        seed: int = 0,
+    ):
         """Args:
             plant: a finalized floating-base plant (one free body, 1-DoF joints, welds).
             position_noise_std: rad, scalar or n entries (v[6:] order); default 2e-5.
@@ -173,8 +179,12 @@ class JointEncoders(LeafSystem):
         self._nq = plant.num_positions()
         self._q_select = _as_slice(self._q_index)
         self._v_select = _as_slice(self._nq + self._v_index)
-        std = np.concatenate([_std(position_noise_std, n, "position_noise_std", who),
-                              _std(velocity_noise_std, n, "velocity_noise_std", who)])
+        std = np.concatenate(
+            [
+                _std(position_noise_std, n, "position_noise_std", who),
+                _std(velocity_noise_std, n, "velocity_noise_std", who),
+            ]
+        )
         period, seed = _period_seed(period, seed, who)
         self._noise = SampledNoise(2 * n, std, period, seed)
         self._state = self.DeclareVectorInputPort("state", plant.num_positions() + plant.num_velocities())
@@ -200,7 +210,7 @@ class JointEncoders(LeafSystem):
     def _CalcVelocity(self, context: Context, output: BasicVector) -> None:
         v = self._eval_state(context)[self._v_select]
         if not self._noise.is_zero:
-            v = v + self._noise.value(context.get_time())[self._n:]
+            v = v + self._noise.value(context.get_time())[self._n :]
         output.SetFromVector(v)
 
 
@@ -227,8 +237,9 @@ class MotorTorqueSensor(LeafSystem):
     not in it (the estimator's model of those only approximates them).
     """
 
-    def __init__(self, plant: MultibodyPlant, *, noise_std=MOTOR_TORQUE_NOISE_STD,
-                 period: float = DEFAULT_PERIOD, seed: int = 1):
+    def __init__(
+        self, plant: MultibodyPlant, *, noise_std=MOTOR_TORQUE_NOISE_STD, period: float = DEFAULT_PERIOD, seed: int = 1
+    ):
         """Args:
             plant: a finalized floating-base plant whose actuators each drive one 1-DoF
                 joint.
@@ -250,8 +261,10 @@ class MotorTorqueSensor(LeafSystem):
             actuator = plant.get_joint_actuator(JointActuatorIndex(int(index)))
             k = k_of_joint.get(int(actuator.joint().index()))
             if k is None:
-                raise ValueError(f"{who}: actuator {actuator.name()!r} drives joint "
-                                 f"{actuator.joint().name()!r}, which is not a 1-DoF joint of the tree")
+                raise ValueError(
+                    f"{who}: actuator {actuator.name()!r} drives joint "
+                    f"{actuator.joint().name()!r}, which is not a 1-DoF joint of the tree"
+                )
             rows.append(k)
             cols.append(actuator.input_start())
         self._rows = np.array(rows, dtype=int)
@@ -343,10 +356,17 @@ class FootForceTorqueSensors(LeafSystem):
             [moment about So, N m (3); force, N (3)], expressed in world, plus noise.
     """
 
-    def __init__(self, plant: MultibodyPlant, sensor_joints: Sequence[Joint], *,
-                 force_noise_std=FT_FORCE_NOISE_STD, moment_noise_std=FT_MOMENT_NOISE_STD,
-                 period: float = DEFAULT_PERIOD, seed: int = 2,
-                 compensate_sole_weight: bool = True):
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        sensor_joints: Sequence[Joint],
+        *,
+        force_noise_std=FT_FORCE_NOISE_STD,
+        moment_noise_std=FT_MOMENT_NOISE_STD,
+        period: float = DEFAULT_PERIOD,
+        seed: int = 2,
+        compensate_sole_weight: bool = True,
+    ):
         """Args:
             plant: a finalized MultibodyPlant.
             sensor_joints: weld joints of ``plant`` carrying the sensors, e.g.
@@ -366,8 +386,9 @@ class FootForceTorqueSensors(LeafSystem):
         who = "FootForceTorqueSensors"
         check_plant(plant, who)
         if isinstance(sensor_joints, (str, bytes, Joint)) or not isinstance(sensor_joints, Sequence):
-            raise ValueError(f"{who}: sensor_joints must be a sequence of weld joints, got "
-                             f"{type(sensor_joints).__name__}")
+            raise ValueError(
+                f"{who}: sensor_joints must be a sequence of weld joints, got {type(sensor_joints).__name__}"
+            )
         if len(sensor_joints) == 0:
             raise ValueError(f"{who}: sensor_joints is empty")
         joints = []
@@ -377,8 +398,9 @@ class FootForceTorqueSensors(LeafSystem):
             if joint.GetParentPlant() is not plant:
                 raise ValueError(f"{who}: sensor_joints[{i}] ({joint.name()!r}) is not a joint of this plant")
             if joint.type_name() != "weld":
-                raise ValueError(f"{who}: sensor_joints[{i}] ({joint.name()!r}) is a "
-                                 f"{joint.type_name()!r} joint, not a weld joint")
+                raise ValueError(
+                    f"{who}: sensor_joints[{i}] ({joint.name()!r}) is a {joint.type_name()!r} joint, not a weld joint"
+                )
             if any(int(j.index()) == int(joint.index()) for j in joints):
                 raise ValueError(f"{who}: sensor_joints[{i}] ({joint.name()!r}) appears twice")
             joints.append(joint)
@@ -409,19 +431,17 @@ class FootForceTorqueSensors(LeafSystem):
             self._p_SCcm_S[i] = first_moment / mass if mass > 0 else np.zeros(3)
         self._weight = self._sole_mass[:, None] * gravity[None, :]  # m g_W per sensor, N
         # [m g]x transposed, per sensor: (row r) @ [w]x^T = ([w]x r)^T = (w x r)^T.
-        self._weight_skew_T = np.array([[[0.0, w[2], -w[1]], [-w[2], 0.0, w[0]], [w[1], -w[0], 0.0]]
-                                        for w in self._weight])
+        self._weight_skew_T = np.array(
+            [[[0.0, w[2], -w[1]], [-w[2], 0.0, w[0]], [w[1], -w[0], 0.0]] for w in self._weight]
+        )
 
         m = len(joints)
         force_std = _std(force_noise_std, 3, "force_noise_std", who)
         moment_std = _std(moment_noise_std, 3, "moment_noise_std", who)
         period, seed = _period_seed(period, seed, who)
-        self._noise = SampledNoise(6 * m, np.tile(np.concatenate([moment_std, force_std]), m),
-                                   period, seed)
-        self._reaction = self.DeclareAbstractInputPort(
-            "reaction_forces", AbstractValue.Make([SpatialForce()]))
-        self._state = self.DeclareVectorInputPort(
-            "state", plant.num_positions() + plant.num_velocities())
+        self._noise = SampledNoise(6 * m, np.tile(np.concatenate([moment_std, force_std]), m), period, seed)
+        self._reaction = self.DeclareAbstractInputPort("reaction_forces", AbstractValue.Make([SpatialForce()]))
+        self._state = self.DeclareVectorInputPort("state", plant.num_positions() + plant.num_velocities())
         self.DeclareVectorOutputPort("wrenches", 6 * m, self._CalcWrenches)
 
     @property
@@ -452,9 +472,11 @@ class FootForceTorqueSensors(LeafSystem):
         """Noise-free ``wrenches`` for a reaction-force list and a state x = [q; v]."""
         self._plant.SetPositions(self._context, x[: self._nq])
         if len(reaction_forces) <= self._max_joint_index:
-            raise ValueError(f"FootForceTorqueSensors: input 'reaction_forces' has "
-                             f"{len(reaction_forces)} entries; the plant has joint index "
-                             f"{self._max_joint_index}")
+            raise ValueError(
+                f"FootForceTorqueSensors: input 'reaction_forces' has "
+                f"{len(reaction_forces)} entries; the plant has joint index "
+                f"{self._max_joint_index}"
+            )
         # Vectorised over the sensors, one batched product: rows [tau_S; f_S; p_SCcm_S] times
         # R_WS^T give R_WS tau_S, R_WS f_S and r = R_WS p_SCcm_S; the wrench is -R_WS [tau_S; f_S]
         # with the sole weight removed (force - m g, moment - r x m g = moment + [m g]x r).
@@ -477,7 +499,8 @@ class FootForceTorqueSensors(LeafSystem):
                 if not (np.isfinite(F.rotational()).all() and np.isfinite(F.translational()).all()):
                     raise ValueError(
                         f"FootForceTorqueSensors: input 'reaction_forces' has NaN or inf at "
-                        f"indices [{index}] (joint {joint.name()!r})")
+                        f"indices [{index}] (joint {joint.name()!r})"
+                    )
             raise ValueError("FootForceTorqueSensors: non-finite wrench (check input 'state')")
         return out
 
@@ -518,9 +541,17 @@ class Imu:
     linear_acceleration: OutputPort
 
 
-def add_imu(builder: DiagramBuilder, plant: MultibodyPlant, frame: Frame, *,
-            gyro_noise_std=GYRO_NOISE_STD, accel_noise_std=ACCEL_NOISE_STD,
-            period: float = DEFAULT_PERIOD, seed: int = 3, name: str = "imu") -> Imu:
+def add_imu(
+    builder: DiagramBuilder,
+    plant: MultibodyPlant,
+    frame: Frame,
+    *,
+    gyro_noise_std=GYRO_NOISE_STD,
+    accel_noise_std=ACCEL_NOISE_STD,
+    period: float = DEFAULT_PERIOD,
+    seed: int = 3,
+    name: str = "imu",
+) -> Imu:
     """Adds a gyroscope and an accelerometer at ``frame`` (on its body), with noise.
 
     Drake's ``Gyroscope(body, X_BS)`` and ``Accelerometer(body, X_BS, g_W)`` with X_BS the
@@ -561,21 +592,17 @@ def add_imu(builder: DiagramBuilder, plant: MultibodyPlant, frame: Frame, *,
     accel = builder.AddSystem(Accelerometer(body, X_BS, gravity))
     accel.set_name(f"{name}_accelerometer")
     builder.Connect(plant.get_body_poses_output_port(), gyro.get_body_poses_input_port())
-    builder.Connect(plant.get_body_spatial_velocities_output_port(),
-                    gyro.get_body_velocities_input_port())
+    builder.Connect(plant.get_body_spatial_velocities_output_port(), gyro.get_body_velocities_input_port())
     builder.Connect(plant.get_body_poses_output_port(), accel.get_body_poses_input_port())
-    builder.Connect(plant.get_body_spatial_velocities_output_port(),
-                    accel.get_body_velocities_input_port())
-    builder.Connect(plant.get_body_spatial_accelerations_output_port(),
-                    accel.get_body_accelerations_input_port())
+    builder.Connect(plant.get_body_spatial_velocities_output_port(), accel.get_body_velocities_input_port())
+    builder.Connect(plant.get_body_spatial_accelerations_output_port(), accel.get_body_accelerations_input_port())
     gyro_noise = builder.AddSystem(NoisyVector(3, gyro_std, period, seed))
     gyro_noise.set_name(f"{name}_gyro_noise")
     accel_noise = builder.AddSystem(NoisyVector(3, accel_std, period, seed + 1000003))
     accel_noise.set_name(f"{name}_accel_noise")
     builder.Connect(gyro.get_measurement_output_port(), gyro_noise.get_input_port())
     builder.Connect(accel.get_measurement_output_port(), accel_noise.get_input_port())
-    return Imu(frame, gyro, accel, gyro_noise, accel_noise,
-               gyro_noise.get_output_port(), accel_noise.get_output_port())
+    return Imu(frame, gyro, accel, gyro_noise, accel_noise, gyro_noise.get_output_port(), accel_noise.get_output_port())
 
 
 # ---------------------------------------------------------------------------------------
@@ -601,12 +628,17 @@ class BaseStateEstimator(LeafSystem):
     With all stds 0 the outputs equal the state's entries exactly.
     """
 
-    def __init__(self, plant: MultibodyPlant, *,
-                 orientation_noise_std=BASE_ORIENTATION_NOISE_STD,
-                 position_noise_std=BASE_POSITION_NOISE_STD,
-                 angular_velocity_noise_std=BASE_ANGULAR_VELOCITY_NOISE_STD,
-                 linear_velocity_noise_std=BASE_LINEAR_VELOCITY_NOISE_STD,
-                 period: float = DEFAULT_PERIOD, seed: int = 4):
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        *,
+        orientation_noise_std=BASE_ORIENTATION_NOISE_STD,
+        position_noise_std=BASE_POSITION_NOISE_STD,
+        angular_velocity_noise_std=BASE_ANGULAR_VELOCITY_NOISE_STD,
+        linear_velocity_noise_std=BASE_LINEAR_VELOCITY_NOISE_STD,
+        period: float = DEFAULT_PERIOD,
+        seed: int = 4,
+    ):
         """Args:
             plant: a finalized floating-base plant.
             orientation_noise_std: rad, scalar or 3 entries (base-frame axes); default 1e-3.
@@ -624,11 +656,14 @@ class BaseStateEstimator(LeafSystem):
         topology, _, _ = _joint_indices(plant, who)
         self._q0 = topology.free_joint.position_start()
         self._v0 = plant.num_positions() + topology.free_joint.velocity_start()
-        std = np.concatenate([
-            _std(orientation_noise_std, 3, "orientation_noise_std", who),
-            _std(position_noise_std, 3, "position_noise_std", who),
-            _std(angular_velocity_noise_std, 3, "angular_velocity_noise_std", who),
-            _std(linear_velocity_noise_std, 3, "linear_velocity_noise_std", who)])
+        std = np.concatenate(
+            [
+                _std(orientation_noise_std, 3, "orientation_noise_std", who),
+                _std(position_noise_std, 3, "position_noise_std", who),
+                _std(angular_velocity_noise_std, 3, "angular_velocity_noise_std", who),
+                _std(linear_velocity_noise_std, 3, "linear_velocity_noise_std", who),
+            ]
+        )
         period, seed = _period_seed(period, seed, who)
         self._noise = SampledNoise(12, std, period, seed)
         self._state = self.DeclareVectorInputPort("state", plant.num_positions() + plant.num_velocities())
@@ -646,7 +681,7 @@ class BaseStateEstimator(LeafSystem):
         return x
 
     def _CalcPose(self, context: Context, output: BasicVector) -> None:
-        pose = self._eval_state(context)[self._q0: self._q0 + 7]
+        pose = self._eval_state(context)[self._q0 : self._q0 + 7]
         if self._noise.is_zero:
             output.SetFromVector(pose)
             return
@@ -669,7 +704,7 @@ class BaseStateEstimator(LeafSystem):
         output.SetFromVector((w * inv, qx * inv, qy * inv, qz * inv, x + dx, y + dy, z + dz))
 
     def _CalcVelocity(self, context: Context, output: BasicVector) -> None:
-        velocity = np.array(self._eval_state(context)[self._v0: self._v0 + 6])
+        velocity = np.array(self._eval_state(context)[self._v0 : self._v0 + 6])
         if not self._noise.is_zero:
             velocity += self._noise.value(context.get_time())[6:]
         output.SetFromVector(velocity)
@@ -720,8 +755,7 @@ class SensedStateAssembler(LeafSystem):
         self._v_index = nq + v_index
         covered = np.concatenate([self._pose_index, self._velocity_index, self._q_index, self._v_index])
         if sorted(covered.tolist()) != list(range(nq + nv)):
-            raise ValueError(f"{who}: the free joint and 1-DoF joints do not cover the plant's "
-                             "state exactly once")
+            raise ValueError(f"{who}: the free joint and 1-DoF joints do not cover the plant's state exactly once")
         n = topology.num_joints
         self._size = nq + nv
         self._ports = (
@@ -781,8 +815,15 @@ class SensorHandles:
     seeds: dict
 
 
-def add_sensors(builder: DiagramBuilder, plant: MultibodyPlant, handles: HumanoidHandles, *,
-                noise: bool = True, seed: int = 0, name_prefix: str = "") -> SensorHandles:
+def add_sensors(
+    builder: DiagramBuilder,
+    plant: MultibodyPlant,
+    handles: HumanoidHandles,
+    *,
+    noise: bool = True,
+    seed: int = 0,
+    name_prefix: str = "",
+) -> SensorHandles:
     """Adds a humanoid's sensors to ``builder`` and wires them to ``plant``.
 
     Adds JointEncoders, MotorTorqueSensor, FootForceTorqueSensors (only if
@@ -828,38 +869,57 @@ def add_sensors(builder: DiagramBuilder, plant: MultibodyPlant, handles: Humanoi
     on = 1.0 if noise else 0.0
 
     state_port = plant.get_state_output_port()
-    encoders = builder.AddSystem(JointEncoders(
-        plant, position_noise_std=on * ENCODER_POSITION_NOISE_STD,
-        velocity_noise_std=on * ENCODER_VELOCITY_NOISE_STD, seed=seeds["encoders"]))
+    encoders = builder.AddSystem(
+        JointEncoders(
+            plant,
+            position_noise_std=on * ENCODER_POSITION_NOISE_STD,
+            velocity_noise_std=on * ENCODER_VELOCITY_NOISE_STD,
+            seed=seeds["encoders"],
+        )
+    )
     encoders.set_name(f"{name_prefix}joint_encoders")
     builder.Connect(state_port, encoders.GetInputPort("state"))
 
-    torque = builder.AddSystem(MotorTorqueSensor(
-        plant, noise_std=on * MOTOR_TORQUE_NOISE_STD, seed=seeds["torque"]))
+    torque = builder.AddSystem(MotorTorqueSensor(plant, noise_std=on * MOTOR_TORQUE_NOISE_STD, seed=seeds["torque"]))
     torque.set_name(f"{name_prefix}motor_torque_sensor")
     builder.Connect(plant.get_net_actuation_output_port(), torque.get_actuation_input_port())
 
     ft = None
     sides = tuple(sorted(handles.ft_sensor_joints))
     if sides:
-        ft = builder.AddSystem(FootForceTorqueSensors(
-            plant, [handles.ft_sensor_joints[s] for s in sides],
-            force_noise_std=on * FT_FORCE_NOISE_STD, moment_noise_std=on * FT_MOMENT_NOISE_STD,
-            seed=seeds["ft"]))
+        ft = builder.AddSystem(
+            FootForceTorqueSensors(
+                plant,
+                [handles.ft_sensor_joints[s] for s in sides],
+                force_noise_std=on * FT_FORCE_NOISE_STD,
+                moment_noise_std=on * FT_MOMENT_NOISE_STD,
+                seed=seeds["ft"],
+            )
+        )
         ft.set_name(f"{name_prefix}foot_force_torque_sensors")
-        builder.Connect(plant.get_reaction_forces_output_port(),
-                        ft.get_reaction_forces_input_port())
+        builder.Connect(plant.get_reaction_forces_output_port(), ft.get_reaction_forces_input_port())
         builder.Connect(state_port, ft.get_state_input_port())
 
-    imu = add_imu(builder, plant, handles.imu_frame, gyro_noise_std=on * GYRO_NOISE_STD,
-                  accel_noise_std=on * ACCEL_NOISE_STD, seed=seeds["imu"],
-                  name=f"{name_prefix}imu")
+    imu = add_imu(
+        builder,
+        plant,
+        handles.imu_frame,
+        gyro_noise_std=on * GYRO_NOISE_STD,
+        accel_noise_std=on * ACCEL_NOISE_STD,
+        seed=seeds["imu"],
+        name=f"{name_prefix}imu",
+    )
 
-    base = builder.AddSystem(BaseStateEstimator(
-        plant, orientation_noise_std=on * BASE_ORIENTATION_NOISE_STD,
-        position_noise_std=on * BASE_POSITION_NOISE_STD,
-        angular_velocity_noise_std=on * BASE_ANGULAR_VELOCITY_NOISE_STD,
-        linear_velocity_noise_std=on * BASE_LINEAR_VELOCITY_NOISE_STD, seed=seeds["base"]))
+    base = builder.AddSystem(
+        BaseStateEstimator(
+            plant,
+            orientation_noise_std=on * BASE_ORIENTATION_NOISE_STD,
+            position_noise_std=on * BASE_POSITION_NOISE_STD,
+            angular_velocity_noise_std=on * BASE_ANGULAR_VELOCITY_NOISE_STD,
+            linear_velocity_noise_std=on * BASE_LINEAR_VELOCITY_NOISE_STD,
+            seed=seeds["base"],
+        )
+    )
     base.set_name(f"{name_prefix}base_state_estimator")
     builder.Connect(state_port, base.GetInputPort("state"))
 

@@ -249,13 +249,16 @@ class JointEffortOverlay(_MeshcatOverlay):
         if max_effort.ndim == 0:
             max_effort = np.full(k, float(max_effort))
         if max_effort.shape != (k,):
-            raise ValueError(f"{who}: max_effort must be a scalar or have one entry per joint ({k}), "
-                             f"got shape {max_effort.shape}")
+            raise ValueError(
+                f"{who}: max_effort must be a scalar or have one entry per joint ({k}), got shape {max_effort.shape}"
+            )
         if not (np.isfinite(max_effort).all() and (max_effort > 0).all()):
             raise ValueError(f"{who}: max_effort must be positive and finite, got {max_effort}")
         self._inv_max = 1.0 / max_effort
         self._context = plant.CreateDefaultContext()
-        self.radius = positive_number(radius, f"{who}: radius") if radius is not None else _default_radius(plant, self._context)
+        self.radius = (
+            positive_number(radius, f"{who}: radius") if radius is not None else _default_radius(plant, self._context)
+        )
         period = _period(publish_period, who)
 
         base_nv = _base_velocities(plant)
@@ -271,11 +274,13 @@ class JointEffortOverlay(_MeshcatOverlay):
         self._tracks = []
         for node in self._nodes:
             marker = f"{node}/marker"
-            self._tracks.append((
-                _Track(lambda p, t, node=node: meshcat.SetTransform(node, RigidTransform(p), t), _POSITION_TOL),
-                _Track(lambda s, t, m=marker: meshcat.SetProperty(m, "scale", [s, s, s], t), _SCALE_TOL),
-                _Track(lambda v, t, node=node: meshcat.SetProperty(node, "visible", v, t), 0.0),
-            ))
+            self._tracks.append(
+                (
+                    _Track(lambda p, t, node=node: meshcat.SetTransform(node, RigidTransform(p), t), _POSITION_TOL),
+                    _Track(lambda s, t, m=marker: meshcat.SetProperty(m, "scale", [s, s, s], t), _SCALE_TOL),
+                    _Track(lambda v, t, node=node: meshcat.SetProperty(node, "visible", v, t), 0.0),
+                )
+            )
         self._residual_port = self.DeclareVectorInputPort("residual", self._size)
         self._state_port = self.DeclareVectorInputPort("state", plant.num_positions() + nv)
         self._declare_overlay_events(period)
@@ -341,14 +346,18 @@ def _resolve_joints(plant: MultibodyPlant, joints, who: str) -> tuple[Joint, ...
                 raise ValueError(f"{who}: joint name '{item}' is ambiguous ({error}); pass the Joint") from error
         elif isinstance(item, Joint):
             joint = item
-            if (int(joint.index()) >= plant.num_joints()
-                    or plant.get_joint(joint.index()).name() != joint.name()
-                    or plant.get_joint(joint.index()).model_instance() != joint.model_instance()):
+            if (
+                int(joint.index()) >= plant.num_joints()
+                or plant.get_joint(joint.index()).name() != joint.name()
+                or plant.get_joint(joint.index()).model_instance() != joint.model_instance()
+            ):
                 raise ValueError(f"{who}: joint '{joint.name()}' does not belong to this plant")
         else:
             raise ValueError(f"{who}: joints must be Joint objects or names, got {type(item).__name__}")
         if joint.num_velocities() != 1:
-            raise ValueError(f"{who}: joint '{joint.name()}' has {joint.num_velocities()} DoF; only 1-DoF joints are supported")
+            raise ValueError(
+                f"{who}: joint '{joint.name()}' has {joint.num_velocities()} DoF; only 1-DoF joints are supported"
+            )
         out.append(joint)
     indices = [int(j.index()) for j in out]
     if len(set(indices)) != len(indices):
@@ -373,10 +382,12 @@ def _unique_node_names(names: Sequence[str]) -> list[str]:
 
 def _default_radius(plant: MultibodyPlant, context) -> float:
     """4.7 % of the largest extent of the body origins at the default posture (>= 5 mm)."""
-    points = np.array([
-        plant.EvalBodyPoseInWorld(context, plant.get_joint(j).child_body()).translation()
-        for j in plant.GetJointIndices()
-    ])
+    points = np.array(
+        [
+            plant.EvalBodyPoseInWorld(context, plant.get_joint(j).child_body()).translation()
+            for j in plant.GetJointIndices()
+        ]
+    )
     if len(points) == 0:
         return 0.05
     extent = float(np.max(points.max(axis=0) - points.min(axis=0)))
@@ -447,14 +458,20 @@ class ForceArrows(_MeshcatOverlay):
         flip = RotationMatrix.MakeXRotation(math.pi)
         self._tracks = []
         for node in self._nodes:
-            self._tracks.append((
-                _Track(lambda X, t, n=node: meshcat.SetTransform(n, _pose_from_vector(X), t), _POSITION_TOL),
-                _Track(lambda s, t, n=f"{node}/shaft": meshcat.SetProperty(n, "scale", list(s), t), _POSITION_TOL),
-                _Track(lambda L, t, n=f"{node}/head": meshcat.SetTransform(n, RigidTransform(flip, [0, 0, L]), t),
-                       _POSITION_TOL),
-                _Track(lambda c, t, n=f"{node}/head/cone": meshcat.SetProperty(n, "scale", [c, c, c], t), _SCALE_TOL),
-                _Track(lambda v, t, n=node: meshcat.SetProperty(n, "visible", v, t), 0.0),
-            ))
+            self._tracks.append(
+                (
+                    _Track(lambda X, t, n=node: meshcat.SetTransform(n, _pose_from_vector(X), t), _POSITION_TOL),
+                    _Track(lambda s, t, n=f"{node}/shaft": meshcat.SetProperty(n, "scale", list(s), t), _POSITION_TOL),
+                    _Track(
+                        lambda L, t, n=f"{node}/head": meshcat.SetTransform(n, RigidTransform(flip, [0, 0, L]), t),
+                        _POSITION_TOL,
+                    ),
+                    _Track(
+                        lambda c, t, n=f"{node}/head/cone": meshcat.SetProperty(n, "scale", [c, c, c], t), _SCALE_TOL
+                    ),
+                    _Track(lambda v, t, n=node: meshcat.SetProperty(n, "visible", v, t), 0.0),
+                )
+            )
         self._force_port = self.DeclareVectorInputPort("force_world", 3 * k)
         self._point_port = self.DeclareVectorInputPort("point_world", 3 * k)
         self._declare_overlay_events(period)
@@ -565,15 +582,27 @@ def add_effort_visualization(
         ValueError: port sizes that do not match the plant, only one of force/point ports,
             and everything the systems' constructors reject.
     """
-    overlay = JointEffortOverlay(plant, meshcat, joints, max_effort=max_effort, path=f"{prefix}effort",
-                                 radius=radius, publish_period=publish_period, includes_base=includes_base)
-    for port, mine in ((residual_port, overlay.get_residual_input_port()),
-                       (state_port, overlay.get_state_input_port())):
+    overlay = JointEffortOverlay(
+        plant,
+        meshcat,
+        joints,
+        max_effort=max_effort,
+        path=f"{prefix}effort",
+        radius=radius,
+        publish_period=publish_period,
+        includes_base=includes_base,
+    )
+    for port, mine in (
+        (residual_port, overlay.get_residual_input_port()),
+        (state_port, overlay.get_state_input_port()),
+    ):
         if port.size() != mine.size():
-            raise ValueError(f"add_effort_visualization: the {mine.get_name()} port "
-                             f"'{port.get_system().get_name()}.{port.get_name()}' has size {port.size()}, "
-                             f"expected {mine.size()}" + (" (set includes_base for the classical residual)"
-                                                          if mine.get_name() == "residual" else ""))
+            raise ValueError(
+                f"add_effort_visualization: the {mine.get_name()} port "
+                f"'{port.get_system().get_name()}.{port.get_name()}' has size {port.size()}, "
+                f"expected {mine.size()}"
+                + (" (set includes_base for the classical residual)" if mine.get_name() == "residual" else "")
+            )
     overlay.set_name(f"{prefix}joint_effort_overlay")
     builder.AddSystem(overlay)
     builder.Connect(residual_port, overlay.get_residual_input_port())
@@ -583,10 +612,17 @@ def add_effort_visualization(
         raise ValueError("add_effort_visualization: give both force_port and point_port, or neither")
     if force_port is not None:
         if force_port.size() != point_port.size() or force_port.size() % 3:
-            raise ValueError(f"add_effort_visualization: force_port (size {force_port.size()}) and point_port "
-                             f"(size {point_port.size()}) must have the same size, a multiple of 3")
-        arrows = ForceArrows(meshcat, force_port.size() // 3, path=f"{prefix}forces",
-                             newtons_per_meter=newtons_per_meter, publish_period=publish_period)
+            raise ValueError(
+                f"add_effort_visualization: force_port (size {force_port.size()}) and point_port "
+                f"(size {point_port.size()}) must have the same size, a multiple of 3"
+            )
+        arrows = ForceArrows(
+            meshcat,
+            force_port.size() // 3,
+            path=f"{prefix}forces",
+            newtons_per_meter=newtons_per_meter,
+            publish_period=publish_period,
+        )
         arrows.set_name(f"{prefix}force_arrows")
         builder.AddSystem(arrows)
         builder.Connect(force_port, arrows.get_force_world_input_port())
@@ -650,7 +686,7 @@ def _unpack(data: bytes):
     return value
 
 
-def _unpack_at(b: bytes, i: int):  # noqa: C901 - a format table
+def _unpack_at(b: bytes, i: int):  # a format table
     c = b[i]
     i += 1
     if c <= 0x7F:

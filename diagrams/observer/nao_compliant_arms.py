@@ -19,7 +19,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Rgba
+from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams
 from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
@@ -46,7 +46,7 @@ from systems.observer.fsr_sensing import CenterOfPressure, FsrArray, ImuComAccel
 from systems.simulation.disturbances import Push, PushSource, SmoothPiecewise
 from systems.simulation.ground_truth import VirtualForceTruth
 from systems.simulation.pd_gravity import joint_vector_from_names
-from systems.simulation.visualization import ForceArrows
+from systems.simulation.visualization import ESTIMATE_RGBA, add_force_arrows
 
 
 def lean_posture(delta: float, posture: dict[str, float] | None = None) -> dict[str, float]:
@@ -285,24 +285,27 @@ def build_nao_compliant_arms_diagram(
         visualizer = MeshcatVisualizer.AddToBuilder(
             builder, station.scene_graph, meshcat, MeshcatVisualizerParams(publish_period=1.0 / 32.0)
         )
-        applied = builder.AddSystem(ForceArrows(meshcat, len(pushes), path="applied_forces", newtons_per_meter=20.0))
-        applied.set_name("applied_force_arrows")
-        builder.Connect(push_source.GetOutputPort("force_world"), applied.get_force_world_input_port())
-        builder.Connect(push_source.GetOutputPort("point_world"), applied.get_point_world_input_port())
+        add_force_arrows(
+            builder,
+            meshcat,
+            push_source.GetOutputPort("force_world"),
+            push_source.GetOutputPort("point_world"),
+            name="applied_force_arrows",
+            path="applied_forces",
+            newtons_per_meter=20.0,
+        )
         if len(pushes) == len(NAO_ARM_CHAINS):
-            estimate = builder.AddSystem(
-                ForceArrows(
-                    meshcat,
-                    len(NAO_ARM_CHAINS),
-                    path="estimated_hand_forces",
-                    newtons_per_meter=20.0,
-                    rgba=Rgba(0.1, 0.3, 0.9, 0.9),
-                    min_force=0.2,
-                )
+            add_force_arrows(
+                builder,
+                meshcat,
+                blender.GetOutputPort("blended_force"),
+                push_source.GetOutputPort("point_world"),
+                name="estimated_force_arrows",
+                path="estimated_hand_forces",
+                newtons_per_meter=20.0,
+                rgba=ESTIMATE_RGBA,
+                min_force=0.2,
             )
-            estimate.set_name("estimated_force_arrows")
-            builder.Connect(blender.GetOutputPort("blended_force"), estimate.get_force_world_input_port())
-            builder.Connect(push_source.GetOutputPort("point_world"), estimate.get_point_world_input_port())
 
     diagram = builder.Build()
     diagram.set_name("nao_compliant_arms")

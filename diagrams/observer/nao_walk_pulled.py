@@ -50,7 +50,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Rgba
+from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams
 from pydrake.multibody.plant import ExternallyAppliedSpatialForceMultiplexer, MultibodyPlantConfig
 from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
@@ -73,7 +73,7 @@ from systems.observer.force_observer import WALKING, LipForceObserverSystem, Lip
 from systems.observer.fsr_sensing import FsrArray, ImuComAcceleration
 from systems.simulation.cable import PulleyLoad
 from systems.simulation.ground_truth import CableVirtualForceTruth
-from systems.simulation.visualization import ForceArrows
+from systems.simulation.visualization import ESTIMATE_RGBA, add_force_arrows
 
 #: The paper's lifted mass, kg (m0 ~ 300 g).
 LOAD_MASS = 0.3
@@ -338,23 +338,26 @@ def build_nao_walk_pulled_diagram(
             builder, station.scene_graph, meshcat, MeshcatVisualizerParams(publish_period=1.0 / 32.0)
         )
         if cable is not None:
-            arrows = builder.AddSystem(ForceArrows(meshcat, 1, path="cable_force", newtons_per_meter=20.0))
-            arrows.set_name("cable_force_arrow")
-            builder.Connect(cable.GetOutputPort("force_world"), arrows.get_force_world_input_port())
-            builder.Connect(cable.GetOutputPort("point_world"), arrows.get_point_world_input_port())
-        estimate = builder.AddSystem(
-            ForceArrows(
+            add_force_arrows(
+                builder,
                 meshcat,
-                1,
-                path="estimated_virtual_force",
+                cable.GetOutputPort("force_world"),
+                cable.GetOutputPort("point_world"),
+                name="cable_force_arrow",
+                path="cable_force",
                 newtons_per_meter=20.0,
-                rgba=Rgba(0.1, 0.3, 0.9, 0.9),
-                min_force=0.3,
             )
+        add_force_arrows(
+            builder,
+            meshcat,
+            observer.GetOutputPort("virtual_force"),
+            truth.GetOutputPort("com_world"),
+            name="estimated_force_arrow",
+            path="estimated_virtual_force",
+            newtons_per_meter=20.0,
+            rgba=ESTIMATE_RGBA,
+            min_force=0.3,
         )
-        estimate.set_name("estimated_force_arrow")
-        builder.Connect(observer.GetOutputPort("virtual_force"), estimate.get_force_world_input_port())
-        builder.Connect(truth.GetOutputPort("com_world"), estimate.get_point_world_input_port())
 
     diagram = builder.Build()
     diagram.set_name("nao_walk_pulled")

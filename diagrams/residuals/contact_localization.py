@@ -49,7 +49,7 @@ from systems.residuals.contact_estimation import ContactDetector, ContactLocaliz
 from systems.residuals.geometry_intersection import inward_direction, sample_surface, surface_areas
 from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual, ResidualModel
 from systems.simulation.disturbances import Push, PushSource, Step
-from systems.simulation.visualization import ForceArrows
+from systems.simulation.visualization import add_force_arrows
 
 TRUE_RGBA = Rgba(0.1, 0.8, 0.1, 0.5)  # wide and translucent: the estimate shows inside it
 ESTIMATE_RGBA = Rgba(0.85, 0.0, 0.0, 1.0)
@@ -239,22 +239,33 @@ def build_contact_localization_diagram(
     visualizer = None
     if meshcat is not None:
         visualizer = MeshcatVisualizer.AddToBuilder(builder, station.scene_graph, meshcat)
-        true_arrows = builder.AddSystem(
-            ForceArrows(
-                meshcat, 1, path="true_force", rgba=TRUE_RGBA, min_force=0.5, shaft_radius=0.016, head_radius=0.035
-            )
+        add_force_arrows(
+            builder,
+            meshcat,
+            push_source.GetOutputPort("force_world"),
+            push_source.GetOutputPort("point_world"),
+            name="true_force_arrow",
+            path="true_force",
+            rgba=TRUE_RGBA,
+            min_force=0.5,
+            shaft_radius=0.016,
+            head_radius=0.035,
         )
-        builder.Connect(push_source.GetOutputPort("force_world"), true_arrows.get_force_world_input_port())
-        builder.Connect(push_source.GetOutputPort("point_world"), true_arrows.get_point_world_input_port())
         gate = builder.AddSystem(GatedEstimate())
         builder.Connect(localizer.GetOutputPort("contact_force_world"), gate.GetInputPort("force"))
         builder.Connect(localizer.GetOutputPort("contact_point_world"), gate.GetInputPort("point"))
         builder.Connect(localizer.GetOutputPort("valid"), gate.GetInputPort("valid"))
-        estimate_arrows = builder.AddSystem(
-            ForceArrows(meshcat, 1, path="estimated_force", rgba=ESTIMATE_RGBA, min_force=0.5, shaft_radius=0.005)
+        add_force_arrows(
+            builder,
+            meshcat,
+            gate.GetOutputPort("force_world"),
+            gate.GetOutputPort("point_world"),
+            name="estimated_force_arrow",
+            path="estimated_force",
+            rgba=ESTIMATE_RGBA,
+            min_force=0.5,
+            shaft_radius=0.005,
         )
-        builder.Connect(gate.GetOutputPort("force_world"), estimate_arrows.get_force_world_input_port())
-        builder.Connect(gate.GetOutputPort("point_world"), estimate_arrows.get_point_world_input_port())
     diagram = builder.Build()
     diagram.set_name("contact_localization")
     return diagram, ContactLocalizationHandles(

@@ -61,7 +61,9 @@ __all__ = [
     "ForceArrows",
     "JointEffortOverlay",
     "StaticHtmlScene",
+    "ESTIMATE_RGBA",
     "add_effort_visualization",
+    "add_force_arrows",
     "read_static_html",
 ]
 
@@ -70,6 +72,8 @@ DEFAULT_PUBLISH_PERIOD = 1.0 / 32.0
 #: The paper's red, translucent for the effort markers.
 EFFORT_RGBA = Rgba(0.9, 0.05, 0.05, 0.55)
 FORCE_RGBA = Rgba(0.85, 0.0, 0.0, 1.0)
+#: Blue, for an estimate drawn beside the applied (red) forces.
+ESTIMATE_RGBA = Rgba(0.1, 0.3, 0.9, 0.9)
 
 _POSITION_TOL = 5e-4  # m: a marker or arrow that moved less is not re-sent
 _SCALE_TOL = 1e-2  # fraction of full size
@@ -611,23 +615,46 @@ def add_effort_visualization(
     if (force_port is None) != (point_port is None):
         raise ValueError("add_effort_visualization: give both force_port and point_port, or neither")
     if force_port is not None:
-        if force_port.size() != point_port.size() or force_port.size() % 3:
-            raise ValueError(
-                f"add_effort_visualization: force_port (size {force_port.size()}) and point_port "
-                f"(size {point_port.size()}) must have the same size, a multiple of 3"
-            )
-        arrows = ForceArrows(
+        arrows = add_force_arrows(
+            builder,
             meshcat,
-            force_port.size() // 3,
+            force_port,
+            point_port,
+            name=f"{prefix}force_arrows",
             path=f"{prefix}forces",
             newtons_per_meter=newtons_per_meter,
             publish_period=publish_period,
         )
-        arrows.set_name(f"{prefix}force_arrows")
-        builder.AddSystem(arrows)
-        builder.Connect(force_port, arrows.get_force_world_input_port())
-        builder.Connect(point_port, arrows.get_point_world_input_port())
     return {"effort_overlay": overlay, "force_arrows": arrows}
+
+
+def add_force_arrows(
+    builder: DiagramBuilder,
+    meshcat: Meshcat,
+    force_port: OutputPort,
+    point_port: OutputPort,
+    *,
+    name: str,
+    **arrow_options,
+) -> ForceArrows:
+    """Adds ``ForceArrows`` named ``name`` to ``builder``, one arrow per force of
+    ``force_port`` (3 k forces in world, N) drawn at the points of ``point_port`` (3 k, m);
+    ``arrow_options`` go to ``ForceArrows`` (path, newtons_per_meter, rgba, min_force, ...).
+
+    Raises:
+        ValueError: ports of different sizes, or a size that is not a multiple of 3.
+    """
+    if force_port.size() != point_port.size() or force_port.size() % 3:
+        raise ValueError(
+            f"{name}: force_port (size {force_port.size()}) and point_port "
+            f"(size {point_port.size()}) must have the same size, a multiple of 3"
+        )
+    arrows = ForceArrows(meshcat, force_port.size() // 3, **arrow_options)
+    arrows.set_name(name)
+    builder.AddSystem(arrows)
+    builder.Connect(force_port, arrows.get_force_world_input_port())
+    builder.Connect(point_port, arrows.get_point_world_input_port())
+    return arrows
 
 
 # ---------------------------------------------------------------------------------------

@@ -34,7 +34,7 @@ from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
-from diagrams.observer.nao_sensing import OBSERVER_PERIOD, add_observer_pipeline
+from diagrams.observer.nao_sensing import OBSERVER_PERIOD, add_observer_pipeline, add_virtual_force_arrows
 from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station, default_plant_config
 from models import HumanoidHandles
 from systems.observer.force_observer import LipForceObserverSystem, LipObserverParameters
@@ -42,7 +42,7 @@ from systems.observer.fsr_sensing import CenterOfPressure, FsrArray, ImuComAccel
 from systems.simulation.disturbances import Push, PushSource, SmoothPiecewise
 from systems.simulation.ground_truth import VirtualForceTruth
 from systems.simulation.pd_gravity import joint_vector_from_names
-from systems.simulation.visualization import ESTIMATE_RGBA, add_force_arrows
+from systems.simulation.visualization import add_force_arrows
 
 
 @dataclass
@@ -191,17 +191,7 @@ def build_nao_force_observer_diagram(
             path="applied_forces",
             newtons_per_meter=40.0,
         )
-        add_force_arrows(
-            builder,
-            meshcat,
-            observer.GetOutputPort("virtual_force"),
-            truth.GetOutputPort("com_world"),
-            name="estimated_force_arrow",
-            path="estimated_virtual_force",
-            newtons_per_meter=40.0,
-            rgba=ESTIMATE_RGBA,
-            min_force=0.3,
-        )
+        add_virtual_force_arrows(builder, meshcat, observer, truth, newtons_per_meter=40.0)
 
     diagram = builder.Build()
     diagram.set_name("nao_force_observer")

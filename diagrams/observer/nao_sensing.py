@@ -20,13 +20,16 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
+from pydrake.geometry import Meshcat
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import DiagramBuilder
 
 from diagrams.station.humanoid_station import HumanoidStation
 from systems.observer.force_observer import STANDING, LipForceObserverSystem, LipObserverParameters
 from systems.observer.fsr_sensing import FSR_NOISE_STD, CenterOfPressure, FsrArray, ImuComAcceleration, SupportFootCom
+from systems.simulation.ground_truth import VirtualForceTruth
 from systems.simulation.sensors import SEEDS_PER_CALL
+from systems.simulation.visualization import ESTIMATE_RGBA, add_force_arrows
 
 #: The observer's sampling period on the simulated robot, s (the paper's 16.7 ms, 60 Hz).
 OBSERVER_PERIOD = 1.0 / 60.0
@@ -180,7 +183,31 @@ def add_observer_pipeline(
     )
 
 
+def add_virtual_force_arrows(
+    builder: DiagramBuilder,
+    meshcat: Meshcat,
+    observer: LipForceObserverSystem,
+    truth: VirtualForceTruth,
+    *,
+    newtons_per_meter: float,
+) -> None:
+    """Draws the observer's virtual force estimate (eq. 11, blue) at the true CoM (``truth``'s
+    ``com_world``), where the LIP applies it, ``newtons_per_meter`` N per metre of arrow."""
+    add_force_arrows(
+        builder,
+        meshcat,
+        observer.GetOutputPort("virtual_force"),
+        truth.GetOutputPort("com_world"),
+        name="estimated_force_arrow",
+        path="estimated_virtual_force",
+        newtons_per_meter=newtons_per_meter,
+        rgba=ESTIMATE_RGBA,
+        min_force=0.3,
+    )
+
+
 __all__ = [
+    "add_virtual_force_arrows",
     "FSR_SEED_OFFSET",
     "NaoMeasurementPipeline",
     "OBSERVER_PERIOD",

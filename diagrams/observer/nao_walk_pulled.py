@@ -61,6 +61,7 @@ from diagrams.observer.nao_sensing import (
     OBSERVER_PERIOD,
     ObserverPipeline,
     add_observer_pipeline,
+    add_virtual_force_arrows,
     nao_observer_parameters,
 )
 from diagrams.scenarios import check_common_fields
@@ -73,7 +74,7 @@ from systems.observer.force_observer import WALKING, LipForceObserverSystem, Lip
 from systems.observer.fsr_sensing import FsrArray, ImuComAcceleration
 from systems.simulation.cable import PulleyLoad
 from systems.simulation.ground_truth import CableVirtualForceTruth
-from systems.simulation.visualization import ESTIMATE_RGBA, add_force_arrows
+from systems.simulation.visualization import add_force_arrows
 
 #: The paper's lifted mass, kg (m0 ~ 300 g).
 LOAD_MASS = 0.3
@@ -347,17 +348,7 @@ def build_nao_walk_pulled_diagram(
                 path="cable_force",
                 newtons_per_meter=20.0,
             )
-        add_force_arrows(
-            builder,
-            meshcat,
-            observer.GetOutputPort("virtual_force"),
-            truth.GetOutputPort("com_world"),
-            name="estimated_force_arrow",
-            path="estimated_virtual_force",
-            newtons_per_meter=20.0,
-            rgba=ESTIMATE_RGBA,
-            min_force=0.3,
-        )
+        add_virtual_force_arrows(builder, meshcat, observer, truth, newtons_per_meter=20.0)
 
     diagram = builder.Build()
     diagram.set_name("nao_walk_pulled")

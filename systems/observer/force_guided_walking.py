@@ -59,6 +59,7 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
+from pydrake.common.containers import namedview
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem
 
@@ -296,9 +297,27 @@ def stop_step(steps: list, elapsed: float) -> int:
     return 1 + sum(1 for step in steps if step.t_start <= elapsed)
 
 
-# Discrete state layout.
-_MODE, _DIR, _T0, _SEG, _STOP, _B0, _B1, _ABOVE, _SIGN, _BELOW, _TEND, _LEAN = range(12)
-_STATE_SIZE = 12
+#: The controller's discrete state: mode (STANDING/WALKING/STOPPING), walking direction
+#: (+1 forward, -1 backward), the current segment's start time t0 (s) and index in ``plans``,
+#: the stop variant's index (-1: none) and its cross-fade window (s), the trigger's memory
+#: (``ForceTrigger.update``), the segment's end time (s) and its ZMP lean (m, eq. G-3).
+_ControllerState = namedview(
+    "ControllerState",
+    [
+        "mode",
+        "direction",
+        "t0",
+        "segment",
+        "stop_segment",
+        "blend_start",
+        "blend_end",
+        "trigger_above",
+        "trigger_sign",
+        "trigger_below",
+        "t_end",
+        "lean",
+    ],
+)
 
 
 class ForceGuidedWalkingController(LeafSystem):
@@ -379,9 +398,10 @@ class ForceGuidedWalkingController(LeafSystem):
         #: Log of decisions: (time, event, detail) tuples, for reports.
         self.events: list[tuple[float, str, dict]] = []
         n = self.plans[0].q.shape[1]
-        x0 = np.full(_STATE_SIZE, np.nan)
-        x0[[_MODE, _DIR, _T0, _SEG, _STOP, _SIGN, _LEAN]] = [STANDING, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0]
-        self._state = self.DeclareDiscreteState(x0)
+        x0 = _ControllerState(np.full(len(_ControllerState.get_fields()), np.nan))
+        x0.mode, x0.direction, x0.t0, x0.segment = STANDING, 0.0, 0.0, 0.0
+        x0.stop_segment, x0.trigger_sign, x0.lean = -1.0, 0.0, 0.0
+        self._state = self.DeclareDiscreteState(x0[:])
         self._force = self.DeclareVectorInputPort("force_estimate", 3)
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._Update)
         xd = {self.xd_ticket(), self.time_ticket()}
@@ -415,14 +435,14 @@ class ForceGuidedWalkingController(LeafSystem):
         return plan_from_controller(self._plant, controller, q0)
 
     def _sample(self, context: Context, name: str) -> np.ndarray:
-        s = context.get_discrete_state(self._state).get_value()
+        s = _ControllerState(context.get_discrete_state(self._state).get_value())
         t = context.get_time()
-        plan = self.plans[int(s[_SEG])]
-        t0 = s[_T0]
+        plan = self.plans[int(s.segment)]
+        t0 = s.t0
         value = plan.sample(getattr(plan, name), t - t0)
-        if s[_STOP] >= 0:  # cross-fade to the stop variant (eq. G-2)
-            variant = self.plans[int(s[_STOP])]
-            w = float(smoothstep5(np.array((t - s[_B0]) / max(s[_B1] - s[_B0], 1e-9))))
+        if s.stop_segment >= 0:  # cross-fade to the stop variant (eq. G-2)
+            variant = self.plans[int(s.stop_segment)]
+            w = float(smoothstep5(np.array((t - s.blend_start) / max(s.blend_end - s.blend_start, 1e-9))))
             value = (1.0 - w) * value + w * variant.sample(getattr(variant, name), t - t0)
         return value
 
@@ -430,47 +450,47 @@ class ForceGuidedWalkingController(LeafSystem):
         output.SetFromVector((self._sample(context, "contact") > 0.5).astype(float))
 
     def _CalcState(self, context: Context, output: BasicVector) -> None:
-        s = context.get_discrete_state(self._state).get_value()
-        output.SetFromVector([s[_MODE], s[_DIR], s[_T0] if s[_SEG] > 0 else np.nan])
+        s = _ControllerState(context.get_discrete_state(self._state).get_value())
+        output.SetFromVector([s.mode, s.direction, s.t0 if s.segment > 0 else np.nan])
 
     # ----- logic ---------------------------------------------------------------------
     def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
-        s = context.get_discrete_state(self._state).get_value().copy()
+        s = _ControllerState(context.get_discrete_state(self._state).get_value().copy())
         t = context.get_time()
         force = float(eval_finite_input("ForceGuidedWalkingController", self._force, context)[0])
-        mode = int(s[_MODE])
-        direction = int(s[_DIR]) if mode == WALKING else 0
-        memory = (s[_ABOVE], s[_SIGN], s[_BELOW])
+        mode = int(s.mode)
+        direction = int(s.direction) if mode == WALKING else 0
+        memory = (s.trigger_above, s.trigger_sign, s.trigger_below)
         memory, event = self._trigger.update(memory, t, force, direction)
-        s[_ABOVE], s[_SIGN], s[_BELOW] = memory
-        current = self.plans[int(s[_SEG])]
+        s.trigger_above, s.trigger_sign, s.trigger_below = memory
+        current = self.plans[int(s.segment)]
         if mode == STANDING:
-            ready = t >= self._crouch_time - 1e-9 if s[_SEG] == 0 else True
+            ready = t >= self._crouch_time - 1e-9 if s.segment == 0 else True
             if event in (1, -1) and ready:
-                final = self.plans[int(s[_STOP])] if s[_STOP] >= 0 else current
+                final = self.plans[int(s.stop_segment)] if s.stop_segment >= 0 else current
                 lean = self.lean(force)
                 self.plans.append(self._segment(final.final_positions, event, self._max_steps, lean))
-                s[_SEG], s[_STOP], s[_T0], s[_LEAN] = len(self.plans) - 1, -1, t, lean
-                s[_MODE], s[_DIR] = WALKING, event
-                s[_TEND] = t + self.plans[-1].duration
-                s[_BELOW] = np.nan
+                s.segment, s.stop_segment, s.t0, s.lean = len(self.plans) - 1, -1, t, lean
+                s.mode, s.direction = WALKING, event
+                s.t_end = t + self.plans[-1].duration
+                s.trigger_below = np.nan
                 self.events.append((t, "start", {"direction": event, "force": force, "lean_m": lean}))
         elif mode == WALKING:
-            elapsed = t - s[_T0]
+            elapsed = t - s.t0
             if event == 2:
                 k = stop_step(current.steps, elapsed)
                 if k >= len(current.steps):  # the segment's own last step closes the stance
-                    s[_MODE] = STOPPING
+                    s.mode = STOPPING
                     self.events.append(
                         (t, "stop", {"closing_step": len(current.steps), "force": force, "variant": False})
                     )
                 else:
-                    self.plans.append(self._segment(current.initial_positions, int(s[_DIR]), k, float(s[_LEAN])))
+                    self.plans.append(self._segment(current.initial_positions, int(s.direction), k, float(s.lean)))
                     variant = self.plans[-1]
-                    s[_STOP], s[_B0] = len(self.plans) - 1, t
-                    s[_B1] = s[_T0] + variant.steps[k - 1].t_lift - 0.02
-                    s[_TEND] = s[_T0] + variant.duration
-                    s[_MODE] = STOPPING
+                    s.stop_segment, s.blend_start = len(self.plans) - 1, t
+                    s.blend_end = s.t0 + variant.steps[k - 1].t_lift - 0.02
+                    s.t_end = s.t0 + variant.duration
+                    s.mode = STOPPING
                     jump = float(
                         np.abs(variant.sample(variant.com, elapsed) - current.sample(current.com, elapsed)).max()
                     )
@@ -483,19 +503,19 @@ class ForceGuidedWalkingController(LeafSystem):
                                 "force": force,
                                 "variant": True,
                                 "com_difference_at_switch_m": jump,
-                                "blend_until": float(s[_B1]),
+                                "blend_until": float(s.blend_end),
                             },
                         )
                     )
-            elif t >= s[_TEND]:  # out of steps: stand (a new segment starts after the debounce)
-                s[_MODE] = STANDING
+            elif t >= s.t_end:  # out of steps: stand (a new segment starts after the debounce)
+                s.mode = STANDING
                 self.events.append((t, "segment_end", {}))
-        elif mode == STOPPING and t >= s[_TEND]:
-            s[_MODE] = STANDING
+        elif mode == STOPPING and t >= s.t_end:
+            s.mode = STANDING
             self.events.append((t, "standing", {}))
-        if int(s[_MODE]) != WALKING:
-            s[_DIR] = s[_DIR] if int(s[_MODE]) == STOPPING else 0.0
-        discrete_state.set_value(self._state, s)
+        if int(s.mode) != WALKING:
+            s.direction = s.direction if int(s.mode) == STOPPING else 0.0
+        discrete_state.set_value(self._state, s[:])
 
 
 __all__ = [

@@ -27,6 +27,7 @@ from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_stat
 from systems.residuals.admittance import JointAdmittanceController, admittance_gains_by_group, joint_position_selector
 from systems.residuals.momentum_residuals import ClassicalResidual, InternalResidual
 from systems.simulation.disturbances import PolynomialRampUpDown, Push, PushSource
+from systems.simulation.imperfections import Imperfections
 
 RESIDUAL_KINDS = ("internal", "classical")
 #: A run counts as upright while the pelvis keeps this fraction of its height and tilts less.
@@ -68,6 +69,8 @@ class PushAndComplyScenario:
             see ``diagrams.station.humanoid_station``).
         simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``); the plant
             is discrete, so only ``target_realtime_rate`` and the publishing matter.
+        imperfections: ``systems.simulation.imperfections.Imperfections`` of the station
+            (default: ideal, none).
     """
 
     model: str = "hrp4_like"
@@ -98,6 +101,7 @@ class PushAndComplyScenario:
     log_period: float = 0.01
     plant_config: MultibodyPlantConfig = dataclasses.field(default_factory=default_plant_config)
     simulator_config: SimulatorConfig = dataclasses.field(default_factory=SimulatorConfig)
+    imperfections: Imperfections = dataclasses.field(default_factory=Imperfections)
 
 
 def load_scenario(path: str | Path | None = None, text: str | None = None) -> PushAndComplyScenario:
@@ -140,7 +144,12 @@ def build_push_and_comply_diagram(
         raise ValueError("the scenario needs 0 <= push_start < push_peak_time < push_end <= duration")
     builder = DiagramBuilder()
     station = add_humanoid_station(
-        builder, scenario.model, plant_config=scenario.plant_config, noise=scenario.noise, seed=scenario.seed
+        builder,
+        scenario.model,
+        plant_config=scenario.plant_config,
+        noise=scenario.noise,
+        seed=scenario.seed,
+        imperfections=scenario.imperfections,
     )
     plant, humanoid = station.plant, station.humanoid
     if humanoid is None:

@@ -10,7 +10,7 @@ gravity with no ground, and its "sensed" state is the true state (no sensor suit
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +32,12 @@ from models import (
 )
 from systems.common.topology import FloatingBaseTopology, floating_base_topology
 from systems.residuals.momentum_residuals import ResidualModel
+from systems.simulation.imperfections import (
+    Imperfections,
+    JointFriction,
+    perturbed_spatial_inertias,
+    rated_joint_torques,
+)
 from systems.simulation.pd_gravity import PdGravityController
 from systems.simulation.sensors import SensorHandles, add_sensors
 
@@ -59,7 +65,11 @@ class HumanoidStation:
         dynamics_model: the ``ResidualModel`` whose gravity the PD uses (humanoids), or
             None. Give it to the diagram's residuals (``model=``): the PD reads the
             sample they evaluated one step earlier, so the dynamics at each sensed state
-            are computed once for the PD and all residuals.
+            are computed once for the PD and all residuals. With a model mismatch its
+            links' inertias are the perturbed ones (the plant stays nominal).
+        imperfections: the Imperfections the station was built with (ideal by default).
+        friction: the JointFriction system feeding the plant's applied generalized force,
+            or None.
     """
 
     plant: MultibodyPlant
@@ -77,6 +87,8 @@ class HumanoidStation:
     q_hold: np.ndarray
     sensed_state_hold: ZeroOrderHold | None = None
     dynamics_model: ResidualModel | None = None
+    imperfections: Imperfections = field(default_factory=Imperfections)
+    friction: JointFriction | None = None
 
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -106,6 +118,7 @@ def add_humanoid_station(
     plant_config: MultibodyPlantConfig | None = None,
     noise: bool = True,
     seed: int = 0,
+    imperfections: Imperfections | None = None,
 ) -> HumanoidStation:
     """Adds the station of the module docstring to ``builder``.
 
@@ -117,11 +130,20 @@ def add_humanoid_station(
             "sap" (Drake's convex solver), "similar" or "lagged". Drake's TAMSI solver is
             deprecated and refused; the station's geometry is made for point contact.
         noise, seed: the sensors' noise (defaults of ``systems.simulation.sensors``) and its seed.
+        imperfections: ``systems.simulation.imperfections.Imperfections``; None or the
+            default (ideal) builds exactly the station without them. Friction acts on the
+            plant (rated torques: the actuators' effort limits); the sensor groups go to
+            ``add_sensors``; the model mismatch to ``dynamics_model``. Sensor and model
+            imperfections need a humanoid (a model from a file has neither).
 
     Raises:
         ValueError: an unknown or unreadable model, a model without a floating base, an
-            unknown contact approximation.
+            unknown contact approximation, bad imperfections (naming the field).
     """
+    imperfections = Imperfections() if imperfections is None else imperfections
+    if not isinstance(imperfections, Imperfections):
+        raise ValueError(f"imperfections must be Imperfections, got {type(imperfections).__name__}")
+    imperfections.validate()
     plant_config = default_plant_config() if plant_config is None else plant_config
     check_plant_config(plant_config)
     time_step = plant_config.time_step
@@ -146,11 +168,30 @@ def add_humanoid_station(
 
     # Humanoids: gravity from the dynamics model the estimators share (see HumanoidStation).
     dynamics_model = ResidualModel(plant) if humanoid is not None else None
+    mismatch = imperfections.model_mismatch
+    if mismatch.mass_percent or mismatch.com_percent or mismatch.inertia_percent:
+        if dynamics_model is None:
+            raise ValueError("imperfections.model_mismatch needs a humanoid station (hrp4_like, nao_like)")
+        dynamics_model.set_spatial_inertias(perturbed_spatial_inertias(plant, mismatch, imperfections.seed))
+    friction = None
+    if imperfections.friction.coulomb_percent or imperfections.friction.viscous_percent:
+        rated = rated_joint_torques(plant)
+        friction = builder.AddSystem(
+            JointFriction(
+                plant,
+                coulomb=0.01 * imperfections.friction.coulomb_percent * rated,
+                viscous=0.01 * imperfections.friction.viscous_percent * rated,
+                smoothing_velocity=imperfections.friction.smoothing_velocity,
+            )
+        )
+        friction.set_name("joint_friction")
+        builder.Connect(plant.get_state_output_port(), friction.get_input_port())
+        builder.Connect(friction.get_output_port(), plant.get_applied_generalized_force_input_port())
     controller = builder.AddSystem(PdGravityController(plant, kp, kd, gravity_model=dynamics_model))
     controller.set_name("pd_gravity_controller")
     builder.Connect(controller.GetOutputPort("actuation"), plant.get_actuation_input_port())
     if humanoid is not None:
-        sensors = add_sensors(builder, plant, humanoid, noise=noise, seed=seed)
+        sensors = add_sensors(builder, plant, humanoid, noise=noise, seed=seed, imperfections=imperfections)
         sensed_state, measured_torque = sensors.state, sensors.measured_torque
         known_frames, known_wrenches = tuple(sensors.ft_frames), sensors.ft_wrenches
     else:
@@ -161,6 +202,9 @@ def add_humanoid_station(
         builder.Connect(plant.get_net_actuation_output_port(), to_joint_torque.get_input_port())
         measured_torque = to_joint_torque.get_output_port()
         known_frames, known_wrenches = (), None
+        sensor_groups = (imperfections.imu, imperfections.encoders, imperfections.torque_sensor)
+        if any(group != type(group)() for group in sensor_groups):
+            raise ValueError("imperfections.imu/encoders/torque_sensor need a humanoid station (it has no sensors)")
     sensed_state_hold = None
     if sensors is not None:
         # One sensor reading per step, shared by the PD and the estimators. In a discrete
@@ -193,6 +237,8 @@ def add_humanoid_station(
         q_hold=q_hold,
         sensed_state_hold=sensed_state_hold,
         dynamics_model=dynamics_model,
+        imperfections=imperfections,
+        friction=friction,
     )
 
 

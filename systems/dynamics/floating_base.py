@@ -19,10 +19,11 @@ Jacobian is returned in world coordinates.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import Frame, JacobianWrtVariable
+from pydrake.multibody.tree import BodyIndex, Frame, JacobianWrtVariable, SpatialInertia
 from pydrake.systems.framework import Context
 
 from systems.common.topology import floating_base_topology, uniform_gravity
@@ -69,6 +70,15 @@ class DrakeFloatingBaseDynamics:
         """The plant context at the identity base pose (F0 = world); after ``compute(q, v)``
         it holds q's joint positions (for F0-expressed Jacobians of the same q)."""
         return self._context_F0
+
+    def set_spatial_inertias(self, inertias: Mapping[int, SpatialInertia]) -> None:
+        """Uses the spatial inertias M_BBo_B (``{body index: SpatialInertia}``) in this
+        model's contexts instead of the plant's defaults (a model that differs from the
+        simulated robot); the plant itself is not changed."""
+        for index, M in inertias.items():
+            body = self._plant.get_body(BodyIndex(int(index)))
+            for context in (self._context_F0, self._context_W):
+                body.SetSpatialInertiaInBodyFrame(context, M)
 
     def _mass_matrix_F0(self, q_joints: np.ndarray) -> np.ndarray:
         self._q_F0[7:] = q_joints
@@ -190,6 +200,16 @@ class FloatingBaseDynamics:
         joint positions of the last ``compute`` (see ``DrakeFloatingBaseDynamics.context_F0``);
         None for the "reference" implementation, which keeps no such context."""
         return self._impl.context_F0 if isinstance(self._impl, DrakeFloatingBaseDynamics) else None
+
+    def set_spatial_inertias(self, inertias: Mapping[int, SpatialInertia]) -> None:
+        """See ``DrakeFloatingBaseDynamics.set_spatial_inertias``; "fast" implementation only.
+
+        Raises:
+            ValueError: the "reference" implementation (it reads the plant's defaults).
+        """
+        if not isinstance(self._impl, DrakeFloatingBaseDynamics):
+            raise ValueError("set_spatial_inertias: only the 'fast' implementation supports a perturbed model")
+        self._impl.set_spatial_inertias(inertias)
 
     def compute(self, q: np.ndarray, v: np.ndarray) -> FloatingBaseTerms:
         """All terms of eq. (9) and their derivatives at (q, v) (Drake's coordinates in)."""

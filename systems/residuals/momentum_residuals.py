@@ -52,11 +52,11 @@ has no ``measured_torque`` input.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import Frame, JacobianWrtVariable
+from pydrake.multibody.tree import Frame, JacobianWrtVariable, SpatialInertia
 from pydrake.systems.framework import Context, DiscreteValues, LeafSystem
 
 from systems.common.checks import eval_finite_input
@@ -107,6 +107,17 @@ class ResidualModel:
         self._terms: FloatingBaseTerms | None = None
         self._jacobians: dict[int, np.ndarray] = {}
         self._known_cache: dict = {}
+
+    def set_spatial_inertias(self, inertias: Mapping[int, SpatialInertia]) -> None:
+        """Makes this model differ from the plant: the bodies' spatial inertias M_BBo_B
+        (``{body index: SpatialInertia}``) replace the plant's defaults in every dynamics
+        computation (mass matrix, bias, gravity); the plant is not changed.
+
+        Raises:
+            ValueError: the "reference" implementation.
+        """
+        self.dynamics.set_spatial_inertias(inertias)
+        self._key = None
 
     def check_frames(self, frames: Sequence[Frame | str]) -> tuple[Frame, ...]:
         """See ``check_wrench_frames``."""

@@ -183,9 +183,68 @@ class NoisyVector(LeafSystem):
             output.SetFromVector(clean + self._noise.value(context.get_time()))
 
 
+class RandomWalkBias(LeafSystem):
+    """Adds a slowly varying bias, a Gaussian random walk, to a vector signal.
+
+    The bias b is discrete state, updated every ``period`` T seconds:
+    b_{k+1} = b_k + sigma sqrt(T) n_k, n_k ~ N(0, I) a pure function of (seed, k) (see
+    ``SampledNoise``), b_0 = 0 (the bias is calibrated at start-up). So the bias at time
+    t = k T has standard deviation sigma sqrt(t) per entry (Kalibr's "bias random walk"
+    model, sigma in signal units per sqrt(s), i.e. per s per sqrt(Hz)).
+
+    Inputs:
+        clean: the signal, ``size`` entries (any units).
+
+    Outputs:
+        biased: clean(t) + b(t), same units; direct feedthrough from ``clean``.
+
+    Args:
+        size: signal size (>= 1).
+        random_walk: sigma per entry, scalar or ``size`` entries (>= 0), signal units / sqrt(s).
+        period: update period T, s (> 0).
+        seed: non-negative integer.
+
+    Raises:
+        ValueError: bad size, random_walk, period or seed.
+    """
+
+    def __init__(self, size: int, random_walk, period: float = 1e-3, seed: int = 0):
+        super().__init__()
+        if isinstance(size, (bool, np.bool_)) or not isinstance(size, (int, np.integer)) or size < 1:
+            raise ValueError(f"size must be a positive integer, got {size!r}")
+        period = check_period(period)
+        sigma = as_std_vector(random_walk, int(size), "random_walk")
+        self._increments = SampledNoise(int(size), sigma * math.sqrt(period), period, seed)
+        self._period = period
+        self._clean = self.DeclareVectorInputPort("clean", int(size))
+        self._bias = self.DeclareDiscreteState(int(size))
+        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._Update)
+        self.DeclareVectorOutputPort("biased", int(size), self._CalcBiased)
+
+    @property
+    def increments(self) -> SampledNoise:
+        """The increments' noise stream (std sigma sqrt(T) per entry)."""
+        return self._increments
+
+    def get_bias(self, context: Context) -> np.ndarray:
+        """The current bias b, signal units (a copy)."""
+        return context.get_discrete_state(self._bias).CopyToVector()
+
+    def _Update(self, context: Context, state) -> None:
+        k = int(round(context.get_time() / self._period))
+        bias = context.get_discrete_state(self._bias).get_value()
+        state.get_mutable_vector(self._bias).SetFromVector(bias + self._increments.sample(k))
+
+    def _CalcBiased(self, context: Context, output: BasicVector) -> None:
+        clean = self._clean.Eval(context)
+        check_finite_input("RandomWalkBias", "clean", clean)
+        output.SetFromVector(clean + context.get_discrete_state(self._bias).get_value())
+
+
 __all__ = [
     "BLOCK_SIZE",
     "NoisyVector",
+    "RandomWalkBias",
     "SampledNoise",
     "as_std_vector",
     "check_finite_input",

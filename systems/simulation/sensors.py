@@ -43,10 +43,12 @@ from pydrake.systems.framework import BasicVector, Context, DiagramBuilder, Leaf
 from pydrake.systems.sensors import Accelerometer, Gyroscope
 
 from models import HumanoidHandles
-from systems.common.checks import check_plant
+from systems.common.checks import check_plant, per_joint
 from systems.common.topology import floating_base_topology
+from systems.simulation.imperfections import Imperfections, rated_joint_torques, torque_measurement_errors
 from systems.simulation.noise import (
     NoisyVector,
+    RandomWalkBias,
     SampledNoise,
     as_std_vector,
     check_finite_input,
@@ -150,6 +152,10 @@ class JointEncoders(LeafSystem):
 
     Noise: independent Gaussian per entry, std ``position_noise_std`` /
     ``velocity_noise_std``, held over ``period``; one stream seeded by ``seed``.
+
+    Quantisation (``position_step`` > 0): the position output is
+    step * round((q + noise) / step), an absolute encoder's reading; velocities are not
+    quantised (they stand for a filtered velocity estimate).
     """
 
     def __init__(
@@ -160,6 +166,7 @@ class JointEncoders(LeafSystem):
         velocity_noise_std=ENCODER_VELOCITY_NOISE_STD,
         period: float = DEFAULT_PERIOD,
         seed: int = 0,
+        position_step: float = 0.0,
     ):
         """Args:
             plant: a finalized floating-base plant (one free body, 1-DoF joints, welds).
@@ -167,12 +174,18 @@ class JointEncoders(LeafSystem):
             velocity_noise_std: rad/s, scalar or n entries; default 2e-3.
             period: noise sample-and-hold period, s; default 1e-3.
             seed: noise seed, non-negative integer; default 0.
+            position_step: quantisation step of the positions, rad (m), >= 0; 0 (default)
+                = none.
 
         Raises:
-            ValueError: unsupported or unfinalized plant, bad std/period/seed.
+            ValueError: unsupported or unfinalized plant, bad std/period/seed/step.
         """
         super().__init__()
         who = "JointEncoders"
+        step = float(position_step) if isinstance(position_step, (int, float, np.number)) else math.nan
+        if not (math.isfinite(step) and step >= 0.0):
+            raise ValueError(f"{who}: position_step must be a finite number >= 0 rad, got {position_step!r}")
+        self._position_step = step
         topology, self._q_index, self._v_index = _joint_indices(plant, who)
         n = topology.num_joints
         self._n = n
@@ -196,6 +209,11 @@ class JointEncoders(LeafSystem):
         """The noise stream: entries [0, n) position, [n, 2n) velocity."""
         return self._noise
 
+    @property
+    def position_step(self) -> float:
+        """The position quantisation step, rad (0: none)."""
+        return self._position_step
+
     def _eval_state(self, context: Context) -> np.ndarray:
         x = self._state.Eval(context)
         check_finite_input("JointEncoders", "state", x)
@@ -205,6 +223,8 @@ class JointEncoders(LeafSystem):
         q = self._eval_state(context)[self._q_select]
         if not self._noise.is_zero:
             q = q + self._noise.value(context.get_time())[: self._n]
+        if self._position_step > 0.0:
+            q = self._position_step * np.round(q / self._position_step)
         output.SetFromVector(q)
 
     def _CalcVelocity(self, context: Context, output: BasicVector) -> None:
@@ -235,10 +255,20 @@ class MotorTorqueSensor(LeafSystem):
 
     What is measured is the command; any joint friction/damping of the simulated plant is
     not in it (the estimator's model of those only approximates them).
+
+    Calibration error (``scale``, ``offset``): measured = scale ⊙ u + offset + noise per
+    joint (a torque-constant and offset error of a current-based estimate).
     """
 
     def __init__(
-        self, plant: MultibodyPlant, *, noise_std=MOTOR_TORQUE_NOISE_STD, period: float = DEFAULT_PERIOD, seed: int = 1
+        self,
+        plant: MultibodyPlant,
+        *,
+        noise_std=MOTOR_TORQUE_NOISE_STD,
+        period: float = DEFAULT_PERIOD,
+        seed: int = 1,
+        scale=None,
+        offset=None,
     ):
         """Args:
             plant: a finalized floating-base plant whose actuators each drive one 1-DoF
@@ -246,9 +276,12 @@ class MotorTorqueSensor(LeafSystem):
             noise_std: N m, scalar or n entries (v[6:] order); default 0.05.
             period: noise sample-and-hold period, s; default 1e-3.
             seed: noise seed; default 1.
+            scale: per-joint factor (v[6:] order), scalar or n entries, finite; None = 1.
+            offset: per-joint offset, N m, scalar or n entries, finite; None = 0.
+                Unactuated joints read 0 regardless.
 
         Raises:
-            ValueError: unsupported plant, bad std/period/seed.
+            ValueError: unsupported plant, bad std/period/seed/scale/offset.
         """
         super().__init__()
         who = "MotorTorqueSensor"
@@ -276,6 +309,8 @@ class MotorTorqueSensor(LeafSystem):
         period, seed = _period_seed(period, seed, who)
         self._noise = SampledNoise(n, std, period, seed)
         self._n = n
+        self._scale = None if scale is None else per_joint(scale, n, "scale", who=who)[self._rows]
+        self._offset = None if offset is None else per_joint(offset, n, "offset", who=who)[self._rows]
         self._actuation = self.DeclareVectorInputPort("actuation", na)
         self.DeclareVectorOutputPort("measured_torque", n, self._CalcTorque)
 
@@ -292,6 +327,10 @@ class MotorTorqueSensor(LeafSystem):
         check_finite_input("MotorTorqueSensor", "actuation", u)
         tau = np.zeros(self._n)
         tau[self._rows] = u[self._cols]
+        if self._scale is not None:
+            tau[self._rows] *= self._scale
+        if self._offset is not None:
+            tau[self._rows] += self._offset
         if not self._noise.is_zero:
             tau += self._noise.value(context.get_time())
         output.SetFromVector(tau)
@@ -527,9 +566,11 @@ class Imu:
         gyroscope: Drake's Gyroscope (noise-free ω_WS expressed in S).
         accelerometer: Drake's Accelerometer (noise-free R_SW (a_WS − g_W)).
         gyro_noise, accel_noise: the NoisyVector systems adding the noise.
-        angular_velocity: output port, ω_WS expressed in S + noise, rad/s (3).
-        linear_acceleration: output port, proper acceleration R_SW (a_WS − g_W) + noise,
-            m/s^2 (3); +9.81 along the sensor's up axis at rest.
+        angular_velocity: output port, ω_WS expressed in S + noise (+ bias), rad/s (3).
+        linear_acceleration: output port, proper acceleration R_SW (a_WS − g_W) + noise
+            (+ bias), m/s^2 (3); +9.81 along the sensor's up axis at rest.
+        gyro_bias, accel_bias: the RandomWalkBias systems after the noise, or None (no
+            bias random walk).
     """
 
     frame: Frame
@@ -539,6 +580,8 @@ class Imu:
     accel_noise: NoisyVector
     angular_velocity: OutputPort
     linear_acceleration: OutputPort
+    gyro_bias: RandomWalkBias | None = None
+    accel_bias: RandomWalkBias | None = None
 
 
 def add_imu(
@@ -551,6 +594,8 @@ def add_imu(
     period: float = DEFAULT_PERIOD,
     seed: int = 3,
     name: str = "imu",
+    gyro_bias_random_walk: float = 0.0,
+    accel_bias_random_walk: float = 0.0,
 ) -> Imu:
     """Adds a gyroscope and an accelerometer at ``frame`` (on its body), with noise.
 
@@ -568,6 +613,11 @@ def add_imu(
         period: noise sample-and-hold period, s; default 1e-3.
         seed: noise seed; default 3.
         name: prefix of the added systems' names.
+        gyro_bias_random_walk: sigma of the gyro bias random walk, rad/s^2/sqrt(Hz), scalar
+            or 3 entries; > 0 adds a RandomWalkBias (seed ``seed`` + 2000003) after the
+            noise: bias std sigma sqrt(t). Default 0 (none).
+        accel_bias_random_walk: the same for the accelerometer, m/s^3/sqrt(Hz) (seed
+            ``seed`` + 3000003).
 
     Returns:
         The Imu handles (output ports ``angular_velocity``, ``linear_acceleration``).
@@ -583,6 +633,10 @@ def add_imu(
         raise ValueError(f"{who}: frame {frame.name()!r} is not a frame of this plant")
     gyro_std = _std(gyro_noise_std, 3, "gyro_noise_std", who)
     accel_std = _std(accel_noise_std, 3, "accel_noise_std", who)
+    walks = {
+        "gyro": _std(gyro_bias_random_walk, 3, "gyro_bias_random_walk", who),
+        "accel": _std(accel_bias_random_walk, 3, "accel_bias_random_walk", who),
+    }
     period, seed = _period_seed(period, seed, who)
     body = frame.body()
     X_BS = RigidTransform(frame.GetFixedPoseInBodyFrame())
@@ -602,7 +656,20 @@ def add_imu(
     accel_noise.set_name(f"{name}_accel_noise")
     builder.Connect(gyro.get_measurement_output_port(), gyro_noise.get_input_port())
     builder.Connect(accel.get_measurement_output_port(), accel_noise.get_input_port())
-    return Imu(frame, gyro, accel, gyro_noise, accel_noise, gyro_noise.get_output_port(), accel_noise.get_output_port())
+    imu = Imu(frame, gyro, accel, gyro_noise, accel_noise, gyro_noise.get_output_port(), accel_noise.get_output_port())
+    for kind, offset in (("gyro", 2000003), ("accel", 3000003)):
+        sigma = walks[kind]
+        if not np.any(sigma > 0.0):
+            continue
+        bias = builder.AddSystem(RandomWalkBias(3, sigma, period, seed + offset))
+        bias.set_name(f"{name}_{kind}_bias")
+        if kind == "gyro":
+            builder.Connect(imu.angular_velocity, bias.get_input_port())
+            imu.gyro_bias, imu.angular_velocity = bias, bias.get_output_port()
+        else:
+            builder.Connect(imu.linear_acceleration, bias.get_input_port())
+            imu.accel_bias, imu.linear_acceleration = bias, bias.get_output_port()
+    return imu
 
 
 # ---------------------------------------------------------------------------------------
@@ -823,6 +890,7 @@ def add_sensors(
     noise: bool = True,
     seed: int = 0,
     name_prefix: str = "",
+    imperfections: Imperfections | None = None,
 ) -> SensorHandles:
     """Adds a humanoid's sensors to ``builder`` and wires them to ``plant``.
 
@@ -846,6 +914,10 @@ def add_sensors(
             so the defaults of the individual sensors are seed = 0.
         name_prefix: prepended to the added systems' names (e.g. to add two sensor sets,
             one noisy and one not, to the same diagram).
+        imperfections: the sensor groups of ``Imperfections`` (``imu``, ``encoders``,
+            ``torque_sensor``; seeded by ``imperfections.seed``), applied whatever
+            ``noise`` is; an IMU noise density > 0 replaces that sensor's default std.
+            None or ideal: no change.
 
     Returns:
         SensorHandles.
@@ -867,6 +939,25 @@ def add_sensors(
         raise ValueError(f"{who}: {err}") from err
     seeds = {key: SEEDS_PER_CALL * seed + offset for key, offset in SEED_OFFSETS.items()}
     on = 1.0 if noise else 0.0
+    imp = Imperfections() if imperfections is None else imperfections
+    if not isinstance(imp, Imperfections):
+        raise ValueError(f"{who}: imperfections must be Imperfections, got {type(imp).__name__}")
+    imp.validate()
+    torque_errors = {}
+    if imp.torque_sensor.scale_error_percent > 0.0 or imp.torque_sensor.offset_percent > 0.0:
+        scale, offset = torque_measurement_errors(
+            rated_joint_torques(plant),
+            imp.torque_sensor.scale_error_percent,
+            imp.torque_sensor.offset_percent,
+            imp.seed,
+        )
+        torque_errors = {"scale": scale, "offset": offset}
+    gyro_std = on * GYRO_NOISE_STD
+    if imp.imu.gyro_noise_density > 0.0:
+        gyro_std = imp.imu.gyro_noise_density / math.sqrt(DEFAULT_PERIOD)
+    accel_std = on * ACCEL_NOISE_STD
+    if imp.imu.accel_noise_density > 0.0:
+        accel_std = imp.imu.accel_noise_density / math.sqrt(DEFAULT_PERIOD)
 
     state_port = plant.get_state_output_port()
     encoders = builder.AddSystem(
@@ -875,12 +966,15 @@ def add_sensors(
             position_noise_std=on * ENCODER_POSITION_NOISE_STD,
             velocity_noise_std=on * ENCODER_VELOCITY_NOISE_STD,
             seed=seeds["encoders"],
+            position_step=imp.encoders.step,
         )
     )
     encoders.set_name(f"{name_prefix}joint_encoders")
     builder.Connect(state_port, encoders.GetInputPort("state"))
 
-    torque = builder.AddSystem(MotorTorqueSensor(plant, noise_std=on * MOTOR_TORQUE_NOISE_STD, seed=seeds["torque"]))
+    torque = builder.AddSystem(
+        MotorTorqueSensor(plant, noise_std=on * MOTOR_TORQUE_NOISE_STD, seed=seeds["torque"], **torque_errors)
+    )
     torque.set_name(f"{name_prefix}motor_torque_sensor")
     builder.Connect(plant.get_net_actuation_output_port(), torque.get_actuation_input_port())
 
@@ -904,10 +998,12 @@ def add_sensors(
         builder,
         plant,
         handles.imu_frame,
-        gyro_noise_std=on * GYRO_NOISE_STD,
-        accel_noise_std=on * ACCEL_NOISE_STD,
+        gyro_noise_std=gyro_std,
+        accel_noise_std=accel_std,
         seed=seeds["imu"],
         name=f"{name_prefix}imu",
+        gyro_bias_random_walk=imp.imu.gyro_bias_random_walk,
+        accel_bias_random_walk=imp.imu.accel_bias_random_walk,
     )
 
     base = builder.AddSystem(

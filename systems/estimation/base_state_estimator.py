@@ -70,8 +70,8 @@ F/T sensor but four FSRs per foot (``systems.observer.fsr_sensing``): the same t
 to the sum of a foot's four FSR forces.
 
 Without any foot in contact the filter propagates on the IMU alone (E1-E5) and the
-``valid`` output is 0: the velocity and position then drift quadratically with the
-accelerometer noise and the attitude error.
+``valid`` output is 0: the velocity then drifts by g · (tilt error) · t plus the
+accelerometer's random walk σ_a √t, and the position by one power of t more.
 """
 
 from __future__ import annotations

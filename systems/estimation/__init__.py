@@ -1,0 +1,4 @@
+"""State estimation from the robot's own sensors (IMU, joint encoders, foot contact): the
+floating-base state estimator (``base_state_estimator``, the contact-aided invariant EKF of
+Hartley et al. 2020) and the contact detection that feeds it. Nothing in ``systems.common``
+imports this package."""

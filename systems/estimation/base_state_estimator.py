@@ -1,0 +1,722 @@
+"""Floating-base state estimation: the contact-aided invariant EKF (InEKF) of
+
+    R. Hartley, M. Ghaffari, R. M. Eustice, J. W. Grizzle, "Contact-aided invariant
+    extended Kalman filtering for robot state estimation", Int. J. Robotics Research
+    39(4):402-430, 2020 (arXiv:1904.09251),
+
+in its bias-free, right-invariant form with kinematic (leg odometry) corrections and contact
+switching. The equation labels (E1)-(E10) are this module's; each names the part of the
+paper it implements.
+
+State (the IMU frame I in world W, all in SI units), an element of SE_{2+K}(3)::
+
+    X = [[R, v, p, d_1 ... d_K],     R = R_WI, v = v_WIo (m/s), p = p_WIo (m),
+         [0, I_{2+K}         ]]      d_j = p_W of the j-th foot point in contact (m).
+
+IMU model (continuous, white noises w_g, w_a; contact points fixed up to a white velocity
+noise w_c; the paper's process model)::
+
+    R' = R [ω̃ − w_g]×,   v' = R (ã − w_a) + g,   p' = v,   d_j' = −w_c,j.
+
+(E1)-(E4) Mean propagation over dt with ω̃, ã held (exact for constant ω̃, ã; the paper's
+discretisation), with Γ_1, Γ_2 the SO(3) integrals of :func:`so3_gamma`::
+
+    R⁺ = R Exp(ω̃ dt),  v⁺ = v + R Γ_1(ω̃ dt) ã dt + g dt,
+    p⁺ = p + v dt + R Γ_2(ω̃ dt) ã dt² + ½ g dt²,  d⁺ = d.
+
+(E5) Right-invariant error η = X̄ X⁻¹ = Exp(ξ), ξ = [ξ_R; ξ_v; ξ_p; ξ_d1; ...] ∈ R^{9+3K}. Its
+linearised dynamics ξ' = A ξ + Ad_X̄ w are independent of the state but for the noise term
+(A has [g]× in block (v, R) and I in block (p, v)); A is nilpotent (A³ = 0), so the
+discrete transition is exactly Φ = I + A dt + ½ A² dt², and (the paper's discrete noise)
+P⁺ = Φ P Φᵀ + Φ Ad_X̄ Q_c Ad_X̄ᵀ Φᵀ dt, with Q_c = blkdiag(σ_g² I, σ_a² I, 0, σ_c² I ...)
+the noise densities squared and Ad_X̄ rows [R], [[v]×R, R], [[p]×R, 0, R], [[d_j]×R, 0, 0, R].
+
+(E6) Right-invariant kinematic measurement: forward kinematics of the encoders gives the
+foot point in the IMU frame, h_j = R_WIᵀ (d_j − p) + n_j, n_j ~ N(0, σ_k² I). Innovation and
+Jacobian (the paper's right-invariant observation Y = X⁻¹ b + V)::
+
+    r_j = R̄ h_j − (d̄_j − p̄),   H_j = [0, 0, −I, 0 .. I (at d_j) .. 0],   N_j = R̄ σ_k² I R̄ᵀ = σ_k² I.
+
+(E7) Update: S = H P Hᵀ + N, K = P Hᵀ S⁻¹, δ = K r, X⁺ = Exp(δ) X̄ (left multiplication:
+R⁺ = Exp(δ_R) R̄, v⁺ = Exp(δ_R) v̄ + J_l(δ_R) δ_v, likewise p and d_j), Joseph form
+P⁺ = (I − KH) P (I − KH)ᵀ + K N Kᵀ. Exp of SE_{2+K}(3) in closed form (:func:`so3_exp`,
+J_l = Γ_1).
+
+(E8) Contact made by foot j: d_j = p̄ + R̄ h_j; its error is ξ_dj = ξ_p + R̄ n_j, so the
+covariance is augmented by copying the p rows and columns and adding σ_k² I to the new
+diagonal block (the paper's state augmentation). (E9) Contact lost: the d_j rows and
+columns are removed (marginalised; here zeroed in a fixed-size slot).
+
+(E10) Base frame B (the free joint's child frame) from the IMU frame I fixed in it (X_BI
+constant): R_WB = R_WI R_BIᵀ, p_WBo = p_WIo − R_WB p_BI, ω_W = R_WI ω̃ (gyro, I frame),
+v_WBo = v_WIo + ω_W × (p_WBo − p_WIo) (rigid-body lever arm).
+
+Observability (a property of the filter, tested in tests/test_base_state_estimator.py):
+roll, pitch and velocity are observable through gravity and the contact kinematics; yaw
+and the absolute position are not, so an initial yaw error stays and yaw and position
+random-walk with the gyro and contact noise.
+
+Default noises: a Bosch BMI088-class IMU (Bosch Sensortec, "BMI088 6-axis Motion Tracking
+for High-performance Applications", data sheet BST-BMI088-DS001: gyro output noise density
+0.014 °/s/√Hz, accelerometer noise density 175 µg/√Hz), contact-point velocity noise
+0.01 m/s/√Hz (small foot slip and sole compliance) and forward-kinematics noise 2 mm (sole
+rocking and link flexibility, far above the encoders' 1e-5 rad).
+
+Contact flags: :func:`contact_flags_from_wrenches` / :class:`FootContactFromForceTorque`
+turn the HRP-4 ankle F/T sensors' world-frame wrenches
+(``systems.simulation.sensors.FootForceTorqueSensors``) into one flag per foot: in contact
+when the normal (world z) force of the ground on the sole exceeds a threshold. A Nao has no
+F/T sensor but four FSRs per foot (``systems.observer.fsr_sensing``): the same test applies
+to the sum of a foot's four FSR forces.
+
+Without any foot in contact the filter propagates on the IMU alone (E1-E5) and the
+``valid`` output is 0: the velocity then drifts by g · (tilt error) · t plus the
+accelerometer's random walk σ_a √t, and the position by one power of t more.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import Frame
+from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem
+
+from systems.common.checks import check_plant, eval_finite_input, positive_number
+from systems.common.spatial import skew
+from systems.common.topology import floating_base_topology
+
+#: BMI088 gyro output noise density, 0.014 °/s/√Hz, in rad/s/√Hz (data sheet, see module).
+GYRO_NOISE_DENSITY = 0.014 * math.pi / 180.0
+#: BMI088 accelerometer noise density, 175 µg/√Hz, in m/s²/√Hz.
+ACCEL_NOISE_DENSITY = 175e-6 * 9.80665
+#: White velocity noise of a contact point, m/s/√Hz (slip, sole compliance).
+CONTACT_NOISE_DENSITY = 0.01
+#: Forward-kinematics position noise of a foot point in the IMU frame, m (std per axis).
+KINEMATICS_NOISE_STD = 2e-3
+#: Initial standard deviations: orientation (rad), velocity (m/s), position (m).
+INITIAL_ORIENTATION_STD = 0.05
+INITIAL_VELOCITY_STD = 0.1
+INITIAL_POSITION_STD = 0.01
+#: Default normal-force threshold of the F/T contact test, N.
+CONTACT_FORCE_THRESHOLD = 20.0
+DEFAULT_GRAVITY = np.array([0.0, 0.0, -9.81])
+
+
+# ---------------------------------------------------------------------------------------
+# Lie-group helpers (closed form).
+# ---------------------------------------------------------------------------------------
+
+
+def so3_gamma(phi: np.ndarray, order: int) -> np.ndarray:
+    """Γ_m(φ) = Σ_n [φ]×ⁿ / (n + m)!, m = 0, 1, 2 (closed form; Γ_0 = Exp, Γ_1 = J_l).
+
+    Args:
+        phi: rotation vector, rad (3).
+        order: m in {0, 1, 2}.
+    """
+    phi = np.asarray(phi, dtype=float)
+    theta2 = float(phi @ phi)
+    K = skew(phi)
+    K2 = K @ K
+    if order == 0:
+        if theta2 < 1e-12:
+            return np.eye(3) + K + 0.5 * K2
+        theta = math.sqrt(theta2)
+        return np.eye(3) + (math.sin(theta) / theta) * K + ((1.0 - math.cos(theta)) / theta2) * K2
+    if order == 1:
+        if theta2 < 1e-12:
+            return np.eye(3) + 0.5 * K + K2 / 6.0
+        theta = math.sqrt(theta2)
+        return np.eye(3) + ((1.0 - math.cos(theta)) / theta2) * K + ((theta - math.sin(theta)) / (theta2 * theta)) * K2
+    if order == 2:
+        if theta2 < 1e-12:
+            return 0.5 * np.eye(3) + K / 6.0 + K2 / 24.0
+        theta = math.sqrt(theta2)
+        return (
+            0.5 * np.eye(3)
+            + ((theta - math.sin(theta)) / (theta2 * theta)) * K
+            + ((theta2 + 2.0 * math.cos(theta) - 2.0) / (2.0 * theta2 * theta2)) * K2
+        )
+    raise ValueError(f"so3_gamma: order must be 0, 1 or 2, got {order!r}")
+
+
+def so3_exp(phi: np.ndarray) -> np.ndarray:
+    """Exp(φ) ∈ SO(3) of a rotation vector φ (rad), Rodrigues' formula."""
+    return so3_gamma(phi, 0)
+
+
+def quaternion_to_rotation(quaternion: np.ndarray) -> np.ndarray:
+    """Rotation matrix of a quaternion [w, x, y, z] (normalised first)."""
+    w, x, y, z = np.asarray(quaternion, dtype=float) / np.linalg.norm(quaternion)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def rotation_to_quaternion(R: np.ndarray) -> np.ndarray:
+    """Unit quaternion [w, x, y, z] with w >= 0 of a rotation matrix (Shepperd's method)."""
+    R = np.asarray(R, dtype=float)
+    trace = R[0, 0] + R[1, 1] + R[2, 2]
+    if trace > 0.0:
+        s = 2.0 * math.sqrt(1.0 + trace)
+        q = np.array([0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s])
+    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
+        q = np.array([(R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s])
+    elif R[1, 1] > R[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
+        q = np.array([(R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s])
+    else:
+        s = 2.0 * math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
+        q = np.array([(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s])
+    q /= np.linalg.norm(q)
+    return -q if q[0] < 0.0 else q
+
+
+def imu_to_base(
+    R_WI: np.ndarray,
+    p_WI: np.ndarray,
+    v_WI: np.ndarray,
+    omega_I: np.ndarray,
+    R_BI: np.ndarray,
+    p_BI: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(E10) The free joint's (base_pose (7), base_velocity (6)) from the IMU frame's state.
+
+    Args:
+        R_WI, p_WI, v_WI: IMU orientation, origin position (m) and velocity (m/s) in world.
+        omega_I: angular velocity in the IMU frame (the gyro), rad/s.
+        R_BI, p_BI: the IMU frame's fixed pose in the base frame B.
+
+    Returns:
+        base_pose [quaternion w, x, y, z of R_WB; p_WBo, m], base_velocity [ω_W; v_WBo], Drake's
+        free-joint layouts.
+    """
+    R_WB = R_WI @ R_BI.T
+    r = R_WB @ p_BI  # p_BoIo_W
+    omega_W = R_WI @ omega_I
+    pose = np.concatenate([rotation_to_quaternion(R_WB), p_WI - r])
+    velocity = np.concatenate([omega_W, v_WI - np.cross(omega_W, r)])
+    return pose, velocity
+
+
+def base_to_imu(
+    base_pose: np.ndarray, base_velocity: np.ndarray, R_BI: np.ndarray, p_BI: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Inverse of :func:`imu_to_base`: (R_WI, p_WI, v_WI) from the base's pose (7) and velocity (6)."""
+    base_pose = np.asarray(base_pose, dtype=float)
+    base_velocity = np.asarray(base_velocity, dtype=float)
+    R_WB = quaternion_to_rotation(base_pose[:4])
+    r = R_WB @ p_BI
+    return R_WB @ R_BI, base_pose[4:7] + r, base_velocity[3:6] + np.cross(base_velocity[:3], r)
+
+
+# ---------------------------------------------------------------------------------------
+# Numpy core.
+# ---------------------------------------------------------------------------------------
+
+
+class ContactAidedInvariantEkf:
+    """The contact-aided right-invariant EKF of the module docstring, in numpy.
+
+    The state is the IMU frame's R, v, p in world and one fixed slot per foot (d_j, m), used
+    while the foot is in contact. The covariance P ((9 + 3 K_max)²) is over the right-invariant
+    error ξ = [ξ_R; ξ_v; ξ_p; ξ_d1; ...]; the rows and columns of a foot out of contact are 0.
+    """
+
+    def __init__(
+        self,
+        num_feet: int,
+        *,
+        rotation: np.ndarray | None = None,
+        velocity: np.ndarray | None = None,
+        position: np.ndarray | None = None,
+        gravity: np.ndarray = DEFAULT_GRAVITY,
+        gyro_noise_density: float = GYRO_NOISE_DENSITY,
+        accel_noise_density: float = ACCEL_NOISE_DENSITY,
+        contact_noise_density: float = CONTACT_NOISE_DENSITY,
+        kinematics_noise_std: float = KINEMATICS_NOISE_STD,
+        initial_orientation_std: float = INITIAL_ORIENTATION_STD,
+        initial_velocity_std: float = INITIAL_VELOCITY_STD,
+        initial_position_std: float = INITIAL_POSITION_STD,
+    ):
+        """Args:
+            num_feet: K_max, the number of feet (contact slots), >= 1.
+            rotation, velocity, position: initial R_WI, v_WIo (m/s), p_WIo (m); default I, 0, 0.
+            gravity: g in world, m/s² (3).
+            gyro_noise_density: σ_g, rad/s/√Hz (default BMI088, 2.44e-4).
+            accel_noise_density: σ_a, m/s²/√Hz (default BMI088, 1.72e-3).
+            contact_noise_density: σ_c, m/s/√Hz (default 0.01).
+            kinematics_noise_std: σ_k, m (default 2e-3).
+            initial_orientation_std, initial_velocity_std, initial_position_std: the initial
+                P's diagonal stds, rad, m/s, m (defaults 0.05, 0.1, 0.01).
+
+        Raises:
+            ValueError: a bad number of feet, a non-positive or non-finite noise.
+        """
+        who = "ContactAidedInvariantEkf"
+        if isinstance(num_feet, bool) or not isinstance(num_feet, (int, np.integer)) or num_feet < 1:
+            raise ValueError(f"{who}: num_feet must be a positive integer, got {num_feet!r}")
+        self._K = int(num_feet)
+        self._dim = 9 + 3 * self._K
+        self._g = np.array(gravity, dtype=float).reshape(3)
+        self._var_g = positive_number(gyro_noise_density, f"{who}: gyro_noise_density") ** 2
+        self._var_a = positive_number(accel_noise_density, f"{who}: accel_noise_density") ** 2
+        self._var_c = positive_number(contact_noise_density, f"{who}: contact_noise_density") ** 2
+        self._var_k = positive_number(kinematics_noise_std, f"{who}: kinematics_noise_std") ** 2
+        self._initial_std = np.array(
+            [
+                positive_number(initial_orientation_std, f"{who}: initial_orientation_std"),
+                positive_number(initial_velocity_std, f"{who}: initial_velocity_std"),
+                positive_number(initial_position_std, f"{who}: initial_position_std"),
+            ]
+        )
+        # Φ = I + A dt + ½ A² dt² (E5): the pieces that do not change with dt.
+        self._g_skew = skew(self._g)
+        self.reset(rotation, velocity, position)
+
+    # -- state --------------------------------------------------------------------------
+
+    def reset(
+        self,
+        rotation: np.ndarray | None = None,
+        velocity: np.ndarray | None = None,
+        position: np.ndarray | None = None,
+    ) -> None:
+        """Sets R, v, p (defaults I, 0, 0), no foot in contact, P = the initial covariance."""
+        self._R = np.eye(3) if rotation is None else np.array(rotation, dtype=float).reshape(3, 3)
+        self._v = np.zeros(3) if velocity is None else np.array(velocity, dtype=float).reshape(3)
+        self._p = np.zeros(3) if position is None else np.array(position, dtype=float).reshape(3)
+        self._d = np.zeros((self._K, 3))
+        self._in_contact = np.zeros(self._K, dtype=bool)
+        self._P = np.zeros((self._dim, self._dim))
+        self._P[:9, :9] = np.diag(np.repeat(self._initial_std**2, 3))
+
+    @property
+    def num_feet(self) -> int:
+        return self._K
+
+    @property
+    def num_contacts(self) -> int:
+        """Feet currently in the state (in contact at the last correction)."""
+        return int(self._in_contact.sum())
+
+    @property
+    def in_contact(self) -> np.ndarray:
+        """One bool per foot: in the state (in contact at the last correction)."""
+        return self._in_contact.copy()
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """R_WI (3x3)."""
+        return self._R.copy()
+
+    @property
+    def velocity(self) -> np.ndarray:
+        """v_WIo, m/s."""
+        return self._v.copy()
+
+    @property
+    def position(self) -> np.ndarray:
+        """p_WIo, m."""
+        return self._p.copy()
+
+    @property
+    def foot_positions(self) -> np.ndarray:
+        """d_j (K_max x 3), m; rows of feet out of contact are stale."""
+        return self._d.copy()
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """P over ξ = [ξ_R; ξ_v; ξ_p; ξ_d1; ...] (right-invariant error)."""
+        return self._P.copy()
+
+    def state_vector(self) -> np.ndarray:
+        """[R (row-major 9); v; p; d (3 K); in_contact (K); P (row-major)], for Drake's state."""
+        return np.concatenate(
+            [
+                self._R.reshape(-1),
+                self._v,
+                self._p,
+                self._d.reshape(-1),
+                self._in_contact.astype(float),
+                self._P.reshape(-1),
+            ]
+        )
+
+    def set_state_vector(self, x: np.ndarray) -> None:
+        """Inverse of :meth:`state_vector`."""
+        K, n = self._K, self._dim
+        self._R = x[:9].reshape(3, 3).copy()
+        self._v = x[9:12].copy()
+        self._p = x[12:15].copy()
+        self._d = x[15 : 15 + 3 * K].reshape(K, 3).copy()
+        self._in_contact = x[15 + 3 * K : 15 + 4 * K] > 0.5
+        self._P = x[15 + 4 * K :].reshape(n, n).copy()
+
+    @property
+    def state_size(self) -> int:
+        return 15 + 4 * self._K + self._dim**2
+
+    # -- propagation --------------------------------------------------------------------
+
+    def _adjoint(self) -> np.ndarray:
+        """Ad_X̄ of SE_{2+K}(3) (E5); the rows of feet out of contact are left 0."""
+        n = self._dim
+        R = self._R
+        Ad = np.zeros((n, n))
+        Ad[0:3, 0:3] = R
+        Ad[3:6, 0:3] = skew(self._v) @ R
+        Ad[3:6, 3:6] = R
+        Ad[6:9, 0:3] = skew(self._p) @ R
+        Ad[6:9, 6:9] = R
+        for j in np.flatnonzero(self._in_contact):
+            s = 9 + 3 * j
+            Ad[s : s + 3, 0:3] = skew(self._d[j]) @ R
+            Ad[s : s + 3, s : s + 3] = R
+        return Ad
+
+    def propagate(self, omega: np.ndarray, a: np.ndarray, dt: float) -> None:
+        """IMU propagation over dt (E1)-(E5), measurements held over the step.
+
+        Args:
+            omega: gyro ω̃, angular velocity of I in world expressed in I, rad/s (3).
+            a: accelerometer ã, specific force R_WIᵀ (a_WIo − g) in I, m/s² (3).
+            dt: s, > 0.
+        """
+        omega = np.asarray(omega, dtype=float)
+        a = np.asarray(a, dtype=float)
+        phi = omega * dt
+        # Covariance first: Φ and Ad_X̄ at the state before the step.
+        n = self._dim
+        Phi = np.eye(n)
+        Phi[3:6, 0:3] = self._g_skew * dt
+        Phi[6:9, 0:3] = 0.5 * self._g_skew * dt * dt
+        Phi[6:9, 3:6] = np.eye(3) * dt
+        q = np.zeros(n)
+        q[0:3] = self._var_g
+        q[3:6] = self._var_a
+        for j in np.flatnonzero(self._in_contact):
+            q[9 + 3 * j : 12 + 3 * j] = self._var_c
+        G = Phi @ self._adjoint()
+        self._P = Phi @ self._P @ Phi.T + (G * q) @ G.T * dt
+        self._P = 0.5 * (self._P + self._P.T)
+        # Mean (E1)-(E4).
+        R = self._R
+        g = self._g
+        Ra1 = R @ (so3_gamma(phi, 1) @ a)
+        Ra2 = R @ (so3_gamma(phi, 2) @ a)
+        self._p = self._p + self._v * dt + Ra2 * dt * dt + 0.5 * g * dt * dt
+        self._v = self._v + Ra1 * dt + g * dt
+        self._R = R @ so3_exp(phi)
+
+    # -- correction ---------------------------------------------------------------------
+
+    def _apply_correction(self, delta: np.ndarray) -> None:
+        """X⁺ = Exp(δ) X̄ (E7), δ = [δ_R; δ_v; δ_p; δ_d1; ...]."""
+        dR = so3_exp(delta[0:3])
+        J = so3_gamma(delta[0:3], 1)
+        self._R = dR @ self._R
+        self._v = dR @ self._v + J @ delta[3:6]
+        self._p = dR @ self._p + J @ delta[6:9]
+        active = np.flatnonzero(self._in_contact)
+        if active.size:
+            dd = delta[9:].reshape(self._K, 3)[active]
+            self._d[active] = self._d[active] @ dR.T + dd @ J.T
+
+    def correct_kinematics(self, foot_positions: np.ndarray, in_contact: np.ndarray) -> None:
+        """Kinematic correction and contact switching (E6)-(E9).
+
+        Feet that left contact are removed (E9); feet in contact already in the state
+        correct it (E6, E7), all in one stacked update; feet that made contact are added
+        (E8). With no foot in contact nothing is corrected (IMU-only propagation).
+
+        Args:
+            foot_positions: h_j, the foot points in the IMU frame from forward kinematics,
+                m (K_max x 3); rows of feet not in contact are ignored.
+            in_contact: one flag per foot (K_max).
+        """
+        h = np.asarray(foot_positions, dtype=float).reshape(self._K, 3)
+        flags = np.asarray(in_contact, dtype=bool).reshape(self._K)
+        # (E9) contact lost: marginalise the slot.
+        for j in np.flatnonzero(self._in_contact & ~flags):
+            s = 9 + 3 * j
+            self._P[s : s + 3, :] = 0.0
+            self._P[:, s : s + 3] = 0.0
+            self._in_contact[j] = False
+        # (E6), (E7) feet in contact and in the state.
+        update = np.flatnonzero(self._in_contact & flags)
+        if update.size:
+            m = update.size
+            r = (h[update] @ self._R.T - (self._d[update] - self._p)).reshape(-1)
+            H = np.zeros((3 * m, self._dim))
+            for i, j in enumerate(update):
+                H[3 * i : 3 * i + 3, 6:9] = -np.eye(3)
+                H[3 * i : 3 * i + 3, 9 + 3 * j : 12 + 3 * j] = np.eye(3)
+            PHt = self._P @ H.T
+            S = H @ PHt + self._var_k * np.eye(3 * m)
+            K = np.linalg.solve(S, PHt.T).T
+            self._apply_correction(K @ r)
+            IKH = np.eye(self._dim) - K @ H
+            self._P = IKH @ self._P @ IKH.T + self._var_k * (K @ K.T)
+            self._P = 0.5 * (self._P + self._P.T)
+        # (E8) contact made: d_j = p + R h_j, ξ_dj = ξ_p + R n_j.
+        for j in np.flatnonzero(flags & ~self._in_contact):
+            s = 9 + 3 * j
+            self._d[j] = self._p + self._R @ h[j]
+            self._P[s : s + 3, :] = self._P[6:9, :]
+            self._P[:, s : s + 3] = self._P[:, 6:9]
+            self._P[s : s + 3, s : s + 3] = self._P[6:9, 6:9] + self._var_k * np.eye(3)
+            self._in_contact[j] = True
+
+
+# ---------------------------------------------------------------------------------------
+# Contact flags from the F/T sensors.
+# ---------------------------------------------------------------------------------------
+
+
+def contact_flags_from_wrenches(wrenches: np.ndarray, threshold: float = CONTACT_FORCE_THRESHOLD) -> np.ndarray:
+    """One flag per foot: 1.0 where the ground's normal (world z) force on the sole > threshold.
+
+    Args:
+        wrenches: 6 per foot, [moment (3); force (3)] of the ground on the sole in world
+            (``FootForceTorqueSensors``' ``wrenches`` output), N m and N.
+        threshold: N.
+    """
+    w = np.asarray(wrenches, dtype=float).reshape(-1, 6)
+    return (w[:, 5] > threshold).astype(float)
+
+
+class FootContactFromForceTorque(LeafSystem):
+    """Contact flags from foot F/T sensors (:func:`contact_flags_from_wrenches`).
+
+    Inputs:
+        wrenches: 6 per foot, the ``FootForceTorqueSensors`` output (world frame).
+
+    Outputs:
+        foot_contact: one flag per foot (1.0 in contact, 0.0 not), in the sensors' order.
+
+    For a Nao, sum the four FSR forces of each foot and compare with the threshold instead.
+    """
+
+    def __init__(self, num_feet: int, threshold: float = CONTACT_FORCE_THRESHOLD):
+        """Args:
+        num_feet: number of F/T sensors (feet), >= 1.
+        threshold: normal-force threshold, N (default 20 N, ~5 % of HRP-4's weight).
+        """
+        super().__init__()
+        who = "FootContactFromForceTorque"
+        if isinstance(num_feet, bool) or not isinstance(num_feet, (int, np.integer)) or num_feet < 1:
+            raise ValueError(f"{who}: num_feet must be a positive integer, got {num_feet!r}")
+        self._threshold = positive_number(threshold, f"{who}: threshold")
+        self._wrenches = self.DeclareVectorInputPort("wrenches", 6 * int(num_feet))
+        self.DeclareVectorOutputPort("foot_contact", int(num_feet), self._CalcContact)
+
+    def _CalcContact(self, context: Context, output: BasicVector) -> None:
+        w = eval_finite_input("FootContactFromForceTorque", self._wrenches, context)
+        output.SetFromVector(contact_flags_from_wrenches(w, self._threshold))
+
+
+# ---------------------------------------------------------------------------------------
+# Drake wrapper.
+# ---------------------------------------------------------------------------------------
+
+
+class InvariantEkfBaseStateEstimator(LeafSystem):
+    """Floating-base state estimate from IMU, encoders and foot contact (the InEKF above).
+
+    A drop-in replacement for ``systems.simulation.sensors.BaseStateEstimator``'s outputs.
+    Every ``period`` seconds it reads its inputs, corrects with the kinematics of the feet in
+    contact (E6-E9), then propagates over ``period`` with the IMU sample (E1-E5): the state
+    at t_k + period is the prediction for that time. The outputs depend on the state only.
+
+    Inputs:
+        angular_velocity: gyro, ω of the IMU frame I expressed in I, rad/s (3)
+            (``Imu.angular_velocity``).
+        linear_acceleration: accelerometer, specific force R_WIᵀ (a_WIo − g) in I, m/s² (3)
+            (``Imu.linear_acceleration``).
+        joint_positions: n = nv − 6 encoder positions in the plant's v[6:] joint order (the
+            ``JointEncoders`` ``position`` output), rad (m).
+        foot_contact: one flag per foot of ``foot_frames`` (> 0.5: in contact).
+
+    Outputs:
+        base_pose: 7, the free joint's q layout: quaternion [w, x, y, z] of R_WB, then p_WBo, m.
+        base_velocity: 6, the free joint's v layout: [ω_WB; v_WBo] in world, rad/s and m/s (E10).
+        valid: 1, 1.0 when at least one foot was in contact at the last update (its point is
+            in the state and anchors it), 0.0 when the filter runs on the IMU alone.
+        standard_deviation: 9, sqrt of P's diagonal for ξ_R (rad), ξ_v (m/s), ξ_p (m).
+
+    Every input is checked: NaN or inf raises a ValueError naming the port.
+    """
+
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        imu_frame: Frame,
+        foot_frames: Sequence[Frame],
+        *,
+        initial_base_pose: np.ndarray | None = None,
+        initial_base_velocity: np.ndarray | None = None,
+        period: float = 1e-3,
+        gyro_noise_density: float = GYRO_NOISE_DENSITY,
+        accel_noise_density: float = ACCEL_NOISE_DENSITY,
+        contact_noise_density: float = CONTACT_NOISE_DENSITY,
+        kinematics_noise_std: float = KINEMATICS_NOISE_STD,
+        initial_orientation_std: float = INITIAL_ORIENTATION_STD,
+        initial_velocity_std: float = INITIAL_VELOCITY_STD,
+        initial_position_std: float = INITIAL_POSITION_STD,
+    ):
+        """Args:
+            plant: a finalized floating-base plant (for forward kinematics and gravity).
+            imu_frame: the IMU frame I, fixed in the base body.
+            foot_frames: the foot points' frames (e.g. the sole frames), one per contact flag.
+            initial_base_pose: 7, the free joint's q at the start; default the plant's
+                default free-joint pose (use :meth:`SetInitialBaseState` on a context).
+            initial_base_velocity: 6, default 0.
+            period: update period, s (default 1 ms).
+            gyro_noise_density ... initial_position_std: see :class:`ContactAidedInvariantEkf`.
+
+        Raises:
+            ValueError: bad plant or frames, bad noise parameters or period.
+        """
+        super().__init__()
+        who = "InvariantEkfBaseStateEstimator"
+        self._who = who
+        check_plant(plant, who)
+        topology = floating_base_topology(plant)
+        frames = list(foot_frames)
+        if not frames:
+            raise ValueError(f"{who}: foot_frames is empty")
+        for f in [imu_frame, *frames]:
+            if not isinstance(f, Frame) or f.GetParentPlant() is not plant:
+                raise ValueError(f"{who}: {f!r} is not a frame of this plant")
+        if imu_frame.body().index() != topology.base_frame.body().index():
+            raise ValueError(f"{who}: the IMU frame {imu_frame.name()!r} is not fixed in the base body")
+        self._period = positive_number(period, f"{who}: period")
+        self._plant = plant
+        self._plant_context = plant.CreateDefaultContext()
+        self._imu_frame = imu_frame
+        self._foot_frames = tuple(frames)
+        self._q_index = np.array([j.position_start() for j in topology.joints], dtype=int)
+        X_BI = imu_frame.CalcPose(self._plant_context, topology.base_frame)
+        self._R_BI = X_BI.rotation().matrix()
+        self._p_BI = X_BI.translation().copy()
+        q0 = topology.free_joint.position_start()
+        if initial_base_pose is None:
+            initial_base_pose = plant.GetPositions(self._plant_context)[q0 : q0 + 7]
+        self._core = ContactAidedInvariantEkf(
+            len(frames),
+            gravity=np.asarray(plant.gravity_field().gravity_vector(), dtype=float),
+            gyro_noise_density=gyro_noise_density,
+            accel_noise_density=accel_noise_density,
+            contact_noise_density=contact_noise_density,
+            kinematics_noise_std=kinematics_noise_std,
+            initial_orientation_std=initial_orientation_std,
+            initial_velocity_std=initial_velocity_std,
+            initial_position_std=initial_position_std,
+        )
+        x0 = self._initial_state(initial_base_pose, initial_base_velocity)
+        n = topology.num_joints
+        self._omega = self.DeclareVectorInputPort("angular_velocity", 3)
+        self._accel = self.DeclareVectorInputPort("linear_acceleration", 3)
+        self._joints = self.DeclareVectorInputPort("joint_positions", n)
+        self._contact = self.DeclareVectorInputPort("foot_contact", len(frames))
+        # State: [core state; last gyro (3); valid (1)].
+        self._xd = self.DeclareDiscreteState(x0)
+        self._size = self._core.state_size
+        self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._Update)
+        xd = {self.xd_ticket()}
+        self.DeclareVectorOutputPort("base_pose", 7, self._CalcPose, prerequisites_of_calc=xd)
+        self.DeclareVectorOutputPort("base_velocity", 6, self._CalcVelocity, prerequisites_of_calc=xd)
+        self.DeclareVectorOutputPort("valid", 1, self._CalcValid, prerequisites_of_calc=xd)
+        self.DeclareVectorOutputPort("standard_deviation", 9, self._CalcStd, prerequisites_of_calc=xd)
+
+    @property
+    def period(self) -> float:
+        return self._period
+
+    @property
+    def foot_frames(self) -> tuple:
+        return self._foot_frames
+
+    def _initial_state(self, base_pose, base_velocity) -> np.ndarray:
+        who = self._who
+        pose = np.asarray(base_pose, dtype=float).reshape(-1)
+        velocity = np.zeros(6) if base_velocity is None else np.asarray(base_velocity, dtype=float).reshape(-1)
+        if pose.shape != (7,) or not np.isfinite(pose).all() or np.linalg.norm(pose[:4]) < 1e-9:
+            raise ValueError(f"{who}: initial base pose must be 7 finite numbers with a non-zero quaternion")
+        if velocity.shape != (6,) or not np.isfinite(velocity).all():
+            raise ValueError(f"{who}: initial base velocity must be 6 finite numbers")
+        R, p, v = base_to_imu(pose, velocity, self._R_BI, self._p_BI)
+        self._core.reset(R, v, p)
+        return np.concatenate([self._core.state_vector(), velocity[:3] @ R, [0.0]])
+
+    def SetInitialBaseState(
+        self, context: Context, base_pose: np.ndarray, base_velocity: np.ndarray | None = None
+    ) -> None:
+        """Resets the filter in ``context`` (this system's) to a base pose (7) and velocity (6)."""
+        context.SetDiscreteState(self._initial_state(base_pose, base_velocity))
+
+    def _foot_kinematics(self, joint_positions: np.ndarray) -> np.ndarray:
+        """h_j: the foot frames' origins in the IMU frame, m (K x 3) (E6)."""
+        q = self._plant.GetPositions(self._plant_context)
+        q[self._q_index] = joint_positions
+        self._plant.SetPositions(self._plant_context, q)
+        return np.array([f.CalcPose(self._plant_context, self._imu_frame).translation() for f in self._foot_frames])
+
+    def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
+        who = self._who
+        omega = eval_finite_input(who, self._omega, context)
+        accel = eval_finite_input(who, self._accel, context)
+        joints = eval_finite_input(who, self._joints, context)
+        flags = eval_finite_input(who, self._contact, context) > 0.5
+        x = context.get_discrete_state_vector().value()
+        core = self._core
+        core.set_state_vector(x[: self._size])
+        h = self._foot_kinematics(joints) if flags.any() else np.zeros((core.num_feet, 3))
+        core.correct_kinematics(h, flags)  # with no flag set this only removes feet (E9)
+        valid = 1.0 if core.num_contacts else 0.0
+        core.propagate(omega, accel, self._period)
+        discrete_state.set_value(np.concatenate([core.state_vector(), omega, [valid]]))
+
+    def _outputs(self, context: Context) -> tuple[np.ndarray, np.ndarray]:
+        x = context.get_discrete_state_vector().value()
+        R = x[:9].reshape(3, 3)
+        omega = x[self._size : self._size + 3]
+        return imu_to_base(R, x[12:15], x[9:12], omega, self._R_BI, self._p_BI)
+
+    def _CalcPose(self, context: Context, output: BasicVector) -> None:
+        output.SetFromVector(self._outputs(context)[0])
+
+    def _CalcVelocity(self, context: Context, output: BasicVector) -> None:
+        output.SetFromVector(self._outputs(context)[1])
+
+    def _CalcValid(self, context: Context, output: BasicVector) -> None:
+        output.SetFromVector([context.get_discrete_state_vector().value()[-1]])
+
+    def _CalcStd(self, context: Context, output: BasicVector) -> None:
+        x = context.get_discrete_state_vector().value()
+        n = 9 + 3 * self._core.num_feet
+        P = x[15 + 4 * self._core.num_feet : self._size].reshape(n, n)
+        output.SetFromVector(np.sqrt(np.maximum(np.diag(P)[:9], 0.0)))
+
+
+__all__ = [
+    "ContactAidedInvariantEkf",
+    "FootContactFromForceTorque",
+    "InvariantEkfBaseStateEstimator",
+    "base_to_imu",
+    "contact_flags_from_wrenches",
+    "imu_to_base",
+    "quaternion_to_rotation",
+    "rotation_to_quaternion",
+    "so3_exp",
+    "so3_gamma",
+]

@@ -71,6 +71,8 @@ class PushAndComplyScenario:
             is discrete, so only ``target_realtime_rate`` and the publishing matter.
         imperfections: ``systems.simulation.imperfections.Imperfections`` of the station
             (default: ideal, none).
+        base_state: the source of the sensed base state, "truth_plus_noise" (default, the
+            stand-in) or "invariant_ekf" (``diagrams.station.humanoid_station``).
     """
 
     model: str = "hrp4_like"
@@ -102,6 +104,7 @@ class PushAndComplyScenario:
     plant_config: MultibodyPlantConfig = dataclasses.field(default_factory=default_plant_config)
     simulator_config: SimulatorConfig = dataclasses.field(default_factory=SimulatorConfig)
     imperfections: Imperfections = dataclasses.field(default_factory=Imperfections)
+    base_state: str = "truth_plus_noise"
 
 
 def load_scenario(path: str | Path | None = None, text: str | None = None) -> PushAndComplyScenario:
@@ -150,6 +153,7 @@ def build_push_and_comply_diagram(
         noise=scenario.noise,
         seed=scenario.seed,
         imperfections=scenario.imperfections,
+        base_state=scenario.base_state,
     )
     plant, humanoid = station.plant, station.humanoid
     if humanoid is None:

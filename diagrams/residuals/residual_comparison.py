@@ -68,6 +68,8 @@ class ResidualComparisonScenario:
         skip: the metrics ignore the first ``skip`` s (less than ``duration``).
         simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``); the plant
             is discrete, so only ``target_realtime_rate`` and the publishing matter.
+        base_state: the source of the sensed base state, "truth_plus_noise" (default, the
+            stand-in) or "invariant_ekf" (``diagrams.station.humanoid_station``).
     """
 
     model: str = "hrp4_like"
@@ -88,6 +90,7 @@ class ResidualComparisonScenario:
     log_period: float = 5e-3
     skip: float = 0.5
     simulator_config: SimulatorConfig = field(default_factory=SimulatorConfig)
+    base_state: str = "truth_plus_noise"
 
 
 @dataclass
@@ -122,7 +125,12 @@ def build_residual_comparison_diagram(
         raise ValueError("duration and log_period must be positive, push_frequency non-negative")
     builder = DiagramBuilder()
     station = add_humanoid_station(
-        builder, scenario.model, plant_config=scenario.plant_config, noise=scenario.noise, seed=scenario.seed
+        builder,
+        scenario.model,
+        plant_config=scenario.plant_config,
+        noise=scenario.noise,
+        seed=scenario.seed,
+        base_state=scenario.base_state,
     )
     plant, humanoid = station.plant, station.humanoid
     builder.Connect(builder.AddSystem(ConstantVectorSource(station.q_hold)).get_output_port(), station.desired_position)

@@ -6,6 +6,13 @@ caller connects (a constant posture, or an admittance controller).
 For ``hrp4_like`` and ``nao_like`` the robot stands on flat ground with its simulated sensors
 (``systems.simulation.sensors``); any other floating-base model (an SDFormat or URDF path) floats in zero
 gravity with no ground, and its "sensed" state is the true state (no sensor suite).
+
+The base part of the sensed state (``base_state``, one of ``BASE_STATE_SOURCES``) comes by
+default ("truth_plus_noise") from the stand-in ``systems.simulation.sensors.BaseStateEstimator``
+(the true base state plus white noise); "invariant_ekf" replaces it with the contact-aided
+invariant EKF ``systems.estimation.base_state_estimator.InvariantEkfBaseStateEstimator`` fed by
+the station's IMU, encoders and foot contact from the ankle F/T sensors (hrp4_like; nao_like's
+FSR contact is not wired to it yet).
 """
 
 from __future__ import annotations
@@ -31,6 +38,7 @@ from models import (
     set_standing_state,
 )
 from systems.common.topology import FloatingBaseTopology, floating_base_topology
+from systems.estimation.base_state_estimator import FootContactFromForceTorque, InvariantEkfBaseStateEstimator
 from systems.residuals.momentum_residuals import ResidualModel
 from systems.simulation.imperfections import (
     Imperfections,
@@ -40,6 +48,9 @@ from systems.simulation.imperfections import (
 )
 from systems.simulation.pd_gravity import PdGravityController
 from systems.simulation.sensors import SensorHandles, add_sensors
+
+#: The sources of the sensed state's base part (``add_humanoid_station``'s ``base_state``).
+BASE_STATE_SOURCES = ("truth_plus_noise", "invariant_ekf")
 
 
 @dataclass
@@ -70,6 +81,10 @@ class HumanoidStation:
         imperfections: the Imperfections the station was built with (ideal by default).
         friction: the JointFriction system feeding the plant's applied generalized force,
             or None.
+        base_state: the source of the sensed base state, one of ``BASE_STATE_SOURCES``.
+        base_state_estimator: the InvariantEkfBaseStateEstimator (``base_state`` =
+            "invariant_ekf"), or None. ``set_initial_state`` starts it at the initial state.
+        foot_contact: the FootContactFromForceTorque feeding it its contact flags, or None.
     """
 
     plant: MultibodyPlant
@@ -89,6 +104,9 @@ class HumanoidStation:
     dynamics_model: ResidualModel | None = None
     imperfections: Imperfections = field(default_factory=Imperfections)
     friction: JointFriction | None = None
+    base_state: str = "truth_plus_noise"
+    base_state_estimator: InvariantEkfBaseStateEstimator | None = None
+    foot_contact: FootContactFromForceTorque | None = None
 
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -96,8 +114,9 @@ class HumanoidStation:
 
     def set_initial_state(self, root_context: Context, state: np.ndarray | None = None) -> None:
         """Puts the robot in ``state`` ([q; v], default ``initial_state``) in the diagram's
-        ``root_context``, and the PD's held sensor sample at that state (noise-free: the
-        first reading). Use this rather than setting the plant's state alone: a hold left
+        ``root_context``, the PD's held sensor sample at that state (noise-free: the
+        first reading) and, with ``base_state`` = "invariant_ekf", the base estimator at
+        that state's base pose and velocity. Use this rather than setting the plant's state alone: a hold left
         at zero makes the PD raise a ValueError at the first step.
 
         Raises:
@@ -109,6 +128,14 @@ class HumanoidStation:
         self.plant.SetPositionsAndVelocities(self.plant.GetMyMutableContextFromRoot(root_context), x)
         if self.sensed_state_hold is not None:
             self.sensed_state_hold.GetMyMutableContextFromRoot(root_context).SetDiscreteState(x)
+        if self.base_state_estimator is not None:
+            q0 = self.topology.free_joint.position_start()
+            v0 = self.plant.num_positions() + self.topology.free_joint.velocity_start()
+            self.base_state_estimator.SetInitialBaseState(
+                self.base_state_estimator.GetMyMutableContextFromRoot(root_context),
+                x[q0 : q0 + 7],
+                x[v0 : v0 + 6],
+            )
 
 
 def add_humanoid_station(
@@ -119,6 +146,7 @@ def add_humanoid_station(
     noise: bool = True,
     seed: int = 0,
     imperfections: Imperfections | None = None,
+    base_state: str = "truth_plus_noise",
 ) -> HumanoidStation:
     """Adds the station of the module docstring to ``builder``.
 
@@ -135,11 +163,17 @@ def add_humanoid_station(
             plant (rated torques: the actuators' effort limits); the sensor groups go to
             ``add_sensors``; the model mismatch to ``dynamics_model``. Sensor and model
             imperfections need a humanoid (a model from a file has neither).
+        base_state: the source of the sensed state's base pose and velocity, one of
+            ``BASE_STATE_SOURCES`` (see the module docstring): "truth_plus_noise" (default,
+            the stand-in) or "invariant_ekf" (needs a humanoid with F/T sensors: hrp4_like).
 
     Raises:
         ValueError: an unknown or unreadable model, a model without a floating base, an
-            unknown contact approximation, bad imperfections (naming the field).
+            unknown contact approximation, bad imperfections (naming the field), an unknown
+            ``base_state`` or "invariant_ekf" on a model without foot F/T sensors.
     """
+    if base_state not in BASE_STATE_SOURCES:
+        raise ValueError(f"base_state must be one of {BASE_STATE_SOURCES}, got {base_state!r}")
     imperfections = Imperfections() if imperfections is None else imperfections
     if not isinstance(imperfections, Imperfections):
         raise ValueError(f"imperfections must be Imperfections, got {type(imperfections).__name__}")
@@ -189,9 +223,27 @@ def add_humanoid_station(
         builder.Connect(friction.get_output_port(), plant.get_applied_generalized_force_input_port())
     controller = builder.AddSystem(PdGravityController(plant, kp, kd, gravity_model=dynamics_model))
     controller.set_name("pd_gravity_controller")
+    base_state_estimator = foot_contact = None
     builder.Connect(controller.GetOutputPort("actuation"), plant.get_actuation_input_port())
     if humanoid is not None:
-        sensors = add_sensors(builder, plant, humanoid, noise=noise, seed=seed, imperfections=imperfections)
+        if base_state == "invariant_ekf" and not humanoid.ft_sensor_joints:
+            raise ValueError(
+                f"base_state 'invariant_ekf' needs foot F/T sensors for its contact flags; {model!r} has none "
+                "(its FSR foot contact is not wired to the estimator yet): use 'truth_plus_noise'"
+            )
+        sensors = add_sensors(
+            builder,
+            plant,
+            humanoid,
+            noise=noise,
+            seed=seed,
+            imperfections=imperfections,
+            base_estimator=(base_state == "truth_plus_noise"),
+        )
+        if base_state == "invariant_ekf":
+            base_state_estimator, foot_contact = _add_invariant_ekf(
+                builder, plant, humanoid, topology, sensors, initial_state
+            )
         sensed_state, measured_torque = sensors.state, sensors.measured_torque
         known_frames, known_wrenches = tuple(sensors.ft_frames), sensors.ft_wrenches
     else:
@@ -205,6 +257,8 @@ def add_humanoid_station(
         sensor_groups = (imperfections.imu, imperfections.encoders, imperfections.torque_sensor)
         if any(group != type(group)() for group in sensor_groups):
             raise ValueError("imperfections.imu/encoders/torque_sensor need a humanoid station (it has no sensors)")
+        if base_state != "truth_plus_noise":
+            raise ValueError(f"base_state {base_state!r} needs a humanoid station (a model from a file has no sensors)")
     sensed_state_hold = None
     if sensors is not None:
         # One sensor reading per step, shared by the PD and the estimators. In a discrete
@@ -239,7 +293,45 @@ def add_humanoid_station(
         dynamics_model=dynamics_model,
         imperfections=imperfections,
         friction=friction,
+        base_state=base_state,
+        base_state_estimator=base_state_estimator,
+        foot_contact=foot_contact,
     )
+
+
+def _add_invariant_ekf(
+    builder: DiagramBuilder,
+    plant: MultibodyPlant,
+    humanoid: HumanoidHandles,
+    topology: FloatingBaseTopology,
+    sensors: SensorHandles,
+    initial_state: np.ndarray,
+) -> tuple[InvariantEkfBaseStateEstimator, FootContactFromForceTorque]:
+    """The contact-aided invariant EKF as the source of the assembler's base pose and velocity:
+    gyro and accelerometer from the IMU, joint positions from the encoders, one contact flag
+    per F/T-instrumented foot (its sole frame is the foot point)."""
+    contact = builder.AddSystem(FootContactFromForceTorque(len(sensors.ft_sides)))
+    contact.set_name("foot_contact_from_force_torque")
+    builder.Connect(sensors.ft_wrenches, contact.GetInputPort("wrenches"))
+    q0 = topology.free_joint.position_start()
+    v0 = plant.num_positions() + topology.free_joint.velocity_start()
+    estimator = builder.AddSystem(
+        InvariantEkfBaseStateEstimator(
+            plant,
+            humanoid.imu_frame,
+            [humanoid.sole_frames[side] for side in sensors.ft_sides],
+            initial_base_pose=initial_state[q0 : q0 + 7],
+            initial_base_velocity=initial_state[v0 : v0 + 6],
+        )
+    )
+    estimator.set_name("invariant_ekf_base_state_estimator")
+    builder.Connect(sensors.imu.angular_velocity, estimator.GetInputPort("angular_velocity"))
+    builder.Connect(sensors.imu.linear_acceleration, estimator.GetInputPort("linear_acceleration"))
+    builder.Connect(sensors.encoders.GetOutputPort("position"), estimator.GetInputPort("joint_positions"))
+    builder.Connect(contact.GetOutputPort("foot_contact"), estimator.GetInputPort("foot_contact"))
+    builder.Connect(estimator.GetOutputPort("base_pose"), sensors.assembler.GetInputPort("base_pose"))
+    builder.Connect(estimator.GetOutputPort("base_velocity"), sensors.assembler.GetInputPort("base_velocity"))
+    return estimator, contact
 
 
 def _load(plant: MultibodyPlant, scene_graph: SceneGraph, model: str) -> HumanoidHandles | None:

@@ -857,7 +857,8 @@ class SensorHandles:
         torque_sensor: MotorTorqueSensor, reading the plant's net actuation output.
         ft_sensors: FootForceTorqueSensors, or None if the robot has no F/T welds.
         imu: Imu handles.
-        base_estimator: BaseStateEstimator.
+        base_estimator: BaseStateEstimator, or None when ``add_sensors`` was called with
+            ``base_estimator=False`` (the caller connects the assembler's base inputs).
         assembler: SensedStateAssembler.
         state: output port, the sensed [q; v] (nq + nv), for estimators' ``state`` input.
         measured_torque: output port, n (v[6:] order), N m.
@@ -872,7 +873,7 @@ class SensorHandles:
     torque_sensor: MotorTorqueSensor
     ft_sensors: FootForceTorqueSensors | None
     imu: Imu
-    base_estimator: BaseStateEstimator
+    base_estimator: BaseStateEstimator | None
     assembler: SensedStateAssembler
     state: OutputPort
     measured_torque: OutputPort
@@ -891,6 +892,7 @@ def add_sensors(
     seed: int = 0,
     name_prefix: str = "",
     imperfections: Imperfections | None = None,
+    base_estimator: bool = True,
 ) -> SensorHandles:
     """Adds a humanoid's sensors to ``builder`` and wires them to ``plant``.
 
@@ -918,6 +920,10 @@ def add_sensors(
             ``torque_sensor``; seeded by ``imperfections.seed``), applied whatever
             ``noise`` is; an IMU noise density > 0 replaces that sensor's default std.
             None or ideal: no change.
+        base_estimator: True (default) adds the stand-in BaseStateEstimator (truth plus
+            noise) and connects it to the assembler's ``base_pose``/``base_velocity``; False
+            adds neither and leaves those two inputs for the caller to connect (e.g. a real
+            floating-base estimator, ``diagrams.station.humanoid_station``).
 
     Returns:
         SensorHandles.
@@ -1006,23 +1012,26 @@ def add_sensors(
         accel_bias_random_walk=imp.imu.accel_bias_random_walk,
     )
 
-    base = builder.AddSystem(
-        BaseStateEstimator(
-            plant,
-            orientation_noise_std=on * BASE_ORIENTATION_NOISE_STD,
-            position_noise_std=on * BASE_POSITION_NOISE_STD,
-            angular_velocity_noise_std=on * BASE_ANGULAR_VELOCITY_NOISE_STD,
-            linear_velocity_noise_std=on * BASE_LINEAR_VELOCITY_NOISE_STD,
-            seed=seeds["base"],
+    base = None
+    if base_estimator:
+        base = builder.AddSystem(
+            BaseStateEstimator(
+                plant,
+                orientation_noise_std=on * BASE_ORIENTATION_NOISE_STD,
+                position_noise_std=on * BASE_POSITION_NOISE_STD,
+                angular_velocity_noise_std=on * BASE_ANGULAR_VELOCITY_NOISE_STD,
+                linear_velocity_noise_std=on * BASE_LINEAR_VELOCITY_NOISE_STD,
+                seed=seeds["base"],
+            )
         )
-    )
-    base.set_name(f"{name_prefix}base_state_estimator")
-    builder.Connect(state_port, base.GetInputPort("state"))
+        base.set_name(f"{name_prefix}base_state_estimator")
+        builder.Connect(state_port, base.GetInputPort("state"))
 
     assembler = builder.AddSystem(SensedStateAssembler(plant))
     assembler.set_name(f"{name_prefix}sensed_state")
-    builder.Connect(base.GetOutputPort("base_pose"), assembler.GetInputPort("base_pose"))
-    builder.Connect(base.GetOutputPort("base_velocity"), assembler.GetInputPort("base_velocity"))
+    if base is not None:
+        builder.Connect(base.GetOutputPort("base_pose"), assembler.GetInputPort("base_pose"))
+        builder.Connect(base.GetOutputPort("base_velocity"), assembler.GetInputPort("base_velocity"))
     builder.Connect(encoders.GetOutputPort("position"), assembler.GetInputPort("joint_position"))
     builder.Connect(encoders.GetOutputPort("velocity"), assembler.GetInputPort("joint_velocity"))
 

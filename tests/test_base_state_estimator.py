@@ -15,6 +15,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
 from diagrams.station.humanoid_station import add_humanoid_station
+from systems.dynamics.base_state import quaternion_to_rotation
 from systems.estimation.base_state_estimator import (
     ACCEL_NOISE_DENSITY,
     GYRO_NOISE_DENSITY,
@@ -25,7 +26,6 @@ from systems.estimation.base_state_estimator import (
     base_to_imu,
     contact_flags_from_wrenches,
     imu_to_base,
-    quaternion_to_rotation,
     rotation_to_quaternion,
     so3_exp,
     so3_gamma,
@@ -326,14 +326,14 @@ def test_nan_input_names_the_port(port):
 def test_no_contact_is_flagged_and_propagates_on_the_imu():
     estimator, context = _standalone_estimator()
     update = estimator.EvalUniquePeriodicDiscreteUpdate(context)
-    context.SetDiscreteState(update.get_vector().value())
+    context.SetDiscreteState(update)
     assert estimator.GetOutputPort("valid").Eval(context)[0] == 1.0
     estimator.GetInputPort("foot_contact").FixValue(context, [0.0, 0.0])
     # Free fall on the IMU alone: specific force 0.
     estimator.GetInputPort("linear_acceleration").FixValue(context, np.zeros(3))
     v_before = estimator.GetOutputPort("base_velocity").Eval(context)[3:6].copy()
     for _ in range(10):
-        context.SetDiscreteState(estimator.EvalUniquePeriodicDiscreteUpdate(context).get_vector().value())
+        context.SetDiscreteState(estimator.EvalUniquePeriodicDiscreteUpdate(context))
     assert estimator.GetOutputPort("valid").Eval(context)[0] == 0.0
     v_after = estimator.GetOutputPort("base_velocity").Eval(context)[3:6]
     np.testing.assert_allclose(v_after - v_before, [0.0, 0.0, -9.81 * 10 * estimator.period], atol=1e-9)

@@ -18,7 +18,7 @@ from diagrams.residuals.residual_comparison import (
     residual_comparison_metrics,
 )
 from diagrams.station.humanoid_station import BASE_STATE_SOURCES, add_humanoid_station
-from systems.estimation.base_state_estimator import quaternion_to_rotation
+from systems.dynamics.base_state import quaternion_to_rotation
 
 DT = 1e-3
 

@@ -87,6 +87,7 @@ from pydrake.systems.framework import BasicVector, Context, DiscreteValues, Leaf
 from systems.common.checks import check_plant, eval_finite_input, positive_number
 from systems.common.spatial import skew
 from systems.common.topology import floating_base_topology
+from systems.dynamics.base_state import quaternion_to_rotation
 
 #: BMI088 gyro output noise density, 0.014 °/s/√Hz, in rad/s/√Hz (data sheet, see module).
 GYRO_NOISE_DENSITY = 0.014 * math.pi / 180.0
@@ -148,18 +149,6 @@ def so3_exp(phi: np.ndarray) -> np.ndarray:
     return so3_gamma(phi, 0)
 
 
-def quaternion_to_rotation(quaternion: np.ndarray) -> np.ndarray:
-    """Rotation matrix of a quaternion [w, x, y, z] (normalised first)."""
-    w, x, y, z = np.asarray(quaternion, dtype=float) / np.linalg.norm(quaternion)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
 def rotation_to_quaternion(R: np.ndarray) -> np.ndarray:
     """Unit quaternion [w, x, y, z] with w >= 0 of a rotation matrix (Shepperd's method)."""
     R = np.asarray(R, dtype=float)
@@ -213,7 +202,7 @@ def base_to_imu(
     """Inverse of :func:`imu_to_base`: (R_WI, p_WI, v_WI) from the base's pose (7) and velocity (6)."""
     base_pose = np.asarray(base_pose, dtype=float)
     base_velocity = np.asarray(base_velocity, dtype=float)
-    R_WB = quaternion_to_rotation(base_pose[:4])
+    R_WB = quaternion_to_rotation(base_pose[:4] / np.linalg.norm(base_pose[:4]))
     r = R_WB @ p_BI
     return R_WB @ R_BI, base_pose[4:7] + r, base_velocity[3:6] + np.cross(base_velocity[:3], r)
 
@@ -353,13 +342,21 @@ class ContactAidedInvariantEkf:
 
     def set_state_vector(self, x: np.ndarray) -> None:
         """Inverse of :meth:`state_vector`."""
-        K, n = self._K, self._dim
-        self._R = x[:9].reshape(3, 3).copy()
-        self._v = x[9:12].copy()
-        self._p = x[12:15].copy()
+        K = self._K
+        R, v, p = self.navigation_state(x)
+        self._R, self._v, self._p = R.copy(), v.copy(), p.copy()
         self._d = x[15 : 15 + 3 * K].reshape(K, 3).copy()
         self._in_contact = x[15 + 3 * K : 15 + 4 * K] > 0.5
-        self._P = x[15 + 4 * K :].reshape(n, n).copy()
+        self._P = self.covariance_of(x).copy()
+
+    @staticmethod
+    def navigation_state(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(R_WI, v_WIo, p_WIo) of a :meth:`state_vector` (views, no copy)."""
+        return x[:9].reshape(3, 3), x[9:12], x[12:15]
+
+    def covariance_of(self, x: np.ndarray) -> np.ndarray:
+        """P of a :meth:`state_vector` (a view, no copy)."""
+        return x[15 + 4 * self._K :].reshape(self._dim, self._dim)
 
     @property
     def state_size(self) -> int:
@@ -628,9 +625,11 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         self._accel = self.DeclareVectorInputPort("linear_acceleration", 3)
         self._joints = self.DeclareVectorInputPort("joint_positions", n)
         self._contact = self.DeclareVectorInputPort("foot_contact", len(frames))
-        # State: [core state; last gyro (3); valid (1)].
-        self._xd = self.DeclareDiscreteState(x0)
-        self._size = self._core.state_size
+        # Discrete state groups: the filter (the core's state_vector), the last gyro sample
+        # (3, rad/s, for the output angular velocity) and valid (1: a foot in contact).
+        self._filter_index = self.DeclareDiscreteState(x0[0])
+        self._gyro_index = self.DeclareDiscreteState(x0[1])
+        self._valid_index = self.DeclareDiscreteState(x0[2])
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._Update)
         xd = {self.xd_ticket()}
         self.DeclareVectorOutputPort("base_pose", 7, self._CalcPose, prerequisites_of_calc=xd)
@@ -646,7 +645,7 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
     def foot_frames(self) -> tuple:
         return self._foot_frames
 
-    def _initial_state(self, base_pose, base_velocity) -> np.ndarray:
+    def _initial_state(self, base_pose, base_velocity) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         who = self._who
         pose = np.asarray(base_pose, dtype=float).reshape(-1)
         velocity = np.zeros(6) if base_velocity is None else np.asarray(base_velocity, dtype=float).reshape(-1)
@@ -656,13 +655,16 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
             raise ValueError(f"{who}: initial base velocity must be 6 finite numbers")
         R, p, v = base_to_imu(pose, velocity, self._R_BI, self._p_BI)
         self._core.reset(R, v, p)
-        return np.concatenate([self._core.state_vector(), velocity[:3] @ R, [0.0]])
+        return self._core.state_vector(), velocity[:3] @ R, np.zeros(1)
 
     def SetInitialBaseState(
         self, context: Context, base_pose: np.ndarray, base_velocity: np.ndarray | None = None
     ) -> None:
         """Resets the filter in ``context`` (this system's) to a base pose (7) and velocity (6)."""
-        context.SetDiscreteState(self._initial_state(base_pose, base_velocity))
+        for index, value in zip(
+            (self._filter_index, self._gyro_index, self._valid_index), self._initial_state(base_pose, base_velocity)
+        ):
+            context.SetDiscreteState(index, value)
 
     def _foot_kinematics(self, joint_positions: np.ndarray) -> np.ndarray:
         """h_j: the foot frames' origins in the IMU frame, m (K x 3) (E6)."""
@@ -677,20 +679,20 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         accel = eval_finite_input(who, self._accel, context)
         joints = eval_finite_input(who, self._joints, context)
         flags = eval_finite_input(who, self._contact, context) > 0.5
-        x = context.get_discrete_state_vector().value()
         core = self._core
-        core.set_state_vector(x[: self._size])
+        core.set_state_vector(context.get_discrete_state(self._filter_index).value())
         h = self._foot_kinematics(joints) if flags.any() else np.zeros((core.num_feet, 3))
         core.correct_kinematics(h, flags)  # with no flag set this only removes feet (E9)
         valid = 1.0 if core.num_contacts else 0.0
         core.propagate(omega, accel, self._period)
-        discrete_state.set_value(np.concatenate([core.state_vector(), omega, [valid]]))
+        discrete_state.set_value(self._filter_index, core.state_vector())
+        discrete_state.set_value(self._gyro_index, omega)
+        discrete_state.set_value(self._valid_index, [valid])
 
     def _outputs(self, context: Context) -> tuple[np.ndarray, np.ndarray]:
-        x = context.get_discrete_state_vector().value()
-        R = x[:9].reshape(3, 3)
-        omega = x[self._size : self._size + 3]
-        return imu_to_base(R, x[12:15], x[9:12], omega, self._R_BI, self._p_BI)
+        R, v, p = self._core.navigation_state(context.get_discrete_state(self._filter_index).value())
+        omega = context.get_discrete_state(self._gyro_index).value()
+        return imu_to_base(R, p, v, omega, self._R_BI, self._p_BI)
 
     def _CalcPose(self, context: Context, output: BasicVector) -> None:
         output.SetFromVector(self._outputs(context)[0])
@@ -699,12 +701,10 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         output.SetFromVector(self._outputs(context)[1])
 
     def _CalcValid(self, context: Context, output: BasicVector) -> None:
-        output.SetFromVector([context.get_discrete_state_vector().value()[-1]])
+        output.SetFromVector(context.get_discrete_state(self._valid_index).value())
 
     def _CalcStd(self, context: Context, output: BasicVector) -> None:
-        x = context.get_discrete_state_vector().value()
-        n = 9 + 3 * self._core.num_feet
-        P = x[15 + 4 * self._core.num_feet : self._size].reshape(n, n)
+        P = self._core.covariance_of(context.get_discrete_state(self._filter_index).value())
         output.SetFromVector(np.sqrt(np.maximum(np.diag(P)[:9], 0.0)))
 
 
@@ -715,7 +715,6 @@ __all__ = [
     "base_to_imu",
     "contact_flags_from_wrenches",
     "imu_to_base",
-    "quaternion_to_rotation",
     "rotation_to_quaternion",
     "so3_exp",
     "so3_gamma",

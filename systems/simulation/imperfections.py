@@ -32,8 +32,9 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import BodyIndex, JointActuatorIndex, RotationalInertia, SpatialInertia
 from pydrake.systems.framework import BasicVector, Context, LeafSystem
 
-from systems.common.checks import check_finite_input, check_plant, per_joint
+from systems.common.checks import check_finite_input, check_plant, per_joint, positive_number
 from systems.common.topology import floating_base_topology
+from systems.simulation.noise import check_seed
 
 #: Seed streams of the groups: np.random.default_rng([seed, GROUP_STREAMS[group]]).
 GROUP_STREAMS = {"torque_sensor": 3, "model_mismatch": 4}
@@ -191,7 +192,7 @@ class Imperfections:
         """Returns self; raises ValueError naming the field (e.g. ``imperfections.imu.
         gyro_noise_density``) for a NaN/inf, a negative std or density, a percentage outside
         [0, 100), a non-positive smoothing velocity, bits outside 0..52 or a bad seed."""
-        _check_int(self.seed, "imperfections.seed", 0, None)
+        check_seed(self.seed, "imperfections.seed")
         if not isinstance(self.encoders, EncoderImperfections):
             raise ValueError(f"imperfections.encoders must be an EncoderImperfections, got {self.encoders!r}")
         _check_int(self.encoders.bits, "imperfections.encoders.bits", 0, 52)
@@ -239,12 +240,11 @@ def _check_number(value, path: str) -> float:
     return value
 
 
-def _check_int(value, path: str, low: int, high: int | None) -> int:
+def _check_int(value, path: str, low: int, high: int) -> int:
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
         raise ValueError(f"{path} must be an integer, got {value!r}")
-    if value < low or (high is not None and value > high):
-        bound = f">= {low}" if high is None else f"in [{low}, {high}]"
-        raise ValueError(f"{path} must be {bound}, got {value!r}")
+    if not low <= value <= high:
+        raise ValueError(f"{path} must be in [{low}, {high}], got {value!r}")
     return int(value)
 
 
@@ -334,10 +334,7 @@ class JointFriction(LeafSystem):
         n = topology.num_joints
         self.coulomb = per_joint(coulomb, n, "coulomb", who=who, sign="non-negative")
         self.viscous = per_joint(viscous, n, "viscous", who=who, sign="non-negative")
-        v_s = _check_number(smoothing_velocity, f"{who}: smoothing_velocity")
-        if not v_s > 0.0:
-            raise ValueError(f"{who}: smoothing_velocity must be > 0 rad/s, got {smoothing_velocity!r}")
-        self.smoothing_velocity = v_s
+        self.smoothing_velocity = positive_number(smoothing_velocity, f"{who}: smoothing_velocity")
         self._nq = plant.num_positions()
         self._v_index = self._nq + np.array([j.velocity_start() for j in topology.joints], dtype=int)
         self._out_index = self._v_index - self._nq

@@ -2,7 +2,9 @@
 and truth: synthetic IMU and foot kinematics for the numpy core (analytic signals of a
 robot standing, moving at constant velocity, with a tilted initial guess, with IMU
 noise), and the Drake wrapper on the hrp4_like station (its simulated IMU, encoders and
-F/T sensors) against the plant's true base state, standing and pushed."""
+F/T sensors) against the plant's true base state, standing and pushed; the IMU bias states
+(E11) against finite differences, an injected gyro bias, and the station with the realistic
+IMU (BMI088 noise, EuRoC bias walks) with and without them; FSR contact flags."""
 
 from __future__ import annotations
 
@@ -10,20 +12,25 @@ import math
 
 import numpy as np
 import pytest
+from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
 from diagrams.station.humanoid_station import add_humanoid_station
+from models import add_humanoid, set_standing_state
 from systems.dynamics.base_state import quaternion_to_rotation
 from systems.estimation.base_state_estimator import (
     ACCEL_NOISE_DENSITY,
     GYRO_NOISE_DENSITY,
+    INITIAL_GYRO_BIAS_STD,
     KINEMATICS_NOISE_STD,
     ContactAidedInvariantEkf,
     FootContactFromForceTorque,
+    FootContactFromFsr,
     InvariantEkfBaseStateEstimator,
     base_to_imu,
+    contact_flags_from_fsr,
     contact_flags_from_wrenches,
     imu_to_base,
     rotation_to_quaternion,
@@ -31,6 +38,7 @@ from systems.estimation.base_state_estimator import (
     so3_gamma,
 )
 from systems.simulation.disturbances import Push, PushSource, Step
+from systems.simulation.imperfections import Imperfections
 
 G = np.array([0.0, 0.0, -9.81])
 DT = 1e-3
@@ -338,3 +346,353 @@ def test_no_contact_is_flagged_and_propagates_on_the_imu():
     v_after = estimator.GetOutputPort("base_velocity").Eval(context)[3:6]
     np.testing.assert_allclose(v_after - v_before, [0.0, 0.0, -9.81 * 10 * estimator.period], atol=1e-9)
     assert np.isfinite(estimator.GetOutputPort("standard_deviation").Eval(context)).all()
+
+
+# ---------------------------------------------------------------------------------------
+# IMU bias states (E11).
+# ---------------------------------------------------------------------------------------
+
+
+def test_bias_states_off_by_default_and_their_layout():
+    off = ContactAidedInvariantEkf(2, gravity=G)
+    on = ContactAidedInvariantEkf(2, gravity=G, estimate_imu_bias=True)
+    assert not off.estimates_imu_bias and on.estimates_imu_bias
+    assert off.covariance.shape == (15, 15) and on.covariance.shape == (21, 21)
+    assert off.state_size == 15 + 8 + 15**2 and on.state_size == 15 + 8 + 6 + 21**2
+    np.testing.assert_allclose(np.sqrt(np.diag(on.covariance)[15:18]), INITIAL_GYRO_BIAS_STD)
+    on.reset(imu_bias=[1, 2, 3, 4, 5, 6])
+    np.testing.assert_array_equal(on.imu_bias_of(on.state_vector()), [1, 2, 3, 4, 5, 6])
+    with pytest.raises(ValueError, match="no bias states"):
+        off.reset(imu_bias=np.zeros(6))
+    with pytest.raises(ValueError, match="gyro_bias_random_walk"):
+        ContactAidedInvariantEkf(2, estimate_imu_bias=True, gyro_bias_random_walk=float("nan"))
+
+
+def test_bias_columns_of_the_transition_match_finite_differences():
+    """The linearised error dynamics with biases (E11): two filters, the estimate and a
+    "truth" X = Exp(ξ)⁻¹ X̄, θ = θ̄ − ζ (|ξ| ~ 1e-6), propagated 10 ms on the same IMU sample;
+    the new right-invariant error matches Φ [ξ; ζ] to 1e-10 (the remainder is the O(dt²)
+    of holding X̄ over the step), 100 times closer than Φ without its bias columns."""
+    rng = np.random.default_rng(3)
+    R, v, p = so3_exp([0.2, -0.1, 0.7]), np.array([0.3, -0.2, 0.1]), np.array([0.5, 0.2, 0.8])
+    theta = np.array([0.01, -0.02, 0.005, 0.1, -0.05, 0.2])
+    est = ContactAidedInvariantEkf(2, gravity=G, estimate_imu_bias=True)
+    est.reset(R, v, p, imu_bias=theta)
+    est.correct_kinematics(np.array([[0.05, 0.1, -0.75], [0.0, -0.1, -0.8]]), [True, True])  # (E8) only
+    xi = rng.normal(size=21) * 1e-6
+    E, J = so3_exp(xi[:3]), so3_gamma(xi[:3], 1)
+
+    def true_point(point, k):  # Exp(ξ)⁻¹ applied to a column of X̄
+        return E.T @ (point - J @ xi[k : k + 3])
+
+    x = est.state_vector()  # [R 9; v; p; d 6; in_contact 2; θ 6; P]
+    x[:9] = (E.T @ R).reshape(-1)
+    x[9:12], x[12:15] = true_point(v, 3), true_point(p, 6)
+    x[15:18], x[18:21] = true_point(est.foot_positions[0], 9), true_point(est.foot_positions[1], 12)
+    x[23:29] = theta - xi[15:]
+    truth = ContactAidedInvariantEkf(2, gravity=G, estimate_imu_bias=True)
+    truth.set_state_vector(x)
+    dt = 0.01
+    Phi = est.transition_matrix(dt)
+    omega, a = np.array([0.3, -0.5, 0.8]), np.array([0.5, 0.2, 9.5])
+    est.propagate(omega, a, dt)
+    truth.propagate(omega, a, dt)
+    eta = est.rotation @ truth.rotation.T
+    xi_new = np.concatenate(
+        [
+            0.5 * np.array([eta[2, 1] - eta[1, 2], eta[0, 2] - eta[2, 0], eta[1, 0] - eta[0, 1]]),
+            est.velocity - eta @ truth.velocity,
+            est.position - eta @ truth.position,
+            (est.foot_positions - truth.foot_positions @ eta.T).reshape(-1),
+            est.gyro_bias - truth.gyro_bias,
+            est.accel_bias - truth.accel_bias,
+        ]
+    )
+    error = np.abs(xi_new - Phi @ xi).max()
+    without_bias_columns = Phi.copy()
+    without_bias_columns[:15, 15:] = 0.0
+    print(f"\n|ξ⁺ − Φξ| {error:.2e}, without the bias columns {np.abs(xi_new - without_bias_columns @ xi).max():.2e}")
+    assert error < 1e-10
+    assert np.abs(xi_new - without_bias_columns @ xi).max() > 100.0 * error
+
+
+def _standing_robot():
+    """hrp4_like in its standing posture (no simulation): plant, handles, the free joint's
+    pose (7), joint positions (v[6:] order) and R_WI of the IMU frame."""
+    from systems.common.topology import floating_base_topology
+
+    plant = MultibodyPlant(0.0)
+    handles = add_humanoid(plant, "hrp4_like")
+    plant.Finalize()
+    context = plant.CreateDefaultContext()
+    set_standing_state(plant, context, handles)
+    topology = floating_base_topology(plant)
+    q = plant.GetPositions(context)
+    q0 = topology.free_joint.position_start()
+    joints = np.array([q[j.position_start()] for j in topology.joints])
+    R_WI = handles.imu_frame.CalcRotationMatrixInWorld(context).matrix()
+    return plant, handles, q[q0 : q0 + 7], joints, R_WI
+
+
+def test_injected_gyro_bias_is_estimated_where_observable():
+    """A robot standing still (exact IMU and encoder signals from test-local sources) whose
+    gyro reads a constant bias b = [0.01, 0, 0.01] rad/s (IMU frame, upright: x horizontal,
+    z vertical; ~0.57 °/s), 10 s, the initial bias std raised to 0.02 rad/s (a bias this
+    large is an uncalibrated gyro). Three filters on the same signals:
+
+    * two feet in contact, bias states: the horizontal part of b (a roll/pitch rate would
+      tilt the estimate away from gravity) converges within seconds; the vertical part (a
+      yaw rate) is observable only through the leg kinematics (the two feet, fixed in world,
+      would move in the IMU frame), weakly (the contact points may slide with σ_c): it
+      moves part of the way to the truth and its std shrinks slowly.
+    * one foot in contact, bias states: the vertical part is unobservable (a yaw about the
+      vertical through the contact point leaves the kinematics unchanged): its estimate
+      stays at the prior mean 0 with the prior std and yaw drifts at b_z.
+    * two feet, no bias states: the bias becomes a tilt and velocity error.
+
+    Measured (``pytest -s``): two feet, horizontal error 1e-6 rad/s (std 1.7e-4), vertical
+    estimate 0.0038 (38 %), std 0.0158, yaw drift 0.0062 rad/s; one foot, vertical estimate
+    3e-6, std 0.0200, yaw drift 0.0100 rad/s; tilt 0.0003° with bias states vs 1.5° (and
+    0.31 m/s) without."""
+    plant, handles, pose, joints, R_WI = _standing_robot()
+    gravity = np.asarray(plant.gravity_field().gravity_vector(), dtype=float)
+    b_true = np.array([0.01, 0.0, 0.01])
+    prior_std = 0.02
+    up_I = R_WI.T @ np.array([0.0, 0.0, 1.0])  # the world vertical in the IMU frame
+    assert up_I[2] > 0.999  # the IMU is upright: its z is the vertical
+    builder = DiagramBuilder()
+    sources = {
+        "angular_velocity": b_true,  # the robot does not rotate: the gyro reads its bias
+        "linear_acceleration": R_WI.T @ -gravity,
+        "joint_positions": joints,
+    }
+    feet = [handles.sole_frames["left"], handles.sole_frames["right"]]
+    estimators, contact = {}, {}
+    for key, bias, flags in (
+        ("two_feet", True, [1.0, 1.0]),
+        ("one_foot", True, [1.0, 0.0]),
+        ("no_bias", False, [1.0, 1.0]),
+    ):
+        estimators[key] = builder.AddSystem(
+            InvariantEkfBaseStateEstimator(
+                plant,
+                handles.imu_frame,
+                feet,
+                initial_base_pose=pose,
+                estimate_imu_bias=bias,
+                initial_gyro_bias_std=prior_std,
+            )
+        )
+        contact[key] = builder.AddSystem(ConstantVectorSource(np.array(flags)))
+        builder.Connect(contact[key].get_output_port(), estimators[key].GetInputPort("foot_contact"))
+    for name, value in sources.items():
+        source = builder.AddSystem(ConstantVectorSource(np.asarray(value, dtype=float)))
+        for estimator in estimators.values():
+            builder.Connect(source.get_output_port(), estimator.GetInputPort(name))
+    simulator = Simulator(builder.Build())
+    duration = 10.0
+    simulator.AdvanceTo(duration)
+    context = simulator.get_context()
+    R_WB_true = quaternion_to_rotation(pose[:4])
+    horizontal_truth = np.linalg.norm(b_true - (b_true @ up_I) * up_I)
+    r = {}
+    for key, e in estimators.items():
+        out = {
+            port: e.GetOutputPort(port).Eval(e.GetMyContextFromRoot(context)).copy()
+            for port in ("base_pose", "base_velocity", "imu_bias", "imu_bias_standard_deviation")
+        }
+        b_est, b_std = out["imu_bias"][:3], out["imu_bias_standard_deviation"][:3]
+        error = b_est - b_true
+        tilt, yaw = tilt_and_yaw(quaternion_to_rotation(out["base_pose"][:4]), R_WB_true)
+        r[key] = {
+            "horizontal_error": float(np.linalg.norm(error - (error @ up_I) * up_I)),
+            "vertical_estimate": float(b_est @ up_I),
+            "vertical_std": float(b_std @ np.abs(up_I)),
+            "horizontal_std": float(max(b_std[:2])),
+            "yaw_rate": yaw / duration,
+            "tilt_deg": math.degrees(tilt),
+            "speed": float(np.linalg.norm(out["base_velocity"][3:])),
+        }
+        print(
+            f"\ninjected gyro bias {b_true} rad/s, {duration:.0f} s, {key}: "
+            + str({k: round(v, 6) for k, v in r[key].items()})
+        )
+    two, one, off = r["two_feet"], r["one_foot"], r["no_bias"]
+    for case in (two, one):  # horizontal: observable through gravity, converged
+        assert case["horizontal_error"] < 0.05 * horizontal_truth
+        assert case["horizontal_std"] < 0.05 * prior_std
+        assert case["tilt_deg"] < 0.05 and case["speed"] < 0.01
+    # Vertical, two feet: weakly observable through the leg kinematics.
+    assert 0.2 * b_true[2] < two["vertical_estimate"] < b_true[2]
+    assert 0.5 * prior_std < two["vertical_std"] < 0.9 * prior_std
+    # Vertical, one foot: unobservable; yaw drifts at the bias's rate.
+    assert abs(one["vertical_estimate"]) < 1e-4 and one["vertical_std"] > 0.99 * prior_std
+    assert abs(one["yaw_rate"] - b_true @ up_I) < 0.02 * b_true[2]
+    assert off["tilt_deg"] > 10.0 * max(two["tilt_deg"], 0.01)
+
+
+def test_imu_bias_outputs_are_zero_without_bias_states():
+    estimator, context = _standalone_estimator()
+    context.SetDiscreteState(estimator.EvalUniquePeriodicDiscreteUpdate(context))
+    assert not estimator.estimates_imu_bias
+    np.testing.assert_array_equal(estimator.GetOutputPort("imu_bias").Eval(context), np.zeros(6))
+    np.testing.assert_array_equal(estimator.GetOutputPort("imu_bias_standard_deviation").Eval(context), np.zeros(6))
+    assert estimator.GetOutputPort("standard_deviation").size() == 9
+
+
+# ---------------------------------------------------------------------------------------
+# The station with the realistic IMU, with and without bias states.
+# ---------------------------------------------------------------------------------------
+
+
+def _realistic_imu_run(push: Push | None, duration: float, log_period: float = 0.01) -> dict:
+    """The hrp4_like station with ``Imperfections.realistic()``'s IMU (BMI088 white noise,
+    EuRoC ADIS16448 bias random walks) and base_state "invariant_ekf" (the station's filter
+    then has bias states), holding its posture; a second, bias-free filter fed by the same
+    sensor signals (test-local). Returns, per filter, its errors against the plant's truth
+    (velocity RMS and max tilt over the run, yaw and position errors at its end) and its
+    bias estimate at the end, and the simulated IMU's true biases then."""
+    builder = DiagramBuilder()
+    station = add_humanoid_station(
+        builder, "hrp4_like", imperfections=Imperfections(imu=Imperfections.realistic().imu), base_state="invariant_ekf"
+    )
+    builder.Connect(builder.AddSystem(ConstantVectorSource(station.q_hold)).get_output_port(), station.desired_position)
+    sensors, with_bias = station.sensors, station.base_state_estimator
+    assert with_bias.estimates_imu_bias
+    q0 = station.topology.free_joint.position_start()
+    v0 = station.plant.num_positions() + station.topology.free_joint.velocity_start()
+    without = builder.AddSystem(
+        InvariantEkfBaseStateEstimator(
+            station.plant,
+            station.humanoid.imu_frame,
+            with_bias.foot_frames,
+            initial_base_pose=station.initial_state[q0 : q0 + 7],
+        )
+    )
+    builder.Connect(sensors.imu.angular_velocity, without.GetInputPort("angular_velocity"))
+    builder.Connect(sensors.imu.linear_acceleration, without.GetInputPort("linear_acceleration"))
+    builder.Connect(sensors.encoders.GetOutputPort("position"), without.GetInputPort("joint_positions"))
+    builder.Connect(station.foot_contact.GetOutputPort("foot_contact"), without.GetInputPort("foot_contact"))
+    if push is not None:
+        source = builder.AddSystem(PushSource(station.plant, [push]))
+        builder.Connect(
+            source.get_applied_spatial_forces_output_port(), station.plant.get_applied_spatial_force_input_port()
+        )
+        builder.Connect(station.plant.get_state_output_port(), source.get_state_input_port())
+    estimators = {"with_bias": with_bias, "without_bias": without}
+    logs = {
+        (key, port): LogVectorOutput(e.GetOutputPort(port), builder, log_period)
+        for key, e in estimators.items()
+        for port in ("base_pose", "base_velocity")
+    }
+    logs["state"] = LogVectorOutput(station.plant.get_state_output_port(), builder, log_period)
+    simulator = Simulator(builder.Build())
+    context = simulator.get_mutable_context()
+    station.set_initial_state(context)
+    without.SetInitialBaseState(
+        without.GetMyMutableContextFromRoot(context),
+        station.initial_state[q0 : q0 + 7],
+        station.initial_state[v0 : v0 + 6],
+    )
+    simulator.Initialize()
+    simulator.AdvanceTo(duration)
+    x = logs["state"].FindLog(context).data()
+    metrics = {}
+    for key, estimator in estimators.items():
+        pose = logs[key, "base_pose"].FindLog(context).data()
+        velocity = logs[key, "base_velocity"].FindLog(context).data()
+        n = min(x.shape[1], pose.shape[1])
+        errors = np.array(
+            [
+                tilt_and_yaw(quaternion_to_rotation(pose[:4, k]), quaternion_to_rotation(x[q0 : q0 + 4, k]))
+                for k in range(n)
+            ]
+        )
+        dv = velocity[3:6, :n] - x[v0 + 3 : v0 + 6, :n]
+        bias = estimator.GetOutputPort("imu_bias").Eval(estimator.GetMyContextFromRoot(context))
+        metrics[key] = {
+            "velocity_rms": float(np.sqrt(np.mean(np.sum(dv**2, axis=0)))),
+            "max_tilt_deg": math.degrees(errors[:, 0].max()),
+            "yaw_error_end_deg": math.degrees(errors[-1, 1]),
+            "position_error_end_m": float(np.linalg.norm(pose[4:7, n - 1] - x[q0 + 4 : q0 + 7, n - 1])),
+            "gyro_bias_estimate": np.round(bias[:3], 6).tolist(),
+            "accel_bias_estimate": np.round(bias[3:], 4).tolist(),
+        }
+    true_bias = {
+        kind: system.GetMyContextFromRoot(context).get_discrete_state(0).value().copy()
+        for kind, system in (("gyro", sensors.imu.gyro_bias), ("accel", sensors.imu.accel_bias))
+    }
+    metrics["true_bias"] = {
+        "gyro": np.round(true_bias["gyro"], 6).tolist(),
+        "accel": np.round(true_bias["accel"], 4).tolist(),
+    }
+    metrics["true_speed_max"] = float(np.linalg.norm(x[v0 + 3 : v0 + 6], axis=0).max())
+    return metrics
+
+
+def _print_metrics(title: str, metrics: dict) -> None:
+    print(f"\n{title}")
+    for key, value in metrics.items():
+        if isinstance(value, dict):
+            value = {k: (round(v, 5) if isinstance(v, float) else v) for k, v in value.items()}
+        print(f"  {key}: {value}")
+
+
+def test_hrp4_realistic_imu_standing_60_s_with_and_without_bias_states():
+    """60 s standing on the hrp4_like station with the realistic IMU (its biases start at 0
+    and random-walk: after 60 s ~1.5e-4 rad/s and ~0.023 m/s², 1σ). The issue's floors (base
+    linear-velocity RMS <= 0.02 m/s, tilt <= 0.5°) hold with bias states; the bias-free
+    filter's velocity error is larger (the vertical accelerometer bias, observable, is
+    estimated with bias states and otherwise fought by the contact corrections). The tilt
+    error of both is the horizontal accelerometer bias over g (not separable from tilt when
+    upright). Yaw and position drift: unobservable, their errors after the minute. Measured
+    (``pytest -s``; seeds fixed): with bias states, velocity RMS 6.5 mm/s, max tilt 0.198°,
+    yaw 0.22°/min, position 1.9 mm/min, accelerometer z bias -0.049 m/s² estimated (true
+    -0.055); without, velocity RMS 0.130 m/s (over the floor), max tilt 0.205°, yaw 0.06°/min,
+    position 2.5 mm/min. The true horizontal accelerometer bias at 60 s, 0.0245 m/s², is
+    0.14° of tilt. ~100 s of wall time."""
+    m = _realistic_imu_run(None, 60.0)
+    _print_metrics("hrp4_like, realistic IMU, standing 60 s:", m)
+    on, off = m["with_bias"], m["without_bias"]
+    assert on["velocity_rms"] <= 0.02
+    assert on["max_tilt_deg"] <= 0.5
+    assert on["velocity_rms"] < off["velocity_rms"]
+    # Unobservable, the drift over the minute: yaw (gyro white noise alone: 0.11° 1σ) and
+    # position.
+    assert abs(on["yaw_error_end_deg"]) < 1.0
+    assert on["position_error_end_m"] < 0.02
+
+
+def test_hrp4_realistic_imu_pushed_with_and_without_bias_states():
+    """The 80 N, 0.2 s push on the waist (as the tests above), 3 s, realistic IMU: the floors
+    hold with bias states. Measured (``pytest -s``): true speed up to 0.24 m/s; with bias
+    states velocity RMS 4.5 mm/s, max tilt 0.097°, position error 1.8 mm at 3 s; without,
+    5.6 mm/s, 0.097°, 2.0 mm (the biases are still small after 3 s)."""
+    m = _realistic_imu_run(Push("waist", [0.0, 0.0, 0.0], [1.0, 0.0, 0.0], Step(80.0, 1.0, 1.2)), 3.0)
+    _print_metrics("hrp4_like, realistic IMU, pushed 80 N for 0.2 s, 3 s:", m)
+    assert m["true_speed_max"] > 0.1
+    assert m["with_bias"]["velocity_rms"] <= 0.02
+    assert m["with_bias"]["max_tilt_deg"] <= 0.5
+
+
+# ---------------------------------------------------------------------------------------
+# FSR contact flags.
+# ---------------------------------------------------------------------------------------
+
+
+def test_contact_flags_from_fsr_and_the_system():
+    forces = np.array([1.0, 1.0, 0.5, 0.2, 0.0, 0.1, 0.0, 0.1])  # left 2.7 N, right 0.2 N
+    np.testing.assert_array_equal(contact_flags_from_fsr(forces, 2.5), [1.0, 0.0])
+    system = FootContactFromFsr(50.9)  # a 5.19 kg Nao: 5 % of its weight is 2.5 N
+    assert system.threshold == pytest.approx(0.05 * 50.9)
+    context = system.CreateDefaultContext()
+    system.GetInputPort("fsr_forces").FixValue(context, forces)
+    np.testing.assert_array_equal(system.GetOutputPort("foot_contact").Eval(context), [1.0, 0.0])
+    forces[3] = np.nan
+    system.GetInputPort("fsr_forces").FixValue(context, forces)
+    with pytest.raises(ValueError, match="FootContactFromFsr: input 'fsr_forces'"):
+        system.GetOutputPort("foot_contact").Eval(context)
+    with pytest.raises(ValueError, match="weight_fraction"):
+        FootContactFromFsr(50.9, weight_fraction=1.5)
+    with pytest.raises(ValueError, match="robot_weight"):
+        FootContactFromFsr(0.0)

@@ -11,8 +11,9 @@ The base part of the sensed state (``base_state``, one of ``BASE_STATE_SOURCES``
 default ("truth_plus_noise") from the stand-in ``systems.simulation.sensors.BaseStateEstimator``
 (the true base state plus white noise); "invariant_ekf" replaces it with the contact-aided
 invariant EKF ``systems.estimation.base_state_estimator.InvariantEkfBaseStateEstimator`` fed by
-the station's IMU, encoders and foot contact from the ankle F/T sensors (hrp4_like; nao_like's
-FSR contact is not wired to it yet).
+the station's IMU, encoders and foot contact from the ankle F/T sensors (hrp4_like) or, on a
+robot without them, from its four foot FSRs per foot (nao_like: an ``FsrArray`` added for it),
+with IMU bias states when the simulated IMU has a bias random walk.
 """
 
 from __future__ import annotations
@@ -38,7 +39,11 @@ from models import (
     set_standing_state,
 )
 from systems.common.topology import FloatingBaseTopology, floating_base_topology
-from systems.estimation.base_state_estimator import FootContactFromForceTorque, InvariantEkfBaseStateEstimator
+from systems.estimation.base_state_estimator import (
+    FootContactFromForceTorque,
+    FootContactFromFsr,
+    InvariantEkfBaseStateEstimator,
+)
 from systems.residuals.momentum_residuals import ResidualModel
 from systems.simulation.imperfections import (
     Imperfections,
@@ -84,7 +89,8 @@ class HumanoidStation:
         base_state: the source of the sensed base state, one of ``BASE_STATE_SOURCES``.
         base_state_estimator: the InvariantEkfBaseStateEstimator (``base_state`` =
             "invariant_ekf"), or None. ``set_initial_state`` starts it at the initial state.
-        foot_contact: the FootContactFromForceTorque feeding it its contact flags, or None.
+        foot_contact: the FootContactFromForceTorque (or, without F/T sensors,
+            FootContactFromFsr) feeding it its contact flags, or None.
     """
 
     plant: MultibodyPlant
@@ -165,12 +171,13 @@ def add_humanoid_station(
             imperfections need a humanoid (a model from a file has neither).
         base_state: the source of the sensed state's base pose and velocity, one of
             ``BASE_STATE_SOURCES`` (see the module docstring): "truth_plus_noise" (default,
-            the stand-in) or "invariant_ekf" (needs a humanoid with F/T sensors: hrp4_like).
+            the stand-in) or "invariant_ekf" (needs a humanoid with foot F/T sensors, hrp4_like,
+            or foot FSRs, nao_like).
 
     Raises:
         ValueError: an unknown or unreadable model, a model without a floating base, an
             unknown contact approximation, bad imperfections (naming the field), an unknown
-            ``base_state`` or "invariant_ekf" on a model without foot F/T sensors.
+            ``base_state`` or "invariant_ekf" on a model with neither foot F/T sensors nor FSRs.
     """
     if base_state not in BASE_STATE_SOURCES:
         raise ValueError(f"base_state must be one of {BASE_STATE_SOURCES}, got {base_state!r}")
@@ -226,10 +233,11 @@ def add_humanoid_station(
     base_state_estimator = foot_contact = None
     builder.Connect(controller.GetOutputPort("actuation"), plant.get_actuation_input_port())
     if humanoid is not None:
-        if base_state == "invariant_ekf" and not humanoid.ft_sensor_joints:
+        fsr_feet = all(len(humanoid.fsr_geometries.get(side, ())) == 4 for side in ("left", "right"))
+        if base_state == "invariant_ekf" and not humanoid.ft_sensor_joints and not fsr_feet:
             raise ValueError(
-                f"base_state 'invariant_ekf' needs foot F/T sensors for its contact flags; {model!r} has none "
-                "(its FSR foot contact is not wired to the estimator yet): use 'truth_plus_noise'"
+                f"base_state 'invariant_ekf' needs foot F/T sensors or four FSRs per foot for its contact "
+                f"flags; {model!r} has neither: use 'truth_plus_noise'"
             )
         sensors = add_sensors(
             builder,
@@ -306,22 +314,46 @@ def _add_invariant_ekf(
     topology: FloatingBaseTopology,
     sensors: SensorHandles,
     initial_state: np.ndarray,
-) -> tuple[InvariantEkfBaseStateEstimator, FootContactFromForceTorque]:
+) -> tuple[InvariantEkfBaseStateEstimator, FootContactFromForceTorque | FootContactFromFsr]:
     """The contact-aided invariant EKF as the source of the assembler's base pose and velocity:
     gyro and accelerometer from the IMU, joint positions from the encoders, one contact flag
-    per F/T-instrumented foot (its sole frame is the foot point)."""
-    contact = builder.AddSystem(FootContactFromForceTorque(len(sensors.ft_sides)))
-    contact.set_name("foot_contact_from_force_torque")
-    builder.Connect(sensors.ft_wrenches, contact.GetInputPort("wrenches"))
+    per foot (its sole frame is the foot point): from the F/T sensors when the robot has them
+    (hrp4_like), else from the sum of each foot's four FSRs (nao_like) above 5 % of the
+    robot's weight (``FootContactFromFsr``). The FSRs are an ``FsrArray`` added here, with
+    the noise and seed (16 seed + 5) that ``diagrams.observer.nao_sensing`` gives its own,
+    so both read the same sensors. The filter estimates the IMU biases (its default random
+    walks, ``Imperfections.realistic()``'s) when the simulated IMU has a bias random walk,
+    and is the bias-free filter otherwise (the ideal default IMU)."""
+    from systems.observer.fsr_sensing import FSR_NOISE_STD, FSR_SIDES, FsrArray
+    from systems.simulation.sensors import SEEDS_PER_CALL
+
+    if sensors.ft_sides:
+        sides = sensors.ft_sides
+        contact = builder.AddSystem(FootContactFromForceTorque(len(sides)))
+        contact.set_name("foot_contact_from_force_torque")
+        builder.Connect(sensors.ft_wrenches, contact.GetInputPort("wrenches"))
+    else:
+        sides = FSR_SIDES
+        seed = sensors.seeds["encoders"] // SEEDS_PER_CALL  # the station's seed
+        noise_std = 0.0 if sensors.encoders.noise.is_zero else FSR_NOISE_STD
+        fsr = builder.AddSystem(FsrArray(plant, humanoid, noise_std=noise_std, seed=SEEDS_PER_CALL * seed + 5))
+        fsr.set_name("invariant_ekf_fsr_array")
+        builder.Connect(plant.get_contact_results_output_port(), fsr.GetInputPort("contact_results"))
+        mass = plant.CalcTotalMass(plant.CreateDefaultContext(), [humanoid.model_instance])
+        weight = mass * float(np.linalg.norm(plant.gravity_field().gravity_vector()))
+        contact = builder.AddSystem(FootContactFromFsr(weight, num_feet=len(sides)))
+        contact.set_name("foot_contact_from_fsr")
+        builder.Connect(fsr.GetOutputPort("fsr_forces"), contact.GetInputPort("fsr_forces"))
     q0 = topology.free_joint.position_start()
     v0 = plant.num_positions() + topology.free_joint.velocity_start()
     estimator = builder.AddSystem(
         InvariantEkfBaseStateEstimator(
             plant,
             humanoid.imu_frame,
-            [humanoid.sole_frames[side] for side in sensors.ft_sides],
+            [humanoid.sole_frames[side] for side in sides],
             initial_base_pose=initial_state[q0 : q0 + 7],
             initial_base_velocity=initial_state[v0 : v0 + 6],
+            estimate_imu_bias=sensors.imu.gyro_bias is not None or sensors.imu.accel_bias is not None,
         )
     )
     estimator.set_name("invariant_ekf_base_state_estimator")

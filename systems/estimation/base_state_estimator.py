@@ -4,9 +4,10 @@
     extended Kalman filtering for robot state estimation", Int. J. Robotics Research
     39(4):402-430, 2020 (arXiv:1904.09251),
 
-in its bias-free, right-invariant form with kinematic (leg odometry) corrections and contact
-switching. The equation labels (E1)-(E10) are this module's; each names the part of the
-paper it implements.
+in its right-invariant form with kinematic (leg odometry) corrections and contact switching,
+bias-free by default and optionally with IMU bias states (E11, the paper's "imperfect"
+InEKF of its section on IMU biases). The equation labels (E1)-(E11) are this module's;
+each names the part of the paper it implements.
 
 State (the IMU frame I in world W, all in SI units), an element of SE_{2+K}(3)::
 
@@ -51,10 +52,40 @@ columns are removed (marginalised; here zeroed in a fixed-size slot).
 constant): R_WB = R_WI R_BIᵀ, p_WBo = p_WIo − R_WB p_BI, ω_W = R_WI ω̃ (gyro, I frame),
 v_WBo = v_WIo + ω_W × (p_WBo − p_WIo) (rigid-body lever arm).
 
+(E11) IMU biases (optional, ``estimate_imu_bias``): ω̃ = ω + b_g + w_g, ã = a + b_a + w_a,
+with θ = [b_g; b_a] (IMU frame, rad/s and m/s²) random walks θ' = w_θ, w_θ white of
+densities σ_bg (rad/s²/√Hz) and σ_ba (m/s³/√Hz). The state is (X, θ); X's error stays
+right-invariant, θ's is additive, ζ = θ̄ − θ (as in the paper; not a group error), and
+the error vector is [ξ; ζ] ∈ R^{15+3K}. The mean propagates (E1)-(E4) with ω̃ − b̄_g and
+ã − b̄_a (θ̄ constant). The linearised dynamics gain bias columns,
+
+    A = [[A_X, B], [0, 0]],  B = −[[R̄, 0], [[v̄]×R̄, R̄], [[p̄]×R̄, 0], [[d̄_j]×R̄, 0] ...]
+
+(rows ξ_R, ξ_v, ξ_p, ξ_dj; columns ζ_g, ζ_a), still nilpotent (A⁴ = 0), so with X̄ held over
+the step Φ = I + A dt + ½ A² dt² + ⅙ A³ dt³ exactly: its bias columns are
+B dt + A_X B dt²/2 + A_X² B dt³/6. The noise map is blkdiag(Ad_X̄, I_6) and Q_c gains
+σ_bg² I, σ_ba² I. The kinematic H has zero bias columns; the update adds θ⁺ = θ̄ + δ_θ.
+Defaults: the random walks of ``Imperfections.realistic().imu`` (EuRoC's ADIS16448 figures),
+initial bias std 0.1 °/s and 0.05 m/s², the bias estimate starting at 0 (the simulated
+biases start at 0: an IMU calibrated at start-up).
+
 Observability (a property of the filter, tested in tests/test_base_state_estimator.py):
 roll, pitch and velocity are observable through gravity and the contact kinematics; yaw
 and the absolute position are not, so an initial yaw error stays and yaw and position
-random-walk with the gyro and contact noise.
+random-walk with the gyro and contact noise. With bias states (standing, IMU upright):
+
+* the gyro bias about the world's horizontal axes is observable through gravity (a
+  roll/pitch rate would tilt the estimate): it converges in seconds;
+* the gyro bias about the vertical (a yaw rate) is observable only through the leg
+  kinematics of two or more separated contact points (the points, fixed in world, would
+  move in the IMU frame), and weakly, since the model lets them slide with σ_c: an injected
+  0.01 rad/s is 38 % estimated after 10 s on hrp4_like's feet (tested), ~80 % after 60 s
+  (measured on synthetic signals, two points 0.2 m apart). With a single contact point it
+  is unobservable (a yaw about the vertical through the point leaves the kinematics
+  unchanged): its estimate keeps the prior and yaw drifts at its rate;
+* the accelerometer bias along the vertical is observable; its horizontal part is not
+  separable from tilt while the robot stays upright (a horizontal bias b reads as a tilt
+  of b / |g|, both filters alike).
 
 Default noises: a Bosch BMI088-class IMU (Bosch Sensortec, "BMI088 6-axis Motion Tracking
 for High-performance Applications", data sheet BST-BMI088-DS001: gyro output noise density
@@ -66,8 +97,10 @@ Contact flags: :func:`contact_flags_from_wrenches` / :class:`FootContactFromForc
 turn the HRP-4 ankle F/T sensors' world-frame wrenches
 (``systems.simulation.sensors.FootForceTorqueSensors``) into one flag per foot: in contact
 when the normal (world z) force of the ground on the sole exceeds a threshold. A Nao has no
-F/T sensor but four FSRs per foot (``systems.observer.fsr_sensing``): the same test applies
-to the sum of a foot's four FSR forces.
+F/T sensor but four FSRs per foot (``systems.observer.fsr_sensing.FsrArray``):
+:func:`contact_flags_from_fsr` / :class:`FootContactFromFsr` apply the same test to the sum
+of a foot's four FSR forces, with the threshold a fraction of the robot's weight
+(``CONTACT_WEIGHT_FRACTION``, 5 %).
 
 Without any foot in contact the filter propagates on the IMU alone (E1-E5) and the
 ``valid`` output is 0: the velocity then drifts by g · (tilt error) · t plus the
@@ -85,7 +118,7 @@ from pydrake.multibody.tree import Frame
 from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem
 
 from systems.common.checks import check_plant, eval_finite_input, positive_number
-from systems.common.spatial import skew
+from systems.common.spatial import cross, skew
 from systems.common.topology import floating_base_topology
 from systems.dynamics.base_state import quaternion_to_rotation
 
@@ -101,9 +134,26 @@ KINEMATICS_NOISE_STD = 2e-3
 INITIAL_ORIENTATION_STD = 0.05
 INITIAL_VELOCITY_STD = 0.1
 INITIAL_POSITION_STD = 0.01
+#: Bias random walks of the optional bias states (Kalibr's model: the bias drifts with std
+#: σ_b √t), the ADIS16448 figures of the EuRoC MAV dataset's sensor.yaml (Burri et al., IJRR
+#: 2016), equal to ``systems.simulation.imperfections.Imperfections.realistic().imu``:
+#: gyro σ_bg, rad/s²/√Hz, and accelerometer σ_ba, m/s³/√Hz.
+GYRO_BIAS_RANDOM_WALK = 1.9393e-5
+ACCEL_BIAS_RANDOM_WALK = 3.0e-3
+#: Initial bias standard deviations of the bias states: gyro, rad/s (0.1 °/s, what remains
+#: of the BMI088's ±1 °/s zero-rate offset after a start-up calibration at rest), and
+#: accelerometer, m/s² (~5 mg, a quarter of its ±20 mg zero-g offset).
+INITIAL_GYRO_BIAS_STD = 0.1 * math.pi / 180.0
+INITIAL_ACCEL_BIAS_STD = 0.05
 #: Default normal-force threshold of the F/T contact test, N.
 CONTACT_FORCE_THRESHOLD = 20.0
+#: Default contact threshold of :class:`FootContactFromFsr` as a fraction of the robot's
+#: weight (the F/T default 20 N is 5 % of HRP-4's ~390 N): 2.5 N on a 5.19 kg Nao, 12 times
+#: the std (0.2 N) of the sum of a foot's four FSR noises.
+CONTACT_WEIGHT_FRACTION = 0.05
 DEFAULT_GRAVITY = np.array([0.0, 0.0, -9.81])
+_I3 = np.eye(3)
+_I3.flags.writeable = False
 
 
 # ---------------------------------------------------------------------------------------
@@ -124,20 +174,20 @@ def so3_gamma(phi: np.ndarray, order: int) -> np.ndarray:
     K2 = K @ K
     if order == 0:
         if theta2 < 1e-12:
-            return np.eye(3) + K + 0.5 * K2
+            return _I3 + K + 0.5 * K2
         theta = math.sqrt(theta2)
-        return np.eye(3) + (math.sin(theta) / theta) * K + ((1.0 - math.cos(theta)) / theta2) * K2
+        return _I3 + (math.sin(theta) / theta) * K + ((1.0 - math.cos(theta)) / theta2) * K2
     if order == 1:
         if theta2 < 1e-12:
-            return np.eye(3) + 0.5 * K + K2 / 6.0
+            return _I3 + 0.5 * K + K2 / 6.0
         theta = math.sqrt(theta2)
-        return np.eye(3) + ((1.0 - math.cos(theta)) / theta2) * K + ((theta - math.sin(theta)) / (theta2 * theta)) * K2
+        return _I3 + ((1.0 - math.cos(theta)) / theta2) * K + ((theta - math.sin(theta)) / (theta2 * theta)) * K2
     if order == 2:
         if theta2 < 1e-12:
-            return 0.5 * np.eye(3) + K / 6.0 + K2 / 24.0
+            return 0.5 * _I3 + K / 6.0 + K2 / 24.0
         theta = math.sqrt(theta2)
         return (
-            0.5 * np.eye(3)
+            0.5 * _I3
             + ((theta - math.sin(theta)) / (theta2 * theta)) * K
             + ((theta2 + 2.0 * math.cos(theta) - 2.0) / (2.0 * theta2 * theta2)) * K2
         )
@@ -192,7 +242,7 @@ def imu_to_base(
     r = R_WB @ p_BI  # p_BoIo_W
     omega_W = R_WI @ omega_I
     pose = np.concatenate([rotation_to_quaternion(R_WB), p_WI - r])
-    velocity = np.concatenate([omega_W, v_WI - np.cross(omega_W, r)])
+    velocity = np.concatenate([omega_W, v_WI - cross(omega_W, r)])
     return pose, velocity
 
 
@@ -218,6 +268,10 @@ class ContactAidedInvariantEkf:
     The state is the IMU frame's R, v, p in world and one fixed slot per foot (d_j, m), used
     while the foot is in contact. The covariance P ((9 + 3 K_max)²) is over the right-invariant
     error ξ = [ξ_R; ξ_v; ξ_p; ξ_d1; ...]; the rows and columns of a foot out of contact are 0.
+
+    With ``estimate_imu_bias`` the state also holds the IMU biases θ = [b_g; b_a] (E11) and P
+    ((15 + 3 K_max)²) is over [ξ; ζ], ζ = θ̄ − θ after the foot slots. Without it the filter
+    is exactly the bias-free one (same arithmetic, same state vector).
     """
 
     def __init__(
@@ -235,6 +289,11 @@ class ContactAidedInvariantEkf:
         initial_orientation_std: float = INITIAL_ORIENTATION_STD,
         initial_velocity_std: float = INITIAL_VELOCITY_STD,
         initial_position_std: float = INITIAL_POSITION_STD,
+        estimate_imu_bias: bool = False,
+        gyro_bias_random_walk: float = GYRO_BIAS_RANDOM_WALK,
+        accel_bias_random_walk: float = ACCEL_BIAS_RANDOM_WALK,
+        initial_gyro_bias_std: float = INITIAL_GYRO_BIAS_STD,
+        initial_accel_bias_std: float = INITIAL_ACCEL_BIAS_STD,
     ):
         """Args:
             num_feet: K_max, the number of feet (contact slots), >= 1.
@@ -246,6 +305,13 @@ class ContactAidedInvariantEkf:
             kinematics_noise_std: σ_k, m (default 2e-3).
             initial_orientation_std, initial_velocity_std, initial_position_std: the initial
                 P's diagonal stds, rad, m/s, m (defaults 0.05, 0.1, 0.01).
+            estimate_imu_bias: add the gyro and accelerometer bias states (E11); default
+                False (the bias-free filter).
+            gyro_bias_random_walk: σ_bg, rad/s²/√Hz (default 1.9393e-5, EuRoC ADIS16448).
+            accel_bias_random_walk: σ_ba, m/s³/√Hz (default 3.0e-3, EuRoC ADIS16448).
+            initial_gyro_bias_std, initial_accel_bias_std: the initial P's bias stds, rad/s
+                and m/s² (defaults 1.75e-3 = 0.1 °/s and 0.05). The bias estimate starts at 0.
+                The four bias arguments are checked but unused without ``estimate_imu_bias``.
 
         Raises:
             ValueError: a bad number of feet, a non-positive or non-finite noise.
@@ -253,8 +319,15 @@ class ContactAidedInvariantEkf:
         who = "ContactAidedInvariantEkf"
         if isinstance(num_feet, bool) or not isinstance(num_feet, (int, np.integer)) or num_feet < 1:
             raise ValueError(f"{who}: num_feet must be a positive integer, got {num_feet!r}")
+        if not isinstance(estimate_imu_bias, (bool, np.bool_)):
+            raise ValueError(f"{who}: estimate_imu_bias must be a bool, got {estimate_imu_bias!r}")
         self._K = int(num_feet)
-        self._dim = 9 + 3 * self._K
+        self._bias = bool(estimate_imu_bias)
+        #: First index of ζ = [ζ_g; ζ_a] in ξ (after the foot slots), when estimated.
+        self._b0 = 9 + 3 * self._K
+        self._dim = self._b0 + (6 if self._bias else 0)
+        self._eye = np.eye(self._dim)
+        self._eye.flags.writeable = False
         self._g = np.array(gravity, dtype=float).reshape(3)
         self._var_g = positive_number(gyro_noise_density, f"{who}: gyro_noise_density") ** 2
         self._var_a = positive_number(accel_noise_density, f"{who}: accel_noise_density") ** 2
@@ -265,6 +338,14 @@ class ContactAidedInvariantEkf:
                 positive_number(initial_orientation_std, f"{who}: initial_orientation_std"),
                 positive_number(initial_velocity_std, f"{who}: initial_velocity_std"),
                 positive_number(initial_position_std, f"{who}: initial_position_std"),
+            ]
+        )
+        self._var_bg = positive_number(gyro_bias_random_walk, f"{who}: gyro_bias_random_walk") ** 2
+        self._var_ba = positive_number(accel_bias_random_walk, f"{who}: accel_bias_random_walk") ** 2
+        self._initial_bias_std = np.array(
+            [
+                positive_number(initial_gyro_bias_std, f"{who}: initial_gyro_bias_std"),
+                positive_number(initial_accel_bias_std, f"{who}: initial_accel_bias_std"),
             ]
         )
         # Φ = I + A dt + ½ A² dt² (E5): the pieces that do not change with dt.
@@ -278,8 +359,10 @@ class ContactAidedInvariantEkf:
         rotation: np.ndarray | None = None,
         velocity: np.ndarray | None = None,
         position: np.ndarray | None = None,
+        imu_bias: np.ndarray | None = None,
     ) -> None:
-        """Sets R, v, p (defaults I, 0, 0), no foot in contact, P = the initial covariance."""
+        """Sets R, v, p (defaults I, 0, 0), no foot in contact, P = the initial covariance and,
+        with bias states, the bias estimate [b_g (rad/s); b_a (m/s²)] (default 0)."""
         self._R = np.eye(3) if rotation is None else np.array(rotation, dtype=float).reshape(3, 3)
         self._v = np.zeros(3) if velocity is None else np.array(velocity, dtype=float).reshape(3)
         self._p = np.zeros(3) if position is None else np.array(position, dtype=float).reshape(3)
@@ -287,10 +370,33 @@ class ContactAidedInvariantEkf:
         self._in_contact = np.zeros(self._K, dtype=bool)
         self._P = np.zeros((self._dim, self._dim))
         self._P[:9, :9] = np.diag(np.repeat(self._initial_std**2, 3))
+        self._b = np.zeros(6)
+        if imu_bias is not None:
+            if not self._bias:
+                raise ValueError("ContactAidedInvariantEkf.reset: imu_bias given but the filter has no bias states")
+            self._b = np.array(imu_bias, dtype=float).reshape(6)
+        if self._bias:
+            b0 = self._b0
+            self._P[b0:, b0:] = np.diag(np.repeat(self._initial_bias_std**2, 3))
 
     @property
     def num_feet(self) -> int:
         return self._K
+
+    @property
+    def estimates_imu_bias(self) -> bool:
+        """True with the bias states (E11)."""
+        return self._bias
+
+    @property
+    def gyro_bias(self) -> np.ndarray:
+        """b̄_g, the gyro bias estimate in the IMU frame, rad/s (0 without bias states)."""
+        return self._b[:3].copy()
+
+    @property
+    def accel_bias(self) -> np.ndarray:
+        """b̄_a, the accelerometer bias estimate in the IMU frame, m/s² (0 without bias states)."""
+        return self._b[3:].copy()
 
     @property
     def num_contacts(self) -> int:
@@ -324,21 +430,18 @@ class ContactAidedInvariantEkf:
 
     @property
     def covariance(self) -> np.ndarray:
-        """P over ξ = [ξ_R; ξ_v; ξ_p; ξ_d1; ...] (right-invariant error)."""
+        """P over ξ = [ξ_R; ξ_v; ξ_p; ξ_d1; ...] (right-invariant error), then ζ = [ζ_g; ζ_a]
+        with bias states."""
         return self._P.copy()
 
     def state_vector(self) -> np.ndarray:
-        """[R (row-major 9); v; p; d (3 K); in_contact (K); P (row-major)], for Drake's state."""
-        return np.concatenate(
-            [
-                self._R.reshape(-1),
-                self._v,
-                self._p,
-                self._d.reshape(-1),
-                self._in_contact.astype(float),
-                self._P.reshape(-1),
-            ]
-        )
+        """[R (row-major 9); v; p; d (3 K); in_contact (K); (b_g; b_a with bias states);
+        P (row-major)], for Drake's state."""
+        parts = [self._R.reshape(-1), self._v, self._p, self._d.reshape(-1), self._in_contact.astype(float)]
+        if self._bias:
+            parts.append(self._b)
+        parts.append(self._P.reshape(-1))
+        return np.concatenate(parts)
 
     def set_state_vector(self, x: np.ndarray) -> None:
         """Inverse of :meth:`state_vector`."""
@@ -347,6 +450,7 @@ class ContactAidedInvariantEkf:
         self._R, self._v, self._p = R.copy(), v.copy(), p.copy()
         self._d = x[15 : 15 + 3 * K].reshape(K, 3).copy()
         self._in_contact = x[15 + 3 * K : 15 + 4 * K] > 0.5
+        self._b = self.imu_bias_of(x).copy()
         self._P = self.covariance_of(x).copy()
 
     @staticmethod
@@ -354,18 +458,26 @@ class ContactAidedInvariantEkf:
         """(R_WI, v_WIo, p_WIo) of a :meth:`state_vector` (views, no copy)."""
         return x[:9].reshape(3, 3), x[9:12], x[12:15]
 
+    def imu_bias_of(self, x: np.ndarray) -> np.ndarray:
+        """[b_g (rad/s); b_a (m/s²)] of a :meth:`state_vector` (a view; zeros without bias states)."""
+        if not self._bias:
+            return np.zeros(6)
+        s = 15 + 4 * self._K
+        return x[s : s + 6]
+
     def covariance_of(self, x: np.ndarray) -> np.ndarray:
         """P of a :meth:`state_vector` (a view, no copy)."""
-        return x[15 + 4 * self._K :].reshape(self._dim, self._dim)
+        return x[self.state_size - self._dim**2 :].reshape(self._dim, self._dim)
 
     @property
     def state_size(self) -> int:
-        return 15 + 4 * self._K + self._dim**2
+        return 15 + 4 * self._K + (6 if self._bias else 0) + self._dim**2
 
     # -- propagation --------------------------------------------------------------------
 
     def _adjoint(self) -> np.ndarray:
-        """Ad_X̄ of SE_{2+K}(3) (E5); the rows of feet out of contact are left 0."""
+        """Ad_X̄ of SE_{2+K}(3) (E5); the rows of feet out of contact are left 0; with bias
+        states, blkdiag(Ad_X̄, I_6) (E11)."""
         n = self._dim
         R = self._R
         Ad = np.zeros((n, n))
@@ -378,10 +490,44 @@ class ContactAidedInvariantEkf:
             s = 9 + 3 * j
             Ad[s : s + 3, 0:3] = skew(self._d[j]) @ R
             Ad[s : s + 3, s : s + 3] = R
+        if self._bias:
+            Ad[self._b0 :, self._b0 :] = np.eye(6)
         return Ad
 
+    def _bias_columns(self, dt: float) -> np.ndarray:
+        """Φ's bias columns (E11), rows ξ (9 + 3 K) by ζ (6): B dt + A_X B dt²/2 + A_X² B dt³/6,
+        B = A's bias columns at X̄ (A_X B has [g]× B_R in rows v and B_v in rows p; A_X² B has
+        [g]× B_R in rows p)."""
+        R = self._R
+        B = np.zeros((self._b0, 6))
+        B[0:3, 0:3] = -R
+        B[3:6, 0:3] = -skew(self._v) @ R
+        B[3:6, 3:6] = -R
+        B[6:9, 0:3] = -skew(self._p) @ R
+        for j in np.flatnonzero(self._in_contact):
+            s = 9 + 3 * j
+            B[s : s + 3, 0:3] = -skew(self._d[j]) @ R
+        gB = self._g_skew @ B[0:3]
+        columns = B * dt
+        columns[3:6] += gB * (0.5 * dt * dt)
+        columns[6:9] += B[3:6] * (0.5 * dt * dt) + gB * (dt * dt * dt / 6.0)
+        return columns
+
+    def transition_matrix(self, dt: float) -> np.ndarray:
+        """Φ over dt at the current state (E5; with bias states its bias columns, E11): the
+        linearised error ξ(t + dt) = Φ ξ(t) without noise, X̄ held over the step."""
+        Phi = self._eye.copy()
+        Phi[3:6, 0:3] = self._g_skew * dt
+        Phi[6:9, 0:3] = 0.5 * self._g_skew * dt * dt
+        Phi[6:9, 3:6] = _I3 * dt
+        if self._bias:
+            Phi[: self._b0, self._b0 :] = self._bias_columns(dt)
+        return Phi
+
     def propagate(self, omega: np.ndarray, a: np.ndarray, dt: float) -> None:
-        """IMU propagation over dt (E1)-(E5), measurements held over the step.
+        """IMU propagation over dt (E1)-(E5), measurements held over the step; with bias states
+        the measurements are first corrected by the bias estimate, ω̃ − b̄_g and ã − b̄_a, and
+        the covariance propagated with the bias columns and noises (E11).
 
         Args:
             omega: gyro ω̃, angular velocity of I in world expressed in I, rad/s (3).
@@ -390,18 +536,21 @@ class ContactAidedInvariantEkf:
         """
         omega = np.asarray(omega, dtype=float)
         a = np.asarray(a, dtype=float)
+        if self._bias:
+            omega = omega - self._b[:3]
+            a = a - self._b[3:]
         phi = omega * dt
         # Covariance first: Φ and Ad_X̄ at the state before the step.
         n = self._dim
-        Phi = np.eye(n)
-        Phi[3:6, 0:3] = self._g_skew * dt
-        Phi[6:9, 0:3] = 0.5 * self._g_skew * dt * dt
-        Phi[6:9, 3:6] = np.eye(3) * dt
+        Phi = self.transition_matrix(dt)
         q = np.zeros(n)
         q[0:3] = self._var_g
         q[3:6] = self._var_a
         for j in np.flatnonzero(self._in_contact):
             q[9 + 3 * j : 12 + 3 * j] = self._var_c
+        if self._bias:
+            q[self._b0 : self._b0 + 3] = self._var_bg
+            q[self._b0 + 3 :] = self._var_ba
         G = Phi @ self._adjoint()
         self._P = Phi @ self._P @ Phi.T + (G * q) @ G.T * dt
         self._P = 0.5 * (self._P + self._P.T)
@@ -417,7 +566,8 @@ class ContactAidedInvariantEkf:
     # -- correction ---------------------------------------------------------------------
 
     def _apply_correction(self, delta: np.ndarray) -> None:
-        """X⁺ = Exp(δ) X̄ (E7), δ = [δ_R; δ_v; δ_p; δ_d1; ...]."""
+        """X⁺ = Exp(δ) X̄ (E7), δ = [δ_R; δ_v; δ_p; δ_d1; ...]; with bias states θ⁺ = θ̄ + δ_θ
+        (E11)."""
         dR = so3_exp(delta[0:3])
         J = so3_gamma(delta[0:3], 1)
         self._R = dR @ self._R
@@ -425,8 +575,10 @@ class ContactAidedInvariantEkf:
         self._p = dR @ self._p + J @ delta[6:9]
         active = np.flatnonzero(self._in_contact)
         if active.size:
-            dd = delta[9:].reshape(self._K, 3)[active]
+            dd = delta[9 : self._b0].reshape(self._K, 3)[active]
             self._d[active] = self._d[active] @ dR.T + dd @ J.T
+        if self._bias:
+            self._b = self._b + delta[self._b0 :]
 
     def correct_kinematics(self, foot_positions: np.ndarray, in_contact: np.ndarray) -> None:
         """Kinematic correction and contact switching (E6)-(E9).
@@ -455,13 +607,13 @@ class ContactAidedInvariantEkf:
             r = (h[update] @ self._R.T - (self._d[update] - self._p)).reshape(-1)
             H = np.zeros((3 * m, self._dim))
             for i, j in enumerate(update):
-                H[3 * i : 3 * i + 3, 6:9] = -np.eye(3)
-                H[3 * i : 3 * i + 3, 9 + 3 * j : 12 + 3 * j] = np.eye(3)
+                H[3 * i : 3 * i + 3, 6:9] = -_I3
+                H[3 * i : 3 * i + 3, 9 + 3 * j : 12 + 3 * j] = _I3
             PHt = self._P @ H.T
             S = H @ PHt + self._var_k * np.eye(3 * m)
             K = np.linalg.solve(S, PHt.T).T
             self._apply_correction(K @ r)
-            IKH = np.eye(self._dim) - K @ H
+            IKH = self._eye - K @ H
             self._P = IKH @ self._P @ IKH.T + self._var_k * (K @ K.T)
             self._P = 0.5 * (self._P + self._P.T)
         # (E8) contact made: d_j = p + R h_j, ξ_dj = ξ_p + R n_j.
@@ -470,12 +622,12 @@ class ContactAidedInvariantEkf:
             self._d[j] = self._p + self._R @ h[j]
             self._P[s : s + 3, :] = self._P[6:9, :]
             self._P[:, s : s + 3] = self._P[:, 6:9]
-            self._P[s : s + 3, s : s + 3] = self._P[6:9, 6:9] + self._var_k * np.eye(3)
+            self._P[s : s + 3, s : s + 3] = self._P[6:9, 6:9] + self._var_k * _I3
             self._in_contact[j] = True
 
 
 # ---------------------------------------------------------------------------------------
-# Contact flags from the F/T sensors.
+# Contact flags from the F/T sensors or the FSRs.
 # ---------------------------------------------------------------------------------------
 
 
@@ -500,7 +652,7 @@ class FootContactFromForceTorque(LeafSystem):
     Outputs:
         foot_contact: one flag per foot (1.0 in contact, 0.0 not), in the sensors' order.
 
-    For a Nao, sum the four FSR forces of each foot and compare with the threshold instead.
+    For a Nao's FSRs see :class:`FootContactFromFsr`.
     """
 
     def __init__(self, num_feet: int, threshold: float = CONTACT_FORCE_THRESHOLD):
@@ -519,6 +671,77 @@ class FootContactFromForceTorque(LeafSystem):
     def _CalcContact(self, context: Context, output: BasicVector) -> None:
         w = eval_finite_input("FootContactFromForceTorque", self._wrenches, context)
         output.SetFromVector(contact_flags_from_wrenches(w, self._threshold))
+
+
+def contact_flags_from_fsr(forces: np.ndarray, threshold: float, sensors_per_foot: int = 4) -> np.ndarray:
+    """One flag per foot: 1.0 where the sum of the foot's FSR normal forces > threshold.
+
+    Args:
+        forces: ``sensors_per_foot`` readings per foot, foot by foot (``FsrArray``'s
+            ``fsr_forces``: left then right, each in ``models.FSR_ORDER``), N.
+        threshold: N.
+        sensors_per_foot: FSRs per foot (4 on a Nao).
+    """
+    f = np.asarray(forces, dtype=float).reshape(-1, sensors_per_foot)
+    return (f.sum(axis=1) > threshold).astype(float)
+
+
+class FootContactFromFsr(LeafSystem):
+    """Contact flags from foot force-sensing resistors (:func:`contact_flags_from_fsr`).
+
+    A foot is in contact when the sum of its FSR readings exceeds ``weight_fraction`` times
+    the robot's weight (default ``CONTACT_WEIGHT_FRACTION`` = 5 %: 2.5 N on a 5.19 kg Nao;
+    the F/T default 20 N is the same 5 % of HRP-4's weight).
+
+    Inputs:
+        fsr_forces: ``sensors_per_foot`` per foot, N, foot by foot (``FsrArray``'s
+            ``fsr_forces``: left foot then right foot, each front_left, front_right,
+            rear_left, rear_right).
+
+    Outputs:
+        foot_contact: one flag per foot (1.0 in contact, 0.0 not), in the input's foot order.
+
+    Every input is checked: NaN or inf raises a ValueError naming the port.
+    """
+
+    def __init__(
+        self,
+        robot_weight: float,
+        *,
+        weight_fraction: float = CONTACT_WEIGHT_FRACTION,
+        num_feet: int = 2,
+        sensors_per_foot: int = 4,
+    ):
+        """Args:
+        robot_weight: the robot's weight m |g|, N.
+        weight_fraction: the threshold as a fraction of ``robot_weight``, in (0, 1).
+        num_feet: number of feet, >= 1 (default 2).
+        sensors_per_foot: FSRs per foot, >= 1 (default 4, Nao).
+
+        Raises:
+            ValueError: a non-positive weight, a fraction outside (0, 1), bad counts.
+        """
+        super().__init__()
+        who = "FootContactFromFsr"
+        for name, value in (("num_feet", num_feet), ("sensors_per_foot", sensors_per_foot)):
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+                raise ValueError(f"{who}: {name} must be a positive integer, got {value!r}")
+        fraction = positive_number(weight_fraction, f"{who}: weight_fraction")
+        if fraction >= 1.0:
+            raise ValueError(f"{who}: weight_fraction must be below 1, got {weight_fraction!r}")
+        self._threshold = fraction * positive_number(robot_weight, f"{who}: robot_weight")
+        self._per_foot = int(sensors_per_foot)
+        self._forces = self.DeclareVectorInputPort("fsr_forces", self._per_foot * int(num_feet))
+        self.DeclareVectorOutputPort("foot_contact", int(num_feet), self._CalcContact)
+
+    @property
+    def threshold(self) -> float:
+        """The contact threshold on a foot's FSR sum, N."""
+        return self._threshold
+
+    def _CalcContact(self, context: Context, output: BasicVector) -> None:
+        f = eval_finite_input("FootContactFromFsr", self._forces, context)
+        output.SetFromVector(contact_flags_from_fsr(f, self._threshold, self._per_foot))
 
 
 # ---------------------------------------------------------------------------------------
@@ -548,8 +771,14 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         base_velocity: 6, the free joint's v layout: [ω_WB; v_WBo] in world, rad/s and m/s (E10).
         valid: 1, 1.0 when at least one foot was in contact at the last update (its point is
             in the state and anchors it), 0.0 when the filter runs on the IMU alone.
-        standard_deviation: 9, sqrt of P's diagonal for ξ_R (rad), ξ_v (m/s), ξ_p (m).
+        standard_deviation: 9, sqrt of P's diagonal for ξ_R (rad), ξ_v (m/s), ξ_p (m)
+            (always 9, with or without bias states).
+        imu_bias: 6, the bias estimate [b̄_g (rad/s); b̄_a (m/s²)] in the IMU frame I, the
+            amounts subtracted from the gyro and accelerometer (E11); 0 without bias states.
+        imu_bias_standard_deviation: 6, sqrt of P's diagonal for ζ_g (rad/s) and ζ_a
+            (m/s²); 0 without bias states (the bias is then taken as known, 0).
 
+    With bias states the output angular velocity uses the corrected gyro ω̃ − b̄_g.
     Every input is checked: NaN or inf raises a ValueError naming the port.
     """
 
@@ -569,6 +798,11 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         initial_orientation_std: float = INITIAL_ORIENTATION_STD,
         initial_velocity_std: float = INITIAL_VELOCITY_STD,
         initial_position_std: float = INITIAL_POSITION_STD,
+        estimate_imu_bias: bool = False,
+        gyro_bias_random_walk: float = GYRO_BIAS_RANDOM_WALK,
+        accel_bias_random_walk: float = ACCEL_BIAS_RANDOM_WALK,
+        initial_gyro_bias_std: float = INITIAL_GYRO_BIAS_STD,
+        initial_accel_bias_std: float = INITIAL_ACCEL_BIAS_STD,
     ):
         """Args:
             plant: a finalized floating-base plant (for forward kinematics and gravity).
@@ -578,7 +812,8 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
                 default free-joint pose (use :meth:`SetInitialBaseState` on a context).
             initial_base_velocity: 6, default 0.
             period: update period, s (default 1 ms).
-            gyro_noise_density ... initial_position_std: see :class:`ContactAidedInvariantEkf`.
+            gyro_noise_density ... initial_accel_bias_std: see :class:`ContactAidedInvariantEkf`
+                (``estimate_imu_bias`` False, the default: the bias-free filter).
 
         Raises:
             ValueError: bad plant or frames, bad noise parameters or period.
@@ -618,6 +853,11 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
             initial_orientation_std=initial_orientation_std,
             initial_velocity_std=initial_velocity_std,
             initial_position_std=initial_position_std,
+            estimate_imu_bias=estimate_imu_bias,
+            gyro_bias_random_walk=gyro_bias_random_walk,
+            accel_bias_random_walk=accel_bias_random_walk,
+            initial_gyro_bias_std=initial_gyro_bias_std,
+            initial_accel_bias_std=initial_accel_bias_std,
         )
         x0 = self._initial_state(initial_base_pose, initial_base_velocity)
         n = topology.num_joints
@@ -625,8 +865,9 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         self._accel = self.DeclareVectorInputPort("linear_acceleration", 3)
         self._joints = self.DeclareVectorInputPort("joint_positions", n)
         self._contact = self.DeclareVectorInputPort("foot_contact", len(frames))
-        # Discrete state groups: the filter (the core's state_vector), the last gyro sample
-        # (3, rad/s, for the output angular velocity) and valid (1: a foot in contact).
+        # Discrete state groups: the filter (the core's state_vector, with the bias estimate
+        # when on), the last gyro sample, bias-corrected (3, rad/s, for the output angular
+        # velocity) and valid (1: a foot in contact).
         self._filter_index = self.DeclareDiscreteState(x0[0])
         self._gyro_index = self.DeclareDiscreteState(x0[1])
         self._valid_index = self.DeclareDiscreteState(x0[2])
@@ -636,6 +877,8 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         self.DeclareVectorOutputPort("base_velocity", 6, self._CalcVelocity, prerequisites_of_calc=xd)
         self.DeclareVectorOutputPort("valid", 1, self._CalcValid, prerequisites_of_calc=xd)
         self.DeclareVectorOutputPort("standard_deviation", 9, self._CalcStd, prerequisites_of_calc=xd)
+        self.DeclareVectorOutputPort("imu_bias", 6, self._CalcBias, prerequisites_of_calc=xd)
+        self.DeclareVectorOutputPort("imu_bias_standard_deviation", 6, self._CalcBiasStd, prerequisites_of_calc=xd)
 
     @property
     def period(self) -> float:
@@ -644,6 +887,11 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
     @property
     def foot_frames(self) -> tuple:
         return self._foot_frames
+
+    @property
+    def estimates_imu_bias(self) -> bool:
+        """True with the IMU bias states (E11)."""
+        return self._core.estimates_imu_bias
 
     def _initial_state(self, base_pose, base_velocity) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         who = self._who
@@ -684,21 +932,27 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         h = self._foot_kinematics(joints) if flags.any() else np.zeros((core.num_feet, 3))
         core.correct_kinematics(h, flags)  # with no flag set this only removes feet (E9)
         valid = 1.0 if core.num_contacts else 0.0
+        if core.estimates_imu_bias:
+            omega_corrected = omega - core.gyro_bias  # the bias this propagation uses (E11)
+        else:
+            omega_corrected = omega
         core.propagate(omega, accel, self._period)
         discrete_state.set_value(self._filter_index, core.state_vector())
-        discrete_state.set_value(self._gyro_index, omega)
+        discrete_state.set_value(self._gyro_index, omega_corrected)
         discrete_state.set_value(self._valid_index, [valid])
 
-    def _outputs(self, context: Context) -> tuple[np.ndarray, np.ndarray]:
-        R, v, p = self._core.navigation_state(context.get_discrete_state(self._filter_index).value())
-        omega = context.get_discrete_state(self._gyro_index).value()
-        return imu_to_base(R, p, v, omega, self._R_BI, self._p_BI)
-
     def _CalcPose(self, context: Context, output: BasicVector) -> None:
-        output.SetFromVector(self._outputs(context)[0])
+        # imu_to_base's pose (E10), without its velocity.
+        R, _, p = self._core.navigation_state(context.get_discrete_state(self._filter_index).value())
+        R_WB = R @ self._R_BI.T
+        output.SetFromVector(np.concatenate([rotation_to_quaternion(R_WB), p - R_WB @ self._p_BI]))
 
     def _CalcVelocity(self, context: Context, output: BasicVector) -> None:
-        output.SetFromVector(self._outputs(context)[1])
+        # imu_to_base's velocity (E10), without its pose.
+        R, v, _ = self._core.navigation_state(context.get_discrete_state(self._filter_index).value())
+        omega_W = R @ context.get_discrete_state(self._gyro_index).value()
+        r = (R @ self._R_BI.T) @ self._p_BI
+        output.SetFromVector(np.concatenate([omega_W, v - cross(omega_W, r)]))
 
     def _CalcValid(self, context: Context, output: BasicVector) -> None:
         output.SetFromVector(context.get_discrete_state(self._valid_index).value())
@@ -707,12 +961,24 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         P = self._core.covariance_of(context.get_discrete_state(self._filter_index).value())
         output.SetFromVector(np.sqrt(np.maximum(np.diag(P)[:9], 0.0)))
 
+    def _CalcBias(self, context: Context, output: BasicVector) -> None:
+        output.SetFromVector(self._core.imu_bias_of(context.get_discrete_state(self._filter_index).value()))
+
+    def _CalcBiasStd(self, context: Context, output: BasicVector) -> None:
+        if not self._core.estimates_imu_bias:
+            output.SetFromVector(np.zeros(6))
+            return
+        P = self._core.covariance_of(context.get_discrete_state(self._filter_index).value())
+        output.SetFromVector(np.sqrt(np.maximum(np.diag(P)[-6:], 0.0)))
+
 
 __all__ = [
     "ContactAidedInvariantEkf",
     "FootContactFromForceTorque",
+    "FootContactFromFsr",
     "InvariantEkfBaseStateEstimator",
     "base_to_imu",
+    "contact_flags_from_fsr",
     "contact_flags_from_wrenches",
     "imu_to_base",
     "rotation_to_quaternion",

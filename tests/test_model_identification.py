@@ -572,3 +572,26 @@ def test_identification_refuses_bad_input(hrp4, calibration):
         identify_model_corrections(
             plant, log, known_wrench_frames=frames, options=IdentificationOptions(cutoff_frequency=500.0)
         )
+
+
+def test_joints_the_log_moves_slowly_get_no_viscous_term(hrp4, calibration):
+    """Below ~v_s, F_c tanh(qdot / v_s) + b qdot ~ (F_c / v_s + b) qdot: any split of the
+    slope fits, and a wrong b extrapolates badly to faster motions. A joint whose 95th
+    percentile speed stays under viscous_min_speed v_s keeps b = 0, and its Coulomb term
+    carries the low-speed slope: F_c / v_s ~ the true F_c / v_s + b."""
+    plant, _ = hrp4
+    _, log, truth, frames = calibration
+    speed = np.percentile(np.abs(log.v[:, 6:]), 95, axis=0)
+    threshold = float(np.median(speed)) / 0.1  # in units of v_s = 0.1 rad/s: half the joints
+    options = IdentificationOptions(
+        decimation_period=DECIMATION, torque_std=_torque_std(plant), viscous_min_speed=threshold
+    )
+    corrections = identify_model_corrections(plant, log, known_wrench_frames=frames, options=options)
+    names = [j.name() for j in floating_base_topology(plant).joints]
+    slow = speed < threshold * 0.1
+    assert sorted(corrections.diagnostics["joints_without_viscous"]) == sorted(np.array(names)[slow].tolist())
+    assert np.all(corrections.viscous[slow] == 0.0) and np.all(corrections.viscous[~slow] != 0.0)
+    strong = slow & (rated_joint_torques(plant) >= 40.0)
+    assert strong.any()
+    low_speed_slope = truth["coulomb"][strong] / 0.1 + truth["viscous"][strong]
+    np.testing.assert_allclose(corrections.coulomb[strong] / 0.1, low_speed_slope, rtol=0.35)

@@ -81,6 +81,7 @@ from pydrake.systems.framework import BasicVector, Context, LeafSystem
 
 from systems.common.checks import check_plant, eval_finite_input, per_joint, positive_number
 from systems.common.topology import floating_base_topology, uniform_gravity
+from systems.residuals.offline import ResidualNoiseModel
 
 #: Order of a body's 10 inertial parameters (I about the body origin, body frame).
 PARAMETER_NAMES = ("m", "mc_x", "mc_y", "mc_z", "Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz")
@@ -94,6 +95,9 @@ SOLVER_RCOND = 1e-10
 #: (in the column-normalised unknowns) that ends them (3 steps on the tests' logs).
 GAUSS_NEWTON_STEPS = 5
 GAUSS_NEWTON_TOLERANCE = 1e-7
+#: Weight of the prior rows that hold an unknown at its nominal value (a viscous coefficient
+#: the log cannot identify), on the column-normalised unknowns.
+PINNED_WEIGHT = 1e6
 #: Fewest samples a calibration log may have.
 MIN_LOG_SAMPLES = 20
 
@@ -508,6 +512,9 @@ class IdentificationOptions:
             offset then collinear). 0: none.
         min_mass_fraction: every corrected mass is clipped to >= this fraction of its
             nominal mass (a safeguard; the count is in the diagnostics).
+        viscous_min_speed: the viscous coefficient b of a joint is identified only if the
+            log moves it faster than this many v_s (95th percentile of |qdot|); else b = 0
+            and the Coulomb term carries its friction (the diagnostics list those joints).
     """
 
     cutoff_frequency: float = 5.0
@@ -526,6 +533,7 @@ class IdentificationOptions:
     inertial_prior_std: float = 0.0
     joint_prior_weight: float = 0.0
     min_mass_fraction: float = 0.2
+    viscous_min_speed: float = 2.0
 
     def validate(self) -> IdentificationOptions:
         who = "IdentificationOptions"
@@ -538,7 +546,7 @@ class IdentificationOptions:
             "rank_tolerance",
         ):
             positive_number(getattr(self, name), f"{who}.{name}")
-        for name in ("edge_time", "inertial_prior_std", "joint_prior_weight", "min_mass_fraction"):
+        for name in ("edge_time", "inertial_prior_std", "joint_prior_weight", "min_mass_fraction", "viscous_min_speed"):
             positive_number(getattr(self, name), f"{who}.{name}", allow_zero=True)
         if not isinstance(self.filter_order, int) or not 1 <= self.filter_order <= 10:
             raise ValueError(f"{who}.filter_order must be an integer in 1..10, got {self.filter_order!r}")
@@ -558,6 +566,9 @@ class ModelCorrections:
         torque_offset: o, N m; torque_scale: s (measured = (1 + s) tau + o); 0 on
             unactuated joints.
         body_names: {body index: name}, to check the plant a saved file is used with.
+        residual_noise: optional ``systems.residuals.offline.ResidualNoiseModel``: the
+            covariances of the residuals on the calibration log with this model (the
+            contact detector's noise model); None if not measured.
         diagnostics: rank, num_samples, num_clipped_masses and the RMS of the regression
             residual of (R3) with the nominal model (``rms_before``) and the corrected one
             (``rms_after``), per row group: ``base_force`` (N), ``base_moment`` (N m),
@@ -572,6 +583,7 @@ class ModelCorrections:
     torque_scale: np.ndarray
     body_names: dict[int, str] = field(default_factory=dict)
     diagnostics: dict = field(default_factory=dict)
+    residual_noise: ResidualNoiseModel | None = None
 
     def corrected_torque(self, measured_torque: np.ndarray, v_joints: np.ndarray) -> np.ndarray:
         """The joint effort (N m): (tau_m - o)/(1 + s) - F_c tanh(qdot/v_s) - b qdot, for
@@ -601,6 +613,7 @@ class ModelCorrections:
             torque_offset=self.torque_offset,
             torque_scale=self.torque_scale,
             diagnostics=np.array(json.dumps(self.diagnostics)),
+            **(self.residual_noise.as_arrays() if self.residual_noise is not None else {}),
         )
 
     @classmethod
@@ -629,6 +642,7 @@ class ModelCorrections:
                     torque_scale=np.array(data["torque_scale"], dtype=float),
                     body_names={int(k): v for k, v in json.loads(str(data["body_names"])).items()},
                     diagnostics=json.loads(str(data["diagnostics"])),
+                    residual_noise=ResidualNoiseModel.from_arrays(data),
                 )
         except (OSError, EOFError, KeyError, ValueError, zipfile.BadZipFile, json.JSONDecodeError) as err:
             raise ValueError(f"ModelCorrections.load: cannot read {str(path)!r}: {err}") from err
@@ -724,6 +738,14 @@ def identify_model_corrections(
     q, v, vdot, tau_m, W, coulomb_column, viscous_column, keep = _filtered_log(log, options)
     if keep.size * nv < 2 * (4 * nb + 4 * n):
         raise ValueError(f"{who}: too few samples after filtering and decimation ({keep.size}); log a longer motion")
+    # Coulomb and viscous friction are told apart only by speeds well beyond v_s: below,
+    # F_c tanh(qdot / v_s) + b qdot ~ (F_c / v_s + b) qdot and any split fits. A joint the
+    # log never moves that fast keeps b = 0 (its slope goes to F_c), so that its friction
+    # does not extrapolate with a wrong b to faster motions.
+    joint_speed = np.percentile(np.abs(v[keep, 6:]), 95, axis=0)
+    slow_joints = joint_speed < options.viscous_min_speed * options.smoothing_velocity
+    viscous_column = viscous_column.copy()
+    viscous_column[:, slow_joints] = 0.0
 
     # Which columns are identified (per body) and their scales (nominal m, m r, m r^2).
     identified = np.array(MASS_AND_FIRST_MOMENT + (ROTATIONAL if options.identify_rotational_inertia else ()))
@@ -832,6 +854,11 @@ def identify_model_corrections(
             if options.joint_prior_weight > 0.0:
                 ridge = math.sqrt(options.joint_prior_weight) * np.diag(norms)[r:]
                 prior = np.vstack((prior, ridge))
+            if "viscous" in groups and slow_joints[act].any():  # b = 0 exactly (its column is 0)
+                pinned = r + groups.index("viscous") * na + np.flatnonzero(slow_joints[act])
+                pin_rows = np.zeros((pinned.size, x_nominal.size))
+                pin_rows[np.arange(pinned.size), pinned] = PINNED_WEIGHT
+                prior = np.vstack((prior, pin_rows))
         J /= norms
         prior_n, prior_e = prior / norms, -prior @ (x - x_nominal)
         if _step == 0:  # the large step: least squares on the triangular factor of [J, -e]
@@ -846,6 +873,9 @@ def identify_model_corrections(
         if np.max(np.abs(dx * norms)) < GAUSS_NEWTON_TOLERANCE * max(1.0, np.max(np.abs(x * norms))):
             break
     del J
+
+    if "viscous" in groups:  # the pinned coefficients: exactly 0, not the solver's 1e-15
+        x[r + groups.index("viscous") * na + np.flatnonzero(slow_joints[act])] = 0.0
 
     # Per-link parameters: the minimum-norm (scaled) deviation reproducing pi_base.
     delta = K.T @ np.linalg.solve(K @ K.T, x[:r] - K @ theta_nominal)
@@ -894,6 +924,7 @@ def identify_model_corrections(
     zeros = np.zeros(n)
     diagnostics = {
         "rank": int(base.rank),
+        "joints_without_viscous": [topology.joints[k].name() for k in np.flatnonzero(slow_joints)],
         "num_inertial_columns": int(live.sum()),
         "num_samples": int(S),
         "num_clipped_masses": int(clipped.sum()),

@@ -1,2 +1,3 @@
-"""Walking: the ZMP preview-control pattern generator, the Nao walking controller and the
-analytic leg inverse kinematics."""
+"""Motion references: the ZMP preview-control pattern generator, the Nao walking controller,
+the analytic leg inverse kinematics, posture schedules and the slow sinusoidal whole-body
+motions (``posture_motion``)."""

@@ -481,6 +481,9 @@ class ContactDetector(LeafSystem):
         release_time: s below the off thresholds to switch off (default 0.02).
         period: update period, s.
         use_external, use_internal: which tests to run.
+        startup_time: s, no detection before this time (the estimators' start-up: the
+            residuals start at 0 and a base-state estimator converges over its first steps).
+            Default 0.
     """
 
     def __init__(
@@ -500,6 +503,7 @@ class ContactDetector(LeafSystem):
         period: float = DEFAULT_PERIOD,
         use_external: bool = True,
         use_internal: bool = True,
+        startup_time: float = 0.0,
     ):
         super().__init__()
         who = self._who = "ContactDetector"
@@ -522,6 +526,9 @@ class ContactDetector(LeafSystem):
         if not math.isfinite(self._release_time) or self._release_time < 0.0:
             raise ValueError(f"{who}: release_time must be >= 0, got {release_time}")
         self._on_samples = int(on_samples)
+        self._startup_time = float(startup_time)
+        if not math.isfinite(self._startup_time) or self._startup_time < 0.0:
+            raise ValueError(f"{who}: startup_time must be >= 0, got {startup_time}")
         if covariance_internal is None or covariance_external_force is None:
             cov_int, cov_ext = predicted_residual_covariances(
                 plant,
@@ -592,9 +599,9 @@ class ContactDetector(LeafSystem):
         detected, t_detect, above, below_time = old.detected, old.detection_time, old.samples_above, old.time_below
         s = self.statistics(w, r)
         use = self._use
-        is_above = any(u and si > th for u, si, th in zip(use, s, self._on))
-        is_below = all((not u) or si < th for u, si, th in zip(use, s, self._off))
         t = context.get_time()
+        is_above = t >= self._startup_time and any(u and si > th for u, si, th in zip(use, s, self._on))
+        is_below = all((not u) or si < th for u, si, th in zip(use, s, self._off))
         if detected < 0.5:
             above = above + 1.0 if is_above else 0.0
             if above >= self._on_samples:

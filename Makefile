@@ -15,7 +15,7 @@ MPLBACKEND ?= Agg
 export MPLBACKEND
 RUN = LD_PRELOAD="$(TCMALLOC)$${LD_PRELOAD:+ $$LD_PRELOAD}" $(PY)
 
-.PHONY: demo push-and-comply standing residual-comparison contact-localization nao-force-observer nao-walk nao-walk-pulled nao-force-guided-walk nao-compliant-arms benchmark test install clean
+.PHONY: demo push-and-comply standing residual-comparison contact-localization model-refinement nao-force-observer nao-walk nao-walk-pulled nao-force-guided-walk nao-compliant-arms benchmark test install clean
 
 install: $(STAMP)
 
@@ -52,6 +52,9 @@ residual-comparison: $(STAMP)
 
 contact-localization: $(STAMP)
 	$(RUN) -m apps.contact_localization $(ARGS)
+
+model-refinement: $(STAMP)
+	$(RUN) -m apps.model_refinement $(ARGS)
 
 nao-force-observer: $(STAMP)
 	$(RUN) -m apps.nao_force_observer $(ARGS)

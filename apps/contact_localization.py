@@ -1,5 +1,9 @@
 """Contact localization Monte Carlo study: Flacco et al. (2016), Secs. V-VI, Fig. 9.
 
+By default the study runs in the realistic world (``diagrams.station.conditions``: the
+base state from the invariant EKF, realistic imperfections, the model refined once from a
+calibration motion before the trials); ``--ideal`` runs it in the ideal world.
+
 The humanoid (``hrp4_like``) stands holding its posture with noisy sensors; in each trial a
 constant force of 5-40 N, within 60 deg of the inward surface normal, pushes a random point
 of the outer collision surface of a random link (upper body and legs; the soles, below the
@@ -7,19 +11,22 @@ F/T sensors, are excluded) for 1 s. The internal and external residuals, the
 ContactDetector and the ContactLocalizer see only the sensors. Per trial the app records
 detection and its delay, the localized link and point and the force at the end of the push
 (t = start + 1 s; the localizer averages its inputs from 0.1 s after detection), and the
-computation time of one localizer update. A separate run without contact (10 s) counts
-false detections.
+computation time of one localizer update. Two runs without contact count false detections:
+60 s standing, and 60 s of slow whole-body motion (``diagrams.station.motions``, a motion
+the calibration never saw).
 
 Run: ``python -m apps.contact_localization [--scenario FILE] [--scenario-text YAML]
 [--trials N] [--seed S] [--model M] [--push-start S] [--contact-duration S]
-[--no-contact-duration S] [--no-noise] [--out DIR] [--headless] [--workers W] [--replays R]``.
+[--no-contact-duration S] [--slow-motion-duration S] [--no-noise] [--ideal] [--out DIR] [--headless]
+[--workers W] [--replays R]``.
 The scenario is a ``ContactLocalizationScenario``; ``--trials``, ``--seed``, ``--model``,
-``--push-start``, ``--contact-duration`` (``push_duration``), ``--no-contact-duration`` and
-``--no-noise`` override its fields; ``--workers`` and ``--replays`` are how it runs. Trials run
-in parallel processes ('spawn'). Writes to ``DIR/contact_localization/``: ``metrics.json``
-(totals, floors, per-trial results, the scenario), ``position_errors.png`` (histogram), and
-``replay_trial_<i>.html`` (Meshcat replays of the first R trials: green arrow = true force
-ending at the true contact point, red arrow = the localizer's estimate, shown while valid).
+``--push-start``, ``--contact-duration`` (``push_duration``), ``--no-contact-duration``,
+``--slow-motion-duration`` and ``--no-noise`` override its fields, ``--ideal`` its world;
+``--workers`` and ``--replays`` are how it runs. Trials run in parallel processes ('spawn').
+Writes to ``DIR/contact_localization/``: ``metrics.json`` (totals, floors, per-trial
+results, the scenario), ``position_errors.png`` (histogram), and ``replay_trial_<i>.html``
+(Meshcat replays of the first R trials: green arrow = true force ending at the true contact
+point, red arrow = the localizer's estimate, shown while valid).
 
 The metrics are defined in ``diagrams.residuals.contact_localization``.
 """
@@ -56,9 +63,11 @@ from diagrams.residuals.contact_localization import (
     no_contact_result,
     no_contact_scenario,
     sample_trials,
+    slow_motion_scenario,
     trial_result,
     trial_scenario,
 )
+from diagrams.residuals.model_refinement import calibration_file, refined_model
 from diagrams.scenarios import load_scenario, scenario_as_yaml
 
 #: The replays go on 0.3 s after the push, to show its release.
@@ -74,7 +83,7 @@ def run_trial(spec: dict, scenario: ContactLocalizationScenario) -> dict:
     """Simulates the trial ``spec`` (``sample_trials``) of ``scenario`` to the end of its push;
     returns its results (``trial_result``)."""
     trial = trial_scenario(scenario, spec)
-    diagram, handles = build_contact_localization_diagram(trial)
+    diagram, handles = build_contact_localization_diagram(trial, model_corrections=refined_model(scenario))
     run = simulate(
         diagram,
         trial.push_start + trial.push_duration,
@@ -87,7 +96,7 @@ def run_trial(spec: dict, scenario: ContactLocalizationScenario) -> dict:
 def record_replay(spec: dict, scenario: ContactLocalizationScenario, meshcat, *, live: bool = True) -> None:
     """Records the trial ``spec`` in ``meshcat``, its push and its release."""
     trial = trial_scenario(scenario, spec)
-    diagram, handles = build_contact_localization_diagram(trial, meshcat)
+    diagram, handles = build_contact_localization_diagram(trial, meshcat, model_corrections=refined_model(scenario))
     simulate(
         diagram,
         trial.push_start + trial.push_duration + REPLAY_AFTER_PUSH_S,
@@ -99,10 +108,11 @@ def record_replay(spec: dict, scenario: ContactLocalizationScenario, meshcat, *,
     )
 
 
-def run_no_contact(scenario: ContactLocalizationScenario) -> dict:
-    """The study's run without contact (``no_contact_scenario``): its false detections."""
-    run_scenario = no_contact_scenario(scenario)
-    diagram, handles = build_contact_localization_diagram(run_scenario)
+def run_no_contact(scenario: ContactLocalizationScenario, kind: str = "no_contact") -> dict:
+    """A run without contact, standing (``kind`` "no_contact", ``no_contact_scenario``) or
+    in slow motion ("slow_motion", ``slow_motion_scenario``): its false detections."""
+    run_scenario = no_contact_scenario(scenario) if kind == "no_contact" else slow_motion_scenario(scenario)
+    diagram, handles = build_contact_localization_diagram(run_scenario, model_corrections=refined_model(scenario))
     run = simulate(
         diagram,
         run_scenario.no_contact_duration,
@@ -118,7 +128,7 @@ def _job(job: tuple) -> tuple[str, dict]:
     scenario = load_scenario(ContactLocalizationScenario, text=scenario_yaml)
     if kind == "trial":
         return kind, run_trial(spec, scenario)
-    return kind, run_no_contact(scenario)
+    return kind, run_no_contact(scenario, kind)
 
 
 # ---------------------------------------------------------------------------------------
@@ -148,7 +158,7 @@ def plot_position_errors(path: Path, results: list[dict]) -> None:
 
 
 def _parse(argv):
-    parser = experiment_parser("apps.contact_localization", __doc__, replay=False)
+    parser = experiment_parser("apps.contact_localization", __doc__, replay=False, conditions=True)
     parser.add_argument("--trials", type=int, default=None, help="number of random contacts (scenario default 200)")
     parser.add_argument("--seed", type=int, default=None, help="seed of the trials and of the sensor noise")
     parser.add_argument("--model", default=None, help="humanoid with foot F/T sensors (hrp4_like)")
@@ -167,7 +177,13 @@ def _parse(argv):
         "--no-contact-duration",
         type=float,
         default=None,
-        help="length of the run without contact for false detections, s (scenario default 10; 0 skips)",
+        help="length of the standing run without contact for false detections, s (scenario default 60; 0 skips)",
+    )
+    parser.add_argument(
+        "--slow-motion-duration",
+        type=float,
+        default=None,
+        help="length of the slow whole-body motion run without contact, s (scenario default 60; 0 skips)",
     )
     parser.add_argument("--no-noise", action="store_true", help="ideal sensors")
     args = parser.parse_args(argv)
@@ -182,10 +198,11 @@ def _parse(argv):
     return args
 
 
-def _run_jobs(jobs: list, workers: int) -> tuple[list[dict], dict | None]:
+def _run_jobs(jobs: list, workers: int) -> tuple[list[dict], dict]:
     """Runs the jobs (in ``workers`` spawned processes when more than one); returns the
-    trials' results in trial order and the run without contact's (or None)."""
-    results, no_contact = [], None
+    trials' results in trial order and those of the runs without contact by kind
+    ("no_contact", "slow_motion")."""
+    results, no_contact = [], {}
     if workers == 1:
         outputs = map(_job, jobs)
         pool = None
@@ -197,7 +214,7 @@ def _run_jobs(jobs: list, workers: int) -> tuple[list[dict], dict | None]:
             if kind == "trial":
                 results.append(value)
             else:
-                no_contact = value
+                no_contact[kind] = value
             print(f"\r{done}/{len(jobs)} jobs done", end="", flush=True)
     finally:
         if pool is not None:
@@ -221,6 +238,7 @@ def main(argv: list[str] | None = None) -> int:
             push_start=args.push_start,
             push_duration=args.contact_duration,
             no_contact_duration=args.no_contact_duration,
+            slow_motion_duration=args.slow_motion_duration,
             noise=False if args.no_noise else None,
         )
         if scenario.trials < 1:
@@ -228,13 +246,19 @@ def main(argv: list[str] | None = None) -> int:
         out_dir = output_folder(args, "contact_localization")
         start = time.perf_counter()
         specs = sample_trials(scenario.model, scenario.trials, scenario.seed)
+        if scenario.model_refinement == "calibrate":
+            # Calibrated once, here; the workers read the saved corrections.
+            refined_model(scenario, Path(args.out) / "model_refinement")
+            scenario.model_refinement = str(calibration_file(scenario, Path(args.out) / "model_refinement"))
         scenario_yaml = scenario_as_yaml(scenario)
         jobs = []
-        if scenario.no_contact_duration > 0:  # the longest job first
+        if scenario.no_contact_duration > 0:  # the longest jobs first
             jobs.append(("no_contact", None, scenario_yaml))
+        if scenario.slow_motion_duration > 0:
+            jobs.append(("slow_motion", None, scenario_yaml))
         jobs += [("trial", spec, scenario_yaml) for spec in specs]
         results, no_contact = _run_jobs(jobs, args.workers)
-        metrics = contact_localization_metrics(results, no_contact)
+        metrics = contact_localization_metrics(results, no_contact.get("no_contact"), no_contact.get("slow_motion"))
         metrics.update(
             {
                 "model": scenario.model,
@@ -246,7 +270,8 @@ def main(argv: list[str] | None = None) -> int:
                 "force_range_N": [MIN_FORCE, MAX_FORCE],
                 "max_angle_from_normal_deg": MAX_ANGLE_DEG,
                 "wall_time_s": None,
-                "no_contact_run": no_contact,
+                "no_contact_run": no_contact.get("no_contact"),
+                "slow_motion_run": no_contact.get("slow_motion"),
             }
         )
 

@@ -35,19 +35,21 @@ from apps.runner import (
     simulate,
     write_metrics,
 )
+from diagrams.residuals.model_refinement import refined_model
 from diagrams.residuals.push_and_comply import (
     RESIDUAL_KINDS,
     PushAndComplyScenario,
     build_push_and_comply_diagram,
     push_and_comply_metrics,
 )
+from systems.estimation.model_identification import ModelCorrections
 
 #: Joints plotted (the paper's Figs. 5-6 discuss knees, hips, ankles and chest pitch).
 PLOTTED_JOINTS = ("R_KNEE_P", "L_KNEE_P", "R_HIP_P", "L_HIP_P", "R_ANKLE_P", "L_ANKLE_P", "CHEST_P")
 
 
 def _parse(argv):
-    parser = experiment_parser("apps.push_and_comply", __doc__, replay=False)
+    parser = experiment_parser("apps.push_and_comply", __doc__, replay=False, conditions=True)
     parser.add_argument("--seed", type=int, default=None, help="sensor noise seed (overrides the scenario's)")
     parser.add_argument(
         "--runs", nargs="+", choices=RESIDUAL_KINDS, default=list(RESIDUAL_KINDS), help=argparse.SUPPRESS
@@ -55,10 +57,19 @@ def _parse(argv):
     return parser.parse_args(argv)
 
 
-def run_once(scenario: PushAndComplyScenario, kind: str, meshcat, *, progress: bool = True, live: bool = True) -> dict:
+def run_once(
+    scenario: PushAndComplyScenario,
+    kind: str,
+    meshcat,
+    *,
+    progress: bool = True,
+    live: bool = True,
+    model_corrections: ModelCorrections | None = None,
+) -> dict:
     """One closed loop with the ``kind`` residual: its logged signals, handles and metrics.
-    With ``meshcat`` the run is recorded for the replay (and shown live when ``live``)."""
-    diagram, handles = build_push_and_comply_diagram(scenario, kind, meshcat)
+    With ``meshcat`` the run is recorded for the replay (and shown live when ``live``);
+    ``model_corrections``: the refined model (``refined_model``)."""
+    diagram, handles = build_push_and_comply_diagram(scenario, kind, meshcat, model_corrections=model_corrections)
     run = simulate(
         diagram,
         scenario.duration,
@@ -149,6 +160,7 @@ def main(argv: list[str] | None = None) -> int:
     def body() -> int:
         scenario = scenario_from_args(PushAndComplyScenario, args, seed=args.seed)
         out_dir = output_folder(args, "push_and_comply")
+        corrections = refined_model(scenario, Path(args.out) / "model_refinement")
         meshcat = replay_meshcat(True, args.headless)
         print(
             f"push and comply: {scenario.model}, {scenario.push_peak_force:g} N down on each shoulder from "
@@ -157,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
         )
         runs, metrics = {}, {}
         for kind in args.runs:
-            runs[kind] = run_once(scenario, kind, meshcat, live=not args.headless)
+            runs[kind] = run_once(scenario, kind, meshcat, live=not args.headless, model_corrections=corrections)
             save_replay(meshcat, out_dir / f"{kind}.html")
             metrics[kind] = runs[kind]["metrics"]
         _plot(out_dir, scenario, runs)

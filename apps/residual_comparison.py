@@ -36,16 +36,18 @@ from apps.runner import (
     simulate,
     write_metrics,
 )
+from diagrams.residuals.model_refinement import refined_model
 from diagrams.residuals.residual_comparison import (
     ResidualComparisonScenario,
     build_residual_comparison_diagram,
     check_metrics_window,
     residual_comparison_metrics,
 )
+from systems.estimation.model_identification import ModelCorrections
 
 
 def _parse(argv):
-    parser = experiment_parser("apps.residual_comparison", __doc__, replay=False)
+    parser = experiment_parser("apps.residual_comparison", __doc__, replay=False, conditions=True)
     parser.add_argument("--model", default=None, help="hrp4_like, nao_like, or a floating-base SDF/URDF path")
     parser.add_argument("--push-body", default=None, help="pushed body (default: the right shoulder)")
     parser.add_argument("--duration", type=float, default=None, help="simulated time, s (scenario default 10)")
@@ -57,10 +59,13 @@ def _parse(argv):
     return parser.parse_args(argv)
 
 
-def run_once(scenario: ResidualComparisonScenario, meshcat=None) -> dict:
-    """Simulates ``scenario``: its logged signals, handles, wall time and metrics."""
+def run_once(
+    scenario: ResidualComparisonScenario, meshcat=None, *, model_corrections: ModelCorrections | None = None
+) -> dict:
+    """Simulates ``scenario`` (with the refined model ``model_corrections``, if given): its
+    logged signals, handles, wall time and metrics."""
     check_metrics_window(scenario)  # before the simulation, not after it
-    diagram, handles = build_residual_comparison_diagram(scenario, meshcat)
+    diagram, handles = build_residual_comparison_diagram(scenario, meshcat, model_corrections=model_corrections)
     run = simulate(
         diagram,
         scenario.duration,
@@ -227,8 +232,12 @@ def main(argv: list[str] | None = None) -> int:
             noise=False if args.no_noise else None,
             skip=args.skip,
         )
-        run = run_once(scenario)  # a bad model, body or setting: a ValueError, reported by run_app
+        check_metrics_window(scenario)
+        build_residual_comparison_diagram(scenario)  # a bad model, body or setting fails here, before calibrating
         out_dir = output_folder(args, "residual_comparison")
+        corrections = refined_model(scenario, Path(args.out) / "model_refinement")
+        # A bad model, body or setting: a ValueError, reported by run_app.
+        run = run_once(scenario, model_corrections=corrections)
         _plot(out_dir, run)
         write_metrics(out_dir, run["metrics"], scenario)
         _print_summary(run["metrics"])

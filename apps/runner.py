@@ -25,6 +25,7 @@ from pydrake.systems.analysis import ApplySimulatorConfig, Simulator, SimulatorC
 from pydrake.systems.framework import Context, Diagram
 
 from diagrams.scenarios import ScenarioError, load_scenario, scenario_as_dict
+from diagrams.station.conditions import set_ideal_conditions
 
 #: The folder every app writes into, as ``DIR/<experiment>/`` (``--out DIR``).
 DEFAULT_OUT = Path("out")
@@ -36,10 +37,13 @@ def memory_allocator() -> str:
     return "tcmalloc" if "tcmalloc" in os.environ.get("LD_PRELOAD", "") else "system"
 
 
-def experiment_parser(module: str, doc: str | None, *, replay: bool = True) -> argparse.ArgumentParser:
+def experiment_parser(
+    module: str, doc: str | None, *, replay: bool = True, conditions: bool = False
+) -> argparse.ArgumentParser:
     """The arguments every app shares; the app adds its own. ``module`` is the app's module
     name (``apps.<experiment>``), ``doc`` its docstring (the first paragraph is the
-    description)."""
+    description). With ``conditions`` (the experiments whose default is the realistic
+    world, ``diagrams.station.conditions``) the app also takes ``--ideal``."""
     parser = argparse.ArgumentParser(prog=f"python -m {module}", description=(doc or "").split("\n\n")[0])
     parser.add_argument(
         "--scenario",
@@ -58,6 +62,13 @@ def experiment_parser(module: str, doc: str | None, *, replay: bool = True) -> a
     parser.add_argument("--headless", action="store_true", help="no live Meshcat URL (the replays are still written)")
     if replay:
         parser.add_argument("--no-replay", action="store_true", help="skip the Meshcat replays (faster)")
+    if conditions:
+        parser.add_argument(
+            "--ideal",
+            action="store_true",
+            help="the ideal world: true base state plus white noise, no imperfections, no model refinement "
+            "(default: realistic; applied after --scenario and --scenario-text)",
+        )
     return parser
 
 
@@ -74,13 +85,16 @@ def add_out_argument(parser: argparse.ArgumentParser, folder: str = "<experiment
 
 def scenario_from_args(schema: type, args: argparse.Namespace, defaults: Any = None, **overrides: Any) -> Any:
     """The scenario of ``--scenario`` and ``--scenario-text`` over ``defaults`` (or
-    ``schema()``); then each keyword in ``overrides`` whose value is not None replaces that
+    ``schema()``); with ``--ideal``, its condition fields set to the ideal world
+    (``diagrams.station.conditions``); then each keyword in ``overrides`` whose value is not None replaces that
     field (an app's shorthand options such as ``--seed``).
 
     Raises:
         ScenarioError: see ``diagrams.scenarios.load_scenario``; an override of an unknown field.
     """
     scenario = load_scenario(schema, filename=args.scenario, text=args.scenario_text, defaults=defaults)
+    if getattr(args, "ideal", False):
+        set_ideal_conditions(scenario)
     for name, value in overrides.items():
         if value is None:
             continue

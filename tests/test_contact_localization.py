@@ -7,8 +7,16 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
-from diagrams.residuals.contact_localization import ContactLocalizationScenario, build_contact_localization_diagram
+from diagrams.residuals.contact_localization import ContactLocalizationScenario as RealisticScenario
+from diagrams.residuals.contact_localization import build_contact_localization_diagram
+from diagrams.station.conditions import set_ideal_conditions
 from systems.residuals.contact_estimation import VALID
+
+
+def ContactLocalizationScenario(**fields) -> RealisticScenario:
+    """These tests measure the ideal world (the study's ``--ideal``): the scenario with its
+    conditions set to ideal."""
+    return set_ideal_conditions(RealisticScenario(**fields))
 
 
 def _simulate(config: ContactLocalizationScenario, t_end: float):

@@ -4,6 +4,7 @@ a short run without contact and one Meshcat replay."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 from scenario_checks import SCENARIOS, check_scenario_convention
@@ -35,8 +36,11 @@ def test_app_smoke(tmp_path):
             "0.4",
             "--no-contact-duration",
             "0.5",
+            "--slow-motion-duration",
+            "0.5",
             "--seed",
             "3",
+            "--ideal",
             "--out",
             str(tmp_path),
         ]
@@ -57,7 +61,8 @@ def test_app_smoke(tmp_path):
     ):
         assert key in metrics
     assert metrics["trials"] == 2 and len(metrics["per_trial"]) == 2
-    assert metrics["no_contact_run"]["duration_s"] == 0.5
+    assert metrics["no_contact_run"]["duration_s"] == 0.5 and metrics["slow_motion_run"]["duration_s"] == 0.5
+    assert metrics["slow_motion_run"]["motion"] == "slow whole-body motion"
     # Physics, not bookkeeping: the contacts are found (noise on, 0.2 s of averaging).
     assert metrics["detection_rate"] == 1.0
     assert metrics["correct_link_rate"] == 1.0
@@ -108,7 +113,8 @@ def test_app_reads_scenario_text_and_reports_errors(tmp_path, capsys):
     code = contact_localization.main(
         [
             "--scenario-text",
-            "trials: 1\npush_start: 0.1\npush_duration: 0.3\nno_contact_duration: 0\nseed: 2",
+            "trials: 1\npush_start: 0.15\npush_duration: 0.3\nno_contact_duration: 0\nslow_motion_duration: 0\nseed: 2",
+            "--ideal",
             "--workers",
             "1",
             "--replays",
@@ -121,10 +127,60 @@ def test_app_reads_scenario_text_and_reports_errors(tmp_path, capsys):
     assert code == 0
     metrics = json.loads((tmp_path / "contact_localization" / "metrics.json").read_text())
     assert metrics["trials"] == 1 and metrics["no_contact_run"] is None and metrics["seed"] == 2
-    assert (metrics["push_start_s"], metrics["contact_duration_s"]) == (0.1, 0.3)
+    assert (metrics["push_start_s"], metrics["contact_duration_s"]) == (0.15, 0.3)
     assert metrics["scenario"]["trials"] == 1
     capsys.readouterr()
     assert contact_localization.main(["--scenario-text", "workers: 2", "--out", str(tmp_path)]) == 2
     assert "workers" in capsys.readouterr().err
     assert contact_localization.main(["--scenario-text", "trials: 0", "--out", str(tmp_path)]) == 2
     assert "at least one trial" in capsys.readouterr().err
+
+
+def test_app_calibrates_once_in_the_realistic_world(tmp_path, monkeypatch):
+    """The default (realistic) study calibrates the robot's model once, saves it, and every
+    run reads the saved file (here the calibration is replaced by the estimators' own model
+    with no friction or torque corrections, to keep the test short: the plumbing is under
+    test, the calibration in test_model_refinement.py)."""
+    from diagrams.residuals import model_refinement
+    from systems.estimation.model_identification import ModelCorrections
+
+    calls = []
+
+    def fake_calibration(scenario):
+        _, handles = model_refinement.build_refinement_diagram(scenario, None)
+        n = handles.station.topology.num_joints
+        inertias = model_refinement.estimator_inertias(handles.station)
+        zeros = np.zeros(n)
+        calls.append(scenario)
+        return ModelCorrections(inertias, zeros, zeros, 0.1, zeros, zeros), None
+
+    monkeypatch.setattr(model_refinement, "calibrate_model", fake_calibration)
+    code = contact_localization.main(
+        [
+            "--trials",
+            "1",
+            "--workers",
+            "1",
+            "--replays",
+            "0",
+            "--push-start",
+            "0.2",
+            "--contact-duration",
+            "0.3",
+            "--no-contact-duration",
+            "0",
+            "--slow-motion-duration",
+            "0",
+            "--out",
+            str(tmp_path),
+        ]
+    )
+    assert code == 0 and len(calls) == 1
+    metrics = json.loads((tmp_path / "contact_localization" / "metrics.json").read_text())
+    scenario = metrics["scenario"]
+    assert (
+        scenario["base_state"] == "invariant_ekf" and scenario["imperfections"]["model_mismatch"]["mass_percent"] == 5
+    )
+    saved = Path(scenario["model_refinement"])
+    assert saved.is_file() and saved.parent == tmp_path / "model_refinement"
+    assert metrics["trials"] == 1

@@ -14,6 +14,7 @@ from diagrams.residuals.residual_comparison import (
     build_residual_comparison_diagram,
     set_initial_state,
 )
+from diagrams.station.conditions import set_ideal_conditions
 from diagrams.station.humanoid_station import add_humanoid_station
 
 
@@ -49,7 +50,9 @@ def test_sensor_chain_runs_once_per_step_with_three_residuals(monkeypatch):
         original(self, context, output)
 
     monkeypatch.setattr(sensors_module.SensedStateAssembler, "_CalcState", counting)
-    diagram, handles = build_residual_comparison_diagram(ResidualComparisonScenario(duration=0.02))
+    diagram, handles = build_residual_comparison_diagram(
+        set_ideal_conditions(ResidualComparisonScenario(duration=0.02))
+    )
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
     set_initial_state(diagram, context, handles)

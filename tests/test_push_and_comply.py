@@ -17,6 +17,7 @@ from apps import push_and_comply
 from apps.push_and_comply import run_once
 from diagrams.residuals.push_and_comply import PushAndComplyScenario, build_push_and_comply_diagram, load_scenario
 from diagrams.scenarios import scenario_as_dict
+from diagrams.station.conditions import set_ideal_conditions
 from systems.simulation.visualization import read_static_html
 
 SCENARIOS = Path(push_and_comply.__file__).parent / "scenarios"
@@ -66,7 +67,7 @@ def test_scenario_files_load_into_the_dataclass(tmp_path):
 
 @pytest.fixture(scope="module")
 def short_runs():
-    scenario = PushAndComplyScenario(**SHORT, push_peak_force=30.0)
+    scenario = set_ideal_conditions(PushAndComplyScenario(**SHORT, push_peak_force=30.0))
     return scenario, {kind: run_once(scenario, kind, None, progress=False) for kind in ("internal", "classical")}
 
 
@@ -114,7 +115,10 @@ def app_output(tmp_path_factory):
     scenario.write_text(
         "".join(f"{k}: {v}\n" for k, v in {**SHORT, "duration": 1.5, "push_end": 1.4, "push_peak_time": 0.9}.items())
     )
-    assert push_and_comply.main(["--headless", "--out", str(out), "--scenario", str(scenario), "--seed", "4"]) == 0
+    assert (
+        push_and_comply.main(["--headless", "--out", str(out), "--scenario", str(scenario), "--seed", "4", "--ideal"])
+        == 0
+    )
     return out / "push_and_comply"
 
 

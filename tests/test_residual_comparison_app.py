@@ -17,6 +17,7 @@ from diagrams.residuals.residual_comparison import (
     relative_rms_error,
 )
 from diagrams.scenarios import load_scenario
+from diagrams.station.conditions import set_ideal_conditions
 
 
 def test_scenario_files_load_into_the_dataclass(tmp_path):
@@ -50,7 +51,7 @@ def test_relative_rms_error_and_first_order_filter():
 @pytest.fixture(scope="module")
 def short_noise_free_run():
     """3 s of the paper's experiment with ideal sensors (the push starts at 0.5 s)."""
-    scenario = ResidualComparisonScenario(duration=3.0, noise=False, skip=0.5)
+    scenario = set_ideal_conditions(ResidualComparisonScenario(duration=3.0, noise=False, skip=0.5))
     run = run_once(scenario)
     return scenario, run["metrics"], run
 
@@ -84,7 +85,7 @@ def test_robot_stands_still_while_pushed(short_noise_free_run):
 
 
 def test_app_writes_figures_and_metrics(tmp_path, capsys):
-    assert residual_comparison.main(["--duration", "1.2", "--out", str(tmp_path), "--seed", "3"]) == 0
+    assert residual_comparison.main(["--duration", "1.2", "--out", str(tmp_path), "--seed", "3", "--ideal"]) == 0
     out = tmp_path / "residual_comparison"
     for name in ("fig3_classical.png", "fig4_internal.png", "fig7_external_base.png", "fig8_external_force.png"):
         assert (out / name).stat().st_size > 10_000, name
@@ -105,7 +106,17 @@ def test_app_writes_figures_and_metrics(tmp_path, capsys):
 def test_app_reads_scenario_file_and_text_and_reports_errors(tmp_path, capsys):
     scenario = tmp_path / "short.yaml"
     scenario.write_text("duration: 1.0\nskip: 0.2\nseed: 5\nnoise: false\n")
-    args = ["--scenario", str(scenario), "--scenario-text", "seed: 6", "--skip", "0.3", "--out", str(tmp_path)]
+    args = [
+        "--scenario",
+        str(scenario),
+        "--scenario-text",
+        "seed: 6",
+        "--skip",
+        "0.3",
+        "--ideal",
+        "--out",
+        str(tmp_path),
+    ]
     assert residual_comparison.main(args) == 0
     metrics = json.loads((tmp_path / "residual_comparison" / "metrics.json").read_text())
     assert (metrics["duration_s"], metrics["seed"], metrics["noise"], metrics["skip_s"]) == (1.0, 6, False, 0.3)

@@ -19,6 +19,7 @@ from diagrams.residuals.residual_comparison import (
 )
 from diagrams.station.humanoid_station import BASE_STATE_SOURCES, add_humanoid_station
 from systems.dynamics.base_state import quaternion_to_rotation
+from systems.simulation.imperfections import Imperfections
 
 DT = 1e-3
 
@@ -89,7 +90,7 @@ def test_residual_comparison_with_the_invariant_ekf_stays_finite():
     the internal residual's relative error is printed for both (``pytest -s``)."""
     errors = {}
     for base_state in BASE_STATE_SOURCES:
-        scenario = ResidualComparisonScenario(duration=2.0, base_state=base_state)
+        scenario = ResidualComparisonScenario(duration=2.0, base_state=base_state, imperfections=Imperfections())
         diagram, handles = build_residual_comparison_diagram(scenario)
         simulator = Simulator(diagram)
         context = simulator.get_mutable_context()

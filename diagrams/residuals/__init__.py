@@ -1,2 +1,2 @@
 """Flacco et al. (2016) experiments: residual comparison, push-and-comply, contact
-localization."""
+localization, and the model refinement from the residuals (the paper's future work)."""

@@ -44,11 +44,16 @@ from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
-from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station, default_plant_config
+from diagrams.residuals.wiring import add_internal_and_external_residuals
+from diagrams.station.conditions import set_ideal_conditions
+from diagrams.station.humanoid_station import HumanoidStation, add_scenario_station, default_plant_config
+from diagrams.station.motions import SlowMotion, slow_whole_body_motion
+from systems.estimation.model_identification import ModelCorrections
 from systems.residuals.contact_estimation import ContactDetector, ContactLocalizer, GatedEstimate
 from systems.residuals.geometry_intersection import inward_direction, sample_surface, surface_areas
 from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual, ResidualModel
 from systems.simulation.disturbances import Push, PushSource, Step
+from systems.simulation.imperfections import Imperfections
 from systems.simulation.visualization import add_force_arrows
 
 TRUE_RGBA = Rgba(0.1, 0.8, 0.1, 0.5)  # wide and translucent: the estimate shows inside it
@@ -89,15 +94,27 @@ class ContactLocalizationScenario:
         seed: the sensor noise seed of one run; the study's seed, from which it samples the
             trials and derives each run's noise seed.
         trials: the study's number of random contacts.
-        no_contact_duration: the study's run without contact (false detections), s; 0 skips it.
+        no_contact_duration: the study's run without contact, standing (false detections),
+            s; 0 skips it.
+        slow_motion_duration: the study's run without contact during ``slow_motion`` (false
+            detections while the whole body moves slowly), s; 0 skips it.
+        slow_motion: that run's motion (``diagrams.station.motions``; a different seed from
+            the calibration motion's).
+        motion: the posture motion of one run (None: holding the standing posture; the
+            study sets it for its slow-motion run).
         internal_gain, external_gain: residual gains K, 1/s.
         plant_config: Drake's ``MultibodyPlantConfig`` (default: 1 ms steps, point contact,
             SAP; see ``diagrams.station.humanoid_station``).
         period: residual/detector/localizer period, s.
         settle_time: the localizer's wait after detection before averaging, s.
+        detector_startup_time: the detector stays off for this long after the start, s (the
+            residuals' and the base-state estimator's start-up; a push that starts earlier is
+            detected only from then on).
         log_period: period of the loggers (detector and localizer outputs, truth), s.
         simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``); the plant
             is discrete, so only ``target_realtime_rate`` and the publishing matter.
+        base_state, imperfections, model_refinement: the world of the study
+            (``diagrams.station.conditions``): realistic by default, ideal with ``--ideal``.
     """
 
     model: str = "hrp4_like"
@@ -109,14 +126,21 @@ class ContactLocalizationScenario:
     noise: bool = True
     seed: int = 0
     trials: int = 200
-    no_contact_duration: float = 10.0
+    no_contact_duration: float = 60.0
+    slow_motion_duration: float = 60.0
+    slow_motion: SlowMotion = field(default_factory=lambda: SlowMotion(seed=3, amplitude_scale=0.5))
+    motion: SlowMotion | None = None
     internal_gain: float = 35.0
     external_gain: float = 35.0
     plant_config: MultibodyPlantConfig = field(default_factory=default_plant_config)
     period: float = 1e-3
     settle_time: float = 0.1
+    detector_startup_time: float = 0.1
     log_period: float = 1e-3
     simulator_config: SimulatorConfig = field(default_factory=SimulatorConfig)
+    base_state: str = "invariant_ekf"
+    imperfections: Imperfections = field(default_factory=Imperfections.realistic)
+    model_refinement: str = "calibrate"
 
 
 @dataclass
@@ -141,10 +165,14 @@ def sole_bodies(station: HumanoidStation) -> tuple[str, ...]:
 
 
 def build_contact_localization_diagram(
-    scenario: ContactLocalizationScenario, meshcat: Meshcat | None = None
+    scenario: ContactLocalizationScenario,
+    meshcat: Meshcat | None = None,
+    *,
+    model_corrections: ModelCorrections | None = None,
 ) -> tuple[Diagram, ContactLocalizationHandles]:
     """Builds the diagram of the module docstring for ``scenario`` (one run: its push, or
-    none).
+    none; its posture held, or following ``scenario.motion``) with the refined model
+    ``model_corrections`` (the scenario's ``model_refinement``), if given.
 
     Raises:
         ValueError: a model without foot F/T sensors, an unknown or excluded push body,
@@ -153,15 +181,18 @@ def build_contact_localization_diagram(
     if scenario.push_duration <= 0 or scenario.push_start < 0 or scenario.log_period <= 0:
         raise ValueError("push_duration and log_period must be positive, push_start non-negative")
     builder = DiagramBuilder()
-    station = add_humanoid_station(
-        builder, scenario.model, plant_config=scenario.plant_config, noise=scenario.noise, seed=scenario.seed
-    )
+    station = add_scenario_station(builder, scenario, model_corrections)
     if station.humanoid is None or not station.known_wrench_frames:
         raise ValueError(
             f"the contact study needs a humanoid with foot F/T sensors (hrp4_like), got {scenario.model!r}"
         )
     plant = station.plant
-    builder.Connect(builder.AddSystem(ConstantVectorSource(station.q_hold)).get_output_port(), station.desired_position)
+    if scenario.motion is None:
+        reference = builder.AddSystem(ConstantVectorSource(station.q_hold))
+    else:
+        reference = builder.AddSystem(slow_whole_body_motion(station, scenario.motion))
+    reference.set_name("posture_reference")
+    builder.Connect(reference.get_output_port(), station.desired_position)
     excluded = sole_bodies(station)
 
     pushes = []
@@ -186,18 +217,22 @@ def build_contact_localization_diagram(
     builder.Connect(plant.get_state_output_port(), push_source.GetInputPort("state"))
 
     frames = station.known_wrench_frames
-    # The station's model: the PD's gravity comes from the same per-state computation.
-    model = station.dynamics_model if station.dynamics_model is not None else ResidualModel(plant)
-    internal = builder.AddSystem(InternalResidual(plant, scenario.internal_gain, scenario.period, frames, model=model))
-    external = builder.AddSystem(ExternalResidual(plant, scenario.external_gain, scenario.period, frames, model=model))
-    internal.set_name("internal_residual")
-    external.set_name("external_residual")
-    for residual in (internal, external):
-        builder.Connect(station.sensed_state, residual.GetInputPort("state"))
-        builder.Connect(station.known_wrenches, residual.GetInputPort("known_wrenches"))
-    builder.Connect(station.measured_torque, internal.GetInputPort("measured_torque"))
+    internal, external = add_internal_and_external_residuals(
+        builder, station, scenario.internal_gain, scenario.external_gain, scenario.period
+    )
+    model = internal.model
 
     nq = plant.num_positions()
+    # The detector's noise model: measured on the calibration log when the model was refined
+    # (systems.residuals.offline), else predicted from the white sensor noise.
+    noise = model_corrections.residual_noise if model_corrections is not None else None
+    covariances = {}
+    if noise is not None:
+        noise.check_gains(scenario.internal_gain, scenario.external_gain, scenario.period, "contact study")
+        covariances = {
+            "covariance_internal": noise.covariance_internal,
+            "covariance_external_force": noise.covariance_external_force,
+        }
     detector = builder.AddSystem(
         ContactDetector(
             plant,
@@ -206,6 +241,8 @@ def build_contact_localization_diagram(
             known_wrench_frames=frames,
             nominal_positions=station.initial_state[:nq],
             period=scenario.period,
+            startup_time=scenario.detector_startup_time,
+            **covariances,
         )
     )
     detector.set_name("contact_detector")
@@ -294,7 +331,9 @@ def sample_trials(model: str, trials: int, seed: int) -> list[dict]:
     Returns one dict per trial: ``trial``, ``body``, ``body_index``, ``geometry``,
     ``point_body`` (m, body frame), ``point_world_nominal`` (m), ``force_world`` (N),
     ``noise_seed``."""
-    _, handles = build_contact_localization_diagram(ContactLocalizationScenario(model=model, noise=False))
+    _, handles = build_contact_localization_diagram(
+        set_ideal_conditions(ContactLocalizationScenario(model=model, noise=False))
+    )
     plant, localizer = handles.plant, handles.localizer
     context = plant.CreateDefaultContext()
     plant.SetPositionsAndVelocities(context, handles.station.initial_state)
@@ -346,8 +385,23 @@ def trial_scenario(scenario: ContactLocalizationScenario, spec: dict) -> Contact
 
 
 def no_contact_scenario(scenario: ContactLocalizationScenario) -> ContactLocalizationScenario:
-    """The study's run without contact: no push, its own noise seed (derived from the study's)."""
-    return dataclasses.replace(scenario, push_body=None, seed=(scenario.seed * 100003 + 99991) % (2**31 - 1))
+    """The study's run without contact, standing: no push, its own noise seed (derived from
+    the study's)."""
+    return dataclasses.replace(
+        scenario, push_body=None, motion=None, seed=(scenario.seed * 100003 + 99991) % (2**31 - 1)
+    )
+
+
+def slow_motion_scenario(scenario: ContactLocalizationScenario) -> ContactLocalizationScenario:
+    """The study's run without contact during its slow whole-body motion (``slow_motion``,
+    ``slow_motion_duration``): no push, its own noise seed."""
+    return dataclasses.replace(
+        scenario,
+        push_body=None,
+        motion=scenario.slow_motion,
+        no_contact_duration=scenario.slow_motion_duration,
+        seed=(scenario.seed * 100003 + 99989) % (2**31 - 1),
+    )
 
 
 def time_localizer_update(handles: ContactLocalizationHandles, context: Context, repeats: int = 20) -> float:
@@ -443,15 +497,17 @@ def no_contact_result(
     on = handles.detector.thresholds["on"]
     return {
         "duration_s": scenario.no_contact_duration,
+        "motion": "standing" if scenario.motion is None else "slow whole-body motion",
         "noise_seed": scenario.seed,
         "false_detections": int(np.sum(np.diff(np.concatenate(([0.0], detected))) > 0.5)),
         "max_statistic_over_threshold": [float(stats[0].max() / on[0]), float(stats[1].max() / on[1])],
     }
 
 
-def contact_localization_metrics(results: list[dict], no_contact: dict | None) -> dict:
-    """The study's totals (module docstring) from its trials' ``trial_result``s and its
-    ``no_contact_result`` (None: skipped), and whether each meets its floor (``FLOORS``)."""
+def contact_localization_metrics(results: list[dict], no_contact: dict | None, slow_motion: dict | None = None) -> dict:
+    """The study's totals (module docstring) from its trials' ``trial_result``s and the
+    ``no_contact_result`` of its standing run and of its slow-motion run (None: skipped),
+    and whether each meets its floor (``FLOORS``). ``false_detections`` counts all three."""
     n = len(results)
     detected = [r for r in results if r["detected"]]
     delays = [r["detection_delay_s"] for r in detected]
@@ -469,9 +525,12 @@ def contact_localization_metrics(results: list[dict], no_contact: dict | None) -
         "median_detection_delay_s": median(delays),
         "p95_detection_delay_s": float(np.percentile(delays, 95)) if delays else None,
         "false_detections": (no_contact["false_detections"] if no_contact else 0)
+        + (slow_motion["false_detections"] if slow_motion else 0)
         + sum(r["false_detections_before_push"] for r in results),
         "false_detections_no_contact_run": no_contact["false_detections"] if no_contact else None,
         "no_contact_run_s": no_contact["duration_s"] if no_contact else None,
+        "false_detections_slow_motion_run": slow_motion["false_detections"] if slow_motion else None,
+        "slow_motion_run_s": slow_motion["duration_s"] if slow_motion else None,
         "false_detections_before_push_in_trials": sum(r["false_detections_before_push"] for r in results),
         "correct_link_rate": float(np.mean([r["correct_link"] for r in results])) if n else None,
         "valid_rate": float(np.mean([r["status"] == 0 for r in results])) if n else None,

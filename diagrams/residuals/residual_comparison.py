@@ -32,10 +32,12 @@ from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
-from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station, default_plant_config
+from diagrams.station.humanoid_station import HumanoidStation, add_scenario_station, default_plant_config
 from models import HumanoidHandles
+from systems.estimation.model_identification import ModelCorrections
 from systems.residuals.momentum_residuals import ClassicalResidual, ExternalResidual, InternalResidual, ResidualModel
 from systems.simulation.disturbances import Push, PushSource, Sinusoid
+from systems.simulation.imperfections import Imperfections
 from systems.simulation.sensors import SensorHandles
 
 
@@ -68,8 +70,11 @@ class ResidualComparisonScenario:
         skip: the metrics ignore the first ``skip`` s (less than ``duration``).
         simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``); the plant
             is discrete, so only ``target_realtime_rate`` and the publishing matter.
-        base_state: the source of the sensed base state, "truth_plus_noise" (default, the
-            stand-in) or "invariant_ekf" (``diagrams.station.humanoid_station``).
+        base_state: the source of the sensed base state, "invariant_ekf" (default) or
+            "truth_plus_noise" (``--ideal``; see ``diagrams.station.humanoid_station``).
+        imperfections: the station's ``Imperfections`` (default: realistic; ``--ideal``: none).
+        model_refinement: "calibrate" (default), "none" or a saved model-corrections file
+            (``diagrams.station.conditions``).
     """
 
     model: str = "hrp4_like"
@@ -90,7 +95,9 @@ class ResidualComparisonScenario:
     log_period: float = 5e-3
     skip: float = 0.5
     simulator_config: SimulatorConfig = field(default_factory=SimulatorConfig)
-    base_state: str = "truth_plus_noise"
+    base_state: str = "invariant_ekf"
+    imperfections: Imperfections = field(default_factory=Imperfections.realistic)
+    model_refinement: str = "calibrate"
 
 
 @dataclass
@@ -114,9 +121,13 @@ class ResidualComparisonHandles:
 
 
 def build_residual_comparison_diagram(
-    scenario: ResidualComparisonScenario, meshcat: Meshcat | None = None
+    scenario: ResidualComparisonScenario,
+    meshcat: Meshcat | None = None,
+    *,
+    model_corrections: ModelCorrections | None = None,
 ) -> tuple[Diagram, ResidualComparisonHandles]:
-    """Builds the diagram of the module docstring for ``scenario``.
+    """Builds the diagram of the module docstring for ``scenario``; ``model_corrections``
+    (the scenario's refined model, see ``model_refinement``) go to the station.
 
     Raises:
         ValueError: an unknown model or body, a model without a floating base, bad settings.
@@ -124,14 +135,7 @@ def build_residual_comparison_diagram(
     if scenario.duration <= 0 or scenario.push_frequency < 0 or scenario.log_period <= 0:
         raise ValueError("duration and log_period must be positive, push_frequency non-negative")
     builder = DiagramBuilder()
-    station = add_humanoid_station(
-        builder,
-        scenario.model,
-        plant_config=scenario.plant_config,
-        noise=scenario.noise,
-        seed=scenario.seed,
-        base_state=scenario.base_state,
-    )
+    station = add_scenario_station(builder, scenario, model_corrections)
     plant, humanoid = station.plant, station.humanoid
     builder.Connect(builder.AddSystem(ConstantVectorSource(station.q_hold)).get_output_port(), station.desired_position)
     amplitude = scenario.push_amplitude

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from pydrake.geometry import SceneGraph
@@ -44,6 +45,7 @@ from systems.estimation.base_state_estimator import (
     FootContactFromFsr,
     InvariantEkfBaseStateEstimator,
 )
+from systems.estimation.model_identification import CorrectedJointTorque, ModelCorrections
 from systems.residuals.momentum_residuals import ResidualModel
 from systems.simulation.imperfections import (
     Imperfections,
@@ -91,6 +93,10 @@ class HumanoidStation:
             "invariant_ekf"), or None. ``set_initial_state`` starts it at the initial state.
         foot_contact: the FootContactFromForceTorque (or, without F/T sensors,
             FootContactFromFsr) feeding it its contact flags, or None.
+        model_corrections: the ``ModelCorrections`` applied to ``dynamics_model`` and to
+            ``measured_torque`` (see ``add_humanoid_station``), or None.
+        raw_measured_torque: the torque sensor's own output (before the corrections; the
+            same port as ``measured_torque`` without them): what a calibration log records.
     """
 
     plant: MultibodyPlant
@@ -113,6 +119,8 @@ class HumanoidStation:
     base_state: str = "truth_plus_noise"
     base_state_estimator: InvariantEkfBaseStateEstimator | None = None
     foot_contact: FootContactFromForceTorque | None = None
+    model_corrections: ModelCorrections | None = None
+    raw_measured_torque: OutputPort | None = None
 
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -153,6 +161,7 @@ def add_humanoid_station(
     seed: int = 0,
     imperfections: Imperfections | None = None,
     base_state: str = "truth_plus_noise",
+    model_corrections: ModelCorrections | None = None,
 ) -> HumanoidStation:
     """Adds the station of the module docstring to ``builder``.
 
@@ -173,6 +182,13 @@ def add_humanoid_station(
             ``BASE_STATE_SOURCES`` (see the module docstring): "truth_plus_noise" (default,
             the stand-in) or "invariant_ekf" (needs a humanoid with foot F/T sensors, hrp4_like,
             or foot FSRs, nao_like).
+        model_corrections: a refined model (``systems.estimation.model_identification``,
+            identified from a calibration log of this robot, e.g. by
+            ``diagrams.residuals.model_refinement.calibrate_model``), or None. Its link
+            inertias replace the ``dynamics_model``'s (after any model mismatch: they are the
+            estimators' refined model), and ``measured_torque`` becomes its
+            ``CorrectedJointTorque``: the motor torque with the identified offset and scale
+            removed and the identified joint friction added. Needs a humanoid.
 
     Raises:
         ValueError: an unknown or unreadable model, a model without a floating base, an
@@ -212,8 +228,16 @@ def add_humanoid_station(
     mismatch = imperfections.model_mismatch
     if mismatch.mass_percent or mismatch.com_percent or mismatch.inertia_percent:
         if dynamics_model is None:
-            raise ValueError("imperfections.model_mismatch needs a humanoid station (hrp4_like, nao_like)")
+            raise ValueError(
+                "imperfections.model_mismatch needs a humanoid station (hrp4_like, nao_like): run with --ideal"
+            )
         dynamics_model.set_spatial_inertias(perturbed_spatial_inertias(plant, mismatch, imperfections.seed))
+    if model_corrections is not None:
+        if dynamics_model is None:
+            raise ValueError("model_corrections need a humanoid station (hrp4_like, nao_like)")
+        if not isinstance(model_corrections, ModelCorrections):
+            raise ValueError(f"model_corrections must be ModelCorrections, got {type(model_corrections).__name__}")
+        dynamics_model.set_spatial_inertias(model_corrections.spatial_inertias)
     friction = None
     if imperfections.friction.coulomb_percent or imperfections.friction.viscous_percent:
         rated = rated_joint_torques(plant)
@@ -253,6 +277,12 @@ def add_humanoid_station(
                 builder, plant, humanoid, topology, sensors, initial_state
             )
         sensed_state, measured_torque = sensors.state, sensors.measured_torque
+        if model_corrections is not None:
+            corrected = builder.AddSystem(CorrectedJointTorque(plant, model_corrections))
+            corrected.set_name("corrected_joint_torque")
+            builder.Connect(sensors.measured_torque, corrected.GetInputPort("measured_torque"))
+            builder.Connect(sensors.state, corrected.GetInputPort("state"))
+            measured_torque = corrected.GetOutputPort("joint_torque")
         known_frames, known_wrenches = tuple(sensors.ft_frames), sensors.ft_wrenches
     else:
         sensors = None
@@ -264,9 +294,15 @@ def add_humanoid_station(
         known_frames, known_wrenches = (), None
         sensor_groups = (imperfections.imu, imperfections.encoders, imperfections.torque_sensor)
         if any(group != type(group)() for group in sensor_groups):
-            raise ValueError("imperfections.imu/encoders/torque_sensor need a humanoid station (it has no sensors)")
+            raise ValueError(
+                "imperfections.imu/encoders/torque_sensor need a humanoid station (a model from a file has no "
+                "sensors): run with --ideal"
+            )
         if base_state != "truth_plus_noise":
-            raise ValueError(f"base_state {base_state!r} needs a humanoid station (a model from a file has no sensors)")
+            raise ValueError(
+                f"base_state {base_state!r} needs a humanoid station (a model from a file has no sensors): "
+                "run with --ideal"
+            )
     sensed_state_hold = None
     if sensors is not None:
         # One sensor reading per step, shared by the PD and the estimators. In a discrete
@@ -304,6 +340,26 @@ def add_humanoid_station(
         base_state=base_state,
         base_state_estimator=base_state_estimator,
         foot_contact=foot_contact,
+        model_corrections=model_corrections,
+        raw_measured_torque=sensors.measured_torque if sensors is not None else measured_torque,
+    )
+
+
+def add_scenario_station(
+    builder: DiagramBuilder, scenario: Any, model_corrections: ModelCorrections | None = None
+) -> HumanoidStation:
+    """``add_humanoid_station`` with an experiment scenario's fields: ``model``,
+    ``plant_config``, ``noise``, ``seed``, ``imperfections`` and ``base_state`` (the world,
+    ``diagrams.station.conditions``), and the refined model ``model_corrections``."""
+    return add_humanoid_station(
+        builder,
+        scenario.model,
+        plant_config=scenario.plant_config,
+        noise=scenario.noise,
+        seed=scenario.seed,
+        imperfections=scenario.imperfections,
+        base_state=scenario.base_state,
+        model_corrections=model_corrections,
     )
 
 

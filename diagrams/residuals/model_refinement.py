@@ -1,0 +1,344 @@
+"""Model refinement from the residuals (Flacco et al. 2016, Sec. VI, future work): with no
+unknown contact the residuals see only model error, so a short calibration motion of the
+standing robot identifies corrections of the estimators' model, and the spurious effort
+they remove is measured.
+
+    SlowMotion (calibration) ──► station (realistic: IEKF base state, imperfections) ──► log
+    log ──► identify_model_corrections (base-parameter regressor, friction, torque errors)
+    station(model_corrections) + InternalResidual, ExternalResidual ──► spurious effort,
+        standing and in a different slow motion, before and after
+
+The station (``diagrams.station.humanoid_station``) applies the corrections: the refined
+link inertias replace the estimators' (and the PD's gravity) model, and the motor torques
+the residuals read become ``CorrectedJointTorque`` (offset, scale, friction). The
+identification itself (``systems.estimation.model_identification``) runs on a plain log of
+arrays, so the same call calibrates a real robot from its own recording.
+"""
+
+# No ``from __future__ import annotations``: yaml_load_typed reads the scenario's field types.
+
+import hashlib
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pydrake.multibody.plant import MultibodyPlant, MultibodyPlantConfig
+from pydrake.systems.analysis import Simulator, SimulatorConfig
+from pydrake.systems.framework import Context, Diagram, DiagramBuilder
+from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
+
+from diagrams.residuals.wiring import add_internal_and_external_residuals
+from diagrams.scenarios import scenario_as_yaml
+from diagrams.station.conditions import check_model_refinement
+from diagrams.station.humanoid_station import HumanoidStation, add_scenario_station, default_plant_config
+from diagrams.station.motions import SlowMotion, slow_whole_body_motion
+from systems.estimation.model_identification import (
+    CalibrationLog,
+    IdentificationOptions,
+    ModelCorrections,
+    identify_model_corrections,
+)
+from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual, ResidualModel
+from systems.residuals.offline import replay_residuals, residual_noise_model
+from systems.simulation.imperfections import Imperfections, perturbed_spatial_inertias
+
+#: The issue's floor: the calibration removes at least this fraction of the RMS spurious
+#: external force while standing.
+SPURIOUS_FORCE_REDUCTION_FLOOR = 0.70
+
+#: The identification's options for a calibration: a Gaussian prior of 10 % on each link's
+#: deviation from its nominal (CAD) mass and first moment (the combinations the motion
+#: excites weakly stay near CAD instead of absorbing noise), and a weak ridge toward no
+#: friction and an exact torque sensor, so that joints the motion cannot move (the hand
+#: joints resting on a limit) keep those values. Everything else is the defaults of
+#: ``IdentificationOptions`` (5 Hz parallel filtering, 10 ms samples).
+CALIBRATION_OPTIONS = IdentificationOptions(inertial_prior_std=0.1, joint_prior_weight=1e-3)
+
+
+@dataclass
+class ModelRefinementScenario:
+    """The calibration and its check. SI units.
+
+    Attributes:
+        model: a humanoid with foot F/T sensors (``hrp4_like``).
+        noise, seed: the sensors' noise and its seed.
+        imperfections: the simulated robot's imperfections (default: realistic, with the
+            5 % mass / 10 % CoM / 10 % inertia mismatch the refinement corrects).
+        base_state: the sensed base state's source (default: the invariant EKF).
+        calibration_motion, calibration_duration: the calibration motion and its length, s.
+        standing_duration: the standing check (no motion, no contact), s.
+        check_motion, check_duration: a different slow motion for the check, s.
+        skip: the checks ignore their first ``skip`` s (residual and estimator start-up).
+        internal_gain, external_gain: the residual gains K, 1/s.
+        plant_config, simulator_config: Drake's configurations.
+    """
+
+    model: str = "hrp4_like"
+    noise: bool = True
+    seed: int = 0
+    imperfections: Imperfections = field(default_factory=Imperfections.realistic)
+    base_state: str = "invariant_ekf"
+    calibration_motion: SlowMotion = field(default_factory=lambda: SlowMotion(seed=1))
+    calibration_duration: float = 40.0
+    standing_duration: float = 10.0
+    check_motion: SlowMotion = field(default_factory=lambda: SlowMotion(seed=2, amplitude_scale=0.5))
+    check_duration: float = 30.0
+    skip: float = 2.0
+    internal_gain: float = 35.0
+    external_gain: float = 35.0
+    plant_config: MultibodyPlantConfig = field(default_factory=default_plant_config)
+    simulator_config: SimulatorConfig = field(default_factory=SimulatorConfig)
+
+    def validate(self) -> "ModelRefinementScenario":
+        for name in ("calibration_duration", "standing_duration", "check_duration"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0.0):
+                raise ValueError(f"{name} must be a positive number of seconds, got {value}")
+        if not (0.0 <= self.skip < min(self.standing_duration, self.check_duration)):
+            raise ValueError(f"skip must be in [0, the shortest check), got {self.skip}")
+        self.calibration_motion.validate()
+        self.check_motion.validate()
+        return self
+
+
+@dataclass
+class RefinementHandles:
+    """What ``build_refinement_diagram`` created."""
+
+    plant: MultibodyPlant
+    station: HumanoidStation
+    internal: InternalResidual
+    external: ExternalResidual
+    loggers: dict[str, VectorLogSink]
+
+
+def build_refinement_diagram(
+    scenario: ModelRefinementScenario,
+    motion: SlowMotion | None,
+    corrections: ModelCorrections | None = None,
+) -> tuple[Diagram, RefinementHandles]:
+    """The station of ``scenario`` (with ``corrections`` applied, if given) following
+    ``motion`` (None: holding its posture), with the internal and external residuals, and
+    loggers at every plant step: ``sensed_state``, ``measured_torque`` (the torque sensor's
+    raw output), ``known_wrenches``, ``external_wrench_world``, ``internal_residual``,
+    ``true_state``.
+
+    Raises:
+        ValueError: a model without foot F/T sensors, bad scenario fields.
+    """
+    scenario.validate()
+    builder = DiagramBuilder()
+    station = add_scenario_station(builder, scenario, corrections)
+    if station.humanoid is None or not station.known_wrench_frames:
+        raise ValueError(
+            f"model refinement needs a humanoid with foot F/T sensors (hrp4_like), got {scenario.model!r}: "
+            "run with --ideal, or set model_refinement: none"
+        )
+    plant = station.plant
+    if motion is None:
+        reference = builder.AddSystem(ConstantVectorSource(station.q_hold))
+    else:
+        reference = builder.AddSystem(slow_whole_body_motion(station, motion))
+    reference.set_name("posture_reference")
+    builder.Connect(reference.get_output_port(), station.desired_position)
+    T = scenario.plant_config.time_step
+    internal, external = add_internal_and_external_residuals(
+        builder, station, scenario.internal_gain, scenario.external_gain, T
+    )
+    loggers = {
+        "sensed_state": LogVectorOutput(station.sensed_state, builder, T),
+        "measured_torque": LogVectorOutput(station.raw_measured_torque, builder, T),
+        "known_wrenches": LogVectorOutput(station.known_wrenches, builder, T),
+        "external_wrench_world": LogVectorOutput(external.GetOutputPort("external_wrench_world"), builder, T),
+        "internal_residual": LogVectorOutput(internal.GetOutputPort("residual"), builder, T),
+        "true_state": LogVectorOutput(plant.get_state_output_port(), builder, T),
+    }
+    diagram = builder.Build()
+    diagram.set_name("model_refinement")
+    return diagram, RefinementHandles(plant, station, internal, external, loggers)
+
+
+def run_refinement_diagram(diagram: Diagram, handles: RefinementHandles, duration: float, config) -> Context:
+    """Simulates ``diagram`` for ``duration`` s from the station's initial state; returns the
+    root context (the logs are in it)."""
+    from pydrake.systems.analysis import ApplySimulatorConfig
+
+    simulator = Simulator(diagram)
+    ApplySimulatorConfig(config, simulator)
+    context = simulator.get_mutable_context()
+    handles.station.set_initial_state(context)
+    simulator.Initialize()
+    simulator.AdvanceTo(duration)
+    return context
+
+
+def calibration_log(handles: RefinementHandles, context: Context) -> CalibrationLog:
+    """The run's log in the layout a robot records (``CalibrationLog``): sensed state,
+    the torque sensor's raw motor torques, the F/T wrenches."""
+    nq = handles.plant.num_positions()
+    state = handles.loggers["sensed_state"].FindLog(context)
+    x = state.data().T
+    return CalibrationLog(
+        time=state.sample_times().copy(),
+        q=x[:, :nq].copy(),
+        v=x[:, nq:].copy(),
+        measured_torque=handles.loggers["measured_torque"].FindLog(context).data().T.copy(),
+        known_wrenches=handles.loggers["known_wrenches"].FindLog(context).data().T.copy(),
+    )
+
+
+def estimator_inertias(station: HumanoidStation) -> dict | None:
+    """The link inertias of the estimators' model before refinement: the mismatched ones of
+    the station's imperfections, or None (the plant's own)."""
+    imperfections = station.imperfections
+    mismatch = imperfections.model_mismatch
+    if mismatch.mass_percent or mismatch.com_percent or mismatch.inertia_percent:
+        return perturbed_spatial_inertias(station.plant, mismatch, imperfections.seed)
+    return None
+
+
+def calibrate_model(scenario: ModelRefinementScenario) -> tuple[ModelCorrections, CalibrationLog]:
+    """Runs the calibration motion on the (uncorrected) station and identifies the model
+    corrections from its log, with the residual noise model of the refined model on the same
+    log (``calibrate_from_log``)."""
+    diagram, handles = build_refinement_diagram(scenario, scenario.calibration_motion)
+    context = run_refinement_diagram(diagram, handles, scenario.calibration_duration, scenario.simulator_config)
+    log = calibration_log(handles, context)
+    return calibrate_from_log(scenario, handles, log), log
+
+
+def calibrate_from_log(
+    scenario: ModelRefinementScenario, handles: RefinementHandles, log: CalibrationLog
+) -> ModelCorrections:
+    """The model corrections identified from ``log`` (a robot's own recording, or one of
+    ``calibrate_model``), and their ``residual_noise``: the covariances of the internal and
+    external residuals replayed on the log with the refined model (``systems.residuals.
+    offline``), after the first ``scenario.skip`` s. ``handles``: a refinement diagram of the
+    robot (its plant, F/T frames and the estimators' model before refinement)."""
+    station = handles.station
+    corrections = identify_model_corrections(
+        handles.plant,
+        log,
+        known_wrench_frames=station.known_wrench_frames,
+        nominal_inertias=estimator_inertias(station),
+        options=CALIBRATION_OPTIONS,
+    )
+    model = ResidualModel(handles.plant)
+    model.set_spatial_inertias(corrections.spatial_inertias)
+    period = float(np.median(np.diff(log.time)))
+    internal, external = replay_residuals(
+        handles.plant,
+        model,
+        station.known_wrench_frames,
+        np.hstack((log.q, log.v)),
+        corrections.corrected_torque(log.measured_torque, log.v[:, 6:]),
+        log.known_wrenches,
+        internal_gain=scenario.internal_gain,
+        external_gain=scenario.external_gain,
+        period=period,
+    )
+    corrections.residual_noise = residual_noise_model(
+        internal,
+        external,
+        internal_gain=scenario.internal_gain,
+        external_gain=scenario.external_gain,
+        period=period,
+        skip=int(round(scenario.skip / period)),
+    )
+    return corrections
+
+
+def spurious_effort(handles: RefinementHandles, context: Context, skip: float) -> dict:
+    """The residuals' output without contact, after ``skip`` s: RMS of the external force's
+    norm, N, its RMS per world axis, N, its largest norm, N, and the internal residual's RMS
+    over all joints and samples and its largest joint RMS, N m (all of it is spurious)."""
+    log = handles.loggers["external_wrench_world"].FindLog(context)
+    keep = log.sample_times() >= skip
+    force = log.data()[3:, keep]
+    internal = handles.loggers["internal_residual"].FindLog(context).data()[:, keep]
+    joint_rms = np.sqrt(np.mean(internal**2, axis=1))
+    names = handles.station.joint_names
+    return {
+        "external_force_rms_N": float(np.sqrt(np.mean(np.sum(force**2, axis=0)))),
+        "external_force_rms_per_axis_N": np.sqrt(np.mean(force**2, axis=1)).tolist(),
+        "external_force_max_N": float(np.max(np.linalg.norm(force, axis=0))),
+        "internal_rms_Nm": float(np.sqrt(np.mean(internal**2))),
+        "internal_worst_joint": names[int(np.argmax(joint_rms))],
+        "internal_worst_joint_rms_Nm": float(np.max(joint_rms)),
+    }
+
+
+def check_spurious_effort(
+    scenario: ModelRefinementScenario, motion: SlowMotion | None, duration: float, corrections: ModelCorrections | None
+) -> dict:
+    """``spurious_effort`` of a run of ``duration`` s (``motion`` None: standing) with or
+    without ``corrections``."""
+    diagram, handles = build_refinement_diagram(scenario, motion, corrections)
+    context = run_refinement_diagram(diagram, handles, duration, scenario.simulator_config)
+    return spurious_effort(handles, context, scenario.skip)
+
+
+def reduction(before: float, after: float) -> float:
+    """The fraction of ``before`` removed: 1 - after / before."""
+    return 1.0 - after / before if before > 0 else 0.0
+
+
+def refinement_scenario_for(scenario: Any) -> ModelRefinementScenario:
+    """The calibration of the robot an experiment's ``scenario`` simulates: the same model,
+    imperfections (the same robot: its mismatch and torque-sensor errors), base-state source
+    and plant configuration; the sensor noise is a different draw (seed + 1)."""
+    return ModelRefinementScenario(
+        model=scenario.model,
+        noise=scenario.noise,
+        seed=scenario.seed + 1,
+        imperfections=scenario.imperfections,
+        base_state=scenario.base_state,
+        plant_config=scenario.plant_config,
+    )
+
+
+def calibration_file(scenario: Any, cache_folder: Path) -> Path:
+    """Where ``refined_model`` saves the calibration of ``scenario``'s robot in
+    ``cache_folder``: named by a hash of ``refinement_scenario_for(scenario)`` and the
+    identification's options (not of the code: delete the folder after an update)."""
+    text = scenario_as_yaml(refinement_scenario_for(scenario)) + repr(CALIBRATION_OPTIONS)
+    key = hashlib.sha1(text.encode()).hexdigest()[:16]
+    return Path(cache_folder) / f"model_corrections_{key}.npz"
+
+
+def refined_model(scenario: Any, cache_folder: Path | None = None) -> ModelCorrections | None:
+    """The model corrections an experiment's ``scenario`` asks for with its
+    ``model_refinement`` field: None for "none", the saved file's for a path, and for
+    "calibrate" those of ``calibrate_model(refinement_scenario_for(scenario))``. With a
+    ``cache_folder`` a calibration is saved there under a hash of its scenario and reused
+    by later runs of the same robot (delete the folder to calibrate again).
+
+    Raises:
+        ValueError: a bad ``model_refinement`` or an unreadable corrections file.
+    """
+    choice = check_model_refinement(scenario.model_refinement)
+    if choice == "none":
+        return None
+    if choice != "calibrate":
+        return ModelCorrections.load(choice)
+    calibration = refinement_scenario_for(scenario)
+    path = None
+    if cache_folder is not None:
+        path = calibration_file(scenario, cache_folder)
+        if path.is_file():
+            print(f"model refinement: reusing {path}")
+            return ModelCorrections.load(path)
+    print(
+        f"model refinement: {calibration.calibration_duration:g} s calibration motion of the standing robot, "
+        "then identification ...",
+        flush=True,
+    )
+    start = time.perf_counter()
+    corrections, _ = calibrate_model(calibration)
+    print(f"model refinement: done in {time.perf_counter() - start:.0f} s", flush=True)
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        corrections.save(path)
+    return corrections

@@ -1,0 +1,74 @@
+"""The realistic default world and ``--ideal`` (diagrams.station.conditions, apps.runner)."""
+
+from pathlib import Path
+
+import pytest
+
+from apps.runner import experiment_parser, scenario_from_args
+from diagrams.residuals.contact_localization import ContactLocalizationScenario
+from diagrams.residuals.push_and_comply import PushAndComplyScenario
+from diagrams.residuals.residual_comparison import ResidualComparisonScenario
+from diagrams.scenarios import scenario_as_dict
+from diagrams.station.conditions import check_model_refinement, is_ideal, set_ideal_conditions
+from diagrams.station.standing import StandingScenario
+from systems.simulation.imperfections import Imperfections
+
+REALISTIC_BY_DEFAULT = (ResidualComparisonScenario, ContactLocalizationScenario)
+ALL = (PushAndComplyScenario, ResidualComparisonScenario, ContactLocalizationScenario)
+
+
+@pytest.mark.parametrize("schema", REALISTIC_BY_DEFAULT)
+def test_the_hrp4_experiments_default_to_the_realistic_world(schema):
+    scenario = schema()
+    assert scenario.base_state == "invariant_ekf"
+    assert scenario.model_refinement == "calibrate"
+    realistic = Imperfections.realistic()
+    assert scenario.imperfections.model_mismatch.mass_percent == realistic.model_mismatch.mass_percent == 5.0
+    assert scenario.imperfections.friction.coulomb_percent == realistic.friction.coulomb_percent > 0.0
+    assert not is_ideal(scenario)
+
+
+def test_push_and_comply_still_defaults_to_the_ideal_world_and_ships_the_realistic_one():
+    """Its realistic closed loop does not stay upright yet (BENCHMARKS.md): the default stays
+    ideal and the realistic world is a scenario file."""
+    assert is_ideal(PushAndComplyScenario())
+    parser = experiment_parser("apps.push_and_comply", None, conditions=True)
+    realistic_file = Path(__file__).parents[1] / "apps" / "scenarios" / "push_and_comply_realistic.yaml"
+    realistic = scenario_from_args(PushAndComplyScenario, parser.parse_args(["--scenario", str(realistic_file)]))
+    assert realistic.base_state == "invariant_ekf" and realistic.model_refinement == "calibrate"
+    assert scenario_as_dict(realistic.imperfections) == scenario_as_dict(Imperfections.realistic())
+
+
+@pytest.mark.parametrize("schema", ALL)
+def test_ideal_flag_restores_the_ideal_world_after_the_scenario_file(schema, tmp_path):
+    module = {
+        PushAndComplyScenario: "push_and_comply",
+        ResidualComparisonScenario: "residual_comparison",
+        ContactLocalizationScenario: "contact_localization",
+    }[schema]
+    parser = experiment_parser(f"apps.{module}", None, conditions=True)
+    scenario_file = tmp_path / "realistic.yaml"
+    scenario_file.write_text("base_state: invariant_ekf\nseed: 4\n")
+    realistic = scenario_from_args(schema, parser.parse_args(["--scenario", str(scenario_file)]))
+    assert not is_ideal(realistic) and realistic.seed == 4
+    ideal = scenario_from_args(schema, parser.parse_args(["--scenario", str(scenario_file), "--ideal"]))
+    assert is_ideal(ideal) and ideal.seed == 4
+    assert ideal.base_state == "truth_plus_noise" and ideal.imperfections.is_ideal and ideal.model_refinement == "none"
+
+
+def test_ideal_is_only_offered_where_it_means_something():
+    assert "--ideal" not in experiment_parser("apps.standing", None).format_help()
+    assert "--ideal" in experiment_parser("apps.push_and_comply", None, conditions=True).format_help()
+    # A scenario without condition fields is left alone.
+    standing = StandingScenario()
+    assert set_ideal_conditions(standing) is standing and is_ideal(standing)
+
+
+def test_model_refinement_values_are_checked(tmp_path):
+    assert check_model_refinement("calibrate") == "calibrate"
+    assert check_model_refinement("none") == "none"
+    saved = tmp_path / "corrections.npz"
+    saved.write_bytes(b"")
+    assert check_model_refinement(str(saved)) == str(saved)
+    with pytest.raises(ValueError, match="model_refinement must be one of"):
+        check_model_refinement("calibrated")

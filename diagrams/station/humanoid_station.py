@@ -14,6 +14,11 @@ invariant EKF ``systems.estimation.base_state_estimator.InvariantEkfBaseStateEst
 the station's IMU, encoders and foot contact from the ankle F/T sensors (hrp4_like) or, on a
 robot without them, from its four foot FSRs per foot (nao_like: an ``FsrArray`` added for it),
 with IMU bias states when the simulated IMU has a bias random walk.
+
+``model_corrections`` (a model refined from a calibration log, ``systems.estimation.
+model_identification``) replace the estimators' link inertias and correct the motor torques
+they read (``HumanoidStation.measured_torque``; the sensor's own output stays available as
+``raw_measured_torque``).
 """
 
 from __future__ import annotations

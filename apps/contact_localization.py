@@ -53,13 +53,13 @@ from apps.runner import (
     write_metrics,
 )
 from diagrams.residuals.contact_localization import (
-    FLOORS,
     MAX_ANGLE_DEG,
     MAX_FORCE,
     MIN_FORCE,
     ContactLocalizationScenario,
     build_contact_localization_diagram,
     contact_localization_metrics,
+    floors_for,
     no_contact_result,
     no_contact_scenario,
     sample_trials,
@@ -258,7 +258,9 @@ def main(argv: list[str] | None = None) -> int:
             jobs.append(("slow_motion", None, scenario_yaml))
         jobs += [("trial", spec, scenario_yaml) for spec in specs]
         results, no_contact = _run_jobs(jobs, args.workers)
-        metrics = contact_localization_metrics(results, no_contact.get("no_contact"), no_contact.get("slow_motion"))
+        metrics = contact_localization_metrics(
+            results, no_contact.get("no_contact"), no_contact.get("slow_motion"), floors_for(scenario)
+        )
         metrics.update(
             {
                 "model": scenario.model,
@@ -295,7 +297,8 @@ def _print_summary(metrics: dict) -> None:
         f"contact localization on {metrics['model']}, {metrics['trials']} trials,"
         f" noise {'on' if metrics['noise'] else 'off'}:"
     )
-    for key, (op, floor) in FLOORS.items():
+    for key, floor_text in metrics["floors"].items():
+        op, floor = floor_text.split()
         value = metrics.get(key)
         ok = metrics["meets_floors"].get(key)
         text = "n/a" if value is None else f"{value:.4g}"

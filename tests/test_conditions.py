@@ -72,3 +72,13 @@ def test_model_refinement_values_are_checked(tmp_path):
     assert check_model_refinement(str(saved)) == str(saved)
     with pytest.raises(ValueError, match="model_refinement must be one of"):
         check_model_refinement("calibrated")
+
+
+def test_the_contact_study_checks_the_floors_of_its_world():
+    from diagrams.residuals.contact_localization import FLOORS, REALISTIC_FLOORS, floors_for
+
+    assert floors_for(ContactLocalizationScenario()) is REALISTIC_FLOORS
+    assert floors_for(set_ideal_conditions(ContactLocalizationScenario())) is FLOORS
+    # Issue 11's realistic floors (after refinement); the false detections stay at 0.
+    assert REALISTIC_FLOORS["correct_link_rate"] == (">=", 0.90) and REALISTIC_FLOORS["false_detections"] == ("<=", 0)
+    assert FLOORS["correct_link_rate"] == (">=", 0.95)

@@ -45,7 +45,7 @@ from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
 from diagrams.residuals.wiring import add_internal_and_external_residuals
-from diagrams.station.conditions import set_ideal_conditions
+from diagrams.station.conditions import is_ideal, set_ideal_conditions
 from diagrams.station.humanoid_station import HumanoidStation, add_scenario_station, default_plant_config
 from diagrams.station.motions import SlowMotion, slow_whole_body_motion
 from systems.estimation.model_identification import ModelCorrections
@@ -72,6 +72,23 @@ FLOORS = {
     "median_angle_error_deg": ("<=", 5.0),
     "median_localizer_update_ms": ("<=", 2.0),
 }
+
+#: Issue 11's floors for the realistic world, after model refinement (the issue reports the
+#: delay, p95 position, angle and update time without a floor there: the ideal ones stay).
+REALISTIC_FLOORS = {
+    **FLOORS,
+    "detection_rate": (">=", 0.98),
+    "correct_link_rate": (">=", 0.90),
+    "median_position_error_m": ("<=", 0.03),
+    "median_force_error_rel": ("<=", 0.10),
+}
+
+
+def floors_for(scenario: "ContactLocalizationScenario") -> dict:
+    """``FLOORS`` in the ideal world, ``REALISTIC_FLOORS`` otherwise (any imperfection, the
+    EKF base state or a refined model)."""
+    return FLOORS if is_ideal(scenario) else REALISTIC_FLOORS
+
 
 #: The random contacts of the localization study (``sample_trials``): force magnitude, N,
 #: and the largest angle between the force and the surface's inward normal, deg.
@@ -504,10 +521,14 @@ def no_contact_result(
     }
 
 
-def contact_localization_metrics(results: list[dict], no_contact: dict | None, slow_motion: dict | None = None) -> dict:
+def contact_localization_metrics(
+    results: list[dict], no_contact: dict | None, slow_motion: dict | None = None, floors: dict | None = None
+) -> dict:
     """The study's totals (module docstring) from its trials' ``trial_result``s and the
     ``no_contact_result`` of its standing run and of its slow-motion run (None: skipped),
-    and whether each meets its floor (``FLOORS``). ``false_detections`` counts all three."""
+    and whether each meets its floor (``floors``, default ``FLOORS``; see ``floors_for``).
+    ``false_detections`` counts all three."""
+    floors = FLOORS if floors is None else floors
     n = len(results)
     detected = [r for r in results if r["detected"]]
     delays = [r["detection_delay_s"] for r in detected]
@@ -555,9 +576,9 @@ def contact_localization_metrics(results: list[dict], no_contact: dict | None, s
         ],
     }
     checks = {}
-    for key, (op, floor) in FLOORS.items():
+    for key, (op, floor) in floors.items():
         value = metrics.get(key)
         checks[key] = None if value is None else bool(value >= floor if op == ">=" else value <= floor)
-    metrics["floors"] = {k: f"{op} {v}" for k, (op, v) in FLOORS.items()}
+    metrics["floors"] = {k: f"{op} {v}" for k, (op, v) in floors.items()}
     metrics["meets_floors"] = checks
     return metrics

@@ -25,7 +25,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import matplotlib.pyplot as plt
-import numpy as np
 
 from apps.runner import experiment_parser, output_folder, print_written, run_app, scenario_from_args, write_metrics
 from diagrams.residuals.model_refinement import (
@@ -34,9 +33,9 @@ from diagrams.residuals.model_refinement import (
     build_refinement_diagram,
     calibrate_from_log,
     calibration_log,
+    check_spurious_effort,
     reduction,
     run_refinement_diagram,
-    spurious_effort,
 )
 from systems.estimation.model_identification import CalibrationLog
 
@@ -51,19 +50,6 @@ def _parse(argv):
         "--log", type=Path, default=None, help="identify from this recorded log (.npz) instead of simulating"
     )
     return parser.parse_args(argv)
-
-
-def _check(scenario: ModelRefinementScenario, motion, duration: float, corrections) -> tuple[dict, dict]:
-    diagram, handles = build_refinement_diagram(scenario, motion, corrections)
-    context = run_refinement_diagram(diagram, handles, duration, scenario.simulator_config)
-    log = handles.loggers["external_wrench_world"].FindLog(context)
-    internal = handles.loggers["internal_residual"].FindLog(context).data()
-    trace = {
-        "t": log.sample_times(),
-        "force_norm": np.linalg.norm(log.data()[3:], axis=0),
-        "internal_norm": np.linalg.norm(internal, axis=0),
-    }
-    return spurious_effort(handles, context, scenario.skip), trace
 
 
 def _plot(path: Path, traces: dict) -> None:
@@ -113,8 +99,12 @@ def main(argv: list[str] | None = None) -> int:
                 ("slow_motion", scenario.check_motion, scenario.check_duration),
             ):
                 print(f"model refinement: checking, {case.replace('_', ' ')} ({duration:g} s, twice) ...", flush=True)
-                before, traces[case]["nominal model"] = _check(scenario, motion, duration, None)
-                after, traces[case]["refined model"] = _check(scenario, motion, duration, corrections)
+                before, traces[case]["nominal model"] = check_spurious_effort(
+                    scenario, motion, duration, None, with_trace=True
+                )
+                after, traces[case]["refined model"] = check_spurious_effort(
+                    scenario, motion, duration, corrections, with_trace=True
+                )
                 checks[case] = {
                     "nominal_model": before,
                     "refined_model": after,

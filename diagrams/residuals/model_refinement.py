@@ -42,7 +42,7 @@ from systems.estimation.model_identification import (
 )
 from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual, ResidualModel
 from systems.residuals.offline import replay_residuals, residual_noise_model
-from systems.simulation.imperfections import Imperfections, perturbed_spatial_inertias
+from systems.simulation.imperfections import Imperfections
 
 #: The issue's floor: the calibration removes at least this fraction of the RMS spurious
 #: external force while standing.
@@ -189,16 +189,6 @@ def calibration_log(handles: RefinementHandles, context: Context) -> Calibration
     )
 
 
-def estimator_inertias(station: HumanoidStation) -> dict | None:
-    """The link inertias of the estimators' model before refinement: the mismatched ones of
-    the station's imperfections, or None (the plant's own)."""
-    imperfections = station.imperfections
-    mismatch = imperfections.model_mismatch
-    if mismatch.mass_percent or mismatch.com_percent or mismatch.inertia_percent:
-        return perturbed_spatial_inertias(station.plant, mismatch, imperfections.seed)
-    return None
-
-
 def calibrate_model(scenario: ModelRefinementScenario) -> tuple[ModelCorrections, CalibrationLog]:
     """Runs the calibration motion on the (uncorrected) station and identifies the model
     corrections from its log, with the residual noise model of the refined model on the same
@@ -222,7 +212,7 @@ def calibrate_from_log(
         handles.plant,
         log,
         known_wrench_frames=station.known_wrench_frames,
-        nominal_inertias=estimator_inertias(station),
+        nominal_inertias=station.estimator_inertias,
         options=CALIBRATION_OPTIONS,
     )
     model = ResidualModel(handles.plant)
@@ -271,13 +261,29 @@ def spurious_effort(handles: RefinementHandles, context: Context, skip: float) -
 
 
 def check_spurious_effort(
-    scenario: ModelRefinementScenario, motion: SlowMotion | None, duration: float, corrections: ModelCorrections | None
-) -> dict:
+    scenario: ModelRefinementScenario,
+    motion: SlowMotion | None,
+    duration: float,
+    corrections: ModelCorrections | None,
+    *,
+    with_trace: bool = False,
+) -> dict | tuple[dict, dict]:
     """``spurious_effort`` of a run of ``duration`` s (``motion`` None: standing) with or
-    without ``corrections``."""
+    without ``corrections``; ``with_trace`` also returns its time series: {"t" (s),
+    "force_norm" (N, the external force's norm), "internal_norm" (N m)}."""
     diagram, handles = build_refinement_diagram(scenario, motion, corrections)
     context = run_refinement_diagram(diagram, handles, duration, scenario.simulator_config)
-    return spurious_effort(handles, context, scenario.skip)
+    effort = spurious_effort(handles, context, scenario.skip)
+    if not with_trace:
+        return effort
+    log = handles.loggers["external_wrench_world"].FindLog(context)
+    internal = handles.loggers["internal_residual"].FindLog(context).data()
+    trace = {
+        "t": log.sample_times(),
+        "force_norm": np.linalg.norm(log.data()[3:], axis=0),
+        "internal_norm": np.linalg.norm(internal, axis=0),
+    }
+    return effort, trace
 
 
 def reduction(before: float, after: float) -> float:

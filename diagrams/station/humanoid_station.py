@@ -102,6 +102,8 @@ class HumanoidStation:
             ``measured_torque`` (see ``add_humanoid_station``), or None.
         raw_measured_torque: the torque sensor's own output (before the corrections; the
             same port as ``measured_torque`` without them): what a calibration log records.
+        estimator_inertias: {body index: SpatialInertia} of the estimators' model before any
+            refinement: the model mismatch's perturbed links, or None (the plant's own).
     """
 
     plant: MultibodyPlant
@@ -126,6 +128,7 @@ class HumanoidStation:
     foot_contact: FootContactFromForceTorque | None = None
     model_corrections: ModelCorrections | None = None
     raw_measured_torque: OutputPort | None = None
+    estimator_inertias: dict | None = None
 
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -231,12 +234,14 @@ def add_humanoid_station(
     # Humanoids: gravity from the dynamics model the estimators share (see HumanoidStation).
     dynamics_model = ResidualModel(plant) if humanoid is not None else None
     mismatch = imperfections.model_mismatch
+    estimator_inertias = None
     if mismatch.mass_percent or mismatch.com_percent or mismatch.inertia_percent:
         if dynamics_model is None:
             raise ValueError(
                 "imperfections.model_mismatch needs a humanoid station (hrp4_like, nao_like): run with --ideal"
             )
-        dynamics_model.set_spatial_inertias(perturbed_spatial_inertias(plant, mismatch, imperfections.seed))
+        estimator_inertias = perturbed_spatial_inertias(plant, mismatch, imperfections.seed)
+        dynamics_model.set_spatial_inertias(estimator_inertias)
     if model_corrections is not None:
         if dynamics_model is None:
             raise ValueError("model_corrections need a humanoid station (hrp4_like, nao_like)")
@@ -346,6 +351,7 @@ def add_humanoid_station(
         base_state_estimator=base_state_estimator,
         foot_contact=foot_contact,
         model_corrections=model_corrections,
+        estimator_inertias=estimator_inertias,
         raw_measured_torque=sensors.measured_torque if sensors is not None else measured_torque,
     )
 

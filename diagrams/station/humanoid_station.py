@@ -46,6 +46,7 @@ from models import (
 )
 from systems.common.topology import FloatingBaseTopology, floating_base_topology
 from systems.estimation.base_state_estimator import (
+    LEVEL_GROUND_TILT_STD,
     FootContactFromForceTorque,
     FootContactFromFsr,
     InvariantEkfBaseStateEstimator,
@@ -390,7 +391,11 @@ def _add_invariant_ekf(
     the noise and seed (16 seed + 5) that ``diagrams.observer.nao_sensing`` gives its own,
     so both read the same sensors. The filter estimates the IMU biases (its default random
     walks, ``Imperfections.realistic()``'s) when the simulated IMU has a bias random walk,
-    and is the bias-free filter otherwise (the ideal default IMU)."""
+    and is the bias-free filter otherwise (the ideal default IMU). With the bias states it
+    also takes the soles in contact as flat on level ground (E12, ``LEVEL_GROUND_TILT_STD``):
+    without that the horizontal accelerometer bias reads as a base tilt, which the refined
+    model absorbs during the calibration and the internal residual then shows as gravity
+    torque on every pitch joint."""
     from systems.observer.fsr_sensing import FSR_NOISE_STD, FSR_SIDES, FsrArray
     from systems.simulation.sensors import SEEDS_PER_CALL
 
@@ -413,6 +418,7 @@ def _add_invariant_ekf(
         builder.Connect(fsr.GetOutputPort("fsr_forces"), contact.GetInputPort("fsr_forces"))
     q0 = topology.free_joint.position_start()
     v0 = plant.num_positions() + topology.free_joint.velocity_start()
+    estimate_bias = sensors.imu.gyro_bias is not None or sensors.imu.accel_bias is not None
     estimator = builder.AddSystem(
         InvariantEkfBaseStateEstimator(
             plant,
@@ -420,7 +426,8 @@ def _add_invariant_ekf(
             [humanoid.sole_frames[side] for side in sides],
             initial_base_pose=initial_state[q0 : q0 + 7],
             initial_base_velocity=initial_state[v0 : v0 + 6],
-            estimate_imu_bias=sensors.imu.gyro_bias is not None or sensors.imu.accel_bias is not None,
+            estimate_imu_bias=estimate_bias,
+            level_ground_tilt_std=LEVEL_GROUND_TILT_STD if estimate_bias else None,
         )
     )
     estimator.set_name("invariant_ekf_base_state_estimator")

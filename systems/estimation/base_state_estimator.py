@@ -87,6 +87,26 @@ random-walk with the gyro and contact noise. With bias states (standing, IMU upr
   separable from tilt while the robot stays upright (a horizontal bias b reads as a tilt
   of b / |g|, both filters alike).
 
+(E12) Level ground (optional, ``level_ground_tilt_std``): a foot in flat contact with a
+level floor has its sole normal along world z. With n_j = R_IF_j e_z the sole normal in the
+IMU frame from forward kinematics, the measurement R n_j = e_z is a right-invariant
+observation of a known world direction (as a magnetometer's in Barrau & Bonnabel's
+InEKF)::
+
+    r_j = (R̄ n_j − e_z)_xy = ([e_z]× ξ_R)_xy,   H_j = [[0, −1, 0], [1, 0, 0]] on ξ_R,
+    N_j = σ_t² I₂,
+
+σ_t the floor's and the sole's tilt per update, rad. It is applied every
+``level_ground_period`` (0.1 s: a sole's tilt error is slow, not white), only while the
+base is at rest (its gyro averaged over that period below ``LEVEL_GROUND_MAX_RATE``: a
+pushed robot rocks on its sole edges), and a foot whose r_jᵀ S_j⁻¹ r_j exceeds a
+chi-square gate is left out. Only tilt is observed (no yaw). It makes the horizontal
+accelerometer bias observable while standing (else it reads as a tilt of b / |g|, see
+E11's observability): the flat-floor assumption of humanoid tilt estimators (e.g.
+Benallegue, Chitour, Tanguy, "A new kinematics-inertial tilt estimator for humanoid
+robots", Humanoids 2017 / RA-L 2020, whose kinematic tilt comes from the support foot).
+On a floor tilted by α the estimated tilt follows the floor: an error of about α.
+
 Default noises: a Bosch BMI088-class IMU (Bosch Sensortec, "BMI088 6-axis Motion Tracking
 for High-performance Applications", data sheet BST-BMI088-DS001: gyro output noise density
 0.014 °/s/√Hz, accelerometer noise density 175 µg/√Hz), contact-point velocity noise
@@ -145,6 +165,18 @@ ACCEL_BIAS_RANDOM_WALK = 3.0e-3
 #: accelerometer, m/s² (~5 mg, a quarter of its ±20 mg zero-g offset).
 INITIAL_GYRO_BIAS_STD = 0.1 * math.pi / 180.0
 INITIAL_ACCEL_BIAS_STD = 0.05
+#: σ_t of the level-ground correction (E12) per foot and update, rad (0.5°: a sole rocking on
+#: its contact points and a floor level to a few tenths of a degree).
+LEVEL_GROUND_TILT_STD = 0.5 * math.pi / 180.0
+#: Period of the level-ground corrections (E12), s.
+LEVEL_GROUND_PERIOD = 0.1
+#: The level-ground correction (E12) waits for the base's rotation rate, averaged over a
+#: level_ground_period, to fall below this, rad/s (0.57 °/s): a robot rocking on its feet
+#: (pushed) has no flat sole; at rest the average of the BMI088's gyro noise is ~1e-3.
+LEVEL_GROUND_MAX_RATE = 0.01
+#: Chi-square gate (2 dof, 1e-3 false rejection) of a foot's level-ground innovation: a foot
+#: beyond it is not flat on the floor and is left out of (E12).
+LEVEL_GROUND_GATE = 13.8155
 #: Default normal-force threshold of the F/T contact test, N.
 CONTACT_FORCE_THRESHOLD = 20.0
 #: Default contact threshold of :class:`FootContactFromFsr` as a fraction of the robot's
@@ -580,6 +612,44 @@ class ContactAidedInvariantEkf:
         if self._bias:
             self._b = self._b + delta[self._b0 :]
 
+    def correct_level_ground(self, sole_normals: np.ndarray, tilt_std: float, gate: float = LEVEL_GROUND_GATE) -> int:
+        """Level-ground tilt correction (E12) with the feet in contact and in the state; a
+        foot whose innovation fails the gate r_jᵀ S_j⁻¹ r_j <= ``gate`` (chi-square, 2 dof)
+        is left out: it is not flat (it rolls on an edge, e.g. under a push). Returns the
+        number of feet used.
+
+        Args:
+            sole_normals: n_j, each foot's sole normal in the IMU frame (K_max x 3, unit);
+                rows of feet not in contact are ignored.
+            tilt_std: σ_t, rad (> 0).
+            gate: the chi-square gate (default: 1e-3 false rejection).
+        """
+        feet = np.flatnonzero(self._in_contact)
+        if not feet.size:
+            return 0
+        var = float(tilt_std) ** 2
+        rows = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0]])  # H of one foot on ξ_R
+        P_R = self._P[0:3, 0:3]
+        S_one = rows @ P_R @ rows.T + var * np.eye(2)
+        n = np.asarray(sole_normals, dtype=float).reshape(self._K, 3)[feet]
+        r_all = (n @ self._R.T)[:, :2]  # (R̄ n_j − e_z)_xy per foot
+        accepted = np.einsum("ki,ij,kj->k", r_all, np.linalg.inv(S_one), r_all) <= gate
+        if not accepted.any():
+            return 0
+        r = r_all[accepted].reshape(-1)
+        m = int(accepted.sum())
+        H = np.zeros((2 * m, self._dim))
+        H[0::2, 1] = -1.0
+        H[1::2, 0] = 1.0
+        PHt = self._P @ H.T
+        S = H @ PHt + var * np.eye(2 * m)
+        K = np.linalg.solve(S, PHt.T).T
+        self._apply_correction(K @ r)
+        IKH = self._eye - K @ H
+        self._P = IKH @ self._P @ IKH.T + var * (K @ K.T)
+        self._P = 0.5 * (self._P + self._P.T)
+        return m
+
     def correct_kinematics(self, foot_positions: np.ndarray, in_contact: np.ndarray) -> None:
         """Kinematic correction and contact switching (E6)-(E9).
 
@@ -803,6 +873,8 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         accel_bias_random_walk: float = ACCEL_BIAS_RANDOM_WALK,
         initial_gyro_bias_std: float = INITIAL_GYRO_BIAS_STD,
         initial_accel_bias_std: float = INITIAL_ACCEL_BIAS_STD,
+        level_ground_tilt_std: float | None = None,
+        level_ground_period: float = LEVEL_GROUND_PERIOD,
     ):
         """Args:
             plant: a finalized floating-base plant (for forward kinematics and gravity).
@@ -814,6 +886,12 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
             period: update period, s (default 1 ms).
             gyro_noise_density ... initial_accel_bias_std: see :class:`ContactAidedInvariantEkf`
                 (``estimate_imu_bias`` False, the default: the bias-free filter).
+            level_ground_tilt_std: σ_t of the level-ground correction (E12), rad: the feet
+                in contact are flat on a level floor (their frames' z axes are the sole
+                normals). None (default): no such correction.
+            level_ground_period: s between level-ground corrections (a multiple of
+                ``period``; default 0.1 s). A sole's tilt error (floor, sole rocking) is
+                slow, not white: fused at 1 kHz it would count a thousand times a second.
 
         Raises:
             ValueError: bad plant or frames, bad noise parameters or period.
@@ -859,6 +937,13 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
             initial_gyro_bias_std=initial_gyro_bias_std,
             initial_accel_bias_std=initial_accel_bias_std,
         )
+        self._tilt_std = None
+        if level_ground_tilt_std is not None:
+            self._tilt_std = positive_number(level_ground_tilt_std, f"{who}: level_ground_tilt_std")
+        every = positive_number(level_ground_period, f"{who}: level_ground_period") / self._period
+        if abs(every - round(every)) > 1e-9 * every or round(every) < 1:
+            raise ValueError(f"{who}: level_ground_period must be a multiple of period, got {level_ground_period}")
+        self._level_ground_every = int(round(every))
         x0 = self._initial_state(initial_base_pose, initial_base_velocity)
         n = topology.num_joints
         self._omega = self.DeclareVectorInputPort("angular_velocity", 3)
@@ -867,10 +952,13 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         self._contact = self.DeclareVectorInputPort("foot_contact", len(frames))
         # Discrete state groups: the filter (the core's state_vector, with the bias estimate
         # when on), the last gyro sample, bias-corrected (3, rad/s, for the output angular
-        # velocity) and valid (1: a foot in contact).
+        # velocity), valid (1: a foot in contact) and the gyro mean (3, below).
         self._filter_index = self.DeclareDiscreteState(x0[0])
         self._gyro_index = self.DeclareDiscreteState(x0[1])
         self._valid_index = self.DeclareDiscreteState(x0[2])
+        # The corrected gyro averaged over level_ground_period (3, rad/s, exponential): the
+        # level-ground correction waits for a robot at rest (E12).
+        self._gyro_mean_index = self.DeclareDiscreteState(np.zeros(3))
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._Update)
         xd = {self.xd_ticket()}
         self.DeclareVectorOutputPort("base_pose", 7, self._CalcPose, prerequisites_of_calc=xd)
@@ -913,13 +1001,23 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
             (self._filter_index, self._gyro_index, self._valid_index), self._initial_state(base_pose, base_velocity)
         ):
             context.SetDiscreteState(index, value)
+        context.SetDiscreteState(self._gyro_mean_index, np.zeros(3))
 
-    def _foot_kinematics(self, joint_positions: np.ndarray) -> np.ndarray:
-        """h_j: the foot frames' origins in the IMU frame, m (K x 3) (E6)."""
+    @property
+    def level_ground_tilt_std(self) -> float | None:
+        """σ_t of the level-ground correction (E12), rad; None when off."""
+        return self._tilt_std
+
+    def _foot_kinematics(self, joint_positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """h_j, the foot frames' origins in the IMU frame, m (K x 3) (E6), and n_j, their z
+        axes in the IMU frame (K x 3) (E12)."""
         q = self._plant.GetPositions(self._plant_context)
         q[self._q_index] = joint_positions
         self._plant.SetPositions(self._plant_context, q)
-        return np.array([f.CalcPose(self._plant_context, self._imu_frame).translation() for f in self._foot_frames])
+        poses = [f.CalcPose(self._plant_context, self._imu_frame) for f in self._foot_frames]
+        h = np.array([X.translation() for X in poses])
+        normals = np.array([X.rotation().matrix()[:, 2] for X in poses])
+        return h, normals
 
     def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
         who = self._who
@@ -929,8 +1027,17 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         flags = eval_finite_input(who, self._contact, context) > 0.5
         core = self._core
         core.set_state_vector(context.get_discrete_state(self._filter_index).value())
-        h = self._foot_kinematics(joints) if flags.any() else np.zeros((core.num_feet, 3))
+        if flags.any():
+            h, normals = self._foot_kinematics(joints)
+        else:
+            h = normals = np.zeros((core.num_feet, 3))
         core.correct_kinematics(h, flags)  # with no flag set this only removes feet (E9)
+        gyro_mean = context.get_discrete_state(self._gyro_mean_index).value()
+        gyro_mean = gyro_mean + (omega - core.gyro_bias - gyro_mean) / self._level_ground_every
+        step = int(round(context.get_time() / self._period))
+        at_rest = float(np.linalg.norm(gyro_mean)) < LEVEL_GROUND_MAX_RATE
+        if self._tilt_std is not None and at_rest and step % self._level_ground_every == 0:
+            core.correct_level_ground(normals, self._tilt_std)  # the feet now in contact (E12)
         valid = 1.0 if core.num_contacts else 0.0
         if core.estimates_imu_bias:
             omega_corrected = omega - core.gyro_bias  # the bias this propagation uses (E11)
@@ -940,6 +1047,7 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         discrete_state.set_value(self._filter_index, core.state_vector())
         discrete_state.set_value(self._gyro_index, omega_corrected)
         discrete_state.set_value(self._valid_index, [valid])
+        discrete_state.set_value(self._gyro_mean_index, gyro_mean)
 
     def _CalcPose(self, context: Context, output: BasicVector) -> None:
         # imu_to_base's pose (E10), without its velocity.

@@ -595,3 +595,11 @@ def test_joints_the_log_moves_slowly_get_no_viscous_term(hrp4, calibration):
     assert strong.any()
     low_speed_slope = truth["coulomb"][strong] / 0.1 + truth["viscous"][strong]
     np.testing.assert_allclose(corrections.coulomb[strong] / 0.1, low_speed_slope, rtol=0.35)
+
+
+def test_prior_options_are_checked(hrp4):
+    plant, _ = hrp4
+    with pytest.raises(ValueError, match="torque_offset_prior_std"):
+        IdentificationOptions(torque_offset_prior_std=-1.0).validate()
+    with pytest.raises(ValueError, match="coulomb_prior_std"):
+        IdentificationOptions(coulomb_prior_std=[1.0, np.nan]).validate()

@@ -214,3 +214,42 @@ def test_replay_renders_the_robot_in_headless_chromium(app_output, tmp_path):
     border = np.concatenate((pixels[:, :20].reshape(-1, 3), pixels[:, -20:].reshape(-1, 3)))
     distance = np.min(np.abs(centre[:, None, :] - border[None, :: max(1, len(border) // 400), :]).sum(axis=2), axis=1)
     assert (distance > 40).mean() > 0.01, "the robot is not visible in the replay"
+
+
+def test_dead_band_from_the_calibrated_noise_of_each_residual():
+    """With a refined model's noise model, each run's dead band is at least
+    ``dead_band_sigmas`` standard deviations of its own residual's noise (internal:
+    the internal residual's; classical: the classical residual's joint entries), never
+    below ``dead_band``; without a classical noise model the classical run keeps
+    ``dead_band``; a noise model measured with other gains is refused."""
+    from types import SimpleNamespace
+
+    from diagrams.residuals.push_and_comply import admittance_dead_band
+    from systems.residuals.offline import ResidualNoiseModel
+
+    scenario = PushAndComplyScenario()
+    noise = ResidualNoiseModel(
+        internal_gain=scenario.residual_gain,
+        external_gain=35.0,
+        period=scenario.plant_config.time_step,
+        covariance_internal=np.diag([1e-6, 0.01, 0.04, 1.0]),
+        covariance_external_force=np.eye(3),
+        samples=1000,
+        covariance_classical=np.diag([4.0, 1e-6, 0.25, 9.0]),
+    )
+    corrections = SimpleNamespace(residual_noise=noise)
+    k = scenario.dead_band_sigmas
+    np.testing.assert_allclose(
+        admittance_dead_band(scenario, "internal", corrections),
+        np.maximum(scenario.dead_band, k * np.array([1e-3, 0.1, 0.2, 1.0])),
+    )
+    np.testing.assert_allclose(
+        admittance_dead_band(scenario, "classical", corrections),
+        np.maximum(scenario.dead_band, k * np.array([2.0, 1e-3, 0.5, 3.0])),
+    )
+    assert admittance_dead_band(scenario, "internal", None) == scenario.dead_band
+    noise.covariance_classical = None
+    assert admittance_dead_band(scenario, "classical", corrections) == scenario.dead_band
+    noise.internal_gain = 2 * scenario.residual_gain
+    with pytest.raises(ValueError, match="calibrate again"):
+        admittance_dead_band(scenario, "internal", corrections)

@@ -19,7 +19,7 @@ arrays, so the same call calibrates a real robot from its own recording.
 
 import hashlib
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -42,19 +42,37 @@ from systems.estimation.model_identification import (
 )
 from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual, ResidualModel
 from systems.residuals.offline import replay_residuals, residual_noise_model
-from systems.simulation.imperfections import Imperfections
+from systems.simulation.imperfections import Imperfections, rated_joint_torques
 
 #: The issue's floor: the calibration removes at least this fraction of the RMS spurious
 #: external force while standing.
 SPURIOUS_FORCE_REDUCTION_FLOOR = 0.70
 
-#: The identification's options for a calibration: a Gaussian prior of 10 % on each link's
-#: deviation from its nominal (CAD) mass and first moment (the combinations the motion
-#: excites weakly stay near CAD instead of absorbing noise), and a weak ridge toward no
-#: friction and an exact torque sensor, so that joints the motion cannot move (the hand
-#: joints resting on a limit) keep those values. Everything else is the defaults of
-#: ``IdentificationOptions`` (5 Hz parallel filtering, 10 ms samples).
-CALIBRATION_OPTIONS = IdentificationOptions(inertial_prior_std=0.1, joint_prior_weight=1e-3)
+#: The identification's options for a calibration (``calibration_options`` adds the priors
+#: that scale with each joint's rated torque): Gaussian priors of 10 % on each link's
+#: deviation from its nominal (CAD) mass and first moment and on each torque sensor's scale
+#: (the combinations the motion excites weakly stay near CAD instead of absorbing noise),
+#: of TORQUE_OFFSET_PRIOR_FRACTION of the rated torque on the offsets and
+#: COULOMB_PRIOR_FRACTION on the Coulomb friction: a datasheet's tolerances, wider than the
+#: simulated errors. Everything else is the defaults of ``IdentificationOptions`` (5 Hz
+#: parallel filtering, 10 ms samples). The earlier choice, a ridge on the joint unknowns
+#: whose strength grew with the log (``joint_prior_weight`` 1e-3, an effective offset prior
+#: of ~0.05 N m), moved the leg offsets into the links' gravity parameters (2.7 N m on a
+#: knee) and those erred at the postures of a push.
+CALIBRATION_OPTIONS = IdentificationOptions(inertial_prior_std=0.1, torque_scale_prior_std=0.1)
+TORQUE_OFFSET_PRIOR_FRACTION = 0.05
+COULOMB_PRIOR_FRACTION = 0.1
+
+
+def calibration_options(plant: MultibodyPlant) -> IdentificationOptions:
+    """``CALIBRATION_OPTIONS`` with the offset and Coulomb priors of ``plant``'s joints:
+    the fractions above of each joint's rated torque (its actuator's effort limit)."""
+    rated = rated_joint_torques(plant)
+    return replace(
+        CALIBRATION_OPTIONS,
+        torque_offset_prior_std=TORQUE_OFFSET_PRIOR_FRACTION * rated,
+        coulomb_prior_std=COULOMB_PRIOR_FRACTION * rated,
+    )
 
 
 @dataclass
@@ -213,12 +231,12 @@ def calibrate_from_log(
         log,
         known_wrench_frames=station.known_wrench_frames,
         nominal_inertias=station.estimator_inertias,
-        options=CALIBRATION_OPTIONS,
+        options=calibration_options(handles.plant),
     )
     model = ResidualModel(handles.plant)
     model.set_spatial_inertias(corrections.spatial_inertias)
     period = float(np.median(np.diff(log.time)))
-    internal, external = replay_residuals(
+    replayed = replay_residuals(
         handles.plant,
         model,
         station.known_wrench_frames,
@@ -228,14 +246,16 @@ def calibrate_from_log(
         internal_gain=scenario.internal_gain,
         external_gain=scenario.external_gain,
         period=period,
+        classical_gain=scenario.internal_gain,
     )
     corrections.residual_noise = residual_noise_model(
-        internal,
-        external,
+        replayed.internal,
+        replayed.external_wrench_world,
         internal_gain=scenario.internal_gain,
         external_gain=scenario.external_gain,
         period=period,
         skip=int(round(scenario.skip / period)),
+        classical=replayed.classical,
     )
     return corrections
 
@@ -305,11 +325,21 @@ def refinement_scenario_for(scenario: Any) -> ModelRefinementScenario:
     )
 
 
+#: Part of the calibration cache's key: changed whenever the code changes what a calibration
+#: of the same scenario gives (e.g. the base-state estimator), so that old files are not reused.
+CALIBRATION_REVISION = "3: level-ground tilt at rest in the EKF, datasheet priors on the joints"
+
+
 def calibration_file(scenario: Any, cache_folder: Path) -> Path:
     """Where ``refined_model`` saves the calibration of ``scenario``'s robot in
-    ``cache_folder``: named by a hash of ``refinement_scenario_for(scenario)`` and the
-    identification's options (not of the code: delete the folder after an update)."""
-    text = scenario_as_yaml(refinement_scenario_for(scenario)) + repr(CALIBRATION_OPTIONS)
+    ``cache_folder``: named by a hash of ``refinement_scenario_for(scenario)``, the
+    identification's options and ``CALIBRATION_REVISION`` (not of the code itself: delete
+    the folder after an update that changes the calibration without a new revision)."""
+    text = (
+        scenario_as_yaml(refinement_scenario_for(scenario))
+        + repr((CALIBRATION_OPTIONS, TORQUE_OFFSET_PRIOR_FRACTION, COULOMB_PRIOR_FRACTION))
+        + CALIBRATION_REVISION
+    )
     key = hashlib.sha1(text.encode()).hexdigest()[:16]
     return Path(cache_folder) / f"model_corrections_{key}.npz"
 

@@ -61,8 +61,9 @@ class PushAndComplyScenario:
             (``ModelCorrections.residual_noise``, measured on the calibration log), each
             joint's dead band is at least this many of its internal-residual standard
             deviations (the realistic world's residual noise is well above the sensors'
-            white noise that ``dead_band`` was chosen for). The classical run keeps
-            ``dead_band``.
+            white noise that ``dead_band`` was chosen for); the classical run likewise with
+            the classical residual's noise, which the base-state estimate's velocity error
+            dominates (eq. 7 reads the base velocity, the internal residual does not).
         max_rate: joint velocity limit of the admittance controller, rad/s.
         integrate_from: "measured" (eq. 14 as printed: q_d = q + K_a r T) or "desired"
             (q_d integrates K_a r). With "measured" the PD keeps no stiffness, and a robot
@@ -146,13 +147,16 @@ def admittance_dead_band(
     scenario: PushAndComplyScenario, residual_kind: str, model_corrections: ModelCorrections | None
 ) -> float | np.ndarray:
     """The admittance's dead band, N m: ``scenario.dead_band``, raised per joint to
-    ``dead_band_sigmas`` standard deviations of the internal residual's noise when the
-    refined model carries a noise model (internal run only)."""
+    ``dead_band_sigmas`` standard deviations of the ``residual_kind`` residual's noise when
+    the refined model carries a noise model of it (measured on the calibration log)."""
     noise = model_corrections.residual_noise if model_corrections is not None else None
-    if noise is None or residual_kind != "internal":
+    if noise is None:
+        return scenario.dead_band
+    covariance = noise.covariance_internal if residual_kind == "internal" else noise.covariance_classical
+    if covariance is None:
         return scenario.dead_band
     noise.check_gains(scenario.residual_gain, noise.external_gain, scenario.plant_config.time_step, "push-and-comply")
-    sigma = np.sqrt(np.diag(noise.covariance_internal))
+    sigma = np.sqrt(np.diag(covariance))
     return np.maximum(scenario.dead_band, scenario.dead_band_sigmas * sigma)
 
 

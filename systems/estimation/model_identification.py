@@ -510,6 +510,15 @@ class IdentificationOptions:
             the column-normalised joint unknowns: rows sqrt(lambda) ||col_i|| (x_i -
             x_i,nominal); for joints whose torque barely changes over the log (scale and
             offset then collinear). 0: none.
+        torque_scale_prior_std, torque_offset_prior_std, coulomb_prior_std: a Gaussian
+            prior on each joint's s (dimensionless), o (N m) and F_c (N m) about 0, scalar
+            or one per joint (v[6:] order); 0: none. Unlike ``joint_prior_weight`` its
+            strength does not grow with the log: it is what a datasheet says of the
+            actuators (e.g. a torque constant known to 10 %, an offset within a few percent
+            of the rated torque). In a standing calibration the offsets are nearly collinear
+            with the links' gravity parameters (a link that barely rotates), so the two
+            priors decide the split: a ridge that grows with the data pulls the offsets to
+            0 and moves them into the links, which then err at other postures.
         min_mass_fraction: every corrected mass is clipped to >= this fraction of its
             nominal mass (a safeguard; the count is in the diagnostics).
         viscous_min_speed: the viscous coefficient b of a joint is identified only if the
@@ -532,6 +541,9 @@ class IdentificationOptions:
     rank_tolerance: float = 1e-6
     inertial_prior_std: float = 0.0
     joint_prior_weight: float = 0.0
+    torque_scale_prior_std: float | np.ndarray = 0.0
+    torque_offset_prior_std: float | np.ndarray = 0.0
+    coulomb_prior_std: float | np.ndarray = 0.0
     min_mass_fraction: float = 0.2
     viscous_min_speed: float = 2.0
 
@@ -548,6 +560,10 @@ class IdentificationOptions:
             positive_number(getattr(self, name), f"{who}.{name}")
         for name in ("edge_time", "inertial_prior_std", "joint_prior_weight", "min_mass_fraction", "viscous_min_speed"):
             positive_number(getattr(self, name), f"{who}.{name}", allow_zero=True)
+        for name in ("torque_scale_prior_std", "torque_offset_prior_std", "coulomb_prior_std"):
+            value = np.asarray(getattr(self, name), dtype=float)
+            if value.ndim > 1 or not np.all(np.isfinite(value)) or np.any(value < 0.0):
+                raise ValueError(f"{who}.{name} must be >= 0 (a scalar or one per joint), got {getattr(self, name)!r}")
         if not isinstance(self.filter_order, int) or not 1 <= self.filter_order <= 10:
             raise ValueError(f"{who}.filter_order must be an integer in 1..10, got {self.filter_order!r}")
         return self
@@ -695,6 +711,31 @@ def _known_wrench_force(plant: MultibodyPlant, context: Context, frames: Sequenc
         J = plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kV, frame, np.zeros(3), world, world)
         out += J.T @ W[6 * s : 6 * s + 6]
     return out
+
+
+def _joint_prior_rows(
+    options: IdentificationOptions, groups: list[str], act: np.ndarray, n: int, r: int, size: int
+) -> np.ndarray:
+    """Rows (x_i - 0) / std_i of the Gaussian priors on s, o and F_c (zero std: no row)."""
+    rows = []
+    for name, field_name in (
+        ("scale", "torque_scale_prior_std"),
+        ("offset", "torque_offset_prior_std"),
+        ("coulomb", "coulomb_prior_std"),
+    ):
+        if name not in groups:
+            continue
+        std = np.asarray(getattr(options, field_name), dtype=float)
+        if std.ndim == 0:
+            std = np.full(n, float(std))
+        if std.shape != (n,):
+            raise ValueError(f"IdentificationOptions.{field_name} must be a scalar or {n} values, got {std.shape}")
+        std = std[act]
+        for k in np.flatnonzero(std > 0.0):
+            row = np.zeros(size)
+            row[r + groups.index(name) * act.size + k] = 1.0 / std[k]
+            rows.append(row)
+    return np.array(rows).reshape(-1, size)
 
 
 def identify_model_corrections(
@@ -854,6 +895,7 @@ def identify_model_corrections(
             if options.joint_prior_weight > 0.0:
                 ridge = math.sqrt(options.joint_prior_weight) * np.diag(norms)[r:]
                 prior = np.vstack((prior, ridge))
+            prior = np.vstack((prior, _joint_prior_rows(options, groups, act, n, r, x_nominal.size)))
             if "viscous" in groups and slow_joints[act].any():  # b = 0 exactly (its column is 0)
                 pinned = r + groups.index("viscous") * na + np.flatnonzero(slow_joints[act])
                 pin_rows = np.zeros((pinned.size, x_nominal.size))

@@ -2,6 +2,7 @@
 residual noise model a calibration log gives the contact detector.
 
 ``replay_residuals`` steps the same ``InternalResidual`` and ``ExternalResidual`` systems
+(and optionally the ``ClassicalResidual``)
 (``systems.residuals.momentum_residuals``) through the log's samples, so a log replays
 exactly as the robot's estimators would have run on it. Without an unknown contact, what
 they report is model error plus sensor noise: ``residual_noise_model`` takes their
@@ -15,12 +16,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Frame
 
-from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual, ResidualModel
+from systems.residuals.momentum_residuals import ClassicalResidual, ExternalResidual, InternalResidual, ResidualModel
 
 
 @dataclass
@@ -33,6 +35,8 @@ class ResidualNoiseModel:
         covariance_internal: (n, n) of the internal residual, N^2 m^2.
         covariance_external_force: (3, 3) of the external residual's force in world, N^2.
         samples: how many samples they were computed from.
+        covariance_classical: (n, n) of the classical residual's joint entries (eq. 7,
+            gain ``internal_gain``), N^2 m^2, or None if it was not replayed.
     """
 
     internal_gain: float
@@ -41,6 +45,7 @@ class ResidualNoiseModel:
     covariance_internal: np.ndarray
     covariance_external_force: np.ndarray
     samples: int
+    covariance_classical: np.ndarray | None = None
 
     def check_gains(self, internal_gain: float, external_gain: float, period: float, who: str) -> None:
         """ValueError unless the residuals that use this model run with its gains and period."""
@@ -55,11 +60,14 @@ class ResidualNoiseModel:
 
     def as_arrays(self) -> dict[str, np.ndarray]:
         """Its fields as arrays (for ``np.savez``; see ``from_arrays``)."""
-        return {
+        arrays = {
             "noise_gains_period": np.array([self.internal_gain, self.external_gain, self.period, self.samples]),
             "noise_covariance_internal": self.covariance_internal,
             "noise_covariance_external_force": self.covariance_external_force,
         }
+        if self.covariance_classical is not None:
+            arrays["noise_covariance_classical"] = self.covariance_classical
+        return arrays
 
     @classmethod
     def from_arrays(cls, data) -> ResidualNoiseModel | None:
@@ -74,7 +82,21 @@ class ResidualNoiseModel:
             covariance_internal=np.array(data["noise_covariance_internal"], dtype=float),
             covariance_external_force=np.array(data["noise_covariance_external_force"], dtype=float),
             samples=int(gains[3]),
+            covariance_classical=(
+                np.array(data["noise_covariance_classical"], dtype=float)
+                if "noise_covariance_classical" in data
+                else None
+            ),
         )
+
+
+class ReplayedResiduals(NamedTuple):
+    """What ``replay_residuals`` returns: per log sample, the internal residual (N, n), the
+    external residual's wrench in world (N, 6), and the classical residual (N, nv) or None."""
+
+    internal: np.ndarray
+    external_wrench_world: np.ndarray
+    classical: np.ndarray | None
 
 
 def replay_residuals(
@@ -88,9 +110,11 @@ def replay_residuals(
     internal_gain: float,
     external_gain: float,
     period: float,
-) -> tuple[np.ndarray, np.ndarray]:
+    classical_gain: float | None = None,
+) -> ReplayedResiduals:
     """The internal residual (N, n) and the external residual's ``external_wrench_world``
-    (N, 6) at each of the N samples of a log taken every ``period`` s.
+    (N, 6) at each of the N samples of a log taken every ``period`` s, and with
+    ``classical_gain`` the classical residual (eq. 7, N x nv) too.
 
     Args:
         plant, model: the plant and the estimators' dynamics model (refined or not).
@@ -100,6 +124,7 @@ def replay_residuals(
             torques, corrected if the model is refined), v[6:] order, N m.
         known_wrenches: (N, 6 k) the F/T wrenches, world.
         internal_gain, external_gain: K, 1/s. period: T, s.
+        classical_gain: K of the classical residual, 1/s; None: not replayed.
 
     Raises:
         ValueError: arrays of inconsistent sizes or non-finite values (naming them).
@@ -120,28 +145,36 @@ def replay_residuals(
             raise ValueError(f"replay_residuals: {name} must be (N, {width}) with N = {samples}, got {array.shape}")
         if not np.isfinite(array).all():
             raise ValueError(f"replay_residuals: {name} holds NaN or inf")
-    internal = InternalResidual(plant, internal_gain, period, frames, model=model)
-    external = ExternalResidual(plant, external_gain, period, frames, model=model)
-    internal_out = np.empty((samples, n))
-    external_out = np.empty((samples, 6))
-    contexts = [(system, system.CreateDefaultContext()) for system in (internal, external)]
-    state_values = [s.GetInputPort("state").FixValue(c, state[0]) for s, c in contexts]
-    wrench_values = [s.GetInputPort("known_wrenches").FixValue(c, known_wrenches[0]) for s, c in contexts]
-    torque_value = internal.GetInputPort("measured_torque").FixValue(contexts[0][1], joint_torque[0])
-    residual_port = internal.GetOutputPort("residual")
-    wrench_port = external.GetOutputPort("external_wrench_world")
+    systems = [
+        (InternalResidual(plant, internal_gain, period, frames, model=model), "residual", n),
+        (ExternalResidual(plant, external_gain, period, frames, model=model), "external_wrench_world", 6),
+    ]
+    if classical_gain is not None:
+        systems.append((ClassicalResidual(plant, classical_gain, period, frames, model=model), "residual", n + 6))
+    outputs = [np.empty((samples, width)) for _, _, width in systems]
+    contexts = [system.CreateDefaultContext() for system, _, _ in systems]
+    state_values = [s.GetInputPort("state").FixValue(c, state[0]) for (s, _, _), c in zip(systems, contexts)]
+    wrench_values = [
+        s.GetInputPort("known_wrenches").FixValue(c, known_wrenches[0]) for (s, _, _), c in zip(systems, contexts)
+    ]
+    torque_values = [
+        s.GetInputPort("measured_torque").FixValue(c, joint_torque[0])
+        for (s, _, _), c in zip(systems, contexts)
+        if s.HasInputPort("measured_torque")
+    ]
+    ports = [s.GetOutputPort(name) for s, name, _ in systems]
     for k in range(samples):
         for value in state_values:
             value.GetMutableData().set_value(state[k])
         for value in wrench_values:
             value.GetMutableData().set_value(known_wrenches[k])
-        torque_value.GetMutableData().set_value(joint_torque[k])
-        for system, context in contexts:
+        for value in torque_values:
+            value.GetMutableData().set_value(joint_torque[k])
+        for (system, _, _), context, port, out in zip(systems, contexts, ports, outputs):
             context.SetTime(k * period)
             context.SetDiscreteState(system.EvalUniquePeriodicDiscreteUpdate(context))
-        internal_out[k] = residual_port.Eval(contexts[0][1])
-        external_out[k] = wrench_port.Eval(contexts[1][1])
-    return internal_out, external_out
+            out[k] = port.Eval(context)
+    return ReplayedResiduals(outputs[0], outputs[1], outputs[2] if classical_gain is not None else None)
 
 
 def residual_noise_model(
@@ -153,10 +186,13 @@ def residual_noise_model(
     period: float,
     skip: int = 0,
     shrinkage: float = 0.1,
+    classical: np.ndarray | None = None,
 ) -> ResidualNoiseModel:
     """The residuals' covariances over the samples after the first ``skip`` (the start-up),
     each shrunk toward its diagonal: (1 - shrinkage) C + shrinkage diag(C) (a stable
     estimate from correlated samples; the residuals' samples are correlated over 1/K s).
+    ``classical``: the classical residual (N, nv) replayed with gain ``internal_gain``, whose
+    joint entries give ``covariance_classical``.
 
     Raises:
         ValueError: fewer than 100 samples left, or a shrinkage outside [0, 1].
@@ -179,4 +215,5 @@ def residual_noise_model(
         covariance_internal=covariance(internal),
         covariance_external_force=covariance(force),
         samples=int(internal.shape[0]),
+        covariance_classical=None if classical is None else covariance(np.asarray(classical, dtype=float)[skip:, 6:]),
     )

@@ -343,6 +343,14 @@ def test_detector_thresholds_and_hysteresis(hrp4):
     r = np.zeros(n)
     r[3] = 0.1 * math.sqrt(dut.thresholds["on"][1]) * 1.01
     assert _step_detector(dut, c, np.zeros(6), r, 0.1) == (1.0, 0.1)
+    # Nothing is detected before the start-up time.
+    late = ContactDetector(
+        plant, covariance_internal=np.full(n, 0.01), covariance_external_force=np.full(3, 0.3), startup_time=0.05
+    )
+    assert late.startup_time == 0.05 and dut.startup_time == 0.0
+    c = late.CreateDefaultContext()
+    assert _step_detector(late, c, [0, 0, 0, 10 * f_on, 0, 0], zero_r, 0.01) == (0.0, -1.0)
+    assert _step_detector(late, c, [0, 0, 0, 10 * f_on, 0, 0], zero_r, 0.05) == (1.0, 0.05)
 
 
 def test_detector_bad_input(hrp4):

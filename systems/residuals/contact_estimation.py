@@ -579,6 +579,11 @@ class ContactDetector(LeafSystem):
         return np.linalg.inv(L)
 
     @property
+    def startup_time(self) -> float:
+        """s: no detection before this time."""
+        return self._startup_time
+
+    @property
     def thresholds(self) -> dict:
         """The chi-square thresholds: {"on": (ext, int), "off": (ext, int)}."""
         return {"on": self._on, "off": self._off}

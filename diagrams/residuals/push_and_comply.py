@@ -80,8 +80,8 @@ class PushAndComplyScenario:
         imperfections, base_state, model_refinement: the world (``diagrams.station.
             conditions``). Unlike the other hrp4_like experiments the default is still the
             ideal world (no imperfections, "truth_plus_noise", "none"): in the realistic
-            world (``apps/scenarios/push_and_comply_realistic.yaml``) the admittance loop
-            does not stay upright yet (BENCHMARKS.md, "Realistic world").
+            world (``apps/scenarios/push_and_comply_realistic.yaml``) the internal
+            admittance run does not stay upright yet (BENCHMARKS.md, "Realistic world").
     """
 
     model: str = "hrp4_like"

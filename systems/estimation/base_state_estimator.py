@@ -612,6 +612,17 @@ class ContactAidedInvariantEkf:
         if self._bias:
             self._b = self._b + delta[self._b0 :]
 
+    def _update(self, H: np.ndarray, r: np.ndarray, var: float) -> None:
+        """(E7) with measurement noise var I: S = H P Hᵀ + N, K = P Hᵀ S⁻¹, X⁺ = Exp(K r) X̄,
+        Joseph-form P⁺ = (I − KH) P (I − KH)ᵀ + K N Kᵀ (symmetrised)."""
+        PHt = self._P @ H.T
+        S = H @ PHt + var * np.eye(H.shape[0])
+        K = np.linalg.solve(S, PHt.T).T
+        self._apply_correction(K @ r)
+        IKH = self._eye - K @ H
+        self._P = IKH @ self._P @ IKH.T + var * (K @ K.T)
+        self._P = 0.5 * (self._P + self._P.T)
+
     def correct_level_ground(self, sole_normals: np.ndarray, tilt_std: float, gate: float = LEVEL_GROUND_GATE) -> int:
         """Level-ground tilt correction (E12) with the feet in contact and in the state; a
         foot whose innovation fails the gate r_jᵀ S_j⁻¹ r_j <= ``gate`` (chi-square, 2 dof)
@@ -641,13 +652,7 @@ class ContactAidedInvariantEkf:
         H = np.zeros((2 * m, self._dim))
         H[0::2, 1] = -1.0
         H[1::2, 0] = 1.0
-        PHt = self._P @ H.T
-        S = H @ PHt + var * np.eye(2 * m)
-        K = np.linalg.solve(S, PHt.T).T
-        self._apply_correction(K @ r)
-        IKH = self._eye - K @ H
-        self._P = IKH @ self._P @ IKH.T + var * (K @ K.T)
-        self._P = 0.5 * (self._P + self._P.T)
+        self._update(H, r, var)
         return m
 
     def correct_kinematics(self, foot_positions: np.ndarray, in_contact: np.ndarray) -> None:
@@ -679,13 +684,7 @@ class ContactAidedInvariantEkf:
             for i, j in enumerate(update):
                 H[3 * i : 3 * i + 3, 6:9] = -_I3
                 H[3 * i : 3 * i + 3, 9 + 3 * j : 12 + 3 * j] = _I3
-            PHt = self._P @ H.T
-            S = H @ PHt + self._var_k * np.eye(3 * m)
-            K = np.linalg.solve(S, PHt.T).T
-            self._apply_correction(K @ r)
-            IKH = self._eye - K @ H
-            self._P = IKH @ self._P @ IKH.T + self._var_k * (K @ K.T)
-            self._P = 0.5 * (self._P + self._P.T)
+            self._update(H, r, self._var_k)
         # (E8) contact made: d_j = p + R h_j, ξ_dj = ξ_p + R n_j.
         for j in np.flatnonzero(flags & ~self._in_contact):
             s = 9 + 3 * j

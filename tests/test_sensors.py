@@ -713,6 +713,35 @@ def test_standing_ft_forces_sum_to_weight_and_match_contacts(hrp4_standing):
     )
 
 
+def test_ft_wrenches_are_expressed_with_the_robots_own_orientation(hrp4_standing):
+    """A real robot rotates its F/T readings into world with its estimated orientation, so
+    the estimators see the wrenches and gravity in one frame: add_sensors feeds the F/T
+    sensors the sensed state, and a base orientation off by a tilt rotates the (weld)
+    wrench by that tilt."""
+    s = hrp4_standing
+    diagram, plant, humanoid, context = s["diagram"], s["plant"], s["humanoid"], s["context"]
+    for sensors in (s["sensors"], s["noisy"]):
+        source = diagram.connection_map()[(sensors.ft_sensors, sensors.ft_sensors.get_state_input_port().get_index())]
+        assert source == (sensors.assembler, sensors.assembler.GetOutputPort("state").get_index())
+    pctx = plant.GetMyContextFromRoot(context)
+    raw = FootForceTorqueSensors(
+        plant,
+        [humanoid.ft_sensor_joints[side] for side in ("left", "right")],
+        compensate_sole_weight=False,
+        force_noise_std=0.0,
+        moment_noise_std=0.0,
+    )
+    reactions = plant.get_reaction_forces_output_port().Eval(pctx)
+    x = plant.GetPositionsAndVelocities(pctx).copy()
+    tilt = RollPitchYaw(0.02, -0.03, 0.0).ToRotationMatrix()
+    X_WB = plant.GetFreeBodyPose(pctx, humanoid.base_body)
+    x_tilted = x.copy()
+    x_tilted[:4] = (tilt @ X_WB.rotation()).ToQuaternion().wxyz()
+    true_frame = raw.CalcGroundWrenches(reactions, x).reshape(-1, 3)
+    tilted_frame = raw.CalcGroundWrenches(reactions, x_tilted).reshape(-1, 3)
+    np.testing.assert_allclose(tilted_frame, true_frame @ tilt.matrix().T, rtol=0, atol=1e-9)
+
+
 def test_standing_imu_at_rest(hrp4_standing):
     s = hrp4_standing
     plant, humanoid, context = s["plant"], s["humanoid"], s["context"]

@@ -606,6 +606,12 @@ def test_level_ground_correction_matches_its_jacobian():
         ekf.correct_kinematics(FEET, [True, True])
         normals = np.tile(so3_exp(np.array([math.radians(tilt_deg), 0.0, 0.0]))[:, 2], (2, 1))
         assert ekf.correct_level_ground(normals, LEVEL_GROUND_TILT_STD) == used
+    # A foot whose sole is turning (not still) is left out, whatever its tilt.
+    ekf = ContactAidedInvariantEkf(2, estimate_imu_bias=True, initial_orientation_std=1e-3)
+    ekf.correct_kinematics(FEET, [True, True])
+    flat = np.tile([0.0, 0.0, 1.0], (2, 1))
+    assert ekf.correct_level_ground(flat, LEVEL_GROUND_TILT_STD, still=[False, True]) == 1
+    assert ekf.correct_level_ground(flat, LEVEL_GROUND_TILT_STD, still=[False, False]) == 0
     plant, handles, _, _, _ = _standing_robot()
     with pytest.raises(ValueError, match="level_ground_tilt_std"):
         InvariantEkfBaseStateEstimator(

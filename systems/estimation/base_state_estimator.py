@@ -97,12 +97,15 @@ InEKF)::
     N_j = σ_t² I₂,
 
 σ_t the floor's and the sole's tilt per update, rad. It is applied every
-``level_ground_period`` (0.1 s: a sole's tilt error is slow, not white), only while the
-base is at rest (its gyro averaged over that period below ``LEVEL_GROUND_MAX_RATE``: a
-pushed robot rocks on its sole edges), and a foot whose r_jᵀ S_j⁻¹ r_j exceeds a
-chi-square gate is left out. Only tilt is observed (no yaw). It makes the horizontal
-accelerometer bias observable while standing (else it reads as a tilt of b / |g|, see
-E11's observability): the flat-floor assumption of humanoid tilt estimators (e.g.
+``level_ground_period`` (0.1 s: a sole's tilt error is slow, not white), to each foot
+whose sole is still: its world normal R̄ n_j turned less than ``LEVEL_GROUND_MAX_RATE``
+times that period since the last update (a pushed robot rocks on its sole edges; a robot
+that squats or swings its arms with its soles flat keeps them still), and a foot whose
+r_jᵀ S_j⁻¹ r_j exceeds a chi-square gate is left out. (A first version waited for the
+whole base to be at rest, its gyro averaged over the period below the same rate, and so
+fused nothing during a slow whole-body motion with the soles flat.) Only tilt is observed
+(no yaw). It makes the horizontal accelerometer bias observable while standing (else it
+reads as a tilt of b / |g|, see E11's observability): the flat-floor assumption of humanoid tilt estimators (e.g.
 Benallegue, Chitour, Tanguy, "A new kinematics-inertial tilt estimator for humanoid
 robots", Humanoids 2017 / RA-L 2020, whose kinematic tilt comes from the support foot).
 On a floor tilted by α the estimated tilt follows the floor: an error of about α.
@@ -170,9 +173,10 @@ INITIAL_ACCEL_BIAS_STD = 0.05
 LEVEL_GROUND_TILT_STD = 0.5 * math.pi / 180.0
 #: Period of the level-ground corrections (E12), s.
 LEVEL_GROUND_PERIOD = 0.1
-#: The level-ground correction (E12) waits for the base's rotation rate, averaged over a
-#: level_ground_period, to fall below this, rad/s (0.57 °/s): a robot rocking on its feet
-#: (pushed) has no flat sole; at rest the average of the BMI088's gyro noise is ~1e-3.
+#: The level-ground correction (E12) uses a foot whose sole's world normal turned by less
+#: than this rate times level_ground_period since the previous update, rad/s (0.57 °/s): a
+#: robot rocking on its feet (pushed) has no flat sole; over 0.1 s the BMI088's gyro noise
+#: turns the estimate by ~1e-3 rad/s.
 LEVEL_GROUND_MAX_RATE = 0.01
 #: Chi-square gate (2 dof, 1e-3 false rejection) of a foot's level-ground innovation: a foot
 #: beyond it is not flat on the floor and is left out of (E12).
@@ -623,7 +627,13 @@ class ContactAidedInvariantEkf:
         self._P = IKH @ self._P @ IKH.T + var * (K @ K.T)
         self._P = 0.5 * (self._P + self._P.T)
 
-    def correct_level_ground(self, sole_normals: np.ndarray, tilt_std: float, gate: float = LEVEL_GROUND_GATE) -> int:
+    def correct_level_ground(
+        self,
+        sole_normals: np.ndarray,
+        tilt_std: float,
+        gate: float = LEVEL_GROUND_GATE,
+        still: np.ndarray | None = None,
+    ) -> int:
         """Level-ground tilt correction (E12) with the feet in contact and in the state; a
         foot whose innovation fails the gate r_jᵀ S_j⁻¹ r_j <= ``gate`` (chi-square, 2 dof)
         is left out: it is not flat (it rolls on an edge, e.g. under a push). Returns the
@@ -634,8 +644,11 @@ class ContactAidedInvariantEkf:
                 rows of feet not in contact are ignored.
             tilt_std: σ_t, rad (> 0).
             gate: the chi-square gate (default: 1e-3 false rejection).
+            still: optional (K_max) booleans, the feet whose soles are still (the others
+                are left out); default: all.
         """
-        feet = np.flatnonzero(self._in_contact)
+        in_contact = self._in_contact if still is None else self._in_contact & np.asarray(still, dtype=bool)
+        feet = np.flatnonzero(in_contact)
         if not feet.size:
             return 0
         var = float(tilt_std) ** 2
@@ -955,9 +968,9 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         self._filter_index = self.DeclareDiscreteState(x0[0])
         self._gyro_index = self.DeclareDiscreteState(x0[1])
         self._valid_index = self.DeclareDiscreteState(x0[2])
-        # The corrected gyro averaged over level_ground_period (3, rad/s, exponential): the
-        # level-ground correction waits for a robot at rest (E12).
-        self._gyro_mean_index = self.DeclareDiscreteState(np.zeros(3))
+        # The soles' world normals R̄ n_j at the last level-ground update (K x 3; zero rows:
+        # unknown): E12 uses the feet whose soles have not turned since.
+        self._normals_index = self.DeclareDiscreteState(np.zeros(3 * len(frames)))
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._Update)
         xd = {self.xd_ticket()}
         self.DeclareVectorOutputPort("base_pose", 7, self._CalcPose, prerequisites_of_calc=xd)
@@ -1000,7 +1013,7 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
             (self._filter_index, self._gyro_index, self._valid_index), self._initial_state(base_pose, base_velocity)
         ):
             context.SetDiscreteState(index, value)
-        context.SetDiscreteState(self._gyro_mean_index, np.zeros(3))
+        context.SetDiscreteState(self._normals_index, np.zeros(3 * len(self._foot_frames)))
 
     @property
     def level_ground_tilt_std(self) -> float | None:
@@ -1031,12 +1044,18 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         else:
             h = normals = np.zeros((core.num_feet, 3))
         core.correct_kinematics(h, flags)  # with no flag set this only removes feet (E9)
-        gyro_mean = context.get_discrete_state(self._gyro_mean_index).value()
-        gyro_mean = gyro_mean + (omega - core.gyro_bias - gyro_mean) / self._level_ground_every
+        world_normals = context.get_discrete_state(self._normals_index).value().reshape(-1, 3)
         step = int(round(context.get_time() / self._period))
-        at_rest = float(np.linalg.norm(gyro_mean)) < LEVEL_GROUND_MAX_RATE
-        if self._tilt_std is not None and at_rest and step % self._level_ground_every == 0:
-            core.correct_level_ground(normals, self._tilt_std)  # the feet now in contact (E12)
+        if self._tilt_std is not None and step % self._level_ground_every == 0:
+            # E12 on the feet in contact whose soles turned by less than the rate limit
+            # since the previous update (a zero row: no previous normal, not still).
+            previous = world_normals
+            turned = np.linalg.norm(normals @ core.rotation.T - previous, axis=1)
+            still = (np.linalg.norm(previous, axis=1) > 0.5) & (
+                turned < LEVEL_GROUND_MAX_RATE * self._level_ground_every * self._period
+            )
+            core.correct_level_ground(normals, self._tilt_std, still=still)
+            world_normals = normals @ core.rotation.T if flags.any() else np.zeros_like(normals)
         valid = 1.0 if core.num_contacts else 0.0
         if core.estimates_imu_bias:
             omega_corrected = omega - core.gyro_bias  # the bias this propagation uses (E11)
@@ -1046,7 +1065,7 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         discrete_state.set_value(self._filter_index, core.state_vector())
         discrete_state.set_value(self._gyro_index, omega_corrected)
         discrete_state.set_value(self._valid_index, [valid])
-        discrete_state.set_value(self._gyro_mean_index, gyro_mean)
+        discrete_state.set_value(self._normals_index, world_normals.reshape(-1))
 
     def _CalcPose(self, context: Context, output: BasicVector) -> None:
         # imu_to_base's pose (E10), without its velocity.

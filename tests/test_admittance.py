@@ -439,3 +439,64 @@ def test_gains_by_group_accepts_single_joint_names():
     assert gains[names.index("R_ANKLE_P")] == 1.0
     assert gains[names.index("L_ANKLE_P")] == 0.2
     assert gains[names.index("CHEST_P")] == 0.0
+
+
+# -- closed chain (support_frames) ---------------------------------------------------------
+
+
+def _relative_sole_pose(plant, context, handles, q):
+    """X_RL: the left sole in the right sole's frame (independent of the base)."""
+    plant.SetPositions(context, q)
+    right = handles.sole_frames["right"]
+    return handles.sole_frames["left"].CalcPose(context, right)
+
+
+def test_closed_chain_projection_keeps_both_soles_still(hrp4):
+    """Independent of the Jacobians the projection uses: moving the joints along the
+    projected rate for a short time leaves the left sole's pose relative to the right sole
+    unchanged to first order (forward kinematics), while the unprojected rate moves it; the
+    squeeze part C^T lambda of a residual gives no motion; joints outside the legs keep
+    their rate K_a r'."""
+    plant, handles = hrp4
+    joints = joints_in_velocity_order(plant)
+    n = len(joints)
+    gains = admittance_gains_by_group(plant, handles, {"legs": 0.19, "torso": 0.1, "arms": 0.3, "R_ANKLE_P": 1.0})
+    soles = (handles.sole_frames["left"], handles.sole_frames["right"])
+    dut = JointAdmittanceController(plant, gains, support_frames=soles, integrate_from="desired")
+    free = JointAdmittanceController(plant, gains, integrate_from="desired")
+    assert dut.support_frames == soles and free.support_frames is None
+    rng = np.random.default_rng(3)
+    context = plant.CreateDefaultContext()
+    q0 = plant.GetPositions(context).copy()
+    q_index = np.array([j.position_start() for j in joints])
+    knee = [k for k, j in enumerate(joints) if "KNEE" in j.name()]
+    q_joints = q0[q_index].copy()
+    q_joints[knee] = 0.6  # a bent-knee stance
+    residual = rng.normal(0.0, 1.0, n)
+    projected = dut.CalcDesiredRate(residual, q_joints)
+    unprojected = free.CalcDesiredRate(residual)
+
+    def sole_drift(rate, eps=1e-6):
+        q = q0.copy()
+        q[q_index] = q_joints
+        before = _relative_sole_pose(plant, context, handles, q)
+        q[q_index] = q_joints + eps * rate
+        after = _relative_sole_pose(plant, context, handles, q)
+        d = before.InvertAndCompose(after)
+        return (np.linalg.norm(d.translation()) + np.linalg.norm(d.rotation().ToAngleAxis().angle())) / eps
+
+    assert sole_drift(unprojected) > 1e-2  # a random residual squeezes the legs
+    assert sole_drift(projected) < 1e-4 * sole_drift(unprojected)
+    C = dut.ClosedChainMatrix(q_joints)
+    legs = {int(plant.GetJointByName(name).index()) for name in handles.joint_groups["legs"]}
+    others = np.array([int(j.index()) not in legs for j in joints])
+    np.testing.assert_array_equal(C[:, others], 0.0)
+    np.testing.assert_allclose(projected[others], unprojected[others], rtol=0, atol=1e-12)
+    squeeze = C.T @ rng.normal(0.0, 1.0, 6)
+    np.testing.assert_allclose(dut.CalcDesiredRate(squeeze, q_joints), 0.0, atol=1e-9)
+    with pytest.raises(ValueError, match="needs the joint positions"):
+        dut.CalcDesiredRate(residual)
+    with pytest.raises(ValueError, match="support_frames must be two frames"):
+        JointAdmittanceController(plant, gains, support_frames=soles[:1])
+    with pytest.raises(ValueError, match="ClosedChainMatrix needs support_frames"):
+        free.ClosedChainMatrix(q_joints)

@@ -69,6 +69,11 @@ class PushAndComplyScenario:
             (q_d integrates K_a r). With "measured" the PD keeps no stiffness, and a robot
             whose gravity compensation ignores the ground reaction collapses under its own
             weight (measured: the knees buckle); "desired" keeps the posture's stiffness.
+        closed_chain_projection: the admittance moves the legs only along rates that keep
+            both soles still (``JointAdmittanceController``'s ``support_frames``); without
+            it, leg motions that do not respect the closed chain build internal forces
+            between the feet, which the realistic world's uncalibrated torque-scale errors
+            turn into residual (measured: the internal run twisted its hips and fell).
         noise: sensor noise on (the defaults of ``systems.simulation.sensors``).
         seed: sensor noise seed.
         log_period: loggers' sampling period, s.
@@ -108,6 +113,7 @@ class PushAndComplyScenario:
     dead_band_sigmas: float = 3.0
     max_rate: float = 0.5
     integrate_from: str = "desired"
+    closed_chain_projection: bool = True
     noise: bool = True
     seed: int = 0
     log_period: float = 0.01
@@ -220,6 +226,11 @@ def build_push_and_comply_diagram(
             dead_band=admittance_dead_band(scenario, residual_kind, model_corrections),
             max_rate=scenario.max_rate,
             integrate_from=scenario.integrate_from,
+            support_frames=(
+                (humanoid.sole_frames["left"], humanoid.sole_frames["right"])
+                if scenario.closed_chain_projection
+                else None
+            ),
         )
     )
     admittance.set_name("joint_admittance_controller")

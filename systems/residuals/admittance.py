@@ -24,6 +24,22 @@ as permissive as the model) by default except the joint-limit clip:
    further out, i.e. the clip interval is [min(lower, q_d,prev), max(upper, q_d,prev)].
    Once q_d is inside the limits it stays inside.
 
+Closed chain (``support_frames``, off by default): with both feet on the ground the legs
+and the floor form a closed chain, so joint rates that move one sole relative to the other
+(C q̇ ≠ 0 below) cannot happen; the PD then fights the ground and builds internal forces
+(a squeeze or a twist between the feet). Those load the joints, and any torque-sensor
+scale error the estimators did not calibrate turns them into residual, which the
+admittance follows: with the realistic torque errors this loop ran a pushed robot's hip
+yaw and roll into the ground. With two support frames (the soles), q̇_d is projected, in
+the admittance's own metric K_a⁻¹, onto the rates that keep both soles still:
+
+    C = J_L,j − J_L,b J_R,b⁻¹ J_R,j,   q̇_d = K_a (r' − Cᵀ λ),   λ = (C K_a Cᵀ)⁻¹ C K_a r',
+
+J_s,b and J_s,j the base and joint columns of sole s's spatial-velocity Jacobian (the base
+velocity that keeps the right sole still leaves the left sole moving at C q̇). Cᵀ λ is the
+part of the residual that is a squeeze between the feet, which the robot cannot comply
+with. Only the leg joints appear in C; the rate limit is applied after the projection.
+
 Integration (``integrate_from``):
 
 * ``"measured"`` (default, the paper's eq. 14): q_d(k+1) = q(k) + q̇_d T starts from the
@@ -51,6 +67,7 @@ from collections.abc import Mapping
 
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import Frame, JacobianWrtVariable
 from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem
 from pydrake.systems.primitives import MatrixGain
 
@@ -187,6 +204,7 @@ class JointAdmittanceController(LeafSystem):
         limit_margin: float = DEFAULT_LIMIT_MARGIN,
         initial_position=None,
         integrate_from: str = "measured",
+        support_frames: tuple[Frame, Frame] | None = None,
     ):
         """Constructs the controller.
 
@@ -211,6 +229,9 @@ class JointAdmittanceController(LeafSystem):
             initial_position: q_d before the first update, n entries, rad; default: the
                 measured position at initialisation.
             integrate_from: "measured" (eq. 14, default) or "desired" (integrator).
+            support_frames: None (default), or two frames of ``plant`` (the soles) that
+                stay still on the ground: q̇_d is projected onto the rates that keep them
+                still (see the module doc).
 
         Raises:
             ValueError: unsupported/unfinalized plant, wrong sizes, negative gains,
@@ -263,6 +284,25 @@ class JointAdmittanceController(LeafSystem):
             self._initial_position = None
         else:
             self._initial_position = per_joint(initial_position, n, "initial_position", who=_WHO)
+
+        self._plant = plant
+        self._support_frames = None
+        if support_frames is not None:
+            frames = tuple(support_frames)
+            if len(frames) != 2 or not all(isinstance(f, Frame) for f in frames):
+                raise ValueError(f"{_WHO}: support_frames must be two frames (the soles), got {support_frames!r}")
+            for f in frames:
+                if (
+                    not plant.HasFrameNamed(f.name(), f.model_instance())
+                    or plant.GetFrameByName(f.name(), f.model_instance()).index() != f.index()
+                ):
+                    raise ValueError(f"{_WHO}: support frame {f.name()!r} is not a frame of the plant")
+            self._support_frames = frames
+            self._plant_context = plant.CreateDefaultContext()
+            self._q_index = np.array([j.position_start() for j in joints], dtype=int)
+            q = np.zeros(plant.num_positions())
+            q[0] = 1.0  # the free body's quaternion (w first): the base at the identity
+            self._q_template = q
 
         self._residual_includes_base = bool(residual_includes_base)
         residual_size = n + 6 if self._residual_includes_base else n
@@ -350,6 +390,28 @@ class JointAdmittanceController(LeafSystem):
     def integrate_from(self) -> str:
         return self._integrate_from
 
+    @property
+    def support_frames(self) -> tuple[Frame, Frame] | None:
+        """The two frames kept still by the closed-chain projection, or None."""
+        return self._support_frames
+
+    def ClosedChainMatrix(self, joint_positions: np.ndarray) -> np.ndarray:
+        """C (6 x n): the left support frame's spatial velocity relative to the right one's
+        for joint rates q̇ when the base moves so that the right one is still (v[6:] order);
+        needs ``support_frames``."""
+        if self._support_frames is None:
+            raise ValueError(f"{_WHO}: ClosedChainMatrix needs support_frames")
+        q = self._q_template.copy()
+        q[self._q_index] = joint_positions
+        plant, context = self._plant, self._plant_context
+        plant.SetPositions(context, q)
+        world = plant.world_frame()
+        J_left, J_right = (
+            plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kV, f, np.zeros(3), world, world)
+            for f in self._support_frames
+        )
+        return J_left[:, 6:] - J_left[:, :6] @ np.linalg.solve(J_right[:, :6], J_right[:, 6:])
+
     def get_residual_input_port(self):
         return self._residual_port
 
@@ -361,10 +423,19 @@ class JointAdmittanceController(LeafSystem):
 
     # -- the law ----------------------------------------------------------------------
 
-    def CalcDesiredRate(self, residual: np.ndarray) -> np.ndarray:
-        """q̇_d = clip(K_a soft_threshold(r), ±max_rate) for an n-entry (joint) residual."""
+    def CalcDesiredRate(self, residual: np.ndarray, joint_positions: np.ndarray | None = None) -> np.ndarray:
+        """q̇_d = clip(K_a soft_threshold(r), ±max_rate) for an n-entry (joint) residual;
+        with ``support_frames``, K_a r' is first projected onto the rates that keep them
+        still at ``joint_positions`` (required then; see the module doc)."""
         rate = soft_threshold(residual, self._dead_band)
         rate *= self._gains
+        if self._support_frames is not None:
+            if joint_positions is None:
+                raise ValueError(f"{_WHO}: CalcDesiredRate needs the joint positions with support_frames")
+            C = self.ClosedChainMatrix(joint_positions)
+            CK = C * self._gains  # C K_a
+            lam = np.linalg.lstsq(CK @ C.T, C @ rate, rcond=1e-12)[0]
+            rate -= CK.T @ lam
         np.minimum(rate, self._max_rate, out=rate)
         np.maximum(rate, self._neg_max_rate, out=rate)
         return rate
@@ -381,7 +452,7 @@ class JointAdmittanceController(LeafSystem):
         if self._residual_includes_base:
             r = r[6:]
         base = measured_position if self._integrate_from == "measured" else previous_desired
-        q_d = self.CalcDesiredRate(r)
+        q_d = self.CalcDesiredRate(r, measured_position)
         q_d *= self._period
         q_d += np.asarray(base, dtype=float)
         # A previous q_d outside [lower, upper] (e.g. the start posture of a joint resting on

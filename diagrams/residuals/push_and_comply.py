@@ -86,7 +86,8 @@ class PushAndComplyScenario:
             conditions``). Unlike the other hrp4_like experiments the default is still the
             ideal world (no imperfections, "truth_plus_noise", "none"): in the realistic
             world (``apps/scenarios/push_and_comply_realistic.yaml``) the internal
-            admittance run does not stay upright yet (BENCHMARKS.md, "Realistic world").
+            admittance run stays upright on the robot of ``imperfections.seed`` 0 but falls
+            on others (seeds 3 and 7; BENCHMARKS.md, "Realistic world").
     """
 
     model: str = "hrp4_like"

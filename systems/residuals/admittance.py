@@ -300,9 +300,8 @@ class JointAdmittanceController(LeafSystem):
             self._support_frames = frames
             self._plant_context = plant.CreateDefaultContext()
             self._q_index = np.array([j.position_start() for j in joints], dtype=int)
-            q = np.zeros(plant.num_positions())
-            q[0] = 1.0  # the free body's quaternion (w first): the base at the identity
-            self._q_template = q
+            # C does not depend on the base pose: the default one (a valid quaternion) will do.
+            self._q_template = plant.GetPositions(self._plant_context).copy()
 
         self._residual_includes_base = bool(residual_includes_base)
         residual_size = n + 6 if self._residual_includes_base else n

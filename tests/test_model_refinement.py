@@ -89,6 +89,18 @@ def test_refinement_removes_most_of_the_standing_spurious_force(calibrated):
     assert after["internal_rms_Nm"] < 0.5 * before["internal_rms_Nm"]
 
 
+def _leg_and_chest_offset_errors(scenario, corrections) -> tuple[np.ndarray, np.ndarray]:
+    """On the joints rated >= 100 N m (legs and chest): |identified - simulated| torque
+    offset, and |simulated offset|, each over the joint's rated torque."""
+    rated = rated_joint_torques(build_refinement_diagram(scenario, None)[1].plant)
+    errors = scenario.imperfections.torque_sensor
+    _, offset = torque_measurement_errors(
+        rated, errors.scale_error_percent, errors.offset_percent, scenario.imperfections.seed
+    )
+    big = rated >= 100.0
+    return np.abs(corrections.torque_offset - offset)[big] / rated[big], np.abs(offset[big]) / rated[big]
+
+
 def test_calibration_finds_the_torque_sensor_offsets_of_the_legs(calibrated):
     """The simulated robot's motor-torque offsets (1 % of the rated torque, seeded) against
     the identified ones on the joints rated >= 100 N m (legs and chest, whose gravity load
@@ -97,17 +109,10 @@ def test_calibration_finds_the_torque_sensor_offsets_of_the_legs(calibrated):
     decide). Floor: each within 0.5 % of its rated torque (a push's effort is about that);
     the earlier data-scaled ridge missed a knee's 3.07 N m by 2.7 N m (1.4 %)."""
     scenario, corrections, _ = calibrated
-    plant = build_refinement_diagram(scenario, None)[1].plant
-    rated = rated_joint_torques(plant)
-    torque_errors = scenario.imperfections.torque_sensor
-    _, offset = torque_measurement_errors(
-        rated, torque_errors.scale_error_percent, torque_errors.offset_percent, scenario.imperfections.seed
-    )
-    big = rated >= 100.0
-    error = np.abs(corrections.torque_offset - offset)[big] / rated[big]
+    error, true_offset = _leg_and_chest_offset_errors(scenario, corrections)
     print(
         f"leg and chest offsets: worst error {100 * error.max():.3f} % of rated, true up to "
-        f"{100 * np.max(np.abs(offset[big]) / rated[big]):.2f} %"
+        f"{100 * true_offset.max():.2f} %"
     )
     assert error.max() < 0.005
 
@@ -123,11 +128,7 @@ def test_calibration_with_the_base_state_estimator_finds_the_leg_offsets():
     imperfections.model_mismatch = ModelMismatch(mass_percent=5.0, com_percent=10.0, inertia_percent=0.0)
     scenario = _short(imperfections=imperfections, base_state="invariant_ekf")
     corrections, _ = calibrate_model(scenario)
-    rated = rated_joint_torques(build_refinement_diagram(scenario, None)[1].plant)
-    errors = imperfections.torque_sensor
-    _, offset = torque_measurement_errors(rated, errors.scale_error_percent, errors.offset_percent, imperfections.seed)
-    big = rated >= 100.0
-    error = np.abs(corrections.torque_offset - offset)[big] / rated[big]
+    error, _ = _leg_and_chest_offset_errors(scenario, corrections)
     print(f"EKF base: leg and chest offsets: worst error {100 * error.max():.3f} % of rated")
     assert error.max() < 0.005
 

@@ -105,9 +105,10 @@ r_jᵀ S_j⁻¹ r_j exceeds a chi-square gate is left out. (A first version wait
 whole base to be at rest, its gyro averaged over the period below the same rate, and so
 fused nothing during a slow whole-body motion with the soles flat.) Only tilt is observed
 (no yaw). It makes the horizontal accelerometer bias observable while standing (else it
-reads as a tilt of b / |g|, see E11's observability): the flat-floor assumption of humanoid tilt estimators (e.g.
-Benallegue, Chitour, Tanguy, "A new kinematics-inertial tilt estimator for humanoid
-robots", Humanoids 2017 / RA-L 2020, whose kinematic tilt comes from the support foot).
+reads as a tilt of b / |g|, see E11's observability): the flat-floor assumption of
+humanoid tilt estimators (e.g. Benallegue, Chitour, Tanguy, "A new kinematics-inertial
+tilt estimator for humanoid robots", Humanoids 2017 / RA-L 2020, whose kinematic tilt
+comes from the support foot).
 On a floor tilted by α the estimated tilt follows the floor: an error of about α.
 
 Default noises: a Bosch BMI088-class IMU (Bosch Sensortec, "BMI088 6-axis Motion Tracking
@@ -663,8 +664,7 @@ class ContactAidedInvariantEkf:
         r = r_all[accepted].reshape(-1)
         m = int(accepted.sum())
         H = np.zeros((2 * m, self._dim))
-        H[0::2, 1] = -1.0
-        H[1::2, 0] = 1.0
+        H[:, 0:3] = np.tile(rows, (m, 1))  # one foot's rows per accepted foot
         self._update(H, r, var)
         return m
 

@@ -6,8 +6,14 @@ residual moves the joints in the direction of the effort the residual sees. The 
 runs twice: with the classical residual (eq. 7: it only feels the chest) and with the
 internal residual (eq. 11: it feels the legs too, and the robot bends as if sitting down).
 
+By default it runs in the realistic world (``diagrams.station.conditions``: the invariant
+EKF's base state, realistic sensor, friction and model imperfections, the model refined
+from a calibration motion first, cached in ``DIR/model_refinement/``); ``--ideal`` runs it
+in the ideal world. The admittance keeps both soles and the centre of mass still
+(``closed_chain_projection``, ``hold_center_of_mass``).
+
 Run: ``python -m apps.push_and_comply [--headless] [--out DIR] [--scenario FILE] [--scenario-text YAML]
-[--seed N]``.
+[--seed N] [--ideal]``.
 Writes to ``DIR/push_and_comply/``: ``internal.html`` and ``classical.html`` (self-contained
 Meshcat replays: red spheres at the joints grow with the residual's effort, red arrows are
 the pushes), ``joint_trajectories.png``, ``residual_vs_true_effort.png`` and

@@ -500,3 +500,71 @@ def test_closed_chain_projection_keeps_both_soles_still(hrp4):
         JointAdmittanceController(plant, gains, support_frames=soles[:1])
     with pytest.raises(ValueError, match="ClosedChainMatrix needs support_frames"):
         free.ClosedChainMatrix(q_joints)
+
+
+def _com_in_right_sole(plant, context, handles, q):
+    """p_RG: the robot's centre of mass in the right sole's frame (independent of the base)."""
+    plant.SetPositions(context, q)
+    p_WG = plant.CalcCenterOfMassPositionInWorld(context, [handles.model_instance])
+    return handles.sole_frames["right"].CalcPoseInWorld(context).inverse().multiply(p_WG)
+
+
+def test_hold_center_of_mass_keeps_it_over_the_feet_in_the_estimators_model(hrp4):
+    """Forward kinematics, independent of the Jacobians the projection uses: with
+    ``hold_center_of_mass`` the projected rate keeps the CoM still in the right sole's x-y
+    plane to first order (the model given as ``spatial_inertias``, here with a 3 kg heavier
+    chest), and both soles still; the closed-chain projection alone moves the CoM; with the
+    plant's own inertias the held CoM is the plant's, not the heavier model's."""
+    plant, handles = hrp4
+    joints = joints_in_velocity_order(plant)
+    n = len(joints)
+    gains = admittance_gains_by_group(plant, handles, {"legs": 0.19, "torso": 0.1, "arms": 0.3, "R_ANKLE_P": 1.0})
+    soles = (handles.sole_frames["left"], handles.sole_frames["right"])
+    chest = plant.GetBodyByName("CHEST_P_LINK", handles.model_instance)
+    context = plant.CreateDefaultContext()
+    M = chest.CalcSpatialInertiaInBodyFrame(context)
+    heavier = SpatialInertia(M.get_mass() + 3.0, M.get_com(), M.get_unit_inertia())
+    model = {int(chest.index()): heavier}
+    held = JointAdmittanceController(
+        plant, gains, support_frames=soles, hold_center_of_mass=True, spatial_inertias=model, integrate_from="desired"
+    )
+    held_plant_model = JointAdmittanceController(
+        plant, gains, support_frames=soles, hold_center_of_mass=True, integrate_from="desired"
+    )
+    chain_only = JointAdmittanceController(plant, gains, support_frames=soles, integrate_from="desired")
+    assert held.holds_center_of_mass and not chain_only.holds_center_of_mass
+    model_context = plant.CreateDefaultContext()
+    chest.SetSpatialInertiaInBodyFrame(model_context, heavier)
+
+    rng = np.random.default_rng(5)
+    q0 = plant.GetPositions(context).copy()
+    q_index = np.array([j.position_start() for j in joints])
+    q_joints = q0[q_index].copy()
+    q_joints[[k for k, j in enumerate(joints) if "KNEE" in j.name()]] = 0.4
+    residual = rng.normal(0.0, 1.0, n)
+
+    def drifts(rate, ctx, eps=1e-6):
+        q = q0.copy()
+        q[q_index] = q_joints
+        com_before = _com_in_right_sole(plant, ctx, handles, q)
+        sole_before = _relative_sole_pose(plant, ctx, handles, q)
+        q[q_index] = q_joints + eps * rate
+        com = np.linalg.norm((_com_in_right_sole(plant, ctx, handles, q) - com_before)[:2]) / eps
+        d = sole_before.InvertAndCompose(_relative_sole_pose(plant, ctx, handles, q))
+        sole = (np.linalg.norm(d.translation()) + d.rotation().ToAngleAxis().angle()) / eps
+        return com, sole
+
+    com_free, _ = drifts(chain_only.CalcDesiredRate(residual, q_joints), model_context)
+    com_held, sole_held = drifts(held.CalcDesiredRate(residual, q_joints), model_context)
+    com_plant_held, _ = drifts(held_plant_model.CalcDesiredRate(residual, q_joints), model_context)
+    com_plant_held_in_plant, _ = drifts(held_plant_model.CalcDesiredRate(residual, q_joints), context)
+    assert com_free > 1e-3  # m/s per unit rate: the closed chain alone lets the CoM move
+    assert com_held < 1e-4 * com_free
+    assert sole_held < 1e-6
+    assert com_plant_held_in_plant < 1e-4 * com_free
+    assert com_plant_held > 1e2 * com_held  # a 3 kg different chest: another CoM
+    assert held.ClosedChainMatrix(q_joints).shape == (8, n)
+    with pytest.raises(ValueError, match="hold_center_of_mass needs support_frames"):
+        JointAdmittanceController(plant, gains, hold_center_of_mass=True)
+    with pytest.raises(ValueError, match="spatial_inertias are only used with support_frames"):
+        JointAdmittanceController(plant, gains, spatial_inertias=model)

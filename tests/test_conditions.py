@@ -1,23 +1,19 @@
 """The realistic default world and ``--ideal`` (diagrams.station.conditions, apps.runner)."""
 
-from pathlib import Path
-
 import pytest
 
 from apps.runner import experiment_parser, scenario_from_args
 from diagrams.residuals.contact_localization import ContactLocalizationScenario
 from diagrams.residuals.push_and_comply import PushAndComplyScenario
 from diagrams.residuals.residual_comparison import ResidualComparisonScenario
-from diagrams.scenarios import scenario_as_dict
 from diagrams.station.conditions import check_model_refinement, is_ideal, set_ideal_conditions
 from diagrams.station.standing import StandingScenario
 from systems.simulation.imperfections import Imperfections
 
-REALISTIC_BY_DEFAULT = (ResidualComparisonScenario, ContactLocalizationScenario)
 ALL = (PushAndComplyScenario, ResidualComparisonScenario, ContactLocalizationScenario)
 
 
-@pytest.mark.parametrize("schema", REALISTIC_BY_DEFAULT)
+@pytest.mark.parametrize("schema", ALL)
 def test_the_hrp4_experiments_default_to_the_realistic_world(schema):
     scenario = schema()
     assert scenario.base_state == "invariant_ekf"
@@ -26,17 +22,6 @@ def test_the_hrp4_experiments_default_to_the_realistic_world(schema):
     assert scenario.imperfections.model_mismatch.mass_percent == realistic.model_mismatch.mass_percent == 5.0
     assert scenario.imperfections.friction.coulomb_percent == realistic.friction.coulomb_percent > 0.0
     assert not is_ideal(scenario)
-
-
-def test_push_and_comply_still_defaults_to_the_ideal_world_and_ships_the_realistic_one():
-    """Its realistic closed loop does not stay upright yet (BENCHMARKS.md): the default stays
-    ideal and the realistic world is a scenario file."""
-    assert is_ideal(PushAndComplyScenario())
-    parser = experiment_parser("apps.push_and_comply", None, conditions=True)
-    realistic_file = Path(__file__).parents[1] / "apps" / "scenarios" / "push_and_comply_realistic.yaml"
-    realistic = scenario_from_args(PushAndComplyScenario, parser.parse_args(["--scenario", str(realistic_file)]))
-    assert realistic.base_state == "invariant_ekf" and realistic.model_refinement == "calibrate"
-    assert scenario_as_dict(realistic.imperfections) == scenario_as_dict(Imperfections.realistic())
 
 
 @pytest.mark.parametrize("schema", ALL)

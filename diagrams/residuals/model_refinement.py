@@ -339,7 +339,8 @@ def refinement_scenario_for(scenario: Any) -> ModelRefinementScenario:
 #: Part of the calibration cache's key: changed whenever the code changes what a calibration
 #: of the same scenario gives (e.g. the base-state estimator), so that old files are not reused.
 CALIBRATION_REVISION = (
-    "5: F/T wrenches in the estimated world frame, EKF level ground with still soles, viscous from 0.5 v_s"
+    "6: F/T wrenches in the estimated world frame, EKF level ground with still soles, viscous from 0.5 v_s,"
+    " EKF from a standing start"
 )
 
 

@@ -47,6 +47,8 @@ from models import (
 from systems.common.topology import FloatingBaseTopology, floating_base_topology
 from systems.estimation.base_state_estimator import (
     LEVEL_GROUND_TILT_STD,
+    STANDING_START_ORIENTATION_STD,
+    STANDING_START_VELOCITY_STD,
     FootContactFromForceTorque,
     FootContactFromFsr,
     InvariantEkfBaseStateEstimator,
@@ -134,6 +136,14 @@ class HumanoidStation:
     @property
     def joint_names(self) -> tuple[str, ...]:
         return tuple(j.name() for j in self.topology.joints)
+
+    @property
+    def estimator_spatial_inertias(self) -> dict | None:
+        """{body index: SpatialInertia} (M_BBo_B) of the estimators' model where it differs
+        from the plant: the refined model's, else the mismatched one's; None: the plant's."""
+        if self.model_corrections is not None:
+            return dict(self.model_corrections.spatial_inertias)
+        return self.estimator_inertias
 
     def set_initial_state(self, root_context: Context, state: np.ndarray | None = None) -> None:
         """Puts the robot in ``state`` ([q; v], default ``initial_state``) in the diagram's
@@ -395,7 +405,9 @@ def _add_invariant_ekf(
     also takes the soles in contact as flat on level ground (E12, ``LEVEL_GROUND_TILT_STD``):
     without that the horizontal accelerometer bias reads as a base tilt, which the refined
     model absorbs during the calibration and the internal residual then shows as gravity
-    torque on every pitch joint."""
+    torque on every pitch joint. The station's robot starts standing still on level ground,
+    so the filter starts with that prior (``STANDING_START_ORIENTATION_STD``,
+    ``STANDING_START_VELOCITY_STD``) rather than the generic one."""
     from systems.observer.fsr_sensing import FSR_NOISE_STD, FSR_SIDES, FsrArray
     from systems.simulation.sensors import SEEDS_PER_CALL
 
@@ -426,6 +438,8 @@ def _add_invariant_ekf(
             [humanoid.sole_frames[side] for side in sides],
             initial_base_pose=initial_state[q0 : q0 + 7],
             initial_base_velocity=initial_state[v0 : v0 + 6],
+            initial_orientation_std=STANDING_START_ORIENTATION_STD,
+            initial_velocity_std=STANDING_START_VELOCITY_STD,
             estimate_imu_bias=estimate_bias,
             level_ground_tilt_std=LEVEL_GROUND_TILT_STD if estimate_bias else None,
         )

@@ -172,6 +172,13 @@ INITIAL_ACCEL_BIAS_STD = 0.05
 #: σ_t of the level-ground correction (E12) per foot and update, rad (0.5°: a sole rocking on
 #: its contact points and a floor level to a few tenths of a degree).
 LEVEL_GROUND_TILT_STD = 0.5 * math.pi / 180.0
+#: Initial standard deviations of a robot that starts standing still with its soles flat on
+#: level ground (the station's start): its tilt is what the soles' kinematics give on that
+#: floor, known to the level-ground tolerance (rad), and it is at rest to 1 cm/s (m/s). With
+#: the generic INITIAL_* (2.9°, 0.1 m/s) the filter's first 0.2 s of gains are large, and
+#: the noise they let through moves the base estimate by more than the converged filter's.
+STANDING_START_ORIENTATION_STD = LEVEL_GROUND_TILT_STD
+STANDING_START_VELOCITY_STD = 0.01
 #: Period of the level-ground corrections (E12), s.
 LEVEL_GROUND_PERIOD = 0.1
 #: The level-ground correction (E12) uses a foot whose sole's world normal turned by less

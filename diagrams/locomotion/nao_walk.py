@@ -30,6 +30,7 @@ from diagrams.station.standing import default_gains
 from systems.locomotion.contact_zmp import MIN_NORMAL_FORCE, ContactZmp
 from systems.locomotion.walking_pattern import NaoWalkingController, WalkingParameters
 from systems.simulation.disturbances import Push, PushSource
+from systems.simulation.imperfections import Imperfections
 
 
 @dataclass
@@ -44,7 +45,7 @@ class NaoWalkHandles:
         push_source: the PushSource of the external forces, or None.
         loggers: VectorLogSinks: ``state`` (true [q; v]), ``zmp`` (measured), ``normal_force``,
             ``foot_normal_forces``, ``zmp_reference``, ``com_reference``, ``sole_targets``,
-            ``planned_contact``, ``desired_position``.
+            ``planned_contact``, ``desired_position``, ``sensed_state`` (the station's [q; v]).
         meshcat_visualizer: the MeshcatVisualizer, or None.
     """
 
@@ -98,6 +99,11 @@ class NaoWalkScenario:
             K_p^-1 K_d q_dot_ref (eq. W-3), since the PD damps towards zero velocity. Off by
             default (it does not help: BENCHMARKS.md, "Walking: variants tried").
         noise, seed: the station's sensor noise (the PD reads the sensed state) and its seed.
+        base_state: the source of the sensed base state (``diagrams.station.humanoid_station``):
+            "truth_plus_noise" (default) or "invariant_ekf" (the contact-aided invariant EKF,
+            foot contact from the FSRs). The walking controller is open loop and does not
+            read it; the EKF's walking drift is measured on it (BENCHMARKS.md).
+        imperfections: the station's ``Imperfections`` (default none), e.g. the realistic IMU.
         log_period: period of every logger, s.
         plant_config: Drake's ``MultibodyPlantConfig`` (default: 1 ms steps, point contact, SAP).
         simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``).
@@ -109,6 +115,8 @@ class NaoWalkScenario:
     velocity_lead: bool = False
     noise: bool = False
     seed: int = 0
+    base_state: str = "truth_plus_noise"
+    imperfections: Imperfections = dataclasses.field(default_factory=Imperfections)
     log_period: float = 0.005
     plant_config: MultibodyPlantConfig = dataclasses.field(default_factory=default_plant_config)
     simulator_config: SimulatorConfig = dataclasses.field(default_factory=SimulatorConfig)
@@ -145,7 +153,13 @@ def build_nao_walk_diagram(
     zmp_correction_passes = scenario.zmp_correction_passes
     builder = DiagramBuilder()
     station = add_humanoid_station(
-        builder, "nao_like", plant_config=scenario.plant_config, noise=scenario.noise, seed=scenario.seed
+        builder,
+        "nao_like",
+        plant_config=scenario.plant_config,
+        noise=scenario.noise,
+        seed=scenario.seed,
+        base_state=scenario.base_state,
+        imperfections=scenario.imperfections,
     )
     plant, humanoid = station.plant, station.humanoid
     kp, kd = default_gains(plant, humanoid)
@@ -175,6 +189,8 @@ def build_nao_walk_diagram(
     builder.Connect(plant.get_contact_results_output_port(), contact_zmp.GetInputPort("contact_results"))
 
     loggers = add_walking_loggers(builder, plant, controller, contact_zmp, log_period)
+    loggers["sensed_state"] = LogVectorOutput(station.sensed_state, builder, log_period)
+    loggers["sensed_state"].set_name("log_sensed_state")
 
     visualizer = None
     if meshcat is not None:

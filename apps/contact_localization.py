@@ -24,7 +24,9 @@ The scenario is a ``ContactLocalizationScenario``; ``--trials``, ``--seed``, ``-
 ``--slow-motion-duration`` and ``--no-noise`` override its fields, ``--ideal`` its world;
 ``--workers`` and ``--replays`` are how it runs. Trials run in parallel processes ('spawn').
 Writes to ``DIR/contact_localization/``: ``metrics.json`` (totals, floors, per-trial
-results, the scenario), ``position_errors.png`` (histogram), and ``replay_trial_<i>.html``
+results, the scenario), ``localizer_inputs.npz`` (per trial the averaged q, external wrench
+and internal residual the final localization used: ``ContactLocalizer.localize`` replays
+it), ``position_errors.png`` (histogram), and ``replay_trial_<i>.html``
 (Meshcat replays of the first R trials: green arrow = true force ending at the true contact
 point, red arrow = the localizer's estimate, shown while valid).
 
@@ -282,8 +284,14 @@ def main(argv: list[str] | None = None) -> int:
             record_replay(spec, scenario, meshcat, live=not args.headless)
             save_replay(meshcat, out_dir / f"replay_trial_{spec['trial']}.html")
         metrics["wall_time_s"] = time.perf_counter() - start
+        inputs = [r.pop("localizer_inputs") for r in results]
         metrics["per_trial"] = results
         write_metrics(out_dir, metrics, scenario)
+        np.savez_compressed(
+            out_dir / "localizer_inputs.npz",
+            trial=np.array([r["trial"] for r in results]),
+            **{name: np.array([i[name] for i in inputs]) for name in inputs[0]},
+        )
         plot_position_errors(out_dir / "position_errors.png", results)
         _print_summary(metrics)
         print_written(out_dir)
@@ -297,13 +305,31 @@ def _print_summary(metrics: dict) -> None:
         f"contact localization on {metrics['model']}, {metrics['trials']} trials,"
         f" noise {'on' if metrics['noise'] else 'off'}:"
     )
+    intervals = metrics.get("intervals", {})
+    level = 100 * metrics.get("interval_level", 0.95)
     for key, floor_text in metrics["floors"].items():
         op, floor = floor_text.split()
         value = metrics.get(key)
         ok = metrics["meets_floors"].get(key)
         text = "n/a" if value is None else f"{value:.4g}"
-        print(f"  {key:32s} {text:>10s}   floor {op} {floor:<6}  {'ok' if ok else 'MISSED' if ok is not None else ''}")
+        ci = f"[{intervals[key][0]:.4g}, {intervals[key][1]:.4g}]" if key in intervals else ""
+        verdict = "ok" if ok else "MISSED" if ok is not None else ""
+        print(f"  {key:32s} {text:>10s} {ci:>20s}   floor {op} {floor:<6}  {verdict}")
+    for key in ("valid_rate", "valid_precision"):
+        if metrics.get(key) is not None:
+            ci = f"[{intervals[key][0]:.4g}, {intervals[key][1]:.4g}]" if key in intervals else ""
+            print(f"  {key:32s} {metrics[key]:>10.4g} {ci:>20s}")
+    print(f"  ({level:.0f} % intervals: Clopper-Pearson for rates, order statistics for quantiles)")
     print(f"  status counts: {metrics['status_counts']}")
+    worst = [row for row in metrics.get("per_link", []) if row["rate"] < 1.0]
+    if worst:
+        print("  right-link rate per pushed link, below 100 % (all links: metrics.json 'per_link'):")
+        for row in worst:
+            print(f"    {row['group']:20s} {row['successes']:4d} / {row['trials']:<4d} {100 * row['rate']:5.1f} %")
+    if metrics.get("confusion"):
+        print("  misses (true link -> estimated link or status: count):")
+        for row in metrics["confusion"]:
+            print(f"    {row['true']} -> {row['estimated']}: {row['count']}")
     print(f"wall time {metrics['wall_time_s']:.1f} s")
 
 

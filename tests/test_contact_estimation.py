@@ -41,6 +41,7 @@ from systems.residuals.geometry_intersection import (
     signed_distances,
 )
 from systems.simulation.disturbances import Push, PushSource, Step
+from systems.simulation.pd_gravity import joints_in_velocity_order
 
 # ---------------------------------------------------------------------------------------
 # Fixtures.
@@ -571,3 +572,49 @@ def test_localizer_update_time_hrp4(hrp4):
         dut.EvalUniquePeriodicDiscreteUpdate(c)
         samples.append(time.perf_counter() - start)
     assert np.median(samples) < 2e-3
+
+
+def test_localizer_frees_the_stop_reaction_of_a_joint_on_its_limit(hrp4):
+    """HRP-4's hand joints rest on a position limit. A push on a hand link that presses its
+    joint into the stop is taken by the stop: the internal residual (the true external
+    joint effort, here computed exactly) shows J^fb^T f with that joint's entry cancelled.
+    Without the stop columns (``limit_margin=None``, the paper's fit) some of these pushes
+    come out VALID on a wrong link; with them the result is never VALID on a wrong link, and
+    when it is AMBIGUOUS the true link is one of the two it reports."""
+    plant, scene_graph, handles, context = hrp4
+    context = context.Clone()
+    q = plant.GetPositions(context)
+    hand_joints = [plant.GetJointByName(f"{s}_HAND_J{k}") for s in "RL" for k in (0, 1)]
+    for joint in hand_joints:
+        q[joint.position_start()] = 0.0  # its stop (HAND_J0's upper, HAND_J1's lower limit)
+    plant.SetPositions(context, q)
+    with_stops = ContactLocalizer(plant, scene_graph, exclude_bodies=["l_sole", "r_sole"])
+    paper = ContactLocalizer(plant, scene_graph, exclude_bodies=["l_sole", "r_sole"], limit_margin=None)
+    limited, signs = with_stops.limited_joints(q)
+    names = [j.name() for j in joints_in_velocity_order(plant)]
+    assert {names[k] for k in limited} == {j.name() for j in hand_joints}
+    assert paper.limited_joints(q)[0].size == 0
+    hand_links = [int(plant.GetBodyByName(f"{s}_HAND_J{k}_LINK").index()) for s in "RL" for k in (0, 1)]
+    rng = np.random.default_rng(11)
+    pressed, paper_wrong_valid = 0, 0
+    for _ in range(60):
+        geo_index = int(rng.choice(np.flatnonzero(np.isin(with_stops.geometry.body_indices, hand_links))))
+        body, p_B, _, f_W = _outer_surface_contact(plant, context, with_stops, geo_index, rng)
+        wrench, tau = _exact_residuals(plant, context, body, p_B, f_W)
+        into_stop = limited[signs * tau[limited] < 0.0]  # the push presses these into their stops
+        if into_stop.size == 0:
+            continue
+        pressed += 1
+        tau[into_stop] = 0.0  # the stop takes the push's torque there
+        result = with_stops.localize(q, wrench, tau)
+        truth = int(body.index())
+        assert not (result.status == VALID and result.body_index != truth)
+        if result.status == AMBIGUOUS:
+            assert truth in (result.body_index, result.runner_up_body_index)
+        else:
+            assert result.status == VALID and result.body_index == truth
+        before = paper.localize(q, wrench, tau)
+        paper_wrong_valid += before.status == VALID and before.body_index != truth
+    print(f"\n{pressed} pushes into a stop; the paper's fit VALID on a wrong link in {paper_wrong_valid}")
+    assert pressed >= 10
+    assert paper_wrong_valid >= 1

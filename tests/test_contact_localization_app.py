@@ -12,11 +12,13 @@ from scenario_checks import SCENARIOS, check_scenario_convention
 from apps import contact_localization
 from diagrams.residuals.contact_localization import (
     ContactLocalizationScenario,
+    build_contact_localization_diagram,
     no_contact_scenario,
     sample_trials,
     trial_scenario,
 )
 from diagrams.scenarios import load_scenario
+from diagrams.station.conditions import set_ideal_conditions
 from systems.simulation.visualization import read_static_html
 
 
@@ -69,6 +71,19 @@ def test_app_smoke(tmp_path):
     assert metrics["median_position_error_m"] < 0.02
     assert metrics["median_force_error_rel"] < 0.05
     assert (out / "position_errors.png").stat().st_size > 10_000
+    # The 95 % intervals bracket their figures, and the per-link table counts every trial.
+    low, high = metrics["intervals"]["correct_link_rate"]
+    assert low <= metrics["correct_link_rate"] <= high == 1.0
+    assert sum(row["trials"] for row in metrics["per_link"]) == 2 and metrics["confusion"] == []
+    # The recorded localizer inputs replay to the study's own results.
+    inputs = np.load(out / "localizer_inputs.npz")
+    assert list(inputs["trial"]) == [0, 1]
+    scenario = load_scenario(ContactLocalizationScenario, text="{}")
+    _, handles = build_contact_localization_diagram(set_ideal_conditions(scenario))
+    for k, trial in enumerate(metrics["per_trial"]):
+        replay = handles.localizer.localize(inputs["q"][k], inputs["external_wrench_world"][k], inputs["residual"][k])
+        assert replay.body_index == trial["estimated_body_index"] and replay.status == trial["status"]
+        np.testing.assert_allclose(replay.point_W, trial["estimated_point_world"], atol=1e-12)
     # The replay animates the true and the estimated force arrows.
     scene = read_static_html((out / "replay_trial_0.html").read_text())
     for path in ("/drake/true_force/0", "/drake/estimated_force/0"):

@@ -44,6 +44,7 @@ from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
+from diagrams.residuals.study_statistics import CONFIDENCE_LEVEL, proportion_interval, quantile_interval, rate_table
 from diagrams.residuals.wiring import add_internal_and_external_residuals
 from diagrams.station.conditions import is_ideal, set_ideal_conditions
 from diagrams.station.humanoid_station import HumanoidStation, add_scenario_station, default_plant_config
@@ -455,7 +456,10 @@ def trial_result(
     """The results of the trial ``spec`` run as ``scenario`` (``trial_scenario``) up to the end
     of its push, from the simulator's root ``context``: detection and its delay, the
     localized link and point, the force errors, and the localizer's update time (module
-    docstring); ``wall_time_s``: the simulation's wall time."""
+    docstring); ``wall_time_s``: the simulation's wall time. ``localizer_inputs`` holds
+    the (averaged) q, external wrench and internal residual of the final localization, as
+    arrays (``ContactLocalizer.localization_inputs``: the study's localizations can be
+    replayed offline)."""
     push_start, t_end = scenario.push_start, scenario.push_start + scenario.push_duration
     estimate = handles.localizer.estimate(handles.localizer.GetMyContextFromRoot(context))
     pc = handles.push_source.GetMyContextFromRoot(context)
@@ -500,6 +504,8 @@ def trial_result(
     if estimate.body_index >= 0:
         result["position_error_m"] = float(np.linalg.norm(estimate.point_W - true_point))
     result["localizer_update_s"] = time_localizer_update(handles, context)
+    q, wrench, residual = handles.localizer.localization_inputs(handles.localizer.GetMyContextFromRoot(context))
+    result["localizer_inputs"] = {"q": q, "external_wrench_world": wrench, "residual": residual}
     return result
 
 
@@ -521,6 +527,40 @@ def no_contact_result(
         "noise_seed": scenario.seed,
         "false_detections": int(np.sum(np.diff(np.concatenate(([0.0], detected))) > 0.5)),
         "max_statistic_over_threshold": [float(stats[0].max() / on[0]), float(stats[1].max() / on[1])],
+    }
+
+
+def _intervals_and_tables(results: list[dict], detected: list, valid: list, positions, forces) -> dict:
+    """The study's 95 % intervals (``study_statistics``: Clopper-Pearson for the rates,
+    order statistics for the quantiles), its per-link table of the right-link rate, and the
+    confusion list of its misses (true link -> estimated link or status, with counts)."""
+    n = len(results)
+    if n == 0:
+        return {"intervals": {}, "per_link": [], "confusion": []}
+    intervals = {
+        "detection_rate": proportion_interval(len(detected), n),
+        "correct_link_rate": proportion_interval(sum(r["correct_link"] for r in results), n),
+        "valid_rate": proportion_interval(len(valid), n),
+        "median_position_error_m": quantile_interval(positions, 0.5),
+        "p95_position_error_m": quantile_interval(positions, 0.95),
+    }
+    if valid:
+        intervals["valid_precision"] = proportion_interval(sum(r["correct_link"] for r in valid), len(valid))
+    if forces:
+        intervals["median_force_error_rel"] = quantile_interval(forces, 0.5)
+    confusion: dict[tuple[str, str], int] = {}
+    for r in results:
+        if not r["correct_link"]:
+            key = (r["body"], r["estimated_body"] or f"none ({r['status_reason']})")
+            confusion[key] = confusion.get(key, 0) + 1
+    return {
+        "intervals": {k: [float(a), float(b)] for k, (a, b) in intervals.items()},
+        "interval_level": CONFIDENCE_LEVEL,
+        "per_link": rate_table(results, lambda r: r["body"], lambda r: r["correct_link"]),
+        "confusion": [
+            {"true": t, "estimated": e, "count": c}
+            for (t, e), c in sorted(confusion.items(), key=lambda item: (-item[1], item[0]))
+        ],
     }
 
 
@@ -578,6 +618,9 @@ def contact_localization_metrics(
             if not r["correct_link"]
         ],
     }
+    valid = [r for r in results if r["status"] == 0]
+    metrics["valid_precision"] = float(np.mean([r["correct_link"] for r in valid])) if valid else None
+    metrics.update(_intervals_and_tables(results, detected, valid, positions, forces))
     checks = {}
     for key, (op, floor) in floors.items():
         value = metrics.get(key)

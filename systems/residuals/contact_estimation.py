@@ -649,6 +649,12 @@ class LocalizationResult:
         runner_up_score: the best score on another link (inf if none).
         line_point_W: the line's point closest to the world origin (eq. 22), zeros if none.
         candidates: (body index, point_W, score, l) of every surface entry point kept.
+        runner_up_body_index: the link of ``runner_up_score`` (-1 if none); with AMBIGUOUS
+            the two links that explain the residuals about equally are this and
+            ``body_index``.
+        runner_up_point_W: its first entry point along the force (zeros if none).
+        limited_joints: indices (v[6:] order) of the joints taken as resting on a position
+            limit, whose stop's reaction the fit left free (see ``ContactLocalizer``).
     """
 
     status: int
@@ -659,6 +665,9 @@ class LocalizationResult:
     runner_up_score: float = math.inf
     line_point_W: np.ndarray = field(default_factory=lambda: np.zeros(3))
     candidates: list = field(default_factory=list)
+    runner_up_body_index: int = -1
+    runner_up_point_W: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    limited_joints: tuple = ()
 
     @property
     def reason(self) -> str:
@@ -683,11 +692,21 @@ class ContactLocalizer(LeafSystem):
        the ENTRY point is kept: there the force points into the surface (f . n < 0).
        Entry points buried deeper than ``surface_tolerance`` inside another link's
        primitive are not on the robot's surface and are dropped.
-    3. Each candidate c on link B_c gets the score ||W (J^fb_c^T f_hat - r_int)|| (eq. 12;
-       W = diag(score_weights)). All points of a line on the same link give the same J^T f
-       (the moment of a line about any axis does not depend on the point), so links are
-       ranked by score and, on the best link, the first entry along f is taken (the pusher
-       comes from outside, against f).
+    3. Each candidate c on link B_c gets the score ||W (J^fb_c^T f_hat - r_int - mu)|| (eq.
+       12; W = diag(score_weights)). mu is the reaction of the joint stops: a joint within
+       ``limit_margin`` of a position limit (e.g. HRP-4's hand joints, which rest on theirs)
+       may carry any stop torque that pushes it away from that limit, which the internal
+       residual sees as external effort; the fit leaves it free (one sign-constrained
+       column per such joint: with a diagonal W that row's misfit is zero when its sign is
+       the stop's, else unchanged). All points of a line on the same link give the same
+       J^T f (the moment of a line about any axis does not depend on the point), so links
+       are ranked by score and, on the best link, the first entry along f is taken (the
+       pusher comes from outside, against f). Links that tie, e.g. a hand and its wrist
+       when only the hand joint's row told them apart and it rests on its stop, are ranked
+       by the stop torque their fit needs (least first: a hand pushed away from its stop
+       leaves it, so its row is informative) and then by that first entry; a tie is
+       reported AMBIGUOUS with both links (a hand pressed into its stop moves with its
+       wrist as one body: no residual can tell them apart).
     4. Status: NO_CONTACT when ``contact_detected`` is 0; FORCE_TOO_SMALL when |f_hat| <
        ``min_force``; NO_INTERSECTION without candidates; AMBIGUOUS when another link's
        best score is within ``ambiguity_margin`` of the best; else VALID. Degenerate inputs
@@ -712,6 +731,8 @@ class ContactLocalizer(LeafSystem):
         ``contact_body`` (1): BodyIndex of the link, -1 if none.
         ``contact_point_world`` (3), m. ``contact_force_world`` (3), N.
         ``score`` (1), ``runner_up_score`` (1): N m (inf when there is none).
+        ``runner_up_body`` (1): BodyIndex of the runner-up link, -1 if none.
+        ``runner_up_point_world`` (3), m.
         ``valid`` (1): 1.0 if status is VALID. ``status`` (1): the code (STATUS_REASONS).
 
     Args:
@@ -729,6 +750,9 @@ class ContactLocalizer(LeafSystem):
         ambiguity_margin: N m (default 0.01, about 5 std of the averaged internal residual's
             norm difference on hrp4_like).
         surface_tolerance: m (default 0.01).
+        limit_margin: rad (m for prismatic joints): a joint whose sensed position is within
+            this of a limit of the plant is taken as resting on it (default 0.01); None: no
+            joint is (the paper's fit).
         score_weights: n weights (default 1): e.g. 1 / internal residual noise std.
         skip_unsupported_shapes: ignore meshes etc. instead of raising.
     """
@@ -747,6 +771,7 @@ class ContactLocalizer(LeafSystem):
         averaging_time_constant: float | None = None,
         ambiguity_margin: float = 0.01,
         surface_tolerance: float = 0.01,
+        limit_margin: float | None = 0.01,
         score_weights=1.0,
         skip_unsupported_shapes: bool = False,
     ):
@@ -790,6 +815,13 @@ class ContactLocalizer(LeafSystem):
             raise ValueError(f"{who}: ambiguity_margin and surface_tolerance must be non-negative")
         n, nq, nv = kin.n, kin.nq, kin.nv
         self._score_w = _weights(score_weights, n, f"{who}: score_weights")
+        self._limit_margin = -math.inf if limit_margin is None else float(limit_margin)
+        if not (limit_margin is None or (math.isfinite(self._limit_margin) and self._limit_margin >= 0.0)):
+            raise ValueError(f"{who}: limit_margin must be finite and non-negative, got {limit_margin}")
+        joints = kin.topology.joints
+        self._q_joint_index = np.array([j.position_start() for j in joints], dtype=int)
+        self._lower = np.array([j.position_lower_limits()[0] for j in joints], dtype=float)
+        self._upper = np.array([j.position_upper_limits()[0] for j in joints], dtype=float)
         self._same_body = self._geometry.body_indices[:, None] == self._geometry.body_indices[None, :]
 
         self._state_port = self.DeclareVectorInputPort("state", nq + nv)
@@ -799,7 +831,7 @@ class ContactLocalizer(LeafSystem):
         # Averaging state: _Averaging, then the means of the wrench (6), residual (n) and q (nq).
         self._avg_index = self.DeclareDiscreteState(len(_Averaging.get_fields()))
         self._means_index = self.DeclareDiscreteState(6 + n + nq)
-        result0 = np.array([NO_CONTACT, -1, 0, 0, 0, 0, 0, 0, np.inf, np.inf], dtype=float)
+        result0 = np.array([NO_CONTACT, -1, 0, 0, 0, 0, 0, 0, np.inf, np.inf, -1, 0, 0, 0], dtype=float)
         self._result_index = self.DeclareDiscreteState(result0)
         self._n, self._nq = n, nq
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._Update)
@@ -810,6 +842,8 @@ class ContactLocalizer(LeafSystem):
             ("contact_force_world", 5, 8),
             ("score", 8, 9),
             ("runner_up_score", 9, 10),
+            ("runner_up_body", 10, 11),
+            ("runner_up_point_world", 11, 14),
             ("status", 0, 1),
         ):
             self.DeclareVectorOutputPort(
@@ -825,6 +859,16 @@ class ContactLocalizer(LeafSystem):
     @property
     def candidate_bodies(self) -> list[RigidBody]:
         return list(self._bodies)
+
+    def limited_joints(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(indices, signs) of the joints within ``limit_margin`` of a position limit at the
+        positions ``q`` (v[6:] order): sign +1 at a lower limit (the stop can only push the
+        joint up), -1 at an upper one."""
+        qj = np.asarray(q, dtype=float)[self._q_joint_index]
+        at_lower = qj <= self._lower + self._limit_margin
+        at_upper = qj >= self._upper - self._limit_margin
+        index = np.flatnonzero(at_lower | at_upper)
+        return index, np.where(at_lower[index], 1.0, -1.0)
 
     def localize(self, q: np.ndarray, wrench_W: np.ndarray, residual: np.ndarray) -> LocalizationResult:
         """Steps 1-4 of the class docstring for one (q, external wrench, internal residual),
@@ -863,8 +907,10 @@ class ContactLocalizer(LeafSystem):
         pts_W = p0 + l_in[index, None] * d
         body_of = geo.body_indices[index]
         r = np.asarray(residual, dtype=float)
+        limited, stop_sign = self.limited_joints(q)
         E = kin.elimination()
         scores = np.empty(index.size)
+        reactions = np.zeros(index.size)  # ||W mu||: the stop torque each link's fit needs
         for b in np.unique(body_of):
             rows = np.flatnonzero(body_of == b)
             body = self._bodies[int(np.searchsorted(geo.bodies, b))]
@@ -872,22 +918,64 @@ class ContactLocalizer(LeafSystem):
             p_B = X[:, :3].T @ (pts_W[rows[0]] - X[:, 3])
             J = kin.jacobian(body, p_B)
             g = J.T @ f
-            tau = g[6:] - E.T @ g[:6]  # J^fb^T f (eq. 12)
-            scores[rows] = float(np.linalg.norm(self._score_w * (tau - r)))
-        order = np.lexsort((l_in[index], scores))
+            misfit = g[6:] - E.T @ g[:6] - r  # J^fb^T f (eq. 12) - r_int
+            # A stop's reaction mu (r = J^fb^T f + mu, mu of the stop's sign) takes the rest.
+            stopped = limited[stop_sign * misfit[limited] <= 0.0]
+            reactions[rows] = float(np.linalg.norm(self._score_w[stopped] * misfit[stopped]))
+            misfit[stopped] = 0.0
+            scores[rows] = float(np.linalg.norm(self._score_w * misfit))
+        # Ties (within rounding) go to the link that needs the least stop torque, then to the
+        # first entry along f.
+        order = np.lexsort((l_in[index], np.round(reactions, 12), np.round(scores, 12)))
         best = order[0]
-        others = scores[body_of != body_of[best]]
-        runner_up = float(others.min()) if others.size else math.inf
+        other = np.flatnonzero(body_of[order] != body_of[best])
+        runner = order[other[0]] if other.size else None
+        runner_up = float(scores[runner]) if runner is not None else math.inf
         status = AMBIGUOUS if runner_up - scores[best] < self._margin else VALID
         candidates = [(int(body_of[i]), pts_W[i].copy(), float(scores[i]), float(l_in[index[i]])) for i in order]
         return LocalizationResult(
-            status, int(body_of[best]), pts_W[best].copy(), f.copy(), float(scores[best]), runner_up, p0, candidates
+            status,
+            int(body_of[best]),
+            pts_W[best].copy(),
+            f.copy(),
+            float(scores[best]),
+            runner_up,
+            p0,
+            candidates,
+            runner_up_body_index=int(body_of[runner]) if runner is not None else -1,
+            runner_up_point_W=pts_W[runner].copy() if runner is not None else np.zeros(3),
+            limited_joints=tuple(int(k) for k in limited),
         )
+
+    def localization_inputs(self, context: Context) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(q, external wrench in world, internal residual) that the update at ``context``
+        localizes from: the running means once averaging has started, else the inputs. With
+        them ``localize`` can be replayed offline (e.g. to study its settings)."""
+        avg = _Averaging(np.array(context.get_discrete_state(self._avg_index).get_value()))
+        if avg.active > 0.5 and avg.count > 0.0:
+            means = np.array(context.get_discrete_state(self._means_index).get_value())
+            n = self._n
+            q = means[6 + n :].copy()
+            q[:4] /= np.linalg.norm(q[:4])
+            return q, means[:6], means[6 : 6 + n]
+        x = eval_finite_input(self._who, self._state_port, context)
+        w = eval_finite_input(self._who, self._wrench_port, context)
+        r = eval_finite_input(self._who, self._residual_port, context)
+        return x[: self._nq].copy(), w.copy(), r.copy()
 
     def estimate(self, context: Context) -> LocalizationResult:
         """The localization stored in ``context``'s state (without candidates)."""
         s = self._r(context)
-        return LocalizationResult(int(s[0]), int(s[1]), s[2:5].copy(), s[5:8].copy(), float(s[8]), float(s[9]))
+        return LocalizationResult(
+            int(s[0]),
+            int(s[1]),
+            s[2:5].copy(),
+            s[5:8].copy(),
+            float(s[8]),
+            float(s[9]),
+            runner_up_body_index=int(s[10]),
+            runner_up_point_W=s[11:14].copy(),
+        )
 
     # -- system -----------------------------------------------------------------------------
     def _r(self, context: Context) -> np.ndarray:
@@ -935,7 +1023,8 @@ class ContactLocalizer(LeafSystem):
                 [float(result.status), float(result.body_index)],
                 result.point_W,
                 result.force_W,
-                [result.score, result.runner_up_score],
+                [result.score, result.runner_up_score, float(result.runner_up_body_index)],
+                result.runner_up_point_W,
             )
         )
 

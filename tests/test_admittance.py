@@ -568,3 +568,5 @@ def test_hold_center_of_mass_keeps_it_over_the_feet_in_the_estimators_model(hrp4
         JointAdmittanceController(plant, gains, hold_center_of_mass=True)
     with pytest.raises(ValueError, match="spatial_inertias are only used with support_frames"):
         JointAdmittanceController(plant, gains, spatial_inertias=model)
+    with pytest.raises(ValueError, match="body indices of the plant to SpatialInertia"):
+        JointAdmittanceController(plant, gains, support_frames=soles, spatial_inertias={10_000: heavier})

@@ -321,6 +321,11 @@ class JointAdmittanceController(LeafSystem):
             self._support_frames = frames
             self._plant_context = plant.CreateDefaultContext()
             for index, M in (spatial_inertias or {}).items():
+                if not (0 < int(index) < plant.num_bodies()) or not isinstance(M, SpatialInertia):
+                    raise ValueError(
+                        f"{_WHO}: spatial_inertias must map body indices of the plant to SpatialInertia, "
+                        f"got {index!r}: {type(M).__name__}"
+                    )
                 plant.get_body(BodyIndex(int(index))).SetSpatialInertiaInBodyFrame(self._plant_context, M)
             self._com_instances = [frames[0].model_instance()]
             self._q_index = np.array([j.position_start() for j in joints], dtype=int)

@@ -726,7 +726,7 @@ class ContactLocalizer(LeafSystem):
         ``contact_detected`` (1): ContactDetector's output (only if ``use_detector``).
     State (discrete): the averaging [active, count, onset time, mean wrench (6), mean
         residual (n), mean q (nq)] and the result [status, body, point (3), force (3),
-        score, runner-up].
+        score, runner-up score, runner-up body, runner-up point (3)].
     Outputs:
         ``contact_body`` (1): BodyIndex of the link, -1 if none.
         ``contact_point_world`` (3), m. ``contact_force_world`` (3), N.

@@ -530,6 +530,14 @@ def no_contact_result(
     }
 
 
+def _percentile_with_inf(values: np.ndarray, q: float) -> float:
+    """np.percentile of values that may hold inf (a trial without a localization): where it
+    interpolates between two infs the answer is inf, not the NaN (and warning) of inf - inf."""
+    with np.errstate(invalid="ignore"):
+        value = float(np.percentile(values, q))
+    return math.inf if math.isnan(value) else value
+
+
 def _intervals_and_tables(results: list[dict], detected: list, valid: list, positions, forces) -> dict:
     """The study's 95 % intervals (``study_statistics``: Clopper-Pearson for the rates,
     order statistics for the quantiles), its per-link table of the right-link rate, and the
@@ -600,7 +608,7 @@ def contact_localization_metrics(
         "valid_rate": float(np.mean([r["status"] == 0 for r in results])) if n else None,
         "ambiguous_rate": float(np.mean([r["status"] == 4 for r in results])) if n else None,
         "median_position_error_m": float(np.median(positions)) if n else None,
-        "p95_position_error_m": float(np.percentile(positions, 95)) if n else None,
+        "p95_position_error_m": _percentile_with_inf(positions, 95) if n else None,
         "median_position_error_correct_link_m": median([r["position_error_m"] for r in results if r["correct_link"]]),
         "median_force_error_rel": median(forces),
         "p95_force_error_rel": float(np.percentile(forces, 95)) if forces else None,

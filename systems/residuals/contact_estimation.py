@@ -953,15 +953,19 @@ class ContactLocalizer(LeafSystem):
         them ``localize`` can be replayed offline (e.g. to study its settings)."""
         avg = _Averaging(np.array(context.get_discrete_state(self._avg_index).get_value()))
         if avg.active > 0.5 and avg.count > 0.0:
-            means = np.array(context.get_discrete_state(self._means_index).get_value())
-            n = self._n
-            q = means[6 + n :].copy()
-            q[:4] /= np.linalg.norm(q[:4])
-            return q, means[:6], means[6 : 6 + n]
+            return self._split_means(np.array(context.get_discrete_state(self._means_index).get_value()))
         x = eval_finite_input(self._who, self._state_port, context)
         w = eval_finite_input(self._who, self._wrench_port, context)
         r = eval_finite_input(self._who, self._residual_port, context)
         return x[: self._nq].copy(), w.copy(), r.copy()
+
+    def _split_means(self, means: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(q, wrench, residual) of the averaging state's means; q's quaternion (the mean
+        of nearby unit quaternions) renormalised."""
+        n = self._n
+        q = means[6 + n :].copy()
+        q[:4] /= np.linalg.norm(q[:4])
+        return q, means[:6], means[6 : 6 + n]
 
     def estimate(self, context: Context) -> LocalizationResult:
         """The localization stored in ``context``'s state (without candidates)."""
@@ -991,7 +995,6 @@ class ContactLocalizer(LeafSystem):
         if self._detected_port is not None:
             detected = float(eval_finite_input(who, self._detected_port, context)[0]) > 0.5
         avg = _Averaging(np.array(context.get_discrete_state(self._avg_index).get_value()))
-        n = self._n
         t = context.get_time()
         if not detected:
             discrete_state.set_value(self._avg_index, np.zeros(len(_Averaging.get_fields())))
@@ -1010,9 +1013,7 @@ class ContactLocalizer(LeafSystem):
             means = np.array(context.get_discrete_state(self._means_index).get_value())
             means += alpha * (sample - means)
             discrete_state.set_value(self._means_index, means)
-            w, r = means[:6], means[6 : 6 + n]
-            q = means[6 + n :].copy()
-            q[:4] /= np.linalg.norm(q[:4])  # the mean of nearby unit quaternions, renormalised
+            q, w, r = self._split_means(means)
         discrete_state.set_value(self._avg_index, avg[:])
         discrete_state.set_value(self._result_index, self._pack(self.localize(q, w, r)))
 

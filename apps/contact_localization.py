@@ -7,34 +7,38 @@ calibration motion before the trials); ``--ideal`` runs it in the ideal world.
 The humanoid (``hrp4_like``) stands holding its posture with noisy sensors; in each trial a
 constant force of 5-40 N, within 60 deg of the inward surface normal, pushes a random point
 of the outer collision surface of a random link (upper body and legs; the soles, below the
-F/T sensors, are excluded) for 1 s. The internal and external residuals, the
+F/T sensors, are excluded) for 0.3 s. The trials (1000 by default) are drawn from several
+seeds (5 by default: seed, seed + 1, ...). The internal and external residuals, the
 ContactDetector and the ContactLocalizer see only the sensors. Per trial the app records
 detection and its delay, the localized link and point and the force at the end of the push
-(t = start + 1 s; the localizer averages its inputs from 0.1 s after detection), and the
-computation time of one localizer update. Two runs without contact count false detections:
-60 s standing, and 60 s of slow whole-body motion (``diagrams.station.motions``, a motion
-the calibration never saw).
+(the localizer averages its inputs from 0.1 s after detection and localizes at 100 Hz),
+and the computation time of one localizer update. Each trial starts from the standing
+start (``--trials-per-run N`` runs N trials one after another instead, 0.4 s apart). Two
+runs without contact count false detections: 60 s standing, and 60 s of slow whole-body
+motion (``diagrams.station.motions``, a motion the calibration never saw).
 
 Run: ``python -m apps.contact_localization [--scenario FILE] [--scenario-text YAML]
-[--trials N] [--seed S] [--model M] [--push-start S] [--contact-duration S]
-[--no-contact-duration S] [--slow-motion-duration S] [--no-noise] [--ideal] [--out DIR] [--headless]
-[--workers W] [--replays R]``.
-The scenario is a ``ContactLocalizationScenario``; ``--trials``, ``--seed``, ``--model``,
-``--push-start``, ``--contact-duration`` (``push_duration``), ``--no-contact-duration``,
+[--trials N] [--seed S] [--num-seeds K] [--trials-per-run N] [--model M] [--push-start S]
+[--contact-duration S] [--no-contact-duration S] [--slow-motion-duration S] [--no-noise]
+[--ideal] [--out DIR] [--headless] [--workers W] [--replays R]``.
+The scenario is a ``ContactLocalizationScenario``; ``--trials``, ``--seed``,
+``--num-seeds``, ``--trials-per-run``, ``--model``, ``--push-start``,
+``--contact-duration`` (``push_duration``), ``--no-contact-duration``,
 ``--slow-motion-duration`` and ``--no-noise`` override its fields, ``--ideal`` its world;
 ``--workers`` and ``--replays`` are how it runs. Trials run in parallel processes ('spawn').
 Writes to ``DIR/contact_localization/``: ``metrics.json`` (totals, floors, per-trial
-results, the scenario), ``localizer_inputs.npz`` (per trial the averaged q, external wrench
-and internal residual the final localization used: ``ContactLocalizer.localize`` replays
-it), ``position_errors.png`` (histogram), and ``replay_trial_<i>.html``
-(Meshcat replays of the first R trials: green arrow = true force ending at the true contact
-point, red arrow = the localizer's estimate, shown while valid).
+results, per-link and per-seed tables, the scenario), ``localizer_inputs.npz`` (per trial
+the averaged q, external wrench and internal residual the final localization used:
+``ContactLocalizer.localize`` replays it), ``position_errors.png`` (histogram), and
+``replay_trial_<i>.html`` (Meshcat replays of the first R trials: green arrow = true force
+ending at the true contact point, red arrow = the localizer's estimate, shown while valid).
 
 The metrics are defined in ``diagrams.residuals.contact_localization``.
 """
 
 from __future__ import annotations
 
+import math
 import multiprocessing
 import os
 import time
@@ -42,6 +46,7 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
+from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
 
 from apps.runner import (
     experiment_parser,
@@ -64,7 +69,8 @@ from diagrams.residuals.contact_localization import (
     floors_for,
     no_contact_result,
     no_contact_scenario,
-    sample_trials,
+    run_schedule,
+    sample_study_trials,
     slow_motion_scenario,
     trial_result,
     trial_scenario,
@@ -81,18 +87,67 @@ REPLAY_AFTER_PUSH_S = 0.3
 # ---------------------------------------------------------------------------------------
 
 
-def run_trial(spec: dict, scenario: ContactLocalizationScenario) -> dict:
-    """Simulates the trial ``spec`` (``sample_trials``) of ``scenario`` to the end of its push;
-    returns its results (``trial_result``)."""
-    trial = trial_scenario(scenario, spec)
-    diagram, handles = build_contact_localization_diagram(trial, model_corrections=refined_model(scenario))
-    run = simulate(
-        diagram,
-        trial.push_start + trial.push_duration,
-        set_initial_state=handles.station.set_initial_state,
-        simulator_config=trial.simulator_config,
-    )
-    return trial_result(trial, spec, handles, run.context, run.wall_time_s)
+#: Trials a worker process runs per job (at least one run of ``trials_per_run``).
+TRIALS_PER_JOB = 10
+
+#: A run is restarted from the standing start after a trial that moved a sole from where it
+#: stood by more than these (m, rad): the base-state estimator takes a foot in contact as
+#: still, so the next trials would measure a robot that slipped, not one standing.
+SOLE_SLIP_RESTART = (0.002, math.radians(0.2))
+
+
+def sole_slip(plant, plant_context, sole_frames: dict, start: dict) -> tuple[float, float]:
+    """The largest displacement (m) and rotation (rad) of the soles from their poses ``start``
+    (frame name -> RigidTransform)."""
+    moved, turned = 0.0, 0.0
+    for name, frame in sole_frames.items():
+        X = start[name].InvertAndCompose(frame.CalcPoseInWorld(plant_context))
+        moved = max(moved, float(np.linalg.norm(X.translation())))
+        turned = max(turned, float(abs(X.rotation().ToAngleAxis().angle())))
+    return moved, turned
+
+
+def run_trials(specs: list[dict], scenario: ContactLocalizationScenario) -> list[dict]:
+    """Simulates the trials ``specs`` (``sample_trials``) of ``scenario``, ``trials_per_run``
+    of them one after another in each run from the standing start (``run_schedule``; 1:
+    each trial from the standing start), each read at the end of its push; returns their
+    results (``trial_result``, with the soles' slip since the run's start). A trial after
+    which a sole has slipped (``SOLE_SLIP_RESTART``) ends its run: the next trials start
+    a new one."""
+    results = []
+    remaining = list(specs)
+    model_corrections = refined_model(scenario)
+    while remaining:
+        run_specs = remaining[: scenario.trials_per_run]
+        run_scenario = trial_scenario(scenario, run_specs[0])  # the run's noise seed
+        pushes, windows = run_schedule(scenario, run_specs)
+        diagram, handles = build_contact_localization_diagram(
+            run_scenario, model_corrections=model_corrections, pushes=pushes
+        )
+        simulator = Simulator(diagram)
+        ApplySimulatorConfig(scenario.simulator_config, simulator)
+        context = simulator.get_mutable_context()
+        handles.station.set_initial_state(context)
+        plant_context = handles.plant.GetMyContextFromRoot(context)
+        soles = handles.station.humanoid.sole_frames
+        start = {name: frame.CalcPoseInWorld(plant_context) for name, frame in soles.items()}
+        simulator.Initialize()
+        done = len(run_specs)
+        for k, (spec, window) in enumerate(zip(run_specs, windows)):
+            wall_start = time.perf_counter()
+            simulator.AdvanceTo(window[2])
+            result = trial_result(
+                scenario, spec, handles, context, time.perf_counter() - wall_start, push_index=k, window=window
+            )
+            moved, turned = sole_slip(handles.plant, plant_context, soles, start)
+            result["sole_slip_m"], result["sole_slip_deg"] = moved, math.degrees(turned)
+            result["run_restarted_after"] = moved > SOLE_SLIP_RESTART[0] or turned > SOLE_SLIP_RESTART[1]
+            results.append(result)
+            if result["run_restarted_after"]:
+                done = k + 1
+                break
+        remaining = remaining[done:]
+    return results
 
 
 def record_replay(spec: dict, scenario: ContactLocalizationScenario, meshcat, *, live: bool = True) -> None:
@@ -128,8 +183,8 @@ def _job(job: tuple) -> tuple[str, dict]:
     # The scenario travels as YAML: Drake's config types do not pickle.
     kind, spec, scenario_yaml = job
     scenario = load_scenario(ContactLocalizationScenario, text=scenario_yaml)
-    if kind == "trial":
-        return kind, run_trial(spec, scenario)
+    if kind == "trials":
+        return kind, run_trials(spec, scenario)
     return kind, run_no_contact(scenario, kind)
 
 
@@ -162,7 +217,14 @@ def plot_position_errors(path: Path, results: list[dict]) -> None:
 def _parse(argv):
     parser = experiment_parser("apps.contact_localization", __doc__, replay=False, conditions=True)
     parser.add_argument("--trials", type=int, default=None, help="number of random contacts (scenario default 200)")
-    parser.add_argument("--seed", type=int, default=None, help="seed of the trials and of the sensor noise")
+    parser.add_argument("--seed", type=int, default=None, help="first seed of the trials and of the sensor noise")
+    parser.add_argument("--num-seeds", type=int, default=None, help="seeds the trials are drawn from (default 5)")
+    parser.add_argument(
+        "--trials-per-run",
+        type=int,
+        default=None,
+        help="trials simulated one after another in one run (default 1: each from the standing start)",
+    )
     parser.add_argument("--model", default=None, help="humanoid with foot F/T sensors (hrp4_like)")
     parser.add_argument(
         "--workers", type=int, default=os.cpu_count() or 1, help="parallel processes (default: all cores)"
@@ -173,7 +235,7 @@ def _parse(argv):
         "--contact-duration",
         type=float,
         default=None,
-        help="contact duration, s (the scenario's push_duration, default 1)",
+        help="contact duration, s (the scenario's push_duration, default 0.3)",
     )
     parser.add_argument(
         "--no-contact-duration",
@@ -193,10 +255,15 @@ def _parse(argv):
         args.workers < 1
         or args.replays < 0
         or (args.trials is not None and args.trials < 1)
+        or (args.num_seeds is not None and args.num_seeds < 1)
+        or (args.trials_per_run is not None and args.trials_per_run < 1)
         or (args.contact_duration is not None and args.contact_duration <= 0)
         or (args.push_start is not None and args.push_start < 0)
     ):
-        parser.error("--trials and --workers must be >= 1, --replays >= 0, --contact-duration > 0, --push-start >= 0")
+        parser.error(
+            "--trials, --num-seeds, --trials-per-run and --workers must be >= 1, --replays >= 0,"
+            " --contact-duration > 0, --push-start >= 0"
+        )
     return args
 
 
@@ -213,8 +280,8 @@ def _run_jobs(jobs: list, workers: int) -> tuple[list[dict], dict]:
         outputs = pool.imap_unordered(_job, jobs)
     try:
         for done, (kind, value) in enumerate(outputs, 1):
-            if kind == "trial":
-                results.append(value)
+            if kind == "trials":
+                results.extend(value)
             else:
                 no_contact[kind] = value
             print(f"\r{done}/{len(jobs)} jobs done", end="", flush=True)
@@ -236,6 +303,8 @@ def main(argv: list[str] | None = None) -> int:
             args,
             trials=args.trials,
             seed=args.seed,
+            num_seeds=args.num_seeds,
+            trials_per_run=args.trials_per_run,
             model=args.model,
             push_start=args.push_start,
             push_duration=args.contact_duration,
@@ -247,7 +316,7 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"the study needs at least one trial, got trials: {scenario.trials}")
         out_dir = output_folder(args, "contact_localization")
         start = time.perf_counter()
-        specs = sample_trials(scenario.model, scenario.trials, scenario.seed)
+        specs = sample_study_trials(scenario)
         if scenario.model_refinement == "calibrate":
             # Calibrated once, here; the workers read the saved corrections.
             refined_model(scenario, Path(args.out) / "model_refinement")
@@ -258,7 +327,8 @@ def main(argv: list[str] | None = None) -> int:
             jobs.append(("no_contact", None, scenario_yaml))
         if scenario.slow_motion_duration > 0:
             jobs.append(("slow_motion", None, scenario_yaml))
-        jobs += [("trial", spec, scenario_yaml) for spec in specs]
+        size = max(scenario.trials_per_run, TRIALS_PER_JOB)
+        jobs += [("trials", specs[i : i + size], scenario_yaml) for i in range(0, len(specs), size)]
         results, no_contact = _run_jobs(jobs, args.workers)
         metrics = contact_localization_metrics(
             results, no_contact.get("no_contact"), no_contact.get("slow_motion"), floors_for(scenario)
@@ -267,6 +337,9 @@ def main(argv: list[str] | None = None) -> int:
             {
                 "model": scenario.model,
                 "seed": scenario.seed,
+                "seeds": list(range(scenario.seed, scenario.seed + scenario.num_seeds)),
+                "trials_per_run": scenario.trials_per_run,
+                "trials_with_a_sole_slip": sum(r["run_restarted_after"] for r in results),
                 "noise": scenario.noise,
                 "workers": args.workers,
                 "push_start_s": scenario.push_start,
@@ -302,7 +375,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def _print_summary(metrics: dict) -> None:
     print(
-        f"contact localization on {metrics['model']}, {metrics['trials']} trials,"
+        f"contact localization on {metrics['model']}, {metrics['trials']} trials (seeds {metrics['seeds']}),"
         f" noise {'on' if metrics['noise'] else 'off'}:"
     )
     intervals = metrics.get("intervals", {})
@@ -321,6 +394,15 @@ def _print_summary(metrics: dict) -> None:
             print(f"  {key:32s} {metrics[key]:>10.4g} {ci:>20s}")
     print(f"  ({level:.0f} % intervals: Clopper-Pearson for rates, order statistics for quantiles)")
     print(f"  status counts: {metrics['status_counts']}")
+    per_seed = metrics.get("per_seed", [])
+    if len(per_seed) > 1:
+        print("  right-link rate per seed:")
+        for row in per_seed:
+            low, high = row["interval"]
+            print(
+                f"    seed {row['group']:>8s} {row['successes']:4d} / {row['trials']:<4d} {100 * row['rate']:5.1f} %"
+                f"  [{100 * low:.1f}, {100 * high:.1f}]"
+            )
     worst = [row for row in metrics.get("per_link", []) if row["rate"] < 1.0]
     if worst:
         print("  right-link rate per pushed link, below 100 % (all links: metrics.json 'per_link'):")

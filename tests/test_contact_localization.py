@@ -86,3 +86,55 @@ def test_rejects_model_without_ft_sensors_and_sole_push():
         build_contact_localization_diagram(ContactLocalizationScenario(model="nao_like"))
     with pytest.raises(ValueError, match="below an F/T sensor"):
         build_contact_localization_diagram(ContactLocalizationScenario(push_body="r_sole", push_force=(0, 0, -5)))
+
+
+def test_study_trials_split_over_seeds_and_match_each_seeds_own_draw():
+    """``sample_study_trials``: 7 trials over 3 seeds go 3 / 2 / 2, numbered 0..6 across the
+    seeds, each exactly the trial its seed's ``sample_trials`` draws."""
+    from diagrams.residuals.contact_localization import sample_study_trials, sample_trials
+
+    specs = sample_study_trials(ContactLocalizationScenario(trials=7, num_seeds=3, seed=40))
+    assert [s["trial"] for s in specs] == list(range(7))
+    assert [s["seed"] for s in specs] == [40, 40, 40, 41, 41, 42, 42]
+    for spec in specs:
+        own = sample_trials("hrp4_like", 3, spec["seed"])[spec["trial_of_seed"]]
+        assert spec["body"] == own["body"] and spec["noise_seed"] == own["noise_seed"]
+        np.testing.assert_array_equal(spec["force_world"], own["force_world"])
+    assert len({s["noise_seed"] for s in specs}) == 7
+
+
+def test_trials_run_one_after_another_each_detected_and_localized_in_its_window():
+    """Three pushes in one run (``run_schedule``, 0.4 s apart): each trial's window holds its
+    own detection (none carried over from the previous push, no false detection in the
+    gap), its localization, and the true point of its own push; the study's runner
+    (``apps.contact_localization.run_trials``) reads the same results from the same run."""
+    from apps.contact_localization import run_trials
+    from diagrams.residuals.contact_localization import run_schedule, sample_trials, trial_result
+
+    scenario = ContactLocalizationScenario(push_start=0.3, push_duration=0.3, trial_gap=0.4, trials_per_run=3)
+    specs = sample_trials("hrp4_like", 3, seed=0)  # an elbow, a shoulder and a hand link
+    pushes, windows = run_schedule(scenario, specs)
+    np.testing.assert_allclose(windows, [(0.0, 0.3, 0.6), (0.6, 1.0, 1.3), (1.3, 1.7, 2.0)], atol=1e-12)
+    diagram, handles = build_contact_localization_diagram(scenario, pushes=pushes)
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    handles.station.set_initial_state(context)
+    simulator.Initialize()
+    results = []
+    for k, (spec, window) in enumerate(zip(specs, windows)):
+        simulator.AdvanceTo(window[2])
+        result = trial_result(scenario, spec, handles, context, 0.0, push_index=k, window=window)
+        results.append(result)
+        assert result["detected"] and not result["detector_on_at_push_start"], k
+        assert result["false_detections_before_push"] == 0
+        assert 0.0 <= result["detection_delay_s"] < 0.02
+        assert result["correct_link"] and result["position_error_m"] < 0.01, (k, result["estimated_body"])
+        assert result["force_error_rel"] < 0.05
+        body = handles.plant.GetBodyByName(spec["body"])
+        X_WB = handles.plant.EvalBodyPoseInWorld(handles.plant.GetMyContextFromRoot(context), body)
+        np.testing.assert_allclose(result["true_point_world"], X_WB @ np.array(spec["point_body"]), atol=1e-12)
+    from_runner = run_trials([dict(s) for s in specs], scenario)
+    assert [r["estimated_body"] for r in from_runner] == [r["estimated_body"] for r in results]
+    for a, b in zip(from_runner, results):
+        assert a["position_error_m"] == pytest.approx(b["position_error_m"], abs=1e-12)
+        assert a["sole_slip_m"] < 0.002

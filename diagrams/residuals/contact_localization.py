@@ -34,6 +34,7 @@ the detected trials: |f_hat - f| / |f| and the angle between f_hat and f.
 import dataclasses
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -106,12 +107,24 @@ class ContactLocalizationScenario:
             trial's push_body, push_point, push_force and seed from ``sample_trials``).
         push_point: the contact point in the link's body frame, m.
         push_force: the (constant) force in world, N.
-        push_start: s; the force is on for push_start <= t < push_start + push_duration.
+        push_start: s; the force is on for push_start <= t < push_start + push_duration
+            (the study: the first trial of each run).
         push_duration: s (the study's contact duration).
+        trial_gap: the study's pause between two trials of one run, s (with
+            ``trials_per_run`` > 1).
+        trials_per_run: the study's trials simulated one after another in one run
+            (``run_schedule``), ``trial_gap`` apart, the robot and the residuals coming
+            back to rest in between; 1 (default): each trial from the standing start, as
+            in the paper. Runs of several trials test a robot that has been pushed
+            before (BENCHMARKS.md: its feet slip, and the realistic world's detector
+            does not always release within the gap).
         noise: sensor noise on (systems.simulation.sensors defaults) or off.
-        seed: the sensor noise seed of one run; the study's seed, from which it samples the
-            trials and derives each run's noise seed.
-        trials: the study's number of random contacts.
+        seed: the sensor noise seed of one run; the study's first seed, from which it
+            samples the trials and derives each run's noise seed.
+        num_seeds: the study samples its trials from the seeds seed, seed + 1, ...,
+            seed + num_seeds - 1 (``trials`` split evenly; a figure that holds on one seed
+            only is not a result).
+        trials: the study's number of random contacts (over all its seeds).
         no_contact_duration: the study's run without contact, standing (false detections),
             s; 0 skips it.
         slow_motion_duration: the study's run without contact during ``slow_motion`` (false
@@ -125,6 +138,11 @@ class ContactLocalizationScenario:
             SAP; see ``diagrams.station.humanoid_station``).
         period: residual/detector/localizer period, s.
         settle_time: the localizer's wait after detection before averaging, s.
+        localization_period: s between two localizations while in contact (the localizer
+            averages its inputs every ``period`` all the same; None: every update).
+        detector_release_probability: the detector's p_off (``ContactDetector``'s
+            release_probability): it switches off when both test statistics stay below
+            their chi-square (1 - p_off)-quantiles for 20 ms.
         detector_startup_time: the detector stays off for this long after the start, s (the
             residuals' and the base-state estimator's start-up; a push that starts earlier is
             detected only from then on).
@@ -140,10 +158,13 @@ class ContactLocalizationScenario:
     push_point: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
     push_force: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
     push_start: float = 0.5
-    push_duration: float = 1.0
+    push_duration: float = 0.3
+    trial_gap: float = 0.4
+    trials_per_run: int = 1
     noise: bool = True
     seed: int = 0
-    trials: int = 200
+    num_seeds: int = 5
+    trials: int = 1000
     no_contact_duration: float = 60.0
     slow_motion_duration: float = 60.0
     slow_motion: SlowMotion = field(default_factory=lambda: SlowMotion(seed=3, amplitude_scale=0.5))
@@ -153,6 +174,8 @@ class ContactLocalizationScenario:
     plant_config: MultibodyPlantConfig = field(default_factory=default_plant_config)
     period: float = 1e-3
     settle_time: float = 0.1
+    localization_period: float | None = 0.01
+    detector_release_probability: float = 1e-2
     detector_startup_time: float = 0.1
     log_period: float = 1e-3
     simulator_config: SimulatorConfig = field(default_factory=SimulatorConfig)
@@ -177,6 +200,25 @@ class ContactLocalizationHandles:
     meshcat_visualizer: MeshcatVisualizer | None = None
 
 
+def scenario_push(scenario: ContactLocalizationScenario) -> Push:
+    """The push of a one-push ``scenario`` (its push_body, push_point, push_force,
+    push_start and push_duration).
+
+    Raises:
+        ValueError: a zero force.
+    """
+    force = np.asarray(scenario.push_force, dtype=float)
+    magnitude = float(np.linalg.norm(force))
+    if magnitude == 0.0:
+        raise ValueError("push_force must be non-zero (use push_body=None for no contact)")
+    return Push(
+        scenario.push_body,
+        np.asarray(scenario.push_point, dtype=float),
+        force / magnitude,
+        Step(magnitude, scenario.push_start, scenario.push_start + scenario.push_duration),
+    )
+
+
 def sole_bodies(station: HumanoidStation) -> tuple[str, ...]:
     """Names of the links outboard of the F/T sensors (the soles)."""
     return tuple(j.child_body().name() for j in (station.humanoid.ft_sensor_joints or {}).values())
@@ -187,10 +229,12 @@ def build_contact_localization_diagram(
     meshcat: Meshcat | None = None,
     *,
     model_corrections: ModelCorrections | None = None,
+    pushes: Sequence[Push] | None = None,
 ) -> tuple[Diagram, ContactLocalizationHandles]:
     """Builds the diagram of the module docstring for ``scenario`` (one run: its push, or
     none; its posture held, or following ``scenario.motion``) with the refined model
-    ``model_corrections`` (the scenario's ``model_refinement``), if given.
+    ``model_corrections`` (the scenario's ``model_refinement``), if given. ``pushes``, if
+    given, replaces the scenario's push (e.g. the trials of one run, ``run_schedule``).
 
     Raises:
         ValueError: a model without foot F/T sensors, an unknown or excluded push body,
@@ -198,6 +242,8 @@ def build_contact_localization_diagram(
     """
     if scenario.push_duration <= 0 or scenario.push_start < 0 or scenario.log_period <= 0:
         raise ValueError("push_duration and log_period must be positive, push_start non-negative")
+    if scenario.trial_gap < 0 or scenario.trials_per_run < 1 or scenario.num_seeds < 1:
+        raise ValueError("trial_gap must be non-negative, trials_per_run and num_seeds at least 1")
     builder = DiagramBuilder()
     station = add_scenario_station(builder, scenario, model_corrections)
     if station.humanoid is None or not station.known_wrench_frames:
@@ -213,22 +259,12 @@ def build_contact_localization_diagram(
     builder.Connect(reference.get_output_port(), station.desired_position)
     excluded = sole_bodies(station)
 
-    pushes = []
-    if scenario.push_body is not None:
-        if scenario.push_body in excluded:
-            raise ValueError(f"push body {scenario.push_body!r} is below an F/T sensor: invisible to the residuals")
-        force = np.asarray(scenario.push_force, dtype=float)
-        magnitude = float(np.linalg.norm(force))
-        if magnitude == 0.0:
-            raise ValueError("push_force must be non-zero (use push_body=None for no contact)")
-        pushes.append(
-            Push(
-                scenario.push_body,
-                np.asarray(scenario.push_point, dtype=float),
-                force / magnitude,
-                Step(magnitude, scenario.push_start, scenario.push_start + scenario.push_duration),
-            )
-        )
+    if pushes is None:
+        pushes = [] if scenario.push_body is None else [scenario_push(scenario)]
+    pushes = list(pushes)
+    for push in pushes:
+        if push.body_name in excluded:
+            raise ValueError(f"push body {push.body_name!r} is below an F/T sensor: invisible to the residuals")
     push_source = builder.AddSystem(PushSource(plant, pushes))
     push_source.set_name("push_source")
     builder.Connect(push_source.GetOutputPort("applied_spatial_forces"), plant.get_applied_spatial_force_input_port())
@@ -260,6 +296,7 @@ def build_contact_localization_diagram(
             nominal_positions=station.initial_state[:nq],
             period=scenario.period,
             startup_time=scenario.detector_startup_time,
+            release_probability=scenario.detector_release_probability,
             **covariances,
         )
     )
@@ -272,6 +309,7 @@ def build_contact_localization_diagram(
             station.scene_graph,
             exclude_bodies=excluded,
             period=scenario.period,
+            localization_period=scenario.localization_period,
             settle_time=scenario.settle_time,
         )
     )
@@ -391,8 +429,24 @@ def sample_trials(model: str, trials: int, seed: int) -> list[dict]:
     return specs
 
 
+def sample_study_trials(scenario: ContactLocalizationScenario) -> list[dict]:
+    """The study's ``trials`` random contacts over its ``num_seeds`` seeds (``sample_trials``
+    of seed, seed + 1, ...; the trials split as evenly as they go, the first seeds taking
+    the remainder), numbered 0, 1, ... across the seeds; each spec also names its
+    ``seed``."""
+    specs = []
+    per_seed, extra = divmod(scenario.trials, scenario.num_seeds)
+    for k in range(scenario.num_seeds):
+        count = per_seed + (1 if k < extra else 0)
+        seed = scenario.seed + k
+        for spec in sample_trials(scenario.model, count, seed) if count else []:
+            specs.append({**spec, "trial": len(specs), "seed": seed, "trial_of_seed": spec["trial"]})
+    return specs
+
+
 def trial_scenario(scenario: ContactLocalizationScenario, spec: dict) -> ContactLocalizationScenario:
-    """The run of the trial ``spec`` (``sample_trials``): ``scenario`` with its push and noise seed."""
+    """The run of the trial ``spec`` (``sample_trials``) alone: ``scenario`` with its push and
+    noise seed."""
     return dataclasses.replace(
         scenario,
         push_body=spec["body"],
@@ -400,6 +454,21 @@ def trial_scenario(scenario: ContactLocalizationScenario, spec: dict) -> Contact
         push_force=list(spec["force_world"]),
         seed=spec["noise_seed"],
     )
+
+
+def run_schedule(scenario: ContactLocalizationScenario, specs: Sequence[dict]) -> tuple[list[Push], list[tuple]]:
+    """The trials ``specs`` one after another in one run: trial k pushes from
+    push_start + k (push_duration + trial_gap) for push_duration. Returns the pushes and
+    each trial's window (previous trial's end or 0, push start, push end), s."""
+    pushes, windows = [], []
+    previous_end = 0.0
+    for k, spec in enumerate(specs):
+        start = scenario.push_start + k * (scenario.push_duration + scenario.trial_gap)
+        one = dataclasses.replace(scenario, push_start=start)
+        pushes.append(scenario_push(trial_scenario(one, spec)))
+        windows.append((previous_end, start, start + scenario.push_duration))
+        previous_end = start + scenario.push_duration
+    return pushes, windows
 
 
 def no_contact_scenario(scenario: ContactLocalizationScenario) -> ContactLocalizationScenario:
@@ -452,29 +521,47 @@ def trial_result(
     handles: ContactLocalizationHandles,
     context: Context,
     wall_time_s: float,
+    *,
+    push_index: int = 0,
+    window: tuple[float, float, float] | None = None,
 ) -> dict:
-    """The results of the trial ``spec`` run as ``scenario`` (``trial_scenario``) up to the end
-    of its push, from the simulator's root ``context``: detection and its delay, the
-    localized link and point, the force errors, and the localizer's update time (module
-    docstring); ``wall_time_s``: the simulation's wall time. ``localizer_inputs`` holds
-    the (averaged) q, external wrench and internal residual of the final localization, as
-    arrays (``ContactLocalizer.localization_inputs``: the study's localizations can be
-    replayed offline)."""
-    push_start, t_end = scenario.push_start, scenario.push_start + scenario.push_duration
+    """The results of the trial ``spec`` at the end of its push, from the simulator's root
+    ``context``: detection and its delay, the localized link and point, the force errors,
+    and the localizer's update time (module docstring); ``wall_time_s``: the simulation's
+    wall time. The trial is the push ``push_index`` of the run, in ``window`` (previous
+    trial's end, push start, push end; default: the scenario's one push,
+    ``trial_scenario``): a detection in the window before the push is a false detection,
+    and a detector still on at the push's start (a contact that never ended) leaves the
+    push undetected. ``localizer_inputs`` holds the (averaged) q, external wrench and
+    internal residual of the final localization, as arrays
+    (``ContactLocalizer.localization_inputs``: the study's localizations can be replayed
+    offline)."""
+    if window is None:
+        window = (0.0, scenario.push_start, scenario.push_start + scenario.push_duration)
+    previous_end, push_start, t_end = window
     estimate = handles.localizer.estimate(handles.localizer.GetMyContextFromRoot(context))
     pc = handles.push_source.GetMyContextFromRoot(context)
-    true_point = np.array(handles.push_source.GetOutputPort("point_world").Eval(pc))
+    true_point = np.array(handles.push_source.GetOutputPort("point_world").Eval(pc))[
+        3 * push_index : 3 * push_index + 3
+    ]
     f_true = np.asarray(spec["force_world"])
 
     log = handles.loggers["contact_detected"].FindLog(context)
     t, detected = log.sample_times(), log.data()[0]
     times = handles.loggers["detection_time"].FindLog(context).data()[0]
-    during = (t >= push_start) & (t <= t_end) & (detected > 0.5)
-    rising = np.flatnonzero(np.diff(np.concatenate(([0.0], detected))) > 0.5)
+    before = t <= previous_end
+    state_before = detected[before][-1] if before.any() else 0.0
+    inside = ~before & (t <= t_end)
+    t, detected, times = t[inside], detected[inside], times[inside]
+    rising = np.flatnonzero(np.diff(np.concatenate(([state_before], detected))) > 0.5)
     false_before = int(np.sum(t[rising] < push_start))
+    at_start = t < push_start
+    on_at_start = bool(detected[at_start][-1] > 0.5) if at_start.any() else state_before > 0.5
+    during = (t >= push_start) & (detected > 0.5)
     result = {
         **spec,
-        "detected": bool(during.any()),
+        "detected": bool(during.any()) and not on_at_start,
+        "detector_on_at_push_start": on_at_start,
         "false_detections_before_push": false_before,
         "detection_delay_s": None,
         "status": estimate.status,
@@ -565,6 +652,7 @@ def _intervals_and_tables(results: list[dict], detected: list, valid: list, posi
         "intervals": {k: [float(a), float(b)] for k, (a, b) in intervals.items()},
         "interval_level": CONFIDENCE_LEVEL,
         "per_link": rate_table(results, lambda r: r["body"], lambda r: r["correct_link"]),
+        "per_seed": rate_table(results, lambda r: str(r.get("seed", "")), lambda r: r["correct_link"]),
         "confusion": [
             {"true": t, "estimated": e, "count": c}
             for (t, e), c in sorted(confusion.items(), key=lambda item: (-item[1], item[0]))

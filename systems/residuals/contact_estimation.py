@@ -623,8 +623,9 @@ class ContactDetector(LeafSystem):
 # ContactLocalizer: Sec. VI, eq. (22), Fig. 9.
 # ---------------------------------------------------------------------------------------
 
-#: ContactLocalizer's averaging state: averaging (1/0), samples averaged, onset time (s).
-_Averaging = namedview("_Averaging", ("active", "count", "onset"))
+#: ContactLocalizer's averaging state: averaging (1/0), samples averaged, onset time (s), time
+#: of the last localization (s; -inf before the first of a contact).
+_Averaging = namedview("_Averaging", ("active", "count", "onset", "localized"))
 
 VALID, NO_CONTACT, FORCE_TOO_SMALL, NO_INTERSECTION, AMBIGUOUS = 0, 1, 2, 3, 4
 STATUS_REASONS = {
@@ -717,16 +718,19 @@ class ContactLocalizer(LeafSystem):
     from then on (running mean, or an exponential window of ``averaging_time_constant``):
     a momentum residual's noise is dominated by the white momentum noise times K, which
     the mean removes, while a steady contact's wrench is constant. Before that it uses
-    the latest inputs. The mean is reset when the contact ends.
+    the latest inputs. The mean is reset when the contact ends. The averaging runs at every
+    update; the localization itself (steps 1-4) at the first update of a contact and then
+    every ``localization_period`` (the outputs hold the last one in between).
 
     Inputs:
         ``state`` (nq + nv): sensed [q; v].
         ``external_wrench_world`` (6): ExternalResidual's output.
         ``residual`` (n): InternalResidual's output.
         ``contact_detected`` (1): ContactDetector's output (only if ``use_detector``).
-    State (discrete): the averaging [active, count, onset time, mean wrench (6), mean
-        residual (n), mean q (nq)] and the result [status, body, point (3), force (3),
-        score, runner-up score, runner-up body, runner-up point (3)].
+    State (discrete): the averaging [active, count, onset time, last localization time],
+        the means [wrench (6), residual (n), q (nq)], the inputs of the last localization
+        (same layout) and the result [status, body, point (3), force (3), score, runner-up
+        score, runner-up body, runner-up point (3)].
     Outputs:
         ``contact_body`` (1): BodyIndex of the link, -1 if none.
         ``contact_point_world`` (3), m. ``contact_force_world`` (3), N.
@@ -743,6 +747,9 @@ class ContactLocalizer(LeafSystem):
         exclude_bodies: links never considered (e.g. the soles below F/T sensors: a force
             there is part of the measured wrench and invisible to the residuals).
         period: update period, s.
+        localization_period: s between two localizations while in contact (None: every
+            update). The mean is updated every ``period`` all the same; a slower
+            localization rate only delays the output by up to this (e.g. 0.01 s: 100 Hz).
         use_detector: declare the ``contact_detected`` input.
         min_force: N (default 1.0, about 3.5 times the external force noise at K = 35/s).
         settle_time: s after detection before averaging (default 0.1 = 3.5/K at K = 35/s).
@@ -765,6 +772,7 @@ class ContactLocalizer(LeafSystem):
         bodies: Sequence | None = None,
         exclude_bodies: Sequence = (),
         period: float = DEFAULT_PERIOD,
+        localization_period: float | None = None,
         use_detector: bool = True,
         min_force: float = 1.0,
         settle_time: float = 0.1,
@@ -795,6 +803,11 @@ class ContactLocalizer(LeafSystem):
         )
         self._bodies = [plant.get_body(BodyIndex(int(i))) for i in self._geometry.bodies]
         self._period = positive_number(period, f"{who}: period")
+        self._localization_period = (
+            self._period
+            if localization_period is None
+            else positive_number(localization_period, f"{who}: localization_period")
+        )
         self._min_force = positive_number(min_force, f"{who}: min_force")
         self._settle_time = float(settle_time)
         if not math.isfinite(self._settle_time) or self._settle_time < 0.0:
@@ -831,6 +844,8 @@ class ContactLocalizer(LeafSystem):
         # Averaging state: _Averaging, then the means of the wrench (6), residual (n) and q (nq).
         self._avg_index = self.DeclareDiscreteState(len(_Averaging.get_fields()))
         self._means_index = self.DeclareDiscreteState(6 + n + nq)
+        # The inputs of the last localization [wrench (6), residual (n), q (nq)].
+        self._localized_index = self.DeclareDiscreteState(6 + n + nq)
         result0 = np.array([NO_CONTACT, -1, 0, 0, 0, 0, 0, 0, np.inf, np.inf, -1, 0, 0, 0], dtype=float)
         self._result_index = self.DeclareDiscreteState(result0)
         self._n, self._nq = n, nq
@@ -948,16 +963,13 @@ class ContactLocalizer(LeafSystem):
         )
 
     def localization_inputs(self, context: Context) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(q, external wrench in world, internal residual) that the update at ``context``
-        localizes from: the running means once averaging has started, else the inputs. With
-        them ``localize`` can be replayed offline (e.g. to study its settings)."""
-        avg = _Averaging(np.array(context.get_discrete_state(self._avg_index).get_value()))
-        if avg.active > 0.5 and avg.count > 0.0:
-            return self._split_means(np.array(context.get_discrete_state(self._means_index).get_value()))
-        x = eval_finite_input(self._who, self._state_port, context)
-        w = eval_finite_input(self._who, self._wrench_port, context)
-        r = eval_finite_input(self._who, self._residual_port, context)
-        return x[: self._nq].copy(), w.copy(), r.copy()
+        """(q, external wrench in world, internal residual) that the localizer's current
+        result was computed from: the running means once averaging had started, else the
+        inputs of that update (zeros before the first localization). With them
+        ``localize`` replays the result offline (e.g. to study its settings)."""
+        localized = np.array(context.get_discrete_state(self._localized_index).get_value())
+        n = self._n
+        return localized[6 + n :], localized[:6], localized[6 : 6 + n]
 
     def _split_means(self, means: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(q, wrench, residual) of the averaging state's means; q's quaternion (the mean
@@ -1003,7 +1015,7 @@ class ContactLocalizer(LeafSystem):
             )
             return
         if avg.active < 0.5:
-            avg.active, avg.count, avg.onset = 1.0, 0.0, t
+            avg.active, avg.count, avg.onset, avg.localized = 1.0, 0.0, t, -math.inf
         if t - avg.onset >= self._settle_time - 1e-12:
             avg.count += 1.0
             alpha = 1.0 / avg.count
@@ -1014,8 +1026,11 @@ class ContactLocalizer(LeafSystem):
             means += alpha * (sample - means)
             discrete_state.set_value(self._means_index, means)
             q, w, r = self._split_means(means)
+        if t - avg.localized >= self._localization_period - 1e-9:
+            avg.localized = t
+            discrete_state.set_value(self._localized_index, np.concatenate((w, r, q)))
+            discrete_state.set_value(self._result_index, self._pack(self.localize(q, w, r)))
         discrete_state.set_value(self._avg_index, avg[:])
-        discrete_state.set_value(self._result_index, self._pack(self.localize(q, w, r)))
 
     @staticmethod
     def _pack(result: LocalizationResult) -> np.ndarray:

@@ -15,7 +15,7 @@ MPLBACKEND ?= Agg
 export MPLBACKEND
 RUN = LD_PRELOAD="$(TCMALLOC)$${LD_PRELOAD:+ $$LD_PRELOAD}" $(PY)
 
-.PHONY: demo push-and-comply standing residual-comparison contact-localization model-refinement nao-force-observer nao-walk nao-walk-pulled nao-force-guided-walk nao-compliant-arms benchmark test install clean
+.PHONY: demo contact residuals push-and-comply standing residual-comparison contact-localization model-refinement nao-force-observer nao-walk nao-walk-pulled nao-force-guided-walk nao-compliant-arms benchmark test install clean
 
 install: $(STAMP)
 
@@ -39,6 +39,10 @@ test: $(STAMP)
 
 # The main job (README): the push-and-comply experiment.
 demo: push-and-comply
+
+# The short names the issues use: the contact study and the residual comparison.
+contact: contact-localization
+residuals: residual-comparison
 
 # One target per experiment, named as its app (apps/<name>.py) and its diagram.
 push-and-comply: $(STAMP)

@@ -14,11 +14,10 @@ import numpy as np
 import pytest
 from pydrake.geometry import Box, Capsule, Cylinder, ProximityProperties, Sphere
 from pydrake.math import RigidTransform, RollPitchYaw
-from pydrake.multibody.plant import AddMultibodyPlant, AddMultibodyPlantSceneGraph, MultibodyPlantConfig
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable, RevoluteJoint, SpatialInertia
 from pydrake.systems.framework import DiagramBuilder
 
-from models import add_humanoid, set_standing_state
 from systems.dynamics.floating_base import FloatingBaseDynamics
 from systems.residuals.contact_estimation import (
     AMBIGUOUS,
@@ -49,19 +48,8 @@ from systems.simulation.pd_gravity import joints_in_velocity_order
 
 
 @pytest.fixture(scope="module")
-def hrp4():
-    builder = DiagramBuilder()
-    plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=1e-3), builder)
-    handles = add_humanoid(plant, "hrp4_like", scene_graph=scene_graph)
-    plant.Finalize()
-    context = plant.CreateDefaultContext()
-    set_standing_state(plant, context, handles)
-    # A non-trivial posture: arms and torso moved away from the nominal one.
-    rng = np.random.default_rng(7)
-    q = plant.GetPositions(context)
-    q[7:] += rng.uniform(-0.2, 0.2, q.size - 7)
-    plant.SetPositions(context, q)
-    return plant, scene_graph, handles, context
+def hrp4(hrp4_moved):
+    return hrp4_moved
 
 
 def _primitive_robot():

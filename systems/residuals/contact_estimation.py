@@ -117,6 +117,38 @@ class _SensedConfiguration:
         return self.topology.base_frame.CalcPoseInWorld(self.context).GetAsMatrix34()
 
 
+def candidate_geometry(
+    plant: MultibodyPlant,
+    scene_graph: SceneGraph | SceneGraphInspector,
+    bodies: Sequence | None,
+    exclude_bodies: Sequence,
+    who: str,
+    skip_unsupported_shapes: bool = False,
+) -> tuple[RobotGeometry, list[RigidBody]]:
+    """The collision primitives of a localizer's candidate links and those links (in the
+    geometry's ``bodies`` order): ``bodies`` (RigidBody, names or indices; default every
+    body with a collision geometry) less ``exclude_bodies``.
+
+    Raises:
+        ValueError: a bad scene graph, an unknown body, no candidate left, an unsupported
+            shape (unless ``skip_unsupported_shapes``); the message starts with ``who``.
+    """
+    inspector = scene_graph.model_inspector() if isinstance(scene_graph, SceneGraph) else scene_graph
+    if not isinstance(inspector, SceneGraphInspector):
+        raise ValueError(f"{who}: scene_graph must be a SceneGraph or SceneGraphInspector")
+    excluded = {int(resolve_body(plant, b, who).index()) for b in exclude_bodies}
+    if bodies is None:
+        candidates = [plant.get_body(BodyIndex(i)) for i in range(1, plant.num_bodies())]
+        candidates = [b for b in candidates if plant.GetCollisionGeometriesForBody(b)]
+    else:
+        candidates = [resolve_body(plant, b, who) for b in bodies]
+    candidates = [b for b in candidates if int(b.index()) not in excluded]
+    if not candidates:
+        raise ValueError(f"{who}: no candidate link left")
+    geometry = RobotGeometry.from_plant(plant, inspector, candidates, skip_unsupported=skip_unsupported_shapes)
+    return geometry, [plant.get_body(BodyIndex(int(i))) for i in geometry.bodies]
+
+
 #: ContactDetector's state: contact (1/0), detection time (s, -1: none), consecutive samples
 #: above the on-thresholds, time below the off-thresholds (s), the two test statistics.
 _DetectorState = namedview(
@@ -786,22 +818,9 @@ class ContactLocalizer(LeafSystem):
         super().__init__()
         who = self._who = "ContactLocalizer"
         self._kin = kin = _SensedConfiguration(plant, who)
-        inspector = scene_graph.model_inspector() if isinstance(scene_graph, SceneGraph) else scene_graph
-        if not isinstance(inspector, SceneGraphInspector):
-            raise ValueError(f"{who}: scene_graph must be a SceneGraph or SceneGraphInspector")
-        excluded = {int(resolve_body(plant, b, who).index()) for b in exclude_bodies}
-        if bodies is None:
-            candidates = [plant.get_body(BodyIndex(i)) for i in range(1, plant.num_bodies())]
-            candidates = [b for b in candidates if plant.GetCollisionGeometriesForBody(b)]
-        else:
-            candidates = [resolve_body(plant, b, who) for b in bodies]
-        candidates = [b for b in candidates if int(b.index()) not in excluded]
-        if not candidates:
-            raise ValueError(f"{who}: no candidate link left")
-        self._geometry = RobotGeometry.from_plant(
-            plant, inspector, candidates, skip_unsupported=skip_unsupported_shapes
+        self._geometry, self._bodies = candidate_geometry(
+            plant, scene_graph, bodies, exclude_bodies, who, skip_unsupported_shapes
         )
-        self._bodies = [plant.get_body(BodyIndex(int(i))) for i in self._geometry.bodies]
         self._period = positive_number(period, f"{who}: period")
         self._localization_period = (
             self._period

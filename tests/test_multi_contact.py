@@ -1,0 +1,447 @@
+"""Tests of systems/residuals/multi_contact.py against exact physics.
+
+The residuals fed to the localizer are computed here from known point forces with Drake
+directly: the external residual is the world wrench sum [p x f; f] (moment about the world
+origin), the internal one sum J^fb^T f with J^fb = J_j - J_b M_bb^-1 M_bj from
+``CalcJacobianTranslationalVelocity`` and ``CalcMassMatrix``. True contacts are sampled as
+the contact study samples them (``diagrams/residuals/contact_localization.py::sample_trials``):
+a uniform candidate link, a primitive by area, a uniform point of it on the robot's outer
+surface, a force of 5-40 N within 60 deg of the inward normal.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable
+
+from systems.residuals.geometry_intersection import (
+    BOX,
+    CAPSULE,
+    CONVEX,
+    CYLINDER,
+    SPHERE,
+    inward_direction,
+    outward_normals,
+    sample_surface,
+    signed_distances,
+    surface_areas,
+)
+from systems.residuals.multi_contact import MultiContactLocalizer, surface_grid
+
+#: As the contact study's ``sample_trials``: force magnitude (N) and largest angle to the
+#: inward normal (deg).
+MIN_FORCE, MAX_FORCE, MAX_ANGLE_DEG = 5.0, 40.0, 60.0
+#: The noise added in the noisy tests (averaged residuals): external moment (N m) and force
+#: (N) per axis, internal entries (N m); also the localizer's covariances there.
+MOMENT_STD, FORCE_STD, INTERNAL_STD = 0.05, 0.1, 0.005
+SOLES = ["l_sole", "r_sole"]
+LIMBS = {
+    "trunk": ("waist", "CHEST", "NECK"),
+    "right arm": ("R_SHOULDER", "R_ELBOW", "R_WRIST", "R_HAND"),
+    "left arm": ("L_SHOULDER", "L_ELBOW", "L_WRIST", "L_HAND"),
+    "right leg": ("R_HIP", "R_KNEE", "R_ANKLE"),
+    "left leg": ("L_HIP", "L_KNEE", "L_ANKLE"),
+}
+#: Two contacts on one limb: upper arm + forearm, elbow + forearm, upper arm + elbow,
+#: chest + head.
+SAME_LIMB_PAIRS = [
+    ("R_SHOULDER_Y_LINK", "R_WRIST_Y_LINK"),
+    ("L_SHOULDER_Y_LINK", "L_WRIST_Y_LINK"),
+    ("R_ELBOW_P_LINK", "R_WRIST_Y_LINK"),
+    ("L_SHOULDER_Y_LINK", "L_ELBOW_P_LINK"),
+    ("R_SHOULDER_P_LINK", "R_WRIST_Y_LINK"),
+    ("L_SHOULDER_R_LINK", "L_WRIST_R_LINK"),
+    ("CHEST_Y_LINK", "NECK_P_LINK"),
+    ("R_SHOULDER_Y_LINK", "R_WRIST_R_LINK"),
+]
+
+
+# ---------------------------------------------------------------------------------------
+# Fixtures and exact residuals.
+# ---------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def hrp4(hrp4_moved):
+    """hrp4_like standing, arms and torso moved away from the nominal posture (conftest)."""
+    plant, scene_graph, _, context = hrp4_moved
+    return plant, scene_graph, context
+
+
+@pytest.fixture(scope="module")
+def localizer(hrp4):
+    plant, scene_graph, _ = hrp4
+    return MultiContactLocalizer(plant, scene_graph, exclude_bodies=SOLES)
+
+
+def _sample_contact(plant, context, dut, rng, body_name: str | None = None):
+    """(body, p_B, p_W, f_W): a random outer-surface point of a link (uniform link unless
+    given, primitive by area) and a push of 5-40 N within 60 deg of its inward normal."""
+    geo = dut.geometry
+    X_WB = np.array([plant.EvalBodyPoseInWorld(context, b).GetAsMatrix34() for b in dut.candidate_bodies])
+    R_WG, p_WG = geo.world_poses(X_WB)
+    areas = surface_areas(geo.kinds, geo.params)
+    links = np.unique(geo.body_indices)
+    for _ in range(1000):
+        link = rng.choice(links) if body_name is None else int(plant.GetBodyByName(body_name).index())
+        rows = np.flatnonzero(geo.body_indices == link)
+        g = rng.choice(rows, p=areas[rows] / areas[rows].sum())
+        p_G, n_G = sample_surface(geo.kinds[g], geo.params[g], rng)
+        p_W = R_WG[g] @ p_G + p_WG[g]
+        if geo.outside_other_links(p_W, R_WG, p_WG, link) and p_W[2] > 0.02:
+            break
+    else:
+        raise AssertionError("no outer-surface point found")
+    body = plant.get_body(BodyIndex(int(link)))
+    p_B = plant.EvalBodyPoseInWorld(context, body).inverse().multiply(p_W)
+    f_W = rng.uniform(MIN_FORCE, MAX_FORCE) * inward_direction(R_WG[g] @ n_G, rng, MAX_ANGLE_DEG)
+    return body, p_B, p_W, f_W
+
+
+def _exact_residuals(plant, context, contacts) -> tuple[np.ndarray, np.ndarray]:
+    """(external wrench [sum p x f; sum f], internal residual sum J^fb^T f) of point forces
+    [(body, p_B, p_W, f_W)], from Drake's Jacobians and mass matrix."""
+    world = plant.world_frame()
+    M = plant.CalcMassMatrix(context)
+    A = np.linalg.solve(M[:6, :6], M[:6, 6:])
+    wrench = np.zeros(6)
+    tau = np.zeros(plant.num_velocities() - 6)
+    for body, p_B, p_W, f_W in contacts:
+        J = plant.CalcJacobianTranslationalVelocity(
+            context, JacobianWrtVariable.kV, body.body_frame(), p_B, world, world
+        )
+        tau += (J[:, 6:] - J[:, :6] @ A).T @ f_W
+        wrench += np.concatenate((np.cross(p_W, f_W), f_W))
+    return wrench, tau
+
+
+def _noise(rng, n: int) -> np.ndarray:
+    std = np.concatenate(([MOMENT_STD] * 3, [FORCE_STD] * 3, [INTERNAL_STD] * n))
+    return std * rng.normal(size=6 + n)
+
+
+def _limb(name: str) -> str:
+    return next(limb for limb, prefixes in LIMBS.items() if name.startswith(prefixes))
+
+
+def _pair_errors(fit, contacts) -> tuple[bool, list[float], list[float]]:
+    """(both links right, position errors (m), relative force errors); errors inf on a
+    wrong link (as the contact study counts them)."""
+    truth = [int(c[0].index()) for c in contacts]
+    if fit.body_indices == tuple(truth):
+        order = [0, 1]
+    elif fit.body_indices == tuple(truth[::-1]):
+        order = [1, 0]
+    else:
+        return False, [math.inf, math.inf], [math.inf, math.inf]
+    pos = [float(np.linalg.norm(fit.points_W[order[k]] - c[2])) for k, c in enumerate(contacts)]
+    force = [
+        float(np.linalg.norm(fit.forces_W[order[k]] - c[3]) / np.linalg.norm(c[3])) for k, c in enumerate(contacts)
+    ]
+    return True, pos, force
+
+
+def _two_contact_cases(plant, context, dut, count: int, seed: int):
+    """``count`` seeded pairs: SAME_LIMB_PAIRS first (random points on those links), then
+    links on two different limbs."""
+    rng = np.random.default_rng(seed)
+    names = [b.name() for b in dut.candidate_bodies]
+    cases = []
+    for k in range(count):
+        if k < len(SAME_LIMB_PAIRS):
+            a, b = SAME_LIMB_PAIRS[k]
+        else:
+            while True:
+                a, b = rng.choice(names, 2, replace=False)
+                if _limb(a) != _limb(b):
+                    break
+        cases.append([_sample_contact(plant, context, dut, rng, a), _sample_contact(plant, context, dut, rng, b)])
+    return cases
+
+
+# ---------------------------------------------------------------------------------------
+# Surface grids.
+# ---------------------------------------------------------------------------------------
+
+OCTAHEDRON_PLANES = np.array([[sx, sy, sz, 0.1] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
+OCTAHEDRON_PLANES[:, :3] /= math.sqrt(3.0)
+OCTAHEDRON_PLANES[:, 3] /= math.sqrt(3.0)
+
+
+@pytest.mark.parametrize(
+    "kind,params,planes",
+    [
+        (SPHERE, [0.05, 0, 0], None),
+        (BOX, [0.1, 0.03, 0.05], None),
+        (CYLINDER, [0.04, 0.07, 0], None),
+        (CAPSULE, [0.035, 0.065, 0], None),
+        (CONVEX, [0, 0, 0], OCTAHEDRON_PLANES),
+    ],
+)
+def test_surface_grid_is_on_the_surface(kind, params, planes):
+    """Every grid point lies on the primitive's surface with the outward unit normal
+    there, the count follows the area (about area / spacing^2), and the grid is
+    deterministic."""
+    params = np.array(params, dtype=float)
+    spacing = 0.015
+    p, n = surface_grid(kind, params, spacing, planes)
+    kinds = np.full(len(p), kind)
+    all_params = np.tile(params, (len(p), 1))
+    all_planes = None if planes is None else np.repeat(planes[None], len(p), 0)
+    sd = signed_distances(p[:, None, :], np.array([kind]), params[None], None if planes is None else planes[None])
+    np.testing.assert_allclose(sd[:, 0], 0.0, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, atol=1e-12)
+    if kind != BOX:  # a box's outward_normals is ambiguous only on edges; cell centres are not there
+        np.testing.assert_allclose(np.einsum("ij,ij->i", n, outward_normals(p, kinds, all_params, all_planes)), 1.0)
+    if kind != CONVEX:
+        area = surface_areas(np.array([kind]), params[None])[0]
+        assert 0.6 < len(p) * spacing**2 / area < 2.0
+    p2, _ = surface_grid(kind, params, spacing, planes)
+    np.testing.assert_array_equal(p, p2)
+
+
+# ---------------------------------------------------------------------------------------
+# One contact.
+# ---------------------------------------------------------------------------------------
+
+
+def test_one_contact_exact_every_link(hrp4, localizer):
+    """One outer-surface push on every candidate link of hrp4_like, exact residuals:
+    fit_one finds the link, the point within 1 cm and the force within 1 %; localize says 1
+    contact and its p-value is not small (the exact misfit is ~0)."""
+    plant, _, context = hrp4
+    q = plant.GetPositions(context)
+    rng = np.random.default_rng(11)
+    worst_position, worst_force = 0.0, 0.0
+    for body in localizer.candidate_bodies:
+        contact = _sample_contact(plant, context, localizer, rng, body.name())
+        wrench, tau = _exact_residuals(plant, context, [contact])
+        fit = localizer.fit_one(q, wrench, tau)
+        assert fit.body_indices == (int(body.index()),), body.name()
+        worst_position = max(worst_position, float(np.linalg.norm(fit.points_W[0] - contact[2])))
+        worst_force = max(worst_force, float(np.linalg.norm(fit.forces_W[0] - contact[3]) / np.linalg.norm(contact[3])))
+        result = localizer.localize(q, wrench, tau)
+        assert result.num_contacts == 1 and result.body_indices == (int(body.index()),)
+        assert result.p_value_one > 0.99 and math.isnan(result.statistic_two)
+    print(f"\none contact, every link: worst position error {worst_position:.2e} m, force {worst_force:.2e}")
+    assert worst_position < 0.01 and worst_force < 0.01
+
+
+def test_no_contact_and_joint_stops(hrp4, localizer):
+    """Residuals of noise only: 0 contacts. A hand push pressed into a joint stop (the stop
+    takes that joint's torque): fit_one still explains the residuals exactly, on the pushed
+    link or on its parent (which then needs the stop torque: the two are alike to the
+    residuals), and reports the stop torque."""
+    plant, _, context = hrp4
+    q = plant.GetPositions(context)
+    n = plant.num_velocities() - 6
+    rng = np.random.default_rng(3)
+    assert localizer.localize(q, np.zeros(6), np.zeros(n)).num_contacts == 0
+    zeros = [localizer.localize(q, *np.split(_noise(rng, n), [6])).num_contacts == 0 for _ in range(20)]
+    assert sum(zeros) >= 19
+    limited, signs = localizer.limited_joints(q)
+    assert limited.size  # HRP-4's hand J1 joints rest beyond their lower stops in this posture
+    pressed = 0
+    for _ in range(40):
+        contact = _sample_contact(plant, context, localizer, rng, rng.choice(["R_HAND_J1_LINK", "L_HAND_J1_LINK"]))
+        wrench, tau = _exact_residuals(plant, context, [contact])
+        into = limited[signs * tau[limited] < 0.0]
+        if into.size == 0:
+            continue
+        pressed += 1
+        stop_torque = -tau[into]
+        tau[into] = 0.0
+        fit = localizer.fit_one(q, wrench, tau)
+        parent = plant.GetJointByName(contact[0].name().replace("_LINK", "")).parent_body()
+        assert fit.body_indices[0] in (int(contact[0].index()), int(parent.index()))
+        assert fit.statistic < 1e-6
+        if fit.body_indices[0] == int(contact[0].index()):
+            reported = dict(zip(fit.limited_joints, fit.stop_torques))
+            np.testing.assert_allclose([reported[int(j)] for j in into], stop_torque, rtol=1e-4, atol=1e-6)
+    assert pressed >= 5
+
+
+# ---------------------------------------------------------------------------------------
+# Two contacts.
+# ---------------------------------------------------------------------------------------
+
+
+def test_two_contacts_exact(hrp4, localizer):
+    """24 seeded pairs (8 on one limb, 16 on two limbs), exact residuals.
+
+    Floors: both links right in >= 80 % of the pairs; median position error <= 2 cm and
+    median force error <= 5 % over all contacts (a wrong link counts as an infinite
+    error); localize says 2 contacts in every pair (every force is >= 5 N). The right-link
+    floor is not 100 %: two pushes can be unidentifiable from the residuals (the fit's
+    point_std is then inf). A link and its parent are alike when the push barely loads the
+    joint between (here: the elbow link taken for the upper arm, the neck pitch link for
+    the neck yaw link, both with an exact fit); on one leg the three parallel pitch axes
+    leave a family of exact two-contact fits; two links that only a joint on its stop tells
+    apart are alike. The search itself should not fail: its misfit stays at the true
+    contacts' (0) but for at most two stuck searches (measured: 1, a wrist push taken for
+    the hand link next to it)."""
+    plant, _, context = hrp4
+    q = plant.GetPositions(context)
+    right, positions, forces, stuck = [], [], [], []
+    for contacts in _two_contact_cases(plant, context, localizer, 24, seed=21):
+        wrench, tau = _exact_residuals(plant, context, contacts)
+        result = localizer.localize(q, wrench, tau)
+        assert result.num_contacts == 2, [c[0].name() for c in contacts]
+        ok, pos, force = _pair_errors(result.two, contacts)
+        right.append(ok)
+        positions += pos
+        forces += force
+        stuck.append(result.two.statistic > 1e-3)
+    first = _exact_residuals(plant, context, _two_contact_cases(plant, context, localizer, 1, seed=21)[0])
+    single = localizer.localize(q, *first, max_contacts=1)
+    assert single.num_contacts == 1 and math.isnan(single.statistic_two) and single.p_value_one < 1e-6
+    rate = float(np.mean(right))
+    print(
+        f"\ntwo contacts, exact: right links {rate:.0%} ({sum(right)}/{len(right)}), "
+        f"median position error {np.median(positions):.2e} m, median force error {np.median(forces):.2e}, "
+        f"searches stuck above the exact fit {sum(stuck)}"
+    )
+    assert rate >= 0.8
+    assert np.median(positions) <= 0.02 and np.median(forces) <= 0.05
+    assert sum(stuck) <= 2
+
+
+def test_noise_false_alarm_and_calibration(hrp4, localizer):
+    """Single contacts with Gaussian noise of the localizer's covariances, 200 seeded
+    draws: localize says 2 contacts in <= 2 % of them (the tests' false-alarm rate is
+    1e-3), and the single-contact statistic is calibrated: the mean of s_1 - dof_1 is
+    within 2 of 0 (its standard error is ~0.6), and p < 0.05 in 1-12 % of the draws (5 %
+    expected; 5.3 % measured over 600 other draws)."""
+    plant, _, context = hrp4
+    q = plant.GetPositions(context)
+    n = plant.num_velocities() - 6
+    rng = np.random.default_rng(31)
+    excess, p_values, two, right = [], [], 0, 0
+    for _ in range(200):
+        contact = _sample_contact(plant, context, localizer, rng)
+        wrench, tau = _exact_residuals(plant, context, [contact])
+        noise = _noise(rng, n)
+        result = localizer.localize(q, wrench + noise[:6], tau + noise[6:])
+        assert result.num_contacts >= 1
+        two += result.num_contacts == 2
+        right += result.one.body_indices == (int(contact[0].index()),)
+        excess.append(result.statistic_one - result.dof_one)
+        p_values.append(result.p_value_one)
+    small_p = float(np.mean(np.array(p_values) < 0.05))
+    print(
+        f"\nnoisy single contacts: 2 contacts in {two}/200, right link {right}/200, "
+        f"mean s_1 - dof_1 {np.mean(excess):.2f}, p < 0.05 in {small_p:.1%}"
+    )
+    assert two <= 4
+    assert abs(np.mean(excess)) < 2.0
+    assert 0.01 <= small_p <= 0.12
+
+
+def test_noise_two_contacts_detected(hrp4, localizer):
+    """Two contacts with the same noise, 40 seeded pairs: localize says 2 in >= 90 %."""
+    plant, _, context = hrp4
+    q = plant.GetPositions(context)
+    n = plant.num_velocities() - 6
+    rng = np.random.default_rng(41)
+    said_two, right = 0, 0
+    for contacts in _two_contact_cases(plant, context, localizer, 40, seed=43):
+        wrench, tau = _exact_residuals(plant, context, contacts)
+        noise = _noise(rng, n)
+        result = localizer.localize(q, wrench + noise[:6], tau + noise[6:])
+        said_two += result.num_contacts == 2
+        right += result.num_contacts == 2 and _pair_errors(result.two, contacts)[0]
+    print(f"\nnoisy two contacts: 2 contacts in {said_two}/40, both links right in {right}/40")
+    assert said_two >= 36
+
+
+def test_timing(hrp4, localizer):
+    """Not an assertion: the median time of fit_one and fit_two on hrp4_like at a known pose
+    (the pose's precomputation excluded, as in a steady posture)."""
+    plant, _, context = hrp4
+    q = plant.GetPositions(context)
+    rng = np.random.default_rng(5)
+    cases = _two_contact_cases(plant, context, localizer, 10, seed=51)
+    localizer.fit_two(q, *_exact_residuals(plant, context, cases[0]))  # precomputation
+    one, two = [], []
+    for contacts in cases:
+        wrench, tau = _exact_residuals(plant, context, contacts)
+        start = time.perf_counter()
+        localizer.fit_one(q, wrench, tau)
+        one.append(time.perf_counter() - start)
+        start = time.perf_counter()
+        localizer.fit_two(q, wrench, tau)
+        two.append(time.perf_counter() - start)
+    q2 = q.copy()
+    q2[7:] += 1e-3 * rng.normal(size=q.size - 7)
+    start = time.perf_counter()
+    localizer.fit_one(q2, *_exact_residuals(plant, context, cases[0]))
+    new_pose = time.perf_counter() - start
+    print(
+        f"\nfit_one median {1e3 * np.median(one):.1f} ms, fit_two median {1e3 * np.median(two):.1f} ms "
+        f"(max {1e3 * np.max(two):.1f}); fit_one at a new pose {1e3 * new_pose:.1f} ms"
+    )
+
+
+# ---------------------------------------------------------------------------------------
+# Bad input.
+# ---------------------------------------------------------------------------------------
+
+
+def test_bad_input(hrp4, localizer):
+    plant, scene_graph, context = hrp4
+    q = plant.GetPositions(context)
+    n = plant.num_velocities() - 6
+    w, r = np.zeros(6), np.zeros(n)
+    bad_w = w.copy()
+    bad_w[2] = np.nan
+    with pytest.raises(ValueError, match="wrench_W has NaN"):
+        localizer.fit_one(q, bad_w, r)
+    with pytest.raises(ValueError, match=r"residual must have shape \(34,\)"):
+        localizer.fit_two(q, w, np.zeros(n + 1))
+    with pytest.raises(ValueError, match=r"q must have shape"):
+        localizer.localize(q[:-1], w, r)
+    bad_q = q.copy()
+    bad_q[0] = np.inf
+    with pytest.raises(ValueError, match="q has NaN or inf"):
+        localizer.localize(bad_q, w, r)
+    with pytest.raises(ValueError, match="unit quaternion"):
+        localizer.localize(np.concatenate(([2.0], q[1:])), w, r)
+    with pytest.raises(ValueError, match="max_contacts"):
+        localizer.localize(q, w, r, max_contacts=3)
+    make = lambda **kw: MultiContactLocalizer(plant, scene_graph, exclude_bodies=SOLES, **kw)  # noqa: E731
+    with pytest.raises(ValueError, match="covariance_external must be positive definite"):
+        make(covariance_external=np.diag([1.0] * 5 + [-1.0]))
+    with pytest.raises(ValueError, match="covariance_external must be symmetric"):
+        make(covariance_external=np.eye(6) + np.triu(np.ones((6, 6)), 1))
+    with pytest.raises(ValueError, match="covariance_internal must be 34 standard deviations or a 34x34"):
+        make(covariance_internal=np.eye(3))
+    with pytest.raises(ValueError, match="covariance_internal has NaN"):
+        make(covariance_internal=np.full(n, np.nan))
+    with pytest.raises(ValueError, match="standard deviations must be positive"):
+        make(covariance_internal=np.zeros(n))
+    with pytest.raises(ValueError, match="false_alarm"):
+        make(false_alarm=0.0)
+    with pytest.raises(ValueError, match="spacing"):
+        make(spacing=-0.01)
+    with pytest.raises(ValueError, match="link_pairs"):
+        make(link_pairs=0)
+    with pytest.raises(ValueError, match="unknown body"):
+        MultiContactLocalizer(plant, scene_graph, exclude_bodies=["nope"])
+    with pytest.raises(ValueError, match="SceneGraph"):
+        MultiContactLocalizer(plant, "not a scene graph")
+    with pytest.raises(ValueError, match="MultibodyPlant"):
+        MultiContactLocalizer("not a plant", scene_graph)
+    one_link = MultiContactLocalizer(plant, scene_graph, bodies=["CHEST_Y_LINK"])
+    with pytest.raises(ValueError, match="at least two candidate links"):
+        one_link.fit_two(q, w, r)
+    # Explicit covariances (stds or matrices) give the same fit as the defaults they equal.
+    stds = make(covariance_external=[0.05] * 3 + [0.1] * 3, covariance_internal=np.diag([0.005**2] * n))
+    rng = np.random.default_rng(2)
+    wrench, tau = _exact_residuals(plant, context, [_sample_contact(plant, context, localizer, rng)])
+    a, b = localizer.fit_one(q, wrench, tau), stds.fit_one(q, wrench, tau)
+    assert a.body_indices == b.body_indices
+    np.testing.assert_allclose(a.points_W, b.points_W, atol=1e-9)

@@ -64,9 +64,11 @@ from diagrams.residuals.contact_localization import (
     MAX_FORCE,
     MIN_FORCE,
     ContactLocalizationScenario,
+    averaged_input_covariances,
     build_contact_localization_diagram,
     contact_localization_metrics,
     floors_for,
+    multi_contact_localizer,
     no_contact_result,
     no_contact_scenario,
     run_schedule,
@@ -107,20 +109,28 @@ def sole_slip(plant, plant_context, sole_frames: dict, start: dict) -> tuple[flo
     return moved, turned
 
 
-def run_trials(specs: list[dict], scenario: ContactLocalizationScenario) -> list[dict]:
+def run_trials(
+    specs: list[dict], scenario: ContactLocalizationScenario, covariances: tuple | None = None
+) -> list[dict]:
     """Simulates the trials ``specs`` (``sample_trials``) of ``scenario``, ``trials_per_run``
     of them one after another in each run from the standing start (``run_schedule``; 1:
     each trial from the standing start), each read at the end of its push; returns their
     results (``trial_result``, with the soles' slip since the run's start). A trial after
     which a sole has slipped (``SOLE_SLIP_RESTART``) ends its run: the next trials start
-    a new one."""
+    a new one. With ``covariances`` (``averaged_input_covariances``) each trial also goes
+    through the one-or-two-contact localization (``multi_contact_result``)."""
     results = []
     remaining = list(specs)
     model_corrections = refined_model(scenario)
+    multi_contact = None
+    if covariances is not None:
+        # The diagram owns the plant the localizer reads: both live until the end of the run.
+        multi_diagram, multi_handles = build_contact_localization_diagram(scenario, model_corrections=model_corrections)
+        multi_contact = multi_contact_localizer(multi_handles, covariances)
     while remaining:
         run_specs = remaining[: scenario.trials_per_run]
         run_scenario = trial_scenario(scenario, run_specs[0])  # the run's noise seed
-        pushes, windows = run_schedule(scenario, run_specs)
+        pushes, windows, push_indices = run_schedule(scenario, run_specs)
         diagram, handles = build_contact_localization_diagram(
             run_scenario, model_corrections=model_corrections, pushes=pushes
         )
@@ -133,11 +143,18 @@ def run_trials(specs: list[dict], scenario: ContactLocalizationScenario) -> list
         start = {name: frame.CalcPoseInWorld(plant_context) for name, frame in soles.items()}
         simulator.Initialize()
         done = len(run_specs)
-        for k, (spec, window) in enumerate(zip(run_specs, windows)):
+        for k, (spec, window, indices) in enumerate(zip(run_specs, windows, push_indices)):
             wall_start = time.perf_counter()
             simulator.AdvanceTo(window[2])
             result = trial_result(
-                scenario, spec, handles, context, time.perf_counter() - wall_start, push_index=k, window=window
+                scenario,
+                spec,
+                handles,
+                context,
+                time.perf_counter() - wall_start,
+                push_indices=indices,
+                window=window,
+                multi_contact=multi_contact,
             )
             moved, turned = sole_slip(handles.plant, plant_context, soles, start)
             result["sole_slip_m"], result["sole_slip_deg"] = moved, math.degrees(turned)
@@ -153,7 +170,10 @@ def run_trials(specs: list[dict], scenario: ContactLocalizationScenario) -> list
 def record_replay(spec: dict, scenario: ContactLocalizationScenario, meshcat, *, live: bool = True) -> None:
     """Records the trial ``spec`` in ``meshcat``, its push and its release."""
     trial = trial_scenario(scenario, spec)
-    diagram, handles = build_contact_localization_diagram(trial, meshcat, model_corrections=refined_model(scenario))
+    pushes, _, _ = run_schedule(scenario, [spec])
+    diagram, handles = build_contact_localization_diagram(
+        trial, meshcat, model_corrections=refined_model(scenario), pushes=pushes
+    )
     simulate(
         diagram,
         trial.push_start + trial.push_duration + REPLAY_AFTER_PUSH_S,
@@ -181,10 +201,10 @@ def run_no_contact(scenario: ContactLocalizationScenario, kind: str = "no_contac
 
 def _job(job: tuple) -> tuple[str, dict]:
     # The scenario travels as YAML: Drake's config types do not pickle.
-    kind, spec, scenario_yaml = job
+    kind, spec, scenario_yaml, covariances = job
     scenario = load_scenario(ContactLocalizationScenario, text=scenario_yaml)
     if kind == "trials":
-        return kind, run_trials(spec, scenario)
+        return kind, run_trials(spec, scenario, covariances)
     return kind, run_no_contact(scenario, kind)
 
 
@@ -216,7 +236,10 @@ def plot_position_errors(path: Path, results: list[dict]) -> None:
 
 def _parse(argv):
     parser = experiment_parser("apps.contact_localization", __doc__, replay=False, conditions=True)
-    parser.add_argument("--trials", type=int, default=None, help="number of random contacts (scenario default 200)")
+    parser.add_argument("--trials", type=int, default=None, help="number of trials (scenario default 1000)")
+    parser.add_argument(
+        "--contacts", type=int, choices=(1, 2), default=None, help="contacts per trial (default 1; 2: two links)"
+    )
     parser.add_argument("--seed", type=int, default=None, help="first seed of the trials and of the sensor noise")
     parser.add_argument("--num-seeds", type=int, default=None, help="seeds the trials are drawn from (default 5)")
     parser.add_argument(
@@ -305,6 +328,7 @@ def main(argv: list[str] | None = None) -> int:
             seed=args.seed,
             num_seeds=args.num_seeds,
             trials_per_run=args.trials_per_run,
+            contacts=args.contacts,
             model=args.model,
             push_start=args.push_start,
             push_duration=args.contact_duration,
@@ -322,13 +346,19 @@ def main(argv: list[str] | None = None) -> int:
             refined_model(scenario, Path(args.out) / "model_refinement")
             scenario.model_refinement = str(calibration_file(scenario, Path(args.out) / "model_refinement"))
         scenario_yaml = scenario_as_yaml(scenario)
+        if scenario.contacts not in (1, 2):
+            raise ValueError(f"contacts must be 1 or 2, got contacts: {scenario.contacts}")
+        scenario.multi_contact = scenario.multi_contact or scenario.contacts == 2
+        covariances = None
+        if scenario.multi_contact:
+            covariances = averaged_input_covariances(scenario, refined_model(scenario))
         jobs = []
         if scenario.no_contact_duration > 0:  # the longest jobs first
-            jobs.append(("no_contact", None, scenario_yaml))
+            jobs.append(("no_contact", None, scenario_yaml, None))
         if scenario.slow_motion_duration > 0:
-            jobs.append(("slow_motion", None, scenario_yaml))
+            jobs.append(("slow_motion", None, scenario_yaml, None))
         size = max(scenario.trials_per_run, TRIALS_PER_JOB)
-        jobs += [("trials", specs[i : i + size], scenario_yaml) for i in range(0, len(specs), size)]
+        jobs += [("trials", specs[i : i + size], scenario_yaml, covariances) for i in range(0, len(specs), size)]
         results, no_contact = _run_jobs(jobs, args.workers)
         metrics = contact_localization_metrics(
             results, no_contact.get("no_contact"), no_contact.get("slow_motion"), floors_for(scenario)
@@ -339,6 +369,7 @@ def main(argv: list[str] | None = None) -> int:
                 "seed": scenario.seed,
                 "seeds": list(range(scenario.seed, scenario.seed + scenario.num_seeds)),
                 "trials_per_run": scenario.trials_per_run,
+                "contacts": scenario.contacts,
                 "trials_with_a_sole_slip": sum(r["run_restarted_after"] for r in results),
                 "noise": scenario.noise,
                 "workers": args.workers,
@@ -375,7 +406,8 @@ def main(argv: list[str] | None = None) -> int:
 
 def _print_summary(metrics: dict) -> None:
     print(
-        f"contact localization on {metrics['model']}, {metrics['trials']} trials (seeds {metrics['seeds']}),"
+        f"contact localization on {metrics['model']}, {metrics['trials']} trials of {metrics['contacts']} contact(s)"
+        f" (seeds {metrics['seeds']}),"
         f" noise {'on' if metrics['noise'] else 'off'}:"
     )
     intervals = metrics.get("intervals", {})
@@ -388,7 +420,16 @@ def _print_summary(metrics: dict) -> None:
         ci = f"[{intervals[key][0]:.4g}, {intervals[key][1]:.4g}]" if key in intervals else ""
         verdict = "ok" if ok else "MISSED" if ok is not None else ""
         print(f"  {key:32s} {text:>10s} {ci:>20s}   floor {op} {floor:<6}  {verdict}")
-    for key in ("valid_rate", "valid_precision"):
+    extra = (
+        "valid_rate",
+        "valid_precision",
+        "more_than_one_contact_rate",
+        "p_value_one_below_0.05_rate",
+        "two_contact_fit_links_right_rate",
+        "p95_contact_position_error_m",
+        "p95_contact_force_error_rel",
+    )
+    for key in (k for k in extra if k not in metrics["floors"]):
         if metrics.get(key) is not None:
             ci = f"[{intervals[key][0]:.4g}, {intervals[key][1]:.4g}]" if key in intervals else ""
             print(f"  {key:32s} {metrics[key]:>10.4g} {ci:>20s}")

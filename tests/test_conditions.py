@@ -60,10 +60,13 @@ def test_model_refinement_values_are_checked(tmp_path):
 
 
 def test_the_contact_study_checks_the_floors_of_its_world():
-    from diagrams.residuals.contact_localization import FLOORS, REALISTIC_FLOORS, floors_for
+    from diagrams.residuals.contact_localization import FLOORS, REALISTIC_FLOORS, TWO_CONTACT_FLOORS, floors_for
 
     assert floors_for(ContactLocalizationScenario()) is REALISTIC_FLOORS
     assert floors_for(set_ideal_conditions(ContactLocalizationScenario())) is FLOORS
+    assert floors_for(ContactLocalizationScenario(contacts=2)) is TWO_CONTACT_FLOORS
     # Issue 11's realistic floors (after refinement); the false detections stay at 0.
     assert REALISTIC_FLOORS["correct_link_rate"] == (">=", 0.90) and REALISTIC_FLOORS["false_detections"] == ("<=", 0)
-    assert FLOORS["correct_link_rate"] == (">=", 0.95)
+    # Issue 12's ideal-world floors.
+    assert FLOORS["correct_link_rate"] == (">=", 0.97) and FLOORS["valid_precision"] == (">=", 0.995)
+    assert TWO_CONTACT_FLOORS["both_links_right_rate"] == (">=", 0.80)

@@ -113,7 +113,8 @@ def test_trials_run_one_after_another_each_detected_and_localized_in_its_window(
 
     scenario = ContactLocalizationScenario(push_start=0.3, push_duration=0.3, trial_gap=0.4, trials_per_run=3)
     specs = sample_trials("hrp4_like", 3, seed=0)  # an elbow, a shoulder and a hand link
-    pushes, windows = run_schedule(scenario, specs)
+    pushes, windows, push_indices = run_schedule(scenario, specs)
+    assert push_indices == [[0], [1], [2]]
     np.testing.assert_allclose(windows, [(0.0, 0.3, 0.6), (0.6, 1.0, 1.3), (1.3, 1.7, 2.0)], atol=1e-12)
     diagram, handles = build_contact_localization_diagram(scenario, pushes=pushes)
     simulator = Simulator(diagram)
@@ -123,7 +124,7 @@ def test_trials_run_one_after_another_each_detected_and_localized_in_its_window(
     results = []
     for k, (spec, window) in enumerate(zip(specs, windows)):
         simulator.AdvanceTo(window[2])
-        result = trial_result(scenario, spec, handles, context, 0.0, push_index=k, window=window)
+        result = trial_result(scenario, spec, handles, context, 0.0, push_indices=push_indices[k], window=window)
         results.append(result)
         assert result["detected"] and not result["detector_on_at_push_start"], k
         assert result["false_detections_before_push"] == 0

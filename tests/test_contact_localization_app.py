@@ -71,6 +71,9 @@ def test_app_smoke(tmp_path):
     assert metrics["median_position_error_m"] < 0.02
     assert metrics["median_force_error_rel"] < 0.05
     assert (out / "position_errors.png").stat().st_size > 10_000
+    # Each single contact also went through the one-or-two-contact fit, which found one.
+    assert metrics["multi_contact_trials"] == 2 and metrics["more_than_one_contact_rate"] == 0.0
+    assert all(trial["contacts_estimated"] == 1 for trial in metrics["per_trial"])
     # The 95 % intervals bracket their figures, and the per-link table counts every trial.
     low, high = metrics["intervals"]["correct_link_rate"]
     assert low <= metrics["correct_link_rate"] <= high == 1.0
@@ -90,6 +93,29 @@ def test_app_smoke(tmp_path):
         assert path in scene.tracks, sorted(scene.tracks)[:10]
         visible = [value for _, value in scene.tracks[path].get("visible", [])]
         assert True in visible, path  # shown during the push
+
+
+def test_app_two_contacts(tmp_path):
+    """``--contacts 2``: two links pushed at once in each trial (ideal world, noise on); the
+    one-or-two-contact fit says two contacts and finds both, and the replay shows both
+    true forces."""
+    code = contact_localization.main(
+        ["--contacts", "2", "--trials", "2", "--num-seeds", "1", "--seed", "50", "--workers", "1", "--replays", "1"]
+        + ["--headless", "--no-contact-duration", "0", "--slow-motion-duration", "0", "--ideal", "--out", str(tmp_path)]
+    )
+    assert code == 0
+    out = tmp_path / "contact_localization"
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["contacts"] == 2
+    assert set(metrics["floors"]) >= {"both_links_right_rate", "more_than_one_contact_rate"}
+    assert metrics["detection_rate"] == 1.0 and metrics["more_than_one_contact_rate"] == 1.0
+    for trial in metrics["per_trial"]:
+        assert len(trial["contacts"]) == 2 and trial["contacts"][0]["body"] != trial["contacts"][1]["body"]
+        assert len(trial["true_points_world"]) == 2
+    assert metrics["both_links_right_rate"] == 1.0  # seed 50's first two: a wrist and an ankle, a wrist and a hand
+    assert metrics["median_contact_position_error_m"] < 0.01 and metrics["median_contact_force_error_rel"] < 0.05
+    scene = read_static_html((out / "replay_trial_0.html").read_text())
+    assert {"/drake/true_force/0", "/drake/true_force/1"} <= set(scene.tracks)
 
 
 def test_sampled_contacts_are_on_the_outer_surface_and_within_the_cone():

@@ -7,7 +7,7 @@ calibration motion before the trials); ``--ideal`` runs it in the ideal world.
 The humanoid (``hrp4_like``) stands holding its posture with noisy sensors; in each trial a
 constant force of 5-40 N, within 60 deg of the inward surface normal, pushes a random point
 of the outer collision surface of a random link (upper body and legs; the soles, below the
-F/T sensors, are excluded) for 0.3 s. The trials (1000 by default) are drawn from several
+F/T sensors, are excluded) for 1 s. The trials (1000 by default) are drawn from several
 seeds (5 by default: seed, seed + 1, ...). The internal and external residuals, the
 ContactDetector and the ContactLocalizer see only the sensors. Per trial the app records
 detection and its delay, the localized link and point and the force at the end of the push
@@ -258,7 +258,7 @@ def _parse(argv):
         "--contact-duration",
         type=float,
         default=None,
-        help="contact duration, s (the scenario's push_duration, default 0.3)",
+        help="contact duration, s (the scenario's push_duration, default 1)",
     )
     parser.add_argument(
         "--no-contact-duration",

@@ -445,3 +445,41 @@ def test_bad_input(hrp4, localizer):
     a, b = localizer.fit_one(q, wrench, tau), stds.fit_one(q, wrench, tau)
     assert a.body_indices == b.body_indices
     np.testing.assert_allclose(a.points_W, b.points_W, atol=1e-9)
+
+
+def test_relative_error_accounts_for_a_load_proportional_model_error(hrp4):
+    """A model error proportional to the load (each residual entry scaled by 1 + d, d ~
+    N(0, 0.03^2): a 3 % torque-scale or inertial error times the contact's effort) on
+    single contacts with sensor noise: with the covariances alone the chi-square test
+    takes it for a second contact in most draws; with ``relative_error`` = 0.03 it says
+    two contacts in <= 5 % of them, and still says two for two real contacts."""
+    plant, scene_graph, context = hrp4
+    q = plant.GetPositions(context)
+    n = plant.num_velocities() - 6
+    plain = MultiContactLocalizer(plant, scene_graph, exclude_bodies=SOLES)
+    relative = MultiContactLocalizer(plant, scene_graph, exclude_bodies=SOLES, relative_error=0.03)
+    rng = np.random.default_rng(47)
+    says_two = {"plain": 0, "relative": 0}
+    draws = 40
+    for _ in range(draws):
+        contact = _sample_contact(plant, context, relative, rng)
+        wrench, tau = _exact_residuals(plant, context, [contact])
+        scale = 1.0 + 0.03 * rng.normal(size=6 + n)
+        noise = _noise(rng, n)
+        w, r = wrench * scale[:6] + noise[:6], tau * scale[6:] + noise[6:]
+        says_two["plain"] += plain.localize(q, w, r).num_contacts == 2
+        says_two["relative"] += relative.localize(q, w, r).num_contacts == 2
+    found_two = 0
+    for _ in range(10):
+        contacts = [
+            _sample_contact(plant, context, relative, rng, name) for name in ("R_ELBOW_P_LINK", "L_KNEE_P_LINK")
+        ]
+        wrench, tau = _exact_residuals(plant, context, contacts)
+        noise = _noise(rng, n)
+        found_two += relative.localize(q, wrench + noise[:6], tau + noise[6:]).num_contacts == 2
+    print(f"\nload-proportional error: 2 contacts in {says_two} of {draws}; two real contacts found in {found_two}/10")
+    assert says_two["plain"] >= draws // 2
+    assert says_two["relative"] <= 0.05 * draws
+    assert found_two >= 9
+    with pytest.raises(ValueError, match="relative_error"):
+        MultiContactLocalizer(plant, scene_graph, exclude_bodies=SOLES, relative_error=-1.0)

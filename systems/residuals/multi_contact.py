@@ -651,6 +651,10 @@ class MultiContactLocalizer:
             0.01); None: no joint does.
         skip_unsupported_shapes: ignore shapes other than spheres, boxes, cylinders,
             capsules and convex meshes instead of raising.
+        relative_error: eps >= 0, a model error proportional to the load (e.g. a motor-torque
+            scale error, or a model's inertial error, times the contact's effort): each call
+            whitens with the covariances plus diag((eps b)^2), b its own inputs (default 0:
+            the covariances alone, right for sensor noise on an exact model).
 
     Raises:
         ValueError: a bad plant, scene graph, body, covariance (shape, NaN, asymmetric, not
@@ -677,6 +681,7 @@ class MultiContactLocalizer:
         surface_tolerance: float = 0.01,
         limit_margin: float | None = 0.01,
         skip_unsupported_shapes: bool = False,
+        relative_error: float = 0.0,
     ):
         who = self._who = "MultiContactLocalizer"
         check_plant(plant, who)
@@ -693,6 +698,13 @@ class MultiContactLocalizer:
         self._L_int_inv = self._whitener(
             covariance_internal, n, "covariance_internal", np.full(n, DEFAULT_INTERNAL_STD)
         )
+        # The covariances themselves (L L^T), for the load-proportional term.
+        self._cov_ext = np.linalg.inv(self._L_ext_inv.T @ self._L_ext_inv)
+        self._cov_int = np.linalg.inv(self._L_int_inv.T @ self._L_int_inv)
+        self._relative_error = float(relative_error)
+        if not (math.isfinite(self._relative_error) and self._relative_error >= 0.0):
+            raise ValueError(f"{who}: relative_error must be finite and non-negative, got {relative_error!r}")
+        self._whitened_for: bytes | None = None
         try:
             self._alpha = float(false_alarm)
         except (TypeError, ValueError):
@@ -893,6 +905,16 @@ class MultiContactLocalizer:
         q = self._check_q(q)
         w = self._vector(wrench_W, 6, "wrench_W")
         r = self._vector(residual, self._n, "residual")
+        if self._relative_error > 0.0:
+            # Whiten with the load-proportional term of these inputs (the pose's whitened
+            # columns are recomputed when it changes).
+            key = np.concatenate((w, r)).tobytes()
+            if key != self._whitened_for:
+                eps2 = self._relative_error**2
+                self._L_ext_inv = np.linalg.inv(np.linalg.cholesky(self._cov_ext + np.diag(eps2 * w**2)))
+                self._L_int_inv = np.linalg.inv(np.linalg.cholesky(self._cov_int + np.diag(eps2 * r**2)))
+                self._whitened_for = key
+                self._pose_cache = None
         pose = self._pose(q)
         bt = np.concatenate((self._L_ext_inv @ w, self._L_int_inv @ r))
         return pose, bt, pose.P @ bt

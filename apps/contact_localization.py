@@ -9,7 +9,9 @@ constant force of 5-40 N, within 60 deg of the inward surface normal, pushes a r
 of the outer collision surface of a random link (upper body and legs; the soles, below the
 F/T sensors, are excluded) for 1 s. The trials (1000 by default) are drawn from several
 seeds (5 by default: seed, seed + 1, ...). The internal and external residuals, the
-ContactDetector and the ContactLocalizer see only the sensors. Per trial the app records
+ContactDetector and the ContactLocalizer see only the sensors (``--contacts 2``: two links
+pushed at once; every trial also goes through the one-or-two-contact MultiContactLocalizer).
+Per trial the app records
 detection and its delay, the localized link and point and the force at the end of the push
 (the localizer averages its inputs from 0.1 s after detection and localizes at 100 Hz),
 and the computation time of one localizer update. Each trial starts from the standing
@@ -18,10 +20,10 @@ runs without contact count false detections: 60 s standing, and 60 s of slow who
 motion (``diagrams.station.motions``, a motion the calibration never saw).
 
 Run: ``python -m apps.contact_localization [--scenario FILE] [--scenario-text YAML]
-[--trials N] [--seed S] [--num-seeds K] [--trials-per-run N] [--model M] [--push-start S]
+[--trials N] [--contacts 1|2] [--seed S] [--num-seeds K] [--trials-per-run N] [--model M] [--push-start S]
 [--contact-duration S] [--no-contact-duration S] [--slow-motion-duration S] [--no-noise]
 [--ideal] [--out DIR] [--headless] [--workers W] [--replays R]``.
-The scenario is a ``ContactLocalizationScenario``; ``--trials``, ``--seed``,
+The scenario is a ``ContactLocalizationScenario``; ``--trials``, ``--contacts``, ``--seed``,
 ``--num-seeds``, ``--trials-per-run``, ``--model``, ``--push-start``,
 ``--contact-duration`` (``push_duration``), ``--no-contact-duration``,
 ``--slow-motion-duration`` and ``--no-noise`` override its fields, ``--ideal`` its world;

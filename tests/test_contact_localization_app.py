@@ -101,7 +101,8 @@ def test_app_two_contacts(tmp_path):
     true forces."""
     code = contact_localization.main(
         ["--contacts", "2", "--trials", "2", "--num-seeds", "1", "--seed", "50", "--workers", "1", "--replays", "1"]
-        + ["--headless", "--no-contact-duration", "0", "--slow-motion-duration", "0", "--ideal", "--out", str(tmp_path)]
+        + ["--push-start", "0.2", "--contact-duration", "0.4", "--no-contact-duration", "0"]
+        + ["--slow-motion-duration", "0", "--headless", "--ideal", "--out", str(tmp_path)]
     )
     assert code == 0
     out = tmp_path / "contact_localization"

@@ -149,6 +149,25 @@ def candidate_geometry(
     return geometry, [plant.get_body(BodyIndex(int(i))) for i in geometry.bodies]
 
 
+class _JointStops:
+    """The position limits of the 1-DoF joints (v[6:] order), to tell which rest on a stop."""
+
+    def __init__(self, joints: Sequence, margin: float):
+        self._q_index = np.array([j.position_start() for j in joints], dtype=int)
+        self._lower = np.array([j.position_lower_limits()[0] for j in joints], dtype=float)
+        self._upper = np.array([j.position_upper_limits()[0] for j in joints], dtype=float)
+        self._margin = float(margin)  # -inf: no joint rests on a stop
+
+    def limited(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(indices, signs) of the joints within the margin of a limit at the positions q:
+        +1 at a lower limit (the stop can only push the joint up), -1 at an upper one."""
+        qj = np.asarray(q, dtype=float)[self._q_index]
+        at_lower = qj <= self._lower + self._margin
+        at_upper = qj >= self._upper - self._margin
+        index = np.flatnonzero(at_lower | at_upper)
+        return index, np.where(at_lower[index], 1.0, -1.0)
+
+
 #: ContactDetector's state: contact (1/0), detection time (s, -1: none), consecutive samples
 #: above the on-thresholds, time below the off-thresholds (s), the two test statistics.
 _DetectorState = namedview(
@@ -850,10 +869,7 @@ class ContactLocalizer(LeafSystem):
         self._limit_margin = -math.inf if limit_margin is None else float(limit_margin)
         if not (limit_margin is None or (math.isfinite(self._limit_margin) and self._limit_margin >= 0.0)):
             raise ValueError(f"{who}: limit_margin must be finite and non-negative, got {limit_margin}")
-        joints = kin.topology.joints
-        self._q_joint_index = np.array([j.position_start() for j in joints], dtype=int)
-        self._lower = np.array([j.position_lower_limits()[0] for j in joints], dtype=float)
-        self._upper = np.array([j.position_upper_limits()[0] for j in joints], dtype=float)
+        self._stops = _JointStops(kin.topology.joints, self._limit_margin)
         self._same_body = self._geometry.body_indices[:, None] == self._geometry.body_indices[None, :]
 
         self._state_port = self.DeclareVectorInputPort("state", nq + nv)
@@ -898,11 +914,7 @@ class ContactLocalizer(LeafSystem):
         """(indices, signs) of the joints within ``limit_margin`` of a position limit at the
         positions ``q`` (v[6:] order): sign +1 at a lower limit (the stop can only push the
         joint up), -1 at an upper one."""
-        qj = np.asarray(q, dtype=float)[self._q_joint_index]
-        at_lower = qj <= self._lower + self._limit_margin
-        at_upper = qj >= self._upper - self._limit_margin
-        index = np.flatnonzero(at_lower | at_upper)
-        return index, np.where(at_lower[index], 1.0, -1.0)
+        return self._stops.limited(q)
 
     def localize(self, q: np.ndarray, wrench_W: np.ndarray, residual: np.ndarray) -> LocalizationResult:
         """Steps 1-4 of the class docstring for one (q, external wrench, internal residual),

@@ -92,7 +92,7 @@ from scipy.stats import chi2
 from scipy.stats import f as f_distribution
 
 from systems.common.checks import check_plant, positive_number
-from systems.residuals.contact_estimation import _SensedConfiguration, candidate_geometry
+from systems.residuals.contact_estimation import _JointStops, _SensedConfiguration, candidate_geometry
 from systems.residuals.geometry_intersection import (
     BOX,
     CAPSULE,
@@ -731,10 +731,7 @@ class MultiContactLocalizer:
             self._limit_margin = -math.inf
         else:
             self._limit_margin = positive_number(limit_margin, f"{who}: limit_margin", allow_zero=True)
-        joints = kin.topology.joints
-        self._q_joint_index = np.array([j.position_start() for j in joints], dtype=int)
-        self._lower = np.array([j.position_lower_limits()[0] for j in joints], dtype=float)
-        self._upper = np.array([j.position_upper_limits()[0] for j in joints], dtype=float)
+        self._stops = _JointStops(kin.topology.joints, self._limit_margin)
         self._dense_grid = self._make_grid(self._spacing)
         self._coarse_grid = self._make_grid(self._coarse_spacing)
         self._medium_grid = self._make_grid(self._medium_spacing)
@@ -807,11 +804,7 @@ class MultiContactLocalizer:
     def limited_joints(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(indices (v[6:] order), signs) of the joints within ``limit_margin`` of a limit:
         +1 at a lower limit (the stop pushes the joint up), -1 at an upper one."""
-        qj = self._check_q(q)[self._q_joint_index]
-        at_lower = qj <= self._lower + self._limit_margin
-        at_upper = qj >= self._upper - self._limit_margin
-        index = np.flatnonzero(at_lower | at_upper)
-        return index, np.where(at_lower[index], 1.0, -1.0)
+        return self._stops.limited(self._check_q(q))
 
     def fit_one(self, q: np.ndarray, wrench_W: np.ndarray, residual: np.ndarray) -> ContactFit:
         """The best single contact (module docstring).

@@ -243,6 +243,27 @@ def so3_exp(phi: np.ndarray) -> np.ndarray:
     return so3_gamma(phi, 0)
 
 
+def so3_gammas(phi: np.ndarray, orders: int = 3) -> tuple[np.ndarray, ...]:
+    """(Γ_0(φ), Γ_1(φ), Γ_2(φ)) of :func:`so3_gamma` (the first ``orders`` of them) from one
+    [φ]× and one [φ]×², the filter's per-step form of the same closed-form expressions."""
+    x, y, z = phi.tolist()
+    theta2 = x * x + y * y + z * z
+    K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    K2 = K @ K
+    if theta2 < 1e-12:
+        c0, c1 = 1.0, 0.5
+        d0, d1 = 0.5, 1.0 / 6.0
+        c2, d2 = 1.0 / 6.0, 1.0 / 24.0
+    else:
+        theta = math.sqrt(theta2)
+        sin, cos = math.sin(theta), math.cos(theta)
+        c0, d0 = sin / theta, (1.0 - cos) / theta2
+        c1, d1 = d0, (theta - sin) / (theta2 * theta)
+        c2, d2 = d1, (theta2 + 2.0 * cos - 2.0) / (2.0 * theta2 * theta2)
+    out = (_I3 + c0 * K + d0 * K2, _I3 + c1 * K + d1 * K2, 0.5 * _I3 + c2 * K + d2 * K2)
+    return out[:orders]
+
+
 def rotation_to_quaternion(R: np.ndarray) -> np.ndarray:
     """Unit quaternion [w, x, y, z] with w >= 0 of a rotation matrix (Shepperd's method)."""
     R = np.asarray(R, dtype=float)
@@ -519,6 +540,10 @@ class ContactAidedInvariantEkf:
 
     # -- propagation --------------------------------------------------------------------
 
+    def _active_feet(self) -> list[int]:
+        """The slots of the feet in the state (in contact), as a list of ints."""
+        return [j for j, on in enumerate(self._in_contact.tolist()) if on]
+
     def _adjoint(self) -> np.ndarray:
         """Ad_X̄ of SE_{2+K}(3) (E5); the rows of feet out of contact are left 0; with bias
         states, blkdiag(Ad_X̄, I_6) (E11)."""
@@ -530,7 +555,7 @@ class ContactAidedInvariantEkf:
         Ad[3:6, 3:6] = R
         Ad[6:9, 0:3] = skew(self._p) @ R
         Ad[6:9, 6:9] = R
-        for j in np.flatnonzero(self._in_contact):
+        for j in self._active_feet():
             s = 9 + 3 * j
             Ad[s : s + 3, 0:3] = skew(self._d[j]) @ R
             Ad[s : s + 3, s : s + 3] = R
@@ -538,34 +563,31 @@ class ContactAidedInvariantEkf:
             Ad[self._b0 :, self._b0 :] = np.eye(6)
         return Ad
 
-    def _bias_columns(self, dt: float) -> np.ndarray:
+    def _bias_columns(self, dt: float, adjoint: np.ndarray | None = None) -> np.ndarray:
         """Φ's bias columns (E11), rows ξ (9 + 3 K) by ζ (6): B dt + A_X B dt²/2 + A_X² B dt³/6,
         B = A's bias columns at X̄ (A_X B has [g]× B_R in rows v and B_v in rows p; A_X² B has
-        [g]× B_R in rows p)."""
-        R = self._R
+        [g]× B_R in rows p). B's gyro columns are minus Ad_X̄'s first three columns (E5),
+        its accelerometer columns -R in rows v."""
+        Ad = self._adjoint() if adjoint is None else adjoint
         B = np.zeros((self._b0, 6))
-        B[0:3, 0:3] = -R
-        B[3:6, 0:3] = -skew(self._v) @ R
-        B[3:6, 3:6] = -R
-        B[6:9, 0:3] = -skew(self._p) @ R
-        for j in np.flatnonzero(self._in_contact):
-            s = 9 + 3 * j
-            B[s : s + 3, 0:3] = -skew(self._d[j]) @ R
+        B[:, 0:3] = -Ad[: self._b0, 0:3]
+        B[3:6, 3:6] = -self._R
         gB = self._g_skew @ B[0:3]
         columns = B * dt
         columns[3:6] += gB * (0.5 * dt * dt)
         columns[6:9] += B[3:6] * (0.5 * dt * dt) + gB * (dt * dt * dt / 6.0)
         return columns
 
-    def transition_matrix(self, dt: float) -> np.ndarray:
+    def transition_matrix(self, dt: float, adjoint: np.ndarray | None = None) -> np.ndarray:
         """Φ over dt at the current state (E5; with bias states its bias columns, E11): the
-        linearised error ξ(t + dt) = Φ ξ(t) without noise, X̄ held over the step."""
+        linearised error ξ(t + dt) = Φ ξ(t) without noise, X̄ held over the step.
+        ``adjoint``: this state's :meth:`_adjoint`, if already computed."""
         Phi = self._eye.copy()
         Phi[3:6, 0:3] = self._g_skew * dt
         Phi[6:9, 0:3] = 0.5 * self._g_skew * dt * dt
         Phi[6:9, 3:6] = _I3 * dt
         if self._bias:
-            Phi[: self._b0, self._b0 :] = self._bias_columns(dt)
+            Phi[: self._b0, self._b0 :] = self._bias_columns(dt, adjoint)
         return Phi
 
     def propagate(self, omega: np.ndarray, a: np.ndarray, dt: float) -> None:
@@ -586,39 +608,40 @@ class ContactAidedInvariantEkf:
         phi = omega * dt
         # Covariance first: Φ and Ad_X̄ at the state before the step.
         n = self._dim
-        Phi = self.transition_matrix(dt)
+        Ad = self._adjoint()
+        Phi = self.transition_matrix(dt, Ad)
         q = np.zeros(n)
         q[0:3] = self._var_g
         q[3:6] = self._var_a
-        for j in np.flatnonzero(self._in_contact):
+        for j in self._active_feet():
             q[9 + 3 * j : 12 + 3 * j] = self._var_c
         if self._bias:
             q[self._b0 : self._b0 + 3] = self._var_bg
             q[self._b0 + 3 :] = self._var_ba
-        G = Phi @ self._adjoint()
+        G = Phi @ Ad
         self._P = Phi @ self._P @ Phi.T + (G * q) @ G.T * dt
         self._P = 0.5 * (self._P + self._P.T)
         # Mean (E1)-(E4).
         R = self._R
         g = self._g
-        Ra1 = R @ (so3_gamma(phi, 1) @ a)
-        Ra2 = R @ (so3_gamma(phi, 2) @ a)
+        exp_phi, gamma1, gamma2 = so3_gammas(phi)
+        Ra1 = R @ (gamma1 @ a)
+        Ra2 = R @ (gamma2 @ a)
         self._p = self._p + self._v * dt + Ra2 * dt * dt + 0.5 * g * dt * dt
         self._v = self._v + Ra1 * dt + g * dt
-        self._R = R @ so3_exp(phi)
+        self._R = R @ exp_phi
 
     # -- correction ---------------------------------------------------------------------
 
     def _apply_correction(self, delta: np.ndarray) -> None:
         """X⁺ = Exp(δ) X̄ (E7), δ = [δ_R; δ_v; δ_p; δ_d1; ...]; with bias states θ⁺ = θ̄ + δ_θ
         (E11)."""
-        dR = so3_exp(delta[0:3])
-        J = so3_gamma(delta[0:3], 1)
+        dR, J = so3_gammas(delta[0:3], 2)
         self._R = dR @ self._R
         self._v = dR @ self._v + J @ delta[3:6]
         self._p = dR @ self._p + J @ delta[6:9]
-        active = np.flatnonzero(self._in_contact)
-        if active.size:
+        active = self._active_feet()
+        if active:
             dd = delta[9 : self._b0].reshape(self._K, 3)[active]
             self._d[active] = self._d[active] @ dR.T + dd @ J.T
         if self._bias:
@@ -628,7 +651,8 @@ class ContactAidedInvariantEkf:
         """(E7) with measurement noise var I: S = H P Hᵀ + N, K = P Hᵀ S⁻¹, X⁺ = Exp(K r) X̄,
         Joseph-form P⁺ = (I − KH) P (I − KH)ᵀ + K N Kᵀ (symmetrised)."""
         PHt = self._P @ H.T
-        S = H @ PHt + var * np.eye(H.shape[0])
+        S = H @ PHt
+        S.flat[:: S.shape[0] + 1] += var
         K = np.linalg.solve(S, PHt.T).T
         self._apply_correction(K @ r)
         IKH = self._eye - K @ H
@@ -690,15 +714,15 @@ class ContactAidedInvariantEkf:
         h = np.asarray(foot_positions, dtype=float).reshape(self._K, 3)
         flags = np.asarray(in_contact, dtype=bool).reshape(self._K)
         # (E9) contact lost: marginalise the slot.
-        for j in np.flatnonzero(self._in_contact & ~flags):
+        for j in np.flatnonzero(self._in_contact & ~flags).tolist():
             s = 9 + 3 * j
             self._P[s : s + 3, :] = 0.0
             self._P[:, s : s + 3] = 0.0
             self._in_contact[j] = False
         # (E6), (E7) feet in contact and in the state.
-        update = np.flatnonzero(self._in_contact & flags)
-        if update.size:
-            m = update.size
+        update = np.flatnonzero(self._in_contact & flags).tolist()
+        if update:
+            m = len(update)
             r = (h[update] @ self._R.T - (self._d[update] - self._p)).reshape(-1)
             H = np.zeros((3 * m, self._dim))
             for i, j in enumerate(update):
@@ -706,7 +730,7 @@ class ContactAidedInvariantEkf:
                 H[3 * i : 3 * i + 3, 9 + 3 * j : 12 + 3 * j] = _I3
             self._update(H, r, self._var_k)
         # (E8) contact made: d_j = p + R h_j, ξ_dj = ξ_p + R n_j.
-        for j in np.flatnonzero(flags & ~self._in_contact):
+        for j in np.flatnonzero(flags & ~self._in_contact).tolist():
             s = 9 + 3 * j
             self._d[j] = self._p + self._R @ h[j]
             self._P[s : s + 3, :] = self._P[6:9, :]

@@ -40,6 +40,7 @@ The metrics are defined in ``diagrams.residuals.contact_localization``.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import multiprocessing
 import os
@@ -114,25 +115,37 @@ def sole_slip(plant, plant_context, sole_frames: dict, start: dict) -> tuple[flo
 def run_trials(
     specs: list[dict], scenario: ContactLocalizationScenario, covariances: tuple | None = None
 ) -> list[dict]:
-    """Simulates the trials ``specs`` (``sample_trials``) of ``scenario``, ``trials_per_run``
-    of them one after another in each run from the standing start (``run_schedule``; 1:
-    each trial from the standing start), each read at the end of its push; returns their
-    results (``trial_result``, with the soles' slip since the run's start). A trial after
-    which a sole has slipped (``SOLE_SLIP_RESTART``) ends its run: the next trials start
-    a new one. With ``covariances`` (``averaged_input_covariances``) each trial also goes
-    through the one-or-two-contact localization (``multi_contact_result``)."""
+    """Simulates the trials ``specs`` (``sample_trials``) of ``scenario`` and returns their
+    results (``trial_result``, with the soles' slip since the standing start), each read at
+    the end of its push. With ``covariances`` (``averaged_input_covariances``) each trial
+    also goes through the one-or-two-contact localization (``multi_contact_result``).
+
+    How the trials are run:
+
+    * ``trials_per_run`` 1 with ``shared_standing_start`` (the default): the standing start
+      is simulated once and its state saved at ``push_start``; the trials then push one
+      after another, each from that state, restored before its push (time goes on, so each
+      push sees sensor noise of its own).
+    * ``trials_per_run`` 1 otherwise: each trial simulates its own standing start.
+    * ``trials_per_run`` N > 1: N trials one after another in each run, the robot not reset
+      in between (``run_schedule``); a trial after which a sole has slipped
+      (``SOLE_SLIP_RESTART``) ends its run, and the next trials start a new one.
+    """
     results = []
-    remaining = list(specs)
     model_corrections = refined_model(scenario)
     multi_contact = None
     if covariances is not None:
         # The diagram owns the plant the localizer reads: both live until the end of the run.
         multi_diagram, multi_handles = build_contact_localization_diagram(scenario, model_corrections=model_corrections)
         multi_contact = multi_contact_localizer(multi_handles, covariances)
+    shared_start = scenario.trials_per_run == 1 and scenario.shared_standing_start
+    per_run = len(specs) if shared_start else scenario.trials_per_run
+    schedule = dataclasses.replace(scenario, trial_gap=0.0) if shared_start else scenario
+    remaining = list(specs)
     while remaining:
-        run_specs = remaining[: scenario.trials_per_run]
+        run_specs = remaining[:per_run]
         run_scenario = trial_scenario(scenario, run_specs[0])  # the run's noise seed
-        pushes, windows, push_indices = run_schedule(scenario, run_specs)
+        pushes, windows, push_indices = run_schedule(schedule, run_specs)
         diagram, handles = build_contact_localization_diagram(
             run_scenario, model_corrections=model_corrections, pushes=pushes
         )
@@ -144,8 +157,16 @@ def run_trials(
         soles = handles.station.humanoid.sole_frames
         start = {name: frame.CalcPoseInWorld(plant_context) for name, frame in soles.items()}
         simulator.Initialize()
+        standing = None
+        if shared_start:
+            simulator.AdvanceTo(scenario.push_start)
+            standing = context.Clone()
         done = len(run_specs)
         for k, (spec, window, indices) in enumerate(zip(run_specs, windows, push_indices)):
+            restored = shared_start and k > 0
+            if restored:
+                context.SetStateAndParametersFrom(standing)  # the standing start; the time goes on
+                window = (window[1], window[1], window[2])
             wall_start = time.perf_counter()
             simulator.AdvanceTo(window[2])
             result = trial_result(
@@ -157,10 +178,12 @@ def run_trials(
                 push_indices=indices,
                 window=window,
                 multi_contact=multi_contact,
+                restored_at_start=restored,
             )
             moved, turned = sole_slip(handles.plant, plant_context, soles, start)
             result["sole_slip_m"], result["sole_slip_deg"] = moved, math.degrees(turned)
-            result["run_restarted_after"] = moved > SOLE_SLIP_RESTART[0] or turned > SOLE_SLIP_RESTART[1]
+            result["sole_slipped"] = moved > SOLE_SLIP_RESTART[0] or turned > SOLE_SLIP_RESTART[1]
+            result["run_restarted_after"] = result["sole_slipped"] and not shared_start
             results.append(result)
             if result["run_restarted_after"]:
                 done = k + 1
@@ -372,7 +395,7 @@ def main(argv: list[str] | None = None) -> int:
                 "seeds": list(range(scenario.seed, scenario.seed + scenario.num_seeds)),
                 "trials_per_run": scenario.trials_per_run,
                 "contacts": scenario.contacts,
-                "trials_with_a_sole_slip": sum(r["run_restarted_after"] for r in results),
+                "trials_with_a_sole_slip": sum(r["sole_slipped"] for r in results),
                 "noise": scenario.noise,
                 "workers": args.workers,
                 "push_start_s": scenario.push_start,

@@ -139,3 +139,28 @@ def test_trials_run_one_after_another_each_detected_and_localized_in_its_window(
     for a, b in zip(from_runner, results):
         assert a["position_error_m"] == pytest.approx(b["position_error_m"], abs=1e-12)
         assert a["sole_slip_m"] < 0.002
+
+
+def test_trials_from_one_shared_standing_start_match_the_trials_run_alone():
+    """``shared_standing_start`` (the study's default): the standing start simulated once,
+    its state restored before each push. Without sensor noise the restored start is the
+    start each trial would have simulated on its own, so every trial's detection,
+    localization and force are those of the same trial run alone (from its own standing
+    start) up to round-off, whatever the trials before it did; with noise the pushes see
+    noise of their own (they come one after another in time)."""
+    from apps.contact_localization import run_trials
+    from diagrams.residuals.contact_localization import sample_trials
+
+    shared = ContactLocalizationScenario(push_start=0.3, push_duration=0.3, noise=False, multi_contact=False)
+    assert shared.shared_standing_start and shared.trials_per_run == 1
+    specs = sample_trials("hrp4_like", 3, seed=0)
+    together = run_trials([dict(s) for s in specs], shared)
+    alone = [run_trials([dict(s)], shared)[0] for s in specs]
+    for a, b in zip(together, alone):
+        assert a["detected"] and not a["detector_on_at_push_start"] and a["false_detections_before_push"] == 0
+        assert a["estimated_body"] == b["estimated_body"] and a["correct_link"]
+        assert a["detection_delay_s"] == pytest.approx(b["detection_delay_s"], abs=1e-9)
+        np.testing.assert_allclose(a["estimated_point_world"], b["estimated_point_world"], atol=1e-9)
+        np.testing.assert_allclose(a["estimated_force_world"], b["estimated_force_world"], atol=1e-7)
+        np.testing.assert_allclose(a["true_point_world"], b["true_point_world"], atol=1e-12)
+        assert a["sole_slip_m"] < 0.002 and not a["run_restarted_after"]

@@ -138,6 +138,13 @@ class ContactLocalizationScenario:
             in the paper. Runs of several trials test a robot that has been pushed
             before (BENCHMARKS.md: its feet slip, and the realistic world's detector
             does not always release within the gap).
+        shared_standing_start: with ``trials_per_run`` 1, the study simulates the standing
+            start (the first ``push_start`` seconds) once per job of trials and restores its
+            state before each trial's push (``apps.contact_localization.run_trials``): the
+            same start as simulating it for each trial, at a third less simulated time per
+            trial (1 s pushes). The trials' pushes then follow one another in time, so each
+            push sees sensor noise of its own; what the trials of one job share is the
+            noise of the start. False: each trial simulates its own standing start.
         noise: sensor noise on (systems.simulation.sensors defaults) or off.
         seed: the sensor noise seed of one run; the study's first seed, from which it
             samples the trials and derives each run's noise seed.
@@ -170,7 +177,8 @@ class ContactLocalizationScenario:
         detector_startup_time: the detector stays off for this long after the start, s (the
             residuals' and the base-state estimator's start-up; a push that starts earlier is
             detected only from then on).
-        log_period: period of the loggers (detector and localizer outputs, truth), s.
+        log_period: period of the loggers (detector outputs, residuals), s; the localizer's
+            outputs are logged every ``localization_period`` (its rate of estimates).
         simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``); the plant
             is discrete, so only ``target_realtime_rate`` and the publishing matter.
         base_state, imperfections, model_refinement: the world of the study
@@ -185,6 +193,7 @@ class ContactLocalizationScenario:
     push_duration: float = 1.0
     trial_gap: float = 0.4
     trials_per_run: int = 1
+    shared_standing_start: bool = True
     noise: bool = True
     seed: int = 0
     num_seeds: int = 5
@@ -349,14 +358,16 @@ def build_contact_localization_diagram(
     builder.Connect(detector.GetOutputPort("contact_detected"), localizer.GetInputPort("contact_detected"))
 
     log = scenario.log_period
+    # The localizer's estimate is recomputed once per localization: logged at that rate.
+    estimate_log = max(log, scenario.localization_period or 0.0)
     loggers = {
         "contact_detected": LogVectorOutput(detector.GetOutputPort("contact_detected"), builder, log),
         "detection_time": LogVectorOutput(detector.GetOutputPort("detection_time"), builder, log),
         "test_statistics": LogVectorOutput(detector.GetOutputPort("test_statistics"), builder, log),
-        "status": LogVectorOutput(localizer.GetOutputPort("status"), builder, log),
-        "contact_point_world": LogVectorOutput(localizer.GetOutputPort("contact_point_world"), builder, log),
-        "contact_force_world": LogVectorOutput(localizer.GetOutputPort("contact_force_world"), builder, log),
-        "contact_body": LogVectorOutput(localizer.GetOutputPort("contact_body"), builder, log),
+        "status": LogVectorOutput(localizer.GetOutputPort("status"), builder, estimate_log),
+        "contact_point_world": LogVectorOutput(localizer.GetOutputPort("contact_point_world"), builder, estimate_log),
+        "contact_force_world": LogVectorOutput(localizer.GetOutputPort("contact_force_world"), builder, estimate_log),
+        "contact_body": LogVectorOutput(localizer.GetOutputPort("contact_body"), builder, estimate_log),
     }
     if log_residuals:
         loggers["external_wrench_world"] = LogVectorOutput(
@@ -629,6 +640,7 @@ def trial_result(
     push_indices: Sequence[int] = (0,),
     window: tuple[float, float, float] | None = None,
     multi_contact: MultiContactLocalizer | None = None,
+    restored_at_start: bool = False,
 ) -> dict:
     """The results of the trial ``spec`` at the end of its push, from the simulator's root
     ``context``: detection and its delay, the localized link and point, the force errors,
@@ -642,7 +654,9 @@ def trial_result(
     internal residual of the final localization, as arrays
     (``ContactLocalizer.localization_inputs``: the study's localizations can be replayed
     offline). With ``multi_contact`` the same inputs also go through its one-or-two-contact
-    localization (``multi_contact_result``)."""
+    localization (``multi_contact_result``). ``restored_at_start``: the run's state was
+    restored to its standing start at the window's start (``shared_standing_start``), so
+    the detector was off there whatever the log's last sample before it says."""
     if window is None:
         window = (0.0, scenario.push_start, scenario.push_start + scenario.push_duration)
     previous_end, push_start, t_end = window
@@ -657,7 +671,7 @@ def trial_result(
     t, detected = log.sample_times(), log.data()[0]
     times = handles.loggers["detection_time"].FindLog(context).data()[0]
     before = t <= previous_end
-    state_before = detected[before][-1] if before.any() else 0.0
+    state_before = detected[before][-1] if before.any() and not restored_at_start else 0.0
     inside = ~before & (t <= t_end)
     t, detected, times = t[inside], detected[inside], times[inside]
     rising = np.flatnonzero(np.diff(np.concatenate(([state_before], detected))) > 0.5)

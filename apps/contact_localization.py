@@ -10,7 +10,9 @@ of the outer collision surface of a random link (upper body and legs; the soles,
 F/T sensors, are excluded) for 1 s. The trials (1000 by default) are drawn from several
 seeds (5 by default: seed, seed + 1, ...). The internal and external residuals, the
 ContactDetector and the ContactLocalizer see only the sensors (``--contacts 2``: two links
-pushed at once; every trial also goes through the one-or-two-contact MultiContactLocalizer).
+pushed at once; every trial also goes through the one-or-two-contact MultiContactLocalizer,
+after all trials: each seed's trials with the model error under load measured on the other
+seeds' trials, whose pushes are known: cross-fitting, ``multi_contact_jobs``).
 Per trial the app records
 detection and its delay, the localized link and point and the force at the end of the push
 (the localizer averages its inputs from 0.1 s after detection and localizes at 100 Hz),
@@ -66,12 +68,16 @@ from diagrams.residuals.contact_localization import (
     MAX_ANGLE_DEG,
     MAX_FORCE,
     MIN_FORCE,
+    MIN_LOAD_CALIBRATION_TRIALS,
     ContactLocalizationScenario,
     averaged_input_covariances,
     build_contact_localization_diagram,
     contact_localization_metrics,
+    cross_fitting_folds,
     floors_for,
+    load_model_error,
     multi_contact_localizer,
+    multi_contact_result,
     no_contact_result,
     no_contact_scenario,
     run_schedule,
@@ -94,6 +100,8 @@ REPLAY_AFTER_PUSH_S = 0.3
 
 #: Trials a worker process runs per job (at least one run of ``trials_per_run``).
 TRIALS_PER_JOB = 10
+#: Trials per job of the one-or-two-contact localization (after the simulations).
+MULTI_CONTACT_TRIALS_PER_JOB = 25
 
 #: A run is restarted from the standing start after a trial that moved a sole from where it
 #: stood by more than these (m, rad): the base-state estimator takes a foot in contact as
@@ -112,13 +120,11 @@ def sole_slip(plant, plant_context, sole_frames: dict, start: dict) -> tuple[flo
     return moved, turned
 
 
-def run_trials(
-    specs: list[dict], scenario: ContactLocalizationScenario, covariances: tuple | None = None
-) -> list[dict]:
+def run_trials(specs: list[dict], scenario: ContactLocalizationScenario) -> list[dict]:
     """Simulates the trials ``specs`` (``sample_trials``) of ``scenario`` and returns their
     results (``trial_result``, with the soles' slip since the standing start), each read at
-    the end of its push. With ``covariances`` (``averaged_input_covariances``) each trial
-    also goes through the one-or-two-contact localization (``multi_contact_result``).
+    the end of its push (the one-or-two-contact localization comes after all trials,
+    ``localize_multi_contact``).
 
     How the trials are run:
 
@@ -133,11 +139,6 @@ def run_trials(
     """
     results = []
     model_corrections = refined_model(scenario)
-    multi_contact = None
-    if covariances is not None:
-        # The diagram owns the plant the localizer reads: both live until the end of the run.
-        multi_diagram, multi_handles = build_contact_localization_diagram(scenario, model_corrections=model_corrections)
-        multi_contact = multi_contact_localizer(multi_handles, covariances)
     shared_start = scenario.trials_per_run == 1 and scenario.shared_standing_start
     per_run = len(specs) if shared_start else scenario.trials_per_run
     schedule = dataclasses.replace(scenario, trial_gap=0.0) if shared_start else scenario
@@ -177,7 +178,6 @@ def run_trials(
                 time.perf_counter() - wall_start,
                 push_indices=indices,
                 window=window,
-                multi_contact=multi_contact,
                 restored_at_start=restored,
             )
             moved, turned = sole_slip(handles.plant, plant_context, soles, start)
@@ -190,6 +190,60 @@ def run_trials(
                 break
         remaining = remaining[done:]
     return results
+
+
+def localize_multi_contact(
+    trials: list[dict],
+    scenario: ContactLocalizationScenario,
+    covariances: tuple[np.ndarray, np.ndarray],
+    load_covariances: tuple[np.ndarray, np.ndarray] | None,
+) -> list[dict]:
+    """The one-or-two-contact localization (``multi_contact_result``) of the ``trials``'
+    averaged inputs (``localizer_inputs``) against their true contacts, whitened with the
+    averaged inputs' noise ``covariances`` and the model error under load
+    ``load_covariances`` (measured on other trials, ``load_model_error``; None: none).
+    Returns one dict per trial, with its ``trial``."""
+    # The diagram owns the plant the localizer reads: both live until the end.
+    diagram, handles = build_contact_localization_diagram(scenario, model_corrections=refined_model(scenario))
+    localizer = multi_contact_localizer(handles, covariances, load_covariances)
+    out = []
+    for trial in trials:
+        contacts = trial.get("contacts", [trial])
+        inputs = trial["localizer_inputs"]
+        result = multi_contact_result(
+            localizer,
+            inputs["q"],
+            inputs["external_wrench_world"],
+            inputs["residual"],
+            [c["body_index"] for c in contacts],
+            np.asarray(trial["true_points_world"]),
+            np.array([c["force_world"] for c in contacts]),
+        )
+        out.append({"trial": trial["trial"], **result})
+    return out
+
+
+def multi_contact_jobs(
+    results: list[dict],
+    plant,
+    scenario_yaml: str,
+    covariances: tuple[np.ndarray, np.ndarray],
+    chunk: int = MULTI_CONTACT_TRIALS_PER_JOB,
+) -> list[tuple]:
+    """The jobs of the one-or-two-contact localization of the study's ``results``,
+    cross-fitted (``cross_fitting_folds``): each fold's trials whitened with the model
+    error under load measured on the detected trials of the other folds
+    (``load_model_error``; none with fewer than ``MIN_LOAD_CALIBRATION_TRIALS``)."""
+    jobs = []
+    for fold in cross_fitting_folds(results):
+        inside = set(fold)
+        known = [r for i, r in enumerate(results) if i not in inside and r["detected"]]
+        load = load_model_error(plant, known) if len(known) >= MIN_LOAD_CALIBRATION_TRIALS else None
+        fields = ("trial", "contacts", "localizer_inputs", "true_points_world", "body_index", "force_world")
+        trials = [{k: results[i][k] for k in fields if k in results[i]} for i in fold]
+        for j in range(0, len(trials), chunk):
+            jobs.append(("multi_contact", trials[j : j + chunk], scenario_yaml, (covariances, load)))
+    return jobs
 
 
 def record_replay(spec: dict, scenario: ContactLocalizationScenario, meshcat, *, live: bool = True) -> None:
@@ -229,7 +283,9 @@ def _job(job: tuple) -> tuple[str, dict]:
     kind, spec, scenario_yaml, covariances = job
     scenario = load_scenario(ContactLocalizationScenario, text=scenario_yaml)
     if kind == "trials":
-        return kind, run_trials(spec, scenario, covariances)
+        return kind, run_trials(spec, scenario)
+    if kind == "multi_contact":
+        return kind, localize_multi_contact(spec, scenario, *covariances)
     return kind, run_no_contact(scenario, kind)
 
 
@@ -317,9 +373,10 @@ def _parse(argv):
 
 def _run_jobs(jobs: list, workers: int) -> tuple[list[dict], dict]:
     """Runs the jobs (in ``workers`` spawned processes when more than one); returns the
-    trials' results in trial order and those of the runs without contact by kind
+    results of the "trials" and "multi_contact" jobs in trial order (the second's merged
+    into the first's, or alone) and those of the runs without contact by kind
     ("no_contact", "slow_motion")."""
-    results, no_contact = [], {}
+    results, no_contact, multi = [], {}, []
     if workers == 1:
         outputs = map(_job, jobs)
         pool = None
@@ -330,6 +387,8 @@ def _run_jobs(jobs: list, workers: int) -> tuple[list[dict], dict]:
         for done, (kind, value) in enumerate(outputs, 1):
             if kind == "trials":
                 results.extend(value)
+            elif kind == "multi_contact":
+                multi.extend(value)
             else:
                 no_contact[kind] = value
             print(f"\r{done}/{len(jobs)} jobs done", end="", flush=True)
@@ -339,7 +398,8 @@ def _run_jobs(jobs: list, workers: int) -> tuple[list[dict], dict]:
             pool.join()
     print()
     results.sort(key=lambda r: r["trial"])
-    return results, no_contact
+    multi.sort(key=lambda r: r["trial"])
+    return results or multi, no_contact
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -385,6 +445,14 @@ def main(argv: list[str] | None = None) -> int:
         size = max(scenario.trials_per_run, TRIALS_PER_JOB)
         jobs += [("trials", specs[i : i + size], scenario_yaml, covariances) for i in range(0, len(specs), size)]
         results, no_contact = _run_jobs(jobs, args.workers)
+        if scenario.multi_contact:
+            # After all trials: each seed's trials whitened with the model error under load
+            # measured on the other seeds' (cross-fitting).
+            _, handles = build_contact_localization_diagram(scenario, model_corrections=refined_model(scenario))
+            multi, _ = _run_jobs(multi_contact_jobs(results, handles.plant, scenario_yaml, covariances), args.workers)
+            by_trial = {m.pop("trial"): m for m in multi}
+            for r in results:
+                r.update(by_trial[r["trial"]])
         metrics = contact_localization_metrics(
             results, no_contact.get("no_contact"), no_contact.get("slow_motion"), floors_for(scenario)
         )

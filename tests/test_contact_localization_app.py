@@ -226,3 +226,47 @@ def test_app_calibrates_once_in_the_realistic_world(tmp_path, monkeypatch):
     saved = Path(scenario["model_refinement"])
     assert saved.is_file() and saved.parent == tmp_path / "model_refinement"
     assert metrics["trials"] == 1
+
+
+def test_multi_contact_jobs_cross_fit_the_load_model_error_by_seed(hrp4_moved):
+    """``multi_contact_jobs``: every trial is localized once, in chunks; each seed's trials
+    get the model error under load measured on the OTHER seeds' detected trials
+    (``load_model_error``), never on their own, and none when fewer than
+    ``MIN_LOAD_CALIBRATION_TRIALS`` such trials are known."""
+    from diagrams.residuals.contact_localization import MIN_LOAD_CALIBRATION_TRIALS, load_model_error
+
+    plant, _, _, context = hrp4_moved
+    q = plant.GetPositions(context)
+    n = plant.num_velocities() - 6
+    rng = np.random.default_rng(3)
+    body = plant.GetBodyByName("R_ELBOW_P_LINK")
+
+    def trial(k: int, seed: int, detected: bool = True) -> dict:
+        contact = {"body_index": int(body.index()), "point_body": [0.0, 0.0, -0.1], "force_world": [10.0, 0.0, 0.0]}
+        inputs = {"q": q, "external_wrench_world": rng.normal(size=6), "residual": rng.normal(size=n)}
+        return {
+            "trial": k,
+            "seed": seed,
+            "detected": detected,
+            "contacts": [contact],
+            **contact,
+            "localizer_inputs": inputs,
+            "true_points_world": [[0.0, 0.0, 0.0]],
+        }
+
+    few = MIN_LOAD_CALIBRATION_TRIALS - 1
+    results = [trial(k, 0) for k in range(25)] + [trial(25 + k, 1, detected=k > 0) for k in range(few + 1)]
+    covariances = (np.eye(6), np.eye(n))
+    jobs = contact_localization.multi_contact_jobs(results, plant, "yaml", covariances, chunk=10)
+    assert all(kind == "multi_contact" and len(trials) <= 10 for kind, trials, _, _ in jobs)
+    assert sorted(t["trial"] for _, trials, _, _ in jobs for t in trials) == list(range(len(results)))
+    for _, trials, text, (given, load) in jobs:
+        assert text == "yaml" and given is covariances
+        seed = results[trials[0]["trial"]]["seed"]
+        assert all(results[t["trial"]]["seed"] == seed for t in trials)
+        if seed == 0:  # the other seed has only `few` detected trials
+            assert load is None
+        else:
+            expected = load_model_error(plant, results[:25])
+            np.testing.assert_array_equal(load[0], expected[0])
+            np.testing.assert_array_equal(load[1], expected[1])

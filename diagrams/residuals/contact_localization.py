@@ -51,7 +51,12 @@ from diagrams.station.conditions import is_ideal, set_ideal_conditions
 from diagrams.station.humanoid_station import HumanoidStation, add_scenario_station, default_plant_config
 from diagrams.station.motions import SlowMotion, slow_whole_body_motion
 from systems.estimation.model_identification import ModelCorrections
-from systems.residuals.contact_estimation import ContactDetector, ContactLocalizer, GatedEstimate
+from systems.residuals.contact_estimation import (
+    ContactDetector,
+    ContactLocalizer,
+    GatedEstimate,
+    _SensedConfiguration,
+)
 from systems.residuals.geometry_intersection import inward_direction, sample_surface, surface_areas
 from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual, ResidualModel
 from systems.residuals.multi_contact import MultiContactLocalizer
@@ -155,7 +160,10 @@ class ContactLocalizationScenario:
         contacts: contacts per trial: 1, or 2 (two links pushed at once; ``sample_trials``).
         multi_contact: the study also localizes each trial's averaged inputs with the
             one-or-two-contact ``MultiContactLocalizer`` (``multi_contact_result``; always
-            with ``contacts`` 2): how often it says "more than one contact".
+            with ``contacts`` 2): how often it says "more than one contact". Its tests
+            whiten with the averaged sensor noise (``averaged_input_covariances``) and the
+            model error under load measured on the other seeds' trials, whose contacts
+            are known (``load_model_error``, ``cross_fitting_folds``).
         no_contact_duration: the study's run without contact, standing (false detections),
             s; 0 skips it.
         slow_motion_duration: the study's run without contact during ``slow_motion`` (false
@@ -592,18 +600,87 @@ def averaged_input_covariances(
 
 
 def multi_contact_localizer(
-    handles: ContactLocalizationHandles, covariances: tuple[np.ndarray, np.ndarray]
+    handles: ContactLocalizationHandles,
+    covariances: tuple[np.ndarray, np.ndarray],
+    load_covariances: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> MultiContactLocalizer:
     """The study's one-or-two-contact localizer on the plant of ``handles`` (keep them
     alive with it), the soles excluded, with the averaged inputs' ``covariances``
-    (``averaged_input_covariances``)."""
+    (``averaged_input_covariances``) and, if given, the model error under load
+    (``load_model_error``)."""
+    load_ext, load_int = (None, None) if load_covariances is None else load_covariances
     return MultiContactLocalizer(
         handles.plant,
         handles.scene_graph,
         exclude_bodies=handles.excluded_bodies,
         covariance_external=covariances[0],
         covariance_internal=covariances[1],
+        load_covariance_external=load_ext,
+        load_covariance_internal=load_int,
     )
+
+
+#: The fewest detected pushes of known force ``load_model_error`` measures the model error
+#: on (fewer: the multi-contact fit whitens with the sensor noise alone).
+MIN_LOAD_CALIBRATION_TRIALS = 20
+
+
+def load_model_error(plant: MultibodyPlant, trials: Sequence[dict]) -> tuple[np.ndarray, np.ndarray]:
+    """The residuals' error under load, per N^2 of the total external force, measured on
+    pushes of known points and forces (the study's trials: each with its
+    ``localizer_inputs`` and its ``contacts``): for trial k, e_k = b_k - sum_c A_c f_c, b_k
+    the averaged [external wrench; internal residual] its localization used and A_c f_c
+    what the true contact c predicts at the averaged q (eq. 20: [p_c x f_c; f_c] and
+    J^fb_c^T f_c). Returns (sum_k e_ext e_ext^T, sum_k e_int e_int^T) / sum_k |F_k|^2, F_k
+    the trial's total force: the ``load_covariance_external`` and ``_internal`` of
+    ``MultiContactLocalizer``. The model error of a refined model under load (friction,
+    inertial and torque-scale errors; the base-state estimator's errors) grows with the
+    load; e_k also holds the averaged sensor noise, which makes the figure an upper bound.
+
+    Raises:
+        ValueError: no trial, or a trial without its inputs or contacts.
+    """
+    if not trials:
+        raise ValueError("load_model_error needs at least one push of known force")
+    kin = _SensedConfiguration(plant, "load_model_error")
+    n = plant.num_velocities() - 6
+    sum_ext, sum_int, load = np.zeros((6, 6)), np.zeros((n, n)), 0.0
+    for trial in trials:
+        try:
+            inputs, contacts = trial["localizer_inputs"], trial.get("contacts", [trial])
+            q = np.asarray(inputs["q"], dtype=float)
+            wrench = np.asarray(inputs["external_wrench_world"], dtype=float)
+            residual = np.asarray(inputs["residual"], dtype=float)
+        except KeyError as missing:
+            raise ValueError(f"load_model_error: trial {trial.get('trial')!r} has no {missing}") from None
+        kin.set_positions(q)
+        predicted_ext, predicted_int, total = np.zeros(6), np.zeros(n), np.zeros(3)
+        for contact in contacts:
+            body = plant.get_body(BodyIndex(int(contact["body_index"])))
+            p_B = np.asarray(contact["point_body"], dtype=float)
+            X_WB = kin.body_pose(body)
+            p_W = X_WB[:, :3] @ p_B + X_WB[:, 3]
+            f_W = np.asarray(contact["force_world"], dtype=float)
+            predicted_ext += np.concatenate((np.cross(p_W, f_W), f_W))
+            predicted_int += kin.floating_jacobian(body, p_B).T @ f_W
+            total += f_W
+        e_ext, e_int = wrench - predicted_ext, residual - predicted_int
+        sum_ext += np.outer(e_ext, e_ext)
+        sum_int += np.outer(e_int, e_int)
+        load += float(total @ total)
+    if not load > 0.0:
+        raise ValueError("load_model_error: the pushes' total force is zero")
+    return sum_ext / load, sum_int / load
+
+
+def cross_fitting_folds(trials: Sequence[dict]) -> list[list[int]]:
+    """The folds of the study's cross-fitting: the indices of ``trials`` per seed (with two
+    or more seeds), else the even and the odd trials. Each fold's multi-contact fit uses the
+    model error measured on the other folds (``load_model_error``), never on its own trials."""
+    seeds = sorted({trial.get("seed", 0) for trial in trials})
+    if len(seeds) >= 2:
+        return [[i for i, trial in enumerate(trials) if trial.get("seed", 0) == seed] for seed in seeds]
+    return [list(range(0, len(trials), 2)), list(range(1, len(trials), 2))]
 
 
 def time_localizer_update(handles: ContactLocalizationHandles, context: Context, repeats: int = 20) -> float:

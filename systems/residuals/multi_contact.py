@@ -655,6 +655,12 @@ class MultiContactLocalizer:
             scale error, or a model's inertial error, times the contact's effort): each call
             whitens with the covariances plus diag((eps b)^2), b its own inputs (default 0:
             the covariances alone, right for sensor noise on an exact model).
+        load_covariance_external, load_covariance_internal: a model error that grows with
+            the load, as covariances per N^2 of the total external force (6 x 6 and n x n):
+            each call whitens with the covariances plus |f|^2 times these, f the external
+            residual's force (its inputs' ``wrench_W[3:]``). Measured on pushes of known
+            force (``diagrams.residuals.contact_localization.load_model_error``); default
+            None: no such term.
 
     Raises:
         ValueError: a bad plant, scene graph, body, covariance (shape, NaN, asymmetric, not
@@ -682,6 +688,8 @@ class MultiContactLocalizer:
         limit_margin: float | None = 0.01,
         skip_unsupported_shapes: bool = False,
         relative_error: float = 0.0,
+        load_covariance_external=None,
+        load_covariance_internal=None,
     ):
         who = self._who = "MultiContactLocalizer"
         check_plant(plant, who)
@@ -704,6 +712,8 @@ class MultiContactLocalizer:
         self._relative_error = float(relative_error)
         if not (math.isfinite(self._relative_error) and self._relative_error >= 0.0):
             raise ValueError(f"{who}: relative_error must be finite and non-negative, got {relative_error!r}")
+        self._load_cov_ext = self._load_covariance(load_covariance_external, 6, "load_covariance_external")
+        self._load_cov_int = self._load_covariance(load_covariance_internal, n, "load_covariance_internal")
         self._whitened_for: bytes | None = None
         try:
             self._alpha = float(false_alarm)
@@ -769,6 +779,26 @@ class MultiContactLocalizer:
         except np.linalg.LinAlgError:
             raise ValueError(f"{self._who}: {name} must be positive definite") from None
         return np.linalg.inv(L)
+
+    def _load_covariance(self, cov, size: int, name: str) -> np.ndarray | None:
+        """A load covariance (per N^2): None, or a finite symmetric positive semi-definite
+        size x size matrix."""
+        if cov is None:
+            return None
+        try:
+            c = np.array(cov, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(f"{self._who}: {name} must be numbers, got {cov!r}") from None
+        if c.shape != (size, size):
+            raise ValueError(f"{self._who}: {name} must be a {size}x{size} covariance, got shape {c.shape}")
+        if not np.all(np.isfinite(c)):
+            raise ValueError(f"{self._who}: {name} has NaN or inf entries")
+        if not np.allclose(c, c.T, rtol=1e-9, atol=1e-12 * max(np.abs(c).max(), 1e-300)):
+            raise ValueError(f"{self._who}: {name} must be symmetric")
+        c = 0.5 * (c + c.T)
+        if np.linalg.eigvalsh(c)[0] < -1e-9 * max(np.abs(c).max(), 1e-300):
+            raise ValueError(f"{self._who}: {name} must be positive semi-definite")
+        return c
 
     def _make_grid(self, spacing: float) -> dict:
         """Body-frame grid points of every candidate primitive."""
@@ -898,14 +928,21 @@ class MultiContactLocalizer:
         q = self._check_q(q)
         w = self._vector(wrench_W, 6, "wrench_W")
         r = self._vector(residual, self._n, "residual")
-        if self._relative_error > 0.0:
-            # Whiten with the load-proportional term of these inputs (the pose's whitened
-            # columns are recomputed when it changes).
+        if self._relative_error > 0.0 or self._load_cov_ext is not None or self._load_cov_int is not None:
+            # Whiten with the load-dependent terms of these inputs (the pose's whitened
+            # columns are recomputed when they change).
             key = np.concatenate((w, r)).tobytes()
             if key != self._whitened_for:
                 eps2 = self._relative_error**2
-                self._L_ext_inv = np.linalg.inv(np.linalg.cholesky(self._cov_ext + np.diag(eps2 * w**2)))
-                self._L_int_inv = np.linalg.inv(np.linalg.cholesky(self._cov_int + np.diag(eps2 * r**2)))
+                load2 = float(w[3:] @ w[3:])
+                cov_ext = self._cov_ext + np.diag(eps2 * w**2)
+                cov_int = self._cov_int + np.diag(eps2 * r**2)
+                if self._load_cov_ext is not None:
+                    cov_ext = cov_ext + load2 * self._load_cov_ext
+                if self._load_cov_int is not None:
+                    cov_int = cov_int + load2 * self._load_cov_int
+                self._L_ext_inv = np.linalg.inv(np.linalg.cholesky(cov_ext))
+                self._L_int_inv = np.linalg.inv(np.linalg.cholesky(cov_int))
                 self._whitened_for = key
                 self._pose_cache = None
         pose = self._pose(q)

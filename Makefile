@@ -13,6 +13,8 @@ TCMALLOC = $$(ls /usr/lib/*-linux-gnu/libtcmalloc_minimal.so.4 /usr/lib64/libtcm
 # The apps write their plots to files: matplotlib's file backend unless the caller chose one.
 MPLBACKEND ?= Agg
 export MPLBACKEND
+# `make test`'s processes (pytest-xdist): every core by default, e.g. TEST_WORKERS=1.
+TEST_WORKERS ?= auto
 RUN = LD_PRELOAD="$(TCMALLOC)$${LD_PRELOAD:+ $$LD_PRELOAD}" $(PY)
 
 .PHONY: demo contact residuals push-and-comply standing residual-comparison contact-localization model-refinement nao-force-observer nao-walk nao-walk-pulled nao-force-guided-walk nao-compliant-arms benchmark test install clean
@@ -35,7 +37,7 @@ test: $(STAMP)
 		  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium) >/dev/null 2>&1 || true; }
 	$(PY) -m ruff check .
 	$(PY) -m ruff format --check .
-	$(PY) -m pytest -q $(ARGS)
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile $(ARGS)
 
 # The main job (README): the push-and-comply experiment.
 demo: push-and-comply

@@ -280,7 +280,7 @@ def run_no_contact(scenario: ContactLocalizationScenario, kind: str = "no_contac
 
 def _job(job: tuple) -> tuple[str, dict]:
     # The scenario travels as YAML: Drake's config types do not pickle.
-    kind, spec, scenario_yaml, covariances = job
+    kind, spec, scenario_yaml, covariances = job  # covariances: (noise, load) of "multi_contact"
     scenario = load_scenario(ContactLocalizationScenario, text=scenario_yaml)
     if kind == "trials":
         return kind, run_trials(spec, scenario)
@@ -371,12 +371,11 @@ def _parse(argv):
     return args
 
 
-def _run_jobs(jobs: list, workers: int) -> tuple[list[dict], dict]:
-    """Runs the jobs (in ``workers`` spawned processes when more than one); returns the
-    results of the "trials" and "multi_contact" jobs in trial order (the second's merged
-    into the first's, or alone) and those of the runs without contact by kind
-    ("no_contact", "slow_motion")."""
-    results, no_contact, multi = [], {}, []
+def _run_jobs(jobs: list, workers: int) -> dict:
+    """Runs the jobs (in ``workers`` spawned processes when more than one); returns their
+    results by kind: the "trials" and "multi_contact" jobs' lists joined, in trial order,
+    and the runs without contact's ("no_contact", "slow_motion")."""
+    outputs_by_kind: dict = {}
     if workers == 1:
         outputs = map(_job, jobs)
         pool = None
@@ -385,21 +384,19 @@ def _run_jobs(jobs: list, workers: int) -> tuple[list[dict], dict]:
         outputs = pool.imap_unordered(_job, jobs)
     try:
         for done, (kind, value) in enumerate(outputs, 1):
-            if kind == "trials":
-                results.extend(value)
-            elif kind == "multi_contact":
-                multi.extend(value)
+            if kind in ("trials", "multi_contact"):
+                outputs_by_kind.setdefault(kind, []).extend(value)
             else:
-                no_contact[kind] = value
+                outputs_by_kind[kind] = value
             print(f"\r{done}/{len(jobs)} jobs done", end="", flush=True)
     finally:
         if pool is not None:
             pool.close()
             pool.join()
     print()
-    results.sort(key=lambda r: r["trial"])
-    multi.sort(key=lambda r: r["trial"])
-    return results or multi, no_contact
+    for kind in ("trials", "multi_contact"):
+        outputs_by_kind.get(kind, []).sort(key=lambda r: r["trial"])
+    return outputs_by_kind
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -443,14 +440,15 @@ def main(argv: list[str] | None = None) -> int:
         if scenario.slow_motion_duration > 0:
             jobs.append(("slow_motion", None, scenario_yaml, None))
         size = max(scenario.trials_per_run, TRIALS_PER_JOB)
-        jobs += [("trials", specs[i : i + size], scenario_yaml, covariances) for i in range(0, len(specs), size)]
-        results, no_contact = _run_jobs(jobs, args.workers)
+        jobs += [("trials", specs[i : i + size], scenario_yaml, None) for i in range(0, len(specs), size)]
+        no_contact = _run_jobs(jobs, args.workers)
+        results = no_contact.pop("trials")
         if scenario.multi_contact:
             # After all trials: each seed's trials whitened with the model error under load
             # measured on the other seeds' (cross-fitting).
             _, handles = build_contact_localization_diagram(scenario, model_corrections=refined_model(scenario))
-            multi, _ = _run_jobs(multi_contact_jobs(results, handles.plant, scenario_yaml, covariances), args.workers)
-            by_trial = {m.pop("trial"): m for m in multi}
+            multi_jobs = multi_contact_jobs(results, handles.plant, scenario_yaml, covariances)
+            by_trial = {m.pop("trial"): m for m in _run_jobs(multi_jobs, args.workers)["multi_contact"]}
             for r in results:
                 r.update(by_trial[r["trial"]])
         metrics = contact_localization_metrics(

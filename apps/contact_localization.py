@@ -235,11 +235,11 @@ def multi_contact_jobs(
     error under load measured on the detected trials of the other folds
     (``load_model_error``; none with fewer than ``MIN_LOAD_CALIBRATION_TRIALS``)."""
     jobs = []
+    fields = ("trial", "contacts", "localizer_inputs", "true_points_world", "body_index", "force_world")
     for fold in cross_fitting_folds(results):
         inside = set(fold)
         known = [r for i, r in enumerate(results) if i not in inside and r["detected"]]
         load = load_model_error(plant, known) if len(known) >= MIN_LOAD_CALIBRATION_TRIALS else None
-        fields = ("trial", "contacts", "localizer_inputs", "true_points_world", "body_index", "force_world")
         trials = [{k: results[i][k] for k in fields if k in results[i]} for i in fold]
         for j in range(0, len(trials), chunk):
             jobs.append(("multi_contact", trials[j : j + chunk], scenario_yaml, (covariances, load)))

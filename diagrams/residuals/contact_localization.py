@@ -734,7 +734,6 @@ def trial_result(
     *,
     push_indices: Sequence[int] = (0,),
     window: tuple[float, float, float] | None = None,
-    multi_contact: MultiContactLocalizer | None = None,
     restored_at_start: bool = False,
 ) -> dict:
     """The results of the trial ``spec`` at the end of its push, from the simulator's root
@@ -748,8 +747,8 @@ def trial_result(
     push undetected. ``localizer_inputs`` holds the (averaged) q, external wrench and
     internal residual of the final localization, as arrays
     (``ContactLocalizer.localization_inputs``: the study's localizations can be replayed
-    offline). With ``multi_contact`` the same inputs also go through its one-or-two-contact
-    localization (``multi_contact_result``). ``restored_at_start``: the run's state was
+    offline; the study's one-or-two-contact localization, ``multi_contact_result``, runs on
+    them after all trials). ``restored_at_start``: the run's state was
     restored to its standing start at the window's start (``shared_standing_start``), so
     the detector was off there whatever the log's last sample before it says."""
     if window is None:
@@ -810,11 +809,6 @@ def trial_result(
     q, wrench, residual = handles.localizer.localization_inputs(handles.localizer.GetMyContextFromRoot(context))
     result["localizer_inputs"] = {"q": q, "external_wrench_world": wrench, "residual": residual}
     result["true_points_world"] = true_points.tolist()
-    if multi_contact is not None:
-        contacts = spec.get("contacts", [spec])
-        forces = np.array([c["force_world"] for c in contacts])
-        bodies = [c["body_index"] for c in contacts]
-        result.update(multi_contact_result(multi_contact, q, wrench, residual, bodies, true_points, forces))
     return result
 
 

@@ -245,6 +245,7 @@ def test_unknown_model_name():
 def test_missing_frame_in_model_file(tmp_path, monkeypatch):
     for name in MODEL_NAMES:
         shutil.copy(models.model_file(name), tmp_path / f"{name}.sdf")
+        shutil.copy(models.description_file(name), tmp_path / f"{name}.yaml")
     path = tmp_path / "nao_like.sdf"
     text = path.read_text()
     assert '<frame name="imu"' in text
@@ -252,7 +253,7 @@ def test_missing_frame_in_model_file(tmp_path, monkeypatch):
     monkeypatch.setattr(models, "MODELS_DIR", tmp_path)
     builder = DiagramBuilder()
     plant, _ = AddMultibodyPlant(MultibodyPlantConfig(time_step=1e-3), builder)
-    with pytest.raises(ValueError, match="'imu'"):
+    with pytest.raises(ValueError, match="imu_frame: the robot has no frame or body named 'imu'"):
         add_humanoid(plant, "nao_like")
 
 

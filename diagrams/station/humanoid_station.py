@@ -41,6 +41,7 @@ from models import (
     HumanoidHandles,
     add_ground,
     add_humanoid,
+    is_humanoid,
     point_contact_scene_graph_config,
     set_standing_state,
 )
@@ -455,13 +456,16 @@ def _add_invariant_ekf(
 
 
 def _load(plant: MultibodyPlant, scene_graph: SceneGraph, model: str) -> HumanoidHandles | None:
-    if model in MODEL_NAMES:
+    if is_humanoid(model):
         handles = add_humanoid(plant, model, scene_graph=scene_graph)
         add_ground(plant)
         return handles
     path = Path(model)
     if not path.is_file():
-        raise ValueError(f"--model: '{model}' is neither one of {MODEL_NAMES} nor a readable model file")
+        raise ValueError(
+            f"--model: '{model}' is neither one of {MODEL_NAMES}, nor a robot description (.yaml), nor a "
+            "readable model file"
+        )
     try:
         Parser(plant).AddModels(str(path))
     except Exception as error:  # Drake's parser raises RuntimeError with its own message

@@ -35,35 +35,30 @@ from models import (
     HumanoidHandles,
     add_ground,
     add_humanoid,
+    is_humanoid,
     point_contact_scene_graph_config,
     set_standing_state,
 )
 from systems.common.contact_results import robot_point_contacts
 from systems.simulation.pd_gravity import PdGravityController, joint_vector_from_names
 
-#: Default PD gains per joint group: (kp [N m/rad], kd [N m s/rad]). Chosen so that the
-#: explicit 1 kHz PD is well inside its stability limit (kd·dt / reflected inertia < 0.3)
-#: while the stance legs carry the body weight with < ~1° static error (gravity
-#: compensation only covers the free-floating robot's own joint gravity, not the
-#: body weight supported through the feet).
-DEFAULT_GAINS = {
-    "hrp4_like": {
-        "legs": (3000.0, 30.0),
-        "torso": (1500.0, 20.0),
-        "head": (50.0, 1.0),
-        "arms": (200.0, 4.0),
-        "wrists": (50.0, 1.0),
-        "hands": (10.0, 0.2),
-    },
-    "nao_like": {
-        "legs": (40.0, 0.4),
-        "torso": (40.0, 0.4),
-        "head": (5.0, 0.05),
-        "arms": (5.0, 0.05),
-        "wrists": (2.0, 0.02),
-        "hands": (1.0, 0.01),
-    },
+#: hrp4_like's PD gains per gain group: (kp [N m/rad], kd [N m s/rad]), the reference that
+#: ``default_gains`` scales for a robot whose description gives no gains (the built-in
+#: descriptions give theirs: models/hrp4_like.yaml, models/nao_like.yaml).
+REFERENCE_GAINS = {
+    "legs": (3000.0, 30.0),
+    "torso": (1500.0, 20.0),
+    "head": (50.0, 1.0),
+    "arms": (200.0, 4.0),
+    "wrists": (50.0, 1.0),
+    "hands": (10.0, 0.2),
 }
+#: hrp4_like's mass (kg) and centre-of-mass height standing (m): the reference of the scaling.
+REFERENCE_MASS = 39.0
+REFERENCE_COM_HEIGHT = 0.747
+#: The explicit 1 kHz PD's damping margin: kd dt / H_ii at most this (H the joint-space
+#: inertia's diagonal at the standing posture, rotor inertia included).
+KD_STABILITY_MARGIN = 0.3
 
 
 @dataclass
@@ -113,13 +108,40 @@ class StandingHandles:
 
 
 def default_gains(plant: MultibodyPlant, humanoid: HumanoidHandles) -> tuple[np.ndarray, np.ndarray]:
-    """Per-joint default (kp, kd) arrays in v[6:] order for the humanoid's model."""
-    table = DEFAULT_GAINS[humanoid.name]
+    """Per-joint default (kp, kd) arrays in v[6:] order for a humanoid.
+
+    The description's ``gains`` where it gives them (every built-in model gives all).
+    Other groups scale hrp4_like's (``REFERENCE_GAINS``) by the robot's gravitational
+    moment m g h against hrp4_like's (m the mass, h the centre of mass height standing):
+    a stance leg then holds the body with about the same static angle error. kd is then
+    capped at ``KD_STABILITY_MARGIN`` H_ii / dt (H the joint-space inertia at the standing
+    posture, dt the plant's step), and kp with it in the same ratio, so the explicit PD
+    stays stable on a light joint.
+    """
+    description = humanoid.description
+    given = description.gains if description is not None else {}
+    table = dict(given)
+    missing = [g for g in REFERENCE_GAINS if g not in table]
+    inertia = None
+    if missing:
+        context = plant.CreateDefaultContext()
+        set_standing_state(plant, context, humanoid)
+        mass = plant.CalcTotalMass(context, [humanoid.model_instance])
+        height = plant.CalcCenterOfMassPositionInWorld(context, [humanoid.model_instance])[2]
+        scale = mass * height / (REFERENCE_MASS * REFERENCE_COM_HEIGHT)
+        table.update({g: (scale * REFERENCE_GAINS[g][0], scale * REFERENCE_GAINS[g][1]) for g in missing})
+        inertia = np.diag(plant.CalcMassMatrix(context))
     kp, kd = {}, {}
+    dt = plant.time_step() if plant.time_step() > 0.0 else 1e-3
     for group in ("legs", "torso", "head", "arms", "hands"):
         for j in humanoid.joint_groups[group]:
             key = "wrists" if ("WRIST" in j.upper()) else group
             kp[j], kd[j] = table[key]
+            if inertia is not None and key not in given:
+                index = plant.GetJointByName(j, humanoid.model_instance).velocity_start()
+                limit = KD_STABILITY_MARGIN * inertia[index] / dt
+                if kd[j] > limit:
+                    kp[j], kd[j] = kp[j] * limit / kd[j], limit
     return (joint_vector_from_names(plant, kp), joint_vector_from_names(plant, kd))
 
 
@@ -135,12 +157,12 @@ def build_standing_diagram(
     """Builds the standing diagram for one humanoid.
 
     Args:
-        model_name: one of models.MODEL_NAMES.
+        model_name: a built-in model (models.MODEL_NAMES) or a robot description YAML file.
         plant_config: Drake's plant configuration (default ``default_plant_config()``: 1 ms
             steps, point contact, SAP; see ``diagrams.station.plant_config``).
         meshcat: if given, a MeshcatVisualizer is added.
         kp: PD stiffness, N m/rad, scalar or per joint (v[6:] order); default per model
-            (DEFAULT_GAINS).
+            (``default_gains``).
         kd: PD damping, N m s/rad, scalar or per joint; default per model.
         state_log_period: period of the state logger, s.
 
@@ -150,8 +172,10 @@ def build_standing_diagram(
     Raises:
         ValueError: an unknown model, a plant configuration the station refuses.
     """
-    if model_name not in MODEL_NAMES:
-        raise ValueError(f"unknown humanoid model {model_name!r}; valid names: {MODEL_NAMES}")
+    if not is_humanoid(model_name):
+        raise ValueError(
+            f"unknown humanoid model {model_name!r}: give one of {MODEL_NAMES} or a robot description YAML file"
+        )
     config = default_plant_config() if plant_config is None else plant_config
     check_plant_config(config)
     builder = DiagramBuilder()
@@ -288,7 +312,7 @@ def standing_run_metrics(
 
 
 __all__ = [
-    "DEFAULT_GAINS",
+    "REFERENCE_GAINS",
     "StandingHandles",
     "StandingMetrics",
     "StandingScenario",

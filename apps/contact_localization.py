@@ -316,7 +316,7 @@ def plot_position_errors(path: Path, results: list[dict]) -> None:
 
 
 def _parse(argv):
-    parser = experiment_parser("apps.contact_localization", __doc__, replay=False, conditions=True)
+    parser = experiment_parser("apps.contact_localization", __doc__, replay=False, conditions=True, robot=True)
     parser.add_argument("--trials", type=int, default=None, help="number of trials (scenario default 1000)")
     parser.add_argument(
         "--contacts", type=int, choices=(1, 2), default=None, help="contacts per trial (default 1; 2: two links)"

@@ -41,7 +41,7 @@ from systems.estimation.model_identification import CalibrationLog
 
 
 def _parse(argv):
-    parser = experiment_parser("apps.model_refinement", __doc__, replay=False)
+    parser = experiment_parser("apps.model_refinement", __doc__, replay=False, robot=True)
     parser.add_argument("--seed", type=int, default=None, help="sensor noise seed (scenario default 0)")
     parser.add_argument(
         "--calibration-duration", type=float, default=None, help="calibration motion, s (scenario default 40)"

@@ -51,11 +51,24 @@ from diagrams.residuals.push_and_comply import (
 from systems.estimation.model_identification import ModelCorrections
 
 #: Joints plotted (the paper's Figs. 5-6 discuss knees, hips, ankles and chest pitch).
-PLOTTED_JOINTS = ("R_KNEE_P", "L_KNEE_P", "R_HIP_P", "L_HIP_P", "R_ANKLE_P", "L_ANKLE_P", "CHEST_P")
+
+
+def plotted_joints(humanoid) -> dict[str, tuple[str, ...]]:
+    """The joints the plots show, by role: both knees, both hip pitches (each six-joint
+    leg's third joint), both ankle pitches, the first torso joint (on hrp4_like: R/L_KNEE_P,
+    R/L_HIP_P, R/L_ANKLE_P, CHEST_P)."""
+    groups = humanoid.joint_groups
+    legs = [groups[f"{side}_leg"] for side in ("right", "left") if len(groups[f"{side}_leg"]) == 6]
+    return {
+        "knees": tuple(leg[3] for leg in legs),
+        "hips": tuple(leg[2] for leg in legs),
+        "ankles": tuple(leg[4] for leg in legs),
+        "torso": tuple(groups["torso"][:1]),
+    }
 
 
 def _parse(argv):
-    parser = experiment_parser("apps.push_and_comply", __doc__, replay=False, conditions=True)
+    parser = experiment_parser("apps.push_and_comply", __doc__, replay=False, conditions=True, robot=True)
     parser.add_argument("--seed", type=int, default=None, help="sensor noise seed (overrides the scenario's)")
     parser.add_argument(
         "--runs", nargs="+", choices=RESIDUAL_KINDS, default=list(RESIDUAL_KINDS), help=argparse.SUPPRESS
@@ -97,7 +110,7 @@ def _plot(out_dir: Path, scenario: PushAndComplyScenario, runs: dict) -> None:
     for ax, kind in zip(axes[0], kinds):
         station, s = runs[kind]["handles"].station, runs[kind]["signals"]
         names = station.joint_names
-        for name in PLOTTED_JOINTS:
+        for name in [n for joints in plotted_joints(station.humanoid).values() for n in joints]:
             if name in names:
                 joint = station.topology.joints[names.index(name)]
                 q = s["state"][joint.position_start()]
@@ -117,7 +130,8 @@ def _plot(out_dir: Path, scenario: PushAndComplyScenario, runs: dict) -> None:
         station, s = runs[kind]["handles"].station, runs[kind]["signals"]
         names = list(station.joint_names)
         offset = 6 if kind == "classical" else 0
-        for row, group in enumerate((("R_KNEE_P", "L_KNEE_P"), ("CHEST_P", "R_HIP_P"))):
+        roles = plotted_joints(station.humanoid)
+        for row, group in enumerate((roles["knees"], roles["torso"] + roles["hips"][:1])):
             ax = axes[row][col]
             for name in group:
                 if name in names:

@@ -47,7 +47,7 @@ from systems.estimation.model_identification import ModelCorrections
 
 
 def _parse(argv):
-    parser = experiment_parser("apps.residual_comparison", __doc__, replay=False, conditions=True)
+    parser = experiment_parser("apps.residual_comparison", __doc__, replay=False, conditions=True, robot=True)
     parser.add_argument("--model", default=None, help="hrp4_like, nao_like, or a floating-base SDF/URDF path")
     parser.add_argument("--push-body", default=None, help="pushed body (default: the right shoulder)")
     parser.add_argument("--duration", type=float, default=None, help="simulated time, s (scenario default 10)")
@@ -78,16 +78,17 @@ def run_once(
     return {"signals": signals, "handles": handles, "wall": run.wall_time_s, "metrics": metrics}
 
 
-def _joint_rows(names):
-    rows = [("right and left knee pitch", [n for n in names if "KNEE" in n.upper()])]
+def _joint_rows(names, knees=None):
+    knees = [n for n in names if "KNEE" in n.upper()] if knees is None else list(knees)
+    rows = [("right and left knee pitch", knees)]
     rows.append(("chest yaw", [n for n in names if n.upper() in ("CHEST_Y",)]))
     if not rows[1][1]:  # other models: the two joints with the largest true effort go there
         rows[1] = ("", [])
     return rows
 
 
-def _plot_joints(path: Path, title: str, t, estimate, truth, names, *, base=None, base_truth=None):
-    rows = [r for r in _joint_rows(names) if r[1]]
+def _plot_joints(path: Path, title: str, t, estimate, truth, names, *, knees=None, base=None, base_truth=None):
+    rows = [r for r in _joint_rows(names, knees) if r[1]]
     n_rows = len(rows) + 1 + (1 if base is not None else 0)
     fig, axes = plt.subplots(n_rows, 1, figsize=(8, 2.2 * n_rows), sharex=True)
     axes = np.atleast_1d(axes)
@@ -143,6 +144,8 @@ def _plot_wrench(path: Path, title: str, t, estimate, truth, *, moment: bool):
 def _plot(out_dir: Path, run: dict) -> None:
     """Writes the four figures to ``out_dir``."""
     s, names = run["signals"], list(run["handles"].joint_names)
+    humanoid = run["handles"].station.humanoid
+    knees = None if humanoid is None else humanoid.joint_groups["knees"]  # None: found by name
     t = s["t"]
     _plot_joints(
         out_dir / "fig3_classical.png",
@@ -151,6 +154,7 @@ def _plot(out_dir: Path, run: dict) -> None:
         s["classical"][6:],
         s["tau_c_real"],
         names,
+        knees=knees,
         base=s["classical"][:6],
         base_truth=s["wrench_base_true"],
     )
@@ -161,6 +165,7 @@ def _plot(out_dir: Path, run: dict) -> None:
         s["internal"],
         s["tau_c_real"],
         names,
+        knees=knees,
     )
     _plot_wrench(
         out_dir / "fig7_external_base.png",

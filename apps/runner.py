@@ -26,6 +26,7 @@ from pydrake.systems.framework import Context, Diagram
 
 from diagrams.scenarios import ScenarioError, load_scenario, scenario_as_dict
 from diagrams.station.conditions import set_ideal_conditions
+from models import robot_description
 
 #: The folder every app writes into, as ``DIR/<experiment>/`` (``--out DIR``).
 DEFAULT_OUT = Path("out")
@@ -38,12 +39,14 @@ def memory_allocator() -> str:
 
 
 def experiment_parser(
-    module: str, doc: str | None, *, replay: bool = True, conditions: bool = False
+    module: str, doc: str | None, *, replay: bool = True, conditions: bool = False, robot: bool = False
 ) -> argparse.ArgumentParser:
     """The arguments every app shares; the app adds its own. ``module`` is the app's module
     name (``apps.<experiment>``), ``doc`` its docstring (the first paragraph is the
     description). With ``conditions`` (the experiments whose default is the realistic
-    world, ``diagrams.station.conditions``) the app also takes ``--ideal``."""
+    world, ``diagrams.station.conditions``) the app also takes ``--ideal``; with ``robot``
+    (the experiments on any humanoid) ``--robot FILE.yaml``, a robot description
+    (``models.description``) that replaces the scenario's model."""
     parser = argparse.ArgumentParser(prog=f"python -m {module}", description=(doc or "").split("\n\n")[0])
     parser.add_argument(
         "--scenario",
@@ -62,6 +65,14 @@ def experiment_parser(
     parser.add_argument("--headless", action="store_true", help="no live Meshcat URL (the replays are still written)")
     if replay:
         parser.add_argument("--no-replay", action="store_true", help="skip the Meshcat replays (faster)")
+    if robot:
+        parser.add_argument(
+            "--robot",
+            default=None,
+            metavar="FILE.yaml",
+            help="the robot: a robot description YAML beside its URDF/SDF (README, 'Bring your own robot'), "
+            "or a built-in name (hrp4_like, nao_like); default: the scenario's model",
+        )
     if conditions:
         parser.add_argument(
             "--ideal",
@@ -87,11 +98,20 @@ def scenario_from_args(schema: type, args: argparse.Namespace, defaults: Any = N
     """The scenario of ``--scenario`` and ``--scenario-text`` over ``defaults`` (or
     ``schema()``); with ``--ideal``, its condition fields set to the ideal world
     (``diagrams.station.conditions``); then each keyword in ``overrides`` whose value is not None replaces that
-    field (an app's shorthand options such as ``--seed``).
+    field (an app's shorthand options such as ``--seed``); last, ``--robot`` replaces its
+    ``model`` (or its ``models`` list), after the description is read and checked.
 
     Raises:
         ScenarioError: see ``diagrams.scenarios.load_scenario``; an override of an unknown field.
+        ValueError: a ``--robot`` that is no readable description (naming the field).
     """
+    robot = getattr(args, "robot", None)
+    if robot is not None:
+        robot_description(robot)  # a bad file fails here, naming its field, before anything is built
+        if "models" in {f.name for f in dataclasses.fields(schema)}:
+            overrides = {**overrides, "models": [robot]}
+        else:
+            overrides = {**overrides, "model": robot}
     scenario = load_scenario(schema, filename=args.scenario, text=args.scenario_text, defaults=defaults)
     if getattr(args, "ideal", False):
         set_ideal_conditions(scenario)

@@ -3,10 +3,10 @@
 Usage::
 
     python -m apps.standing [--scenario FILE] [--scenario-text YAML]
-                         [--model hrp4_like|nao_like|all] [--duration 10]
+                         [--model hrp4_like|nao_like|all | --robot FILE.yaml] [--duration 10]
                          [--no-meshcat | --no-replay] [--headless] [--out DIR]
 
-For each model of the scenario (``StandingScenario``; ``--model`` and ``--duration`` override
+For each model of the scenario (``StandingScenario``; ``--model``, ``--robot`` and ``--duration`` override
 its ``models`` and ``duration``): simulates ``duration`` seconds (1 ms discrete steps, SAP,
 point contact), prints a table (base drift after the first second of settling, smallest foot
 sphere normal force, feet flat, real-time factor), writes ``DIR/standing/<model>.json``,
@@ -37,11 +37,11 @@ from diagrams.station.standing import (
     set_initial_state,
     standing_run_metrics,
 )
-from models import MODEL_NAMES
+from models import MODEL_NAMES, set_standing_state
 
 
 def _parse(argv):
-    parser = experiment_parser("apps.standing", __doc__)
+    parser = experiment_parser("apps.standing", __doc__, robot=True)
     parser.add_argument(
         "--model",
         choices=(*MODEL_NAMES, "all"),
@@ -71,8 +71,12 @@ def run_model(scenario: StandingScenario, name: str, meshcat, *, live: bool = Tr
     diagram, handles = build_standing_diagram(
         name, plant_config=scenario.plant_config, meshcat=meshcat, state_log_period=scenario.state_log_period
     )
-    # A three-quarter view framing the robot (Meshcat's default camera is far away).
-    height = 1.5 if name == "hrp4_like" else 0.57
+    # A three-quarter view framing the robot (Meshcat's default camera is far away): its
+    # height taken as twice its centre of mass's, standing.
+    plant = handles.plant
+    context = plant.CreateDefaultContext()
+    set_standing_state(plant, context, handles.humanoid)
+    height = 2.0 * plant.CalcCenterOfMassPositionInWorld(context, [handles.humanoid.model_instance])[2]
     run = simulate(
         diagram,
         scenario.duration,
@@ -100,8 +104,8 @@ def main(argv=None) -> int:
         for name in scenario.models:
             print(f"simulating {name} for {scenario.duration:g} s ...", flush=True)
             row = run_model(scenario, name, meshcat, live=not args.headless)
-            (out_dir / f"{name}.json").write_text(json.dumps(row, indent=2) + "\n")
-            html = save_replay(meshcat, out_dir / f"{name}.html")
+            (out_dir / f"{row['model']}.json").write_text(json.dumps(row, indent=2) + "\n")
+            html = save_replay(meshcat, out_dir / f"{row['model']}.html")
             if html is not None:
                 row["replay"] = str(html)
             rows.append(row)

@@ -95,7 +95,8 @@ class HumanoidHandles:
         base_body: the floating base body (``waist`` / ``torso``).
         joint_groups: joint names per group; keys left_leg, right_leg, legs, torso, head,
             left_arm, right_arm, arms, left_hand, right_hand, hands (``torso`` is empty on
-            Nao).
+            Nao), and for six-joint legs knees (each leg's fourth joint) and ankle_pitch
+            (its fifth).
         sole_frames: ``left``/``right`` frames at the centre of each sole plane, z up,
             x forward.
         ft_sensor_joints: ``left``/``right`` weld joints carrying the ankle F/T sensors
@@ -204,6 +205,19 @@ def _model_text(description: RobotDescription, instance_name: str) -> tuple[str,
     return re.sub(r'(<model\b[^>]*\bname=")[^"]*(")', rf"\g<1>{instance_name}\g<2>", text, count=1), "sdf"
 
 
+def _urdf_effort_limits(text: str) -> dict[str, float]:
+    """{joint: its URDF ``<limit effort>``, N m} (Drake gives it only to the joints with a
+    ``<transmission>``; the loader gives it to the actuators it adds)."""
+    import xml.etree.ElementTree as ET
+
+    efforts = {}
+    for joint in ET.fromstring(text).iter("joint"):
+        limit = joint.find("limit")
+        if limit is not None and limit.get("effort") is not None and float(limit.get("effort")) > 0.0:
+            efforts[joint.get("name")] = float(limit.get("effort"))
+    return efforts
+
+
 def _foot_contact_properties(mass: float) -> ProximityProperties:
     """The added foot spheres' contact: hrp4_like's (5e5 N/m, 20 s/m, 2 ms relaxation,
     friction 1), the stiffness scaled up with a robot heavier than its 39 kg."""
@@ -230,8 +244,8 @@ def add_humanoid(
     The robot is a built-in model name, a robot description YAML file or a RobotDescription
     (``models.description``). The loader parses its URDF/SDFormat (URDF collision meshes
     replaced as the description says), applies the description's joint limit and damping
-    overrides, adds an actuator to every grouped joint without one (with the description's
-    rotor inertia), adds the foot contact spheres the description places, and checks every
+    overrides, adds an actuator to every grouped joint without one (its URDF effort limit,
+    the description's rotor inertia), adds the foot contact spheres the description places, and checks every
     name the description gives.
 
     Robot-robot collisions: the built-in models filter them with a
@@ -288,6 +302,10 @@ def add_humanoid(
     groups = {g: tuple(description.joint_groups[g]) for g in JOINT_GROUPS}
     for key in ("leg", "arm", "hand"):
         groups[f"{key}s"] = groups[f"left_{key}"] + groups[f"right_{key}"]
+    # Six-joint legs (hip's three, knee, ankle pitch, ankle roll): the knees and ankle pitches.
+    six = [groups[f"{side}_leg"] for side in _SIDES if len(groups[f"{side}_leg"]) == 6]
+    groups["knees"] = tuple(leg[3] for leg in six)
+    groups["ankle_pitch"] = tuple(leg[4] for leg in six)
     for group in JOINT_GROUPS:
         for j in groups[group]:
             if not plant.HasJointNamed(j, mi):
@@ -317,9 +335,11 @@ def add_humanoid(
         for a in plant.GetJointActuatorIndices()
         if plant.get_joint_actuator(a).model_instance() == mi
     }
+    efforts = _urdf_effort_limits(text) if kind == "urdf" else {}
     for j in description.joint_names():
         if j not in actuated:
-            actuated[j] = plant.AddJointActuator(f"{j}_actuator", plant.GetJointByName(j, mi)).index()
+            joint = plant.GetJointByName(j, mi)
+            actuated[j] = plant.AddJointActuator(f"{j}_actuator", joint, efforts.get(j, np.inf)).index()
         actuator = plant.get_mutable_joint_actuator(actuated[j])
         rotor = description.rotor_inertia.get(description.gain_group(j))
         if rotor is not None and actuator.default_rotor_inertia() == 0.0:

@@ -38,7 +38,8 @@ The YAML reference (lengths in m, angles in rad, gains in N m/rad and N m s/rad)
                                     # are dropped (the foot touches the ground at its spheres)
       right: {...}
     joint_groups:                   # every 1-DoF joint of the model in exactly one group
-      left_leg: [...]               # six joints, hip to ankle
+      left_leg: [...]               # hip to ankle; six joints: the hip's three, knee,
+                                    # ankle pitch, ankle roll (groups knees, ankle_pitch)
       right_leg: [...]
       torso: [...]                  # may be empty
       head: [...]

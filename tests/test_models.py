@@ -24,6 +24,8 @@ GROUP_KEYS = {
     "left_hand",
     "right_hand",
     "hands",
+    "knees",
+    "ankle_pitch",
 }
 EXPECTED = {
     # revolute joints, welds, mass kg, head-top height straight / nominal posture (m)
@@ -203,6 +205,8 @@ def test_handles_complete(loaded):
     g = h.joint_groups
     assert g["legs"] == g["left_leg"] + g["right_leg"]
     assert g["arms"] == g["left_arm"] + g["right_arm"]
+    assert all("KNEE" in j.upper() for j in g["knees"]) and len(g["knees"]) == 2
+    assert all("ANKLE" in j.upper() and "P" in j.upper() for j in g["ankle_pitch"]) and len(g["ankle_pitch"]) == 2
     assert g["hands"] == g["left_hand"] + g["right_hand"]
     assert len(g["left_leg"]) == len(g["right_leg"]) == 6
     every = g["legs"] + g["torso"] + g["head"] + g["arms"] + g["hands"]

@@ -109,8 +109,7 @@ class PushAndComplyScenario:
             "arms": 0.3,
             "head": 0.0,
             "hands": 0.0,
-            "R_ANKLE_P": 1.0,
-            "L_ANKLE_P": 1.0,
+            "ankle_pitch": 1.0,
         }
     )
     dead_band: float = 0.02
@@ -307,7 +306,7 @@ def push_and_comply_metrics(
     max_displacement_deg = {
         n: float(np.degrees(np.abs(displacement[k, reference:]).max())) for k, n in enumerate(names)
     }
-    knees = [n for n in names if "KNEE" in n.upper()]
+    knees = list(humanoid.joint_groups["knees"])
     flexion = {n: float(np.degrees(displacement[names.index(n), reference:].max())) for n in knees}
 
     context = plant.CreateDefaultContext()

@@ -183,7 +183,8 @@ def main(argv: list[str] | None = None) -> int:
         corrections = refined_model(scenario, Path(args.out) / "model_refinement")
         meshcat = replay_meshcat(True, args.headless)
         print(
-            f"push and comply: {scenario.model}, {scenario.push_peak_force:g} N down on each shoulder from "
+            f"push and comply: {scenario.model}, {scenario.push_peak_force:g} N"
+            f"{' (hrp4_like scaled to the robot)' if scenario.scale_to_robot else ''} down on each shoulder from "
             f"{scenario.push_start:g} s (peak {scenario.push_peak_time:g} s, off {scenario.push_end:g} s), "
             f"{scenario.duration:g} s"
         )

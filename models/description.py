@@ -528,6 +528,8 @@ def prepare_urdf(description: RobotDescription) -> str:
     """The description's URDF text, ready for Drake's parser: mesh file names made absolute
     (package:// URIs resolved), the ``remove_collisions`` bodies' collision elements dropped,
     ``<mimic>`` removed from fixed joints (a reduced model's leftovers, which Drake refuses),
+    ``<dynamics friction>`` dropped (MultibodyPlant does not simulate Coulomb joint friction and
+    warns once per joint; the realistic world's friction is ``Imperfections.friction``),
     and with ``collision_meshes: bounding_box`` every collision mesh Drake cannot use for
     contact replaced by its axis-aligned bounding box in the mesh's frame (scale applied).
 
@@ -544,10 +546,12 @@ def prepare_urdf(description: RobotDescription) -> str:
     except (OSError, ET.ParseError) as error:
         raise _error(where, f"cannot read the URDF '{path}': {error}") from error
     links = {link.get("name"): link for link in root.iter("link")}
-    for joint in root.iter("joint"):  # a reduced model's fixed joints keep <mimic>, which Drake refuses
-        if joint.get("type") == "fixed":
+    for joint in root.iter("joint"):
+        if joint.get("type") == "fixed":  # a reduced model's fixed joints keep <mimic>, which Drake refuses
             for mimic in joint.findall("mimic"):
                 joint.remove(mimic)
+        for dynamics in joint.findall("dynamics"):  # Coulomb friction: MultibodyPlant ignores it, with a warning
+            dynamics.attrib.pop("friction", None)
     for side, foot in description.feet.items():
         for body in foot.remove_collisions:
             if body not in links:

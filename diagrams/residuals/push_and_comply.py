@@ -24,6 +24,7 @@ from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
 from diagrams.scenarios import load_scenario as _load_scenario
 from diagrams.station.humanoid_station import HumanoidStation, add_scenario_station, default_plant_config
+from diagrams.station.standing import size_ratios
 from systems.estimation.model_identification import ModelCorrections
 from systems.residuals.admittance import JointAdmittanceController, admittance_gains_by_group, joint_position_selector
 from systems.residuals.momentum_residuals import ClassicalResidual, InternalResidual
@@ -57,6 +58,12 @@ class PushAndComplyScenario:
             head, arms, hands) or per joint name, rad / (N m s).
         dead_band: residual dead band of the admittance controller, N m (about the
             residual's noise level, so that noise alone does not move the robot).
+        scale_to_robot: the force, the admittance gains and the dead band above are
+            hrp4_like's (the paper's robot, HRP-4); on another robot the force scales with
+            its mass (m / m_ref), the dead band with its gravitational moment
+            (s = m h / (m_ref h_ref), h the centre of mass height standing) and the gains
+            with 1 / s, so the experiment is the paper's at the robot's size (exactly the
+            values above on hrp4_like; ``diagrams.station.standing.size_ratios``).
         dead_band_sigmas: with a refined model that carries a residual noise model
             (``ModelCorrections.residual_noise``, measured on the calibration log), each
             joint's dead band is at least this many of its internal-residual standard
@@ -113,6 +120,7 @@ class PushAndComplyScenario:
         }
     )
     dead_band: float = 0.02
+    scale_to_robot: bool = True
     dead_band_sigmas: float = 3.0
     max_rate: float = 0.5
     integrate_from: str = "desired"
@@ -151,23 +159,38 @@ class PushAndComplyHandles:
     loggers: dict[str, VectorLogSink]
     meshcat_visualizer: MeshcatVisualizer | None
     overlay: dict | None
+    push_peak_force: float = 0.0  # N on each shoulder, after ``scale_to_robot``
 
 
 def admittance_dead_band(
-    scenario: PushAndComplyScenario, residual_kind: str, model_corrections: ModelCorrections | None
+    scenario: PushAndComplyScenario,
+    residual_kind: str,
+    model_corrections: ModelCorrections | None,
+    dead_band: float | None = None,
 ) -> float | np.ndarray:
-    """The admittance's dead band, N m: ``scenario.dead_band``, raised per joint to
-    ``dead_band_sigmas`` standard deviations of the ``residual_kind`` residual's noise when
-    the refined model carries a noise model of it (measured on the calibration log)."""
+    """The admittance's dead band, N m: ``dead_band`` (default ``scenario.dead_band``),
+    raised per joint to ``dead_band_sigmas`` standard deviations of the ``residual_kind``
+    residual's noise when the refined model carries a noise model of it (measured on the
+    calibration log)."""
+    dead_band = scenario.dead_band if dead_band is None else dead_band
     noise = model_corrections.residual_noise if model_corrections is not None else None
     if noise is None:
-        return scenario.dead_band
+        return dead_band
     covariance = noise.covariance_internal if residual_kind == "internal" else noise.covariance_classical
     if covariance is None:
-        return scenario.dead_band
+        return dead_band
     noise.check_gains(scenario.residual_gain, noise.external_gain, scenario.plant_config.time_step, "push-and-comply")
     sigma = np.sqrt(np.diag(covariance))
-    return np.maximum(scenario.dead_band, scenario.dead_band_sigmas * sigma)
+    return np.maximum(dead_band, scenario.dead_band_sigmas * sigma)
+
+
+def robot_scaled_push(plant, humanoid, scenario: PushAndComplyScenario) -> tuple[float, float, float]:
+    """(push peak force, N; admittance gain factor; dead band, N m) on this robot: the
+    scenario's own values, scaled to the robot's size when ``scale_to_robot``."""
+    if not scenario.scale_to_robot:
+        return scenario.push_peak_force, 1.0, scenario.dead_band
+    mass_ratio, moment_ratio = size_ratios(plant, humanoid)
+    return scenario.push_peak_force * mass_ratio, 1.0 / moment_ratio, scenario.dead_band * moment_ratio
 
 
 def build_push_and_comply_diagram(
@@ -195,9 +218,8 @@ def build_push_and_comply_diagram(
         raise ValueError("push-and-comply needs one of the humanoid models (its shoulders and joint groups)")
 
     # Two downward forces on the shoulders, polynomial profile (the paper's Sec. IV).
-    profile = PolynomialRampUpDown(
-        scenario.push_peak_force, scenario.push_start, scenario.push_peak_time, scenario.push_end
-    )
+    peak_force, gain_factor, dead_band = robot_scaled_push(plant, humanoid, scenario)
+    profile = PolynomialRampUpDown(peak_force, scenario.push_start, scenario.push_peak_time, scenario.push_end)
     pushes = [
         Push(body.name(), np.asarray(scenario.push_point, float), np.asarray(scenario.push_direction, float), profile)
         for body in (humanoid.shoulder_bodies["right"], humanoid.shoulder_bodies["left"])
@@ -221,13 +243,13 @@ def build_push_and_comply_diagram(
         builder.Connect(station.known_wrenches, residual.GetInputPort("known_wrenches"))
 
     # Joint admittance (eq. 14) on the measured joint positions.
-    gains = admittance_gains_by_group(plant, humanoid, scenario.admittance_gains)
+    gains = gain_factor * admittance_gains_by_group(plant, humanoid, scenario.admittance_gains)
     admittance = builder.AddSystem(
         JointAdmittanceController(
             plant,
             gains,
             residual_includes_base=(residual_kind == "classical"),
-            dead_band=admittance_dead_band(scenario, residual_kind, model_corrections),
+            dead_band=admittance_dead_band(scenario, residual_kind, model_corrections, dead_band),
             max_rate=scenario.max_rate,
             integrate_from=scenario.integrate_from,
             support_frames=(
@@ -286,6 +308,7 @@ def build_push_and_comply_diagram(
         loggers=loggers,
         meshcat_visualizer=visualizer,
         overlay=overlay,
+        push_peak_force=peak_force,
     )
 
 
@@ -326,6 +349,7 @@ def push_and_comply_metrics(
     upright = bool(pelvis_z.min() > UPRIGHT_HEIGHT_FRACTION * pelvis_z[0] and max(tilt_deg) < UPRIGHT_MAX_TILT_DEG)
     return {
         "residual": handles.residual_kind,
+        "push_peak_force_N": handles.push_peak_force,
         "knee_pitch_flexion_deg": min(flexion.values()) if flexion else None,
         "knee_pitch_flexion_per_knee_deg": flexion,
         "joints_moved_over_1deg": int(sum(v > 1.0 for v in max_displacement_deg.values())),

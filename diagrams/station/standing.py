@@ -16,6 +16,7 @@ gives a run's metrics (base drift, foot contact, fall).
 
 # No ``from __future__ import annotations``: yaml_load_typed reads the scenario's field types.
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -53,9 +54,8 @@ REFERENCE_GAINS = {
     "wrists": (50.0, 1.0),
     "hands": (10.0, 0.2),
 }
-#: hrp4_like's mass (kg) and centre-of-mass height standing (m): the reference of the scaling.
-REFERENCE_MASS = 39.0
-REFERENCE_COM_HEIGHT = 0.747
+#: The robot whose gains and experiments the others scale from (``size_ratios``).
+REFERENCE_MODEL = "hrp4_like"
 #: The explicit 1 kHz PD's damping margin: kd dt / H_ii at most this (H the joint-space
 #: inertia's diagonal at the standing posture, rotor inertia included).
 KD_STABILITY_MARGIN = 0.3
@@ -107,6 +107,33 @@ class StandingHandles:
     meshcat_visualizer: MeshcatVisualizer | None = None
 
 
+def standing_size(plant: MultibodyPlant, humanoid: HumanoidHandles) -> tuple[float, float]:
+    """(mass, kg; centre of mass height standing, m) of the humanoid in its standing state."""
+    context = plant.CreateDefaultContext()
+    set_standing_state(plant, context, humanoid)
+    mass = plant.CalcTotalMass(context, [humanoid.model_instance])
+    height = plant.CalcCenterOfMassPositionInWorld(context, [humanoid.model_instance])[2]
+    return float(mass), float(height)
+
+
+@functools.cache
+def _reference_size() -> tuple[float, float]:
+    builder = DiagramBuilder()
+    plant, _ = AddMultibodyPlant(default_plant_config(), point_contact_scene_graph_config(), builder)
+    humanoid = add_humanoid(plant, REFERENCE_MODEL)
+    plant.Finalize()
+    return standing_size(plant, humanoid)
+
+
+def size_ratios(plant: MultibodyPlant, humanoid: HumanoidHandles) -> tuple[float, float]:
+    """(m / m_ref, m h / (m_ref h_ref)): the humanoid's mass and gravitational moment (m the
+    mass, h the centre of mass height standing) against ``REFERENCE_MODEL``'s, computed the
+    same way (exactly 1 on the reference robot itself)."""
+    mass, height = standing_size(plant, humanoid)
+    reference_mass, reference_height = _reference_size()
+    return mass / reference_mass, mass * height / (reference_mass * reference_height)
+
+
 def default_gains(plant: MultibodyPlant, humanoid: HumanoidHandles) -> tuple[np.ndarray, np.ndarray]:
     """Per-joint default (kp, kd) arrays in v[6:] order for a humanoid.
 
@@ -124,11 +151,9 @@ def default_gains(plant: MultibodyPlant, humanoid: HumanoidHandles) -> tuple[np.
     missing = [g for g in REFERENCE_GAINS if g not in table]
     inertia = None
     if missing:
+        _, scale = size_ratios(plant, humanoid)
         context = plant.CreateDefaultContext()
         set_standing_state(plant, context, humanoid)
-        mass = plant.CalcTotalMass(context, [humanoid.model_instance])
-        height = plant.CalcCenterOfMassPositionInWorld(context, [humanoid.model_instance])[2]
-        scale = mass * height / (REFERENCE_MASS * REFERENCE_COM_HEIGHT)
         table.update({g: (scale * REFERENCE_GAINS[g][0], scale * REFERENCE_GAINS[g][1]) for g in missing})
         inertia = np.diag(plant.CalcMassMatrix(context))
     kp, kd = {}, {}

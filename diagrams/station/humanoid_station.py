@@ -279,11 +279,14 @@ def add_humanoid_station(
     base_state_estimator = foot_contact = None
     builder.Connect(controller.GetOutputPort("actuation"), plant.get_actuation_input_port())
     if humanoid is not None:
-        fsr_feet = all(len(humanoid.fsr_geometries.get(side, ())) == 4 for side in ("left", "right"))
+        fsr_feet = all(
+            humanoid.foot_sensing.get(side) == "fsr" and len(humanoid.fsr_geometries.get(side, ())) == 4
+            for side in ("left", "right")
+        )
         if base_state == "invariant_ekf" and not humanoid.ft_sensor_joints and not fsr_feet:
             raise ValueError(
                 f"base_state 'invariant_ekf' needs foot F/T sensors or four FSRs per foot for its contact "
-                f"flags; {model!r} has neither: use 'truth_plus_noise'"
+                f"flags; {model!r} has neither (its description's feet.*.sensing): use 'truth_plus_noise' (--ideal)"
             )
         sensors = add_sensors(
             builder,

@@ -21,7 +21,9 @@ the same with Meshcat recording its replay: microseconds of wall and CPU time pe
 the real-time factor; the Kalman force observer's throughput on a real Nao recording (the
 authors' ``Force_Y_data``, shipped in ``data/hawley2019-nao``; ``HCO_SHARED_DIR`` moves it, see
 ``systems.observer.nao_dataset``: a missing recording stops the run with an error naming the
-path); and one update of the contact localizer (Flacco et al. Sec. VI) on ``hrp4_like``.
+path); one update of the contact localizer (Flacco et al. Sec. VI) on ``hrp4_like``; and the
+offline estimation from a 1 kHz ``hrp4_like`` log (``--log-seconds``, issue 14: residuals,
+force, detector and localizer on one core), as its real-time factor.
 """
 
 from __future__ import annotations
@@ -309,6 +311,48 @@ def benchmark_contact_localizer(model: str = "hrp4_like", *, calls: int = 100, b
     }
 
 
+def benchmark_log_estimation(seconds: float = 2.0, *, repeats: int = 3) -> dict:
+    """Offline estimation from a log (issue 14's floor: >= 5x real time on a 1 kHz log of a
+    30+ DoF robot, one core): ``hrp4_like`` (34 joints) simulated standing for ``seconds``
+    under a constant 28 N push from 0.5 s to the end (contact for most of the log: the
+    localizer's worst case), its 1 kHz log estimated offline (residuals, force, detector,
+    localizer) on one CPU (the process is pinned to it while timing). The best of
+    ``repeats`` estimations: wall and CPU time, and the real-time factor (log duration /
+    wall time)."""
+    import os
+
+    from diagrams.residuals.log_estimation import build_estimator_plant, estimate_from_log, simulate_push_log
+
+    log, _ = simulate_push_log("hrp4_like", duration=seconds, push_end=seconds + 1.0)
+    robot = build_estimator_plant("hrp4_like")
+    affinity = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else None
+    if affinity:
+        os.sched_setaffinity(0, {min(affinity)})
+    try:
+        timings = []
+        for _ in range(repeats):
+            cpu, wall = time.process_time(), time.perf_counter()
+            estimates = estimate_from_log(robot, log)
+            timings.append((time.perf_counter() - wall, time.process_time() - cpu))
+    finally:
+        if affinity:
+            os.sched_setaffinity(0, affinity)
+    wall, cpu = min(timings)
+    duration = log.num_samples * estimates.period
+    return {
+        "model": "hrp4_like",
+        "num_joints": len(log.joint_names),
+        "log_seconds": duration,
+        "log_rate_hz": 1.0 / estimates.period,
+        "contact_fraction": float(estimates.contact_detected.mean()),
+        "wall_s": wall,
+        "cpu_s": cpu,
+        "us_per_sample": 1e6 * wall / log.num_samples,
+        "real_time_factor": duration / wall,
+        "floor": 5.0,
+    }
+
+
 def _table_header(title: str, header: str, *, blank_line: bool = True) -> None:
     """Prints a table's title, its column header and a rule."""
     if blank_line:
@@ -327,6 +371,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--batches", type=int, default=7, help="batches; the median is reported")
     parser.add_argument(
         "--loop-seconds", type=float, default=2.0, help="simulated seconds per closed-loop timing (0 skips them)"
+    )
+    parser.add_argument(
+        "--log-seconds",
+        type=float,
+        default=2.0,
+        help="seconds of the simulated hrp4_like log estimated offline (0 skips it)",
     )
     add_out_argument(parser)
     args = parser.parse_args(argv)
@@ -402,10 +452,25 @@ def _run(args: argparse.Namespace) -> int:
                 f"{r['model']:<10} {r['num_primitives']:>10} {r['calc_mass_matrix_us']:>12.1f} us"
                 f" {r['localizer_update_us']:>11.1f} us ({r['localizer_update_ratio']:>5.1f}x) {'2000 us':>8}"
             )
+    log_rows = []
+    if "hrp4_like" in names and args.log_seconds > 0:  # F/T feet: the whole offline pipeline
+        log_rows = [benchmark_log_estimation(args.log_seconds)]
+        _table_header(
+            "Offline estimation from a 1 kHz log (residuals, force, detector, localizer), one core",
+            f"{'model':<10} {'joints':>6} {'log':>7} {'in contact':>10} {'per sample':>11} {'real-time factor':>17}"
+            f" {'floor':>6}",
+        )
+        for r in log_rows:
+            print(
+                f"{r['model']:<10} {r['num_joints']:>6} {r['log_seconds']:>5.1f} s"
+                f" {100 * r['contact_fraction']:>8.0f} % {r['us_per_sample']:>8.0f} us"
+                f" {r['real_time_factor']:>17.2f} {r['floor']:>6.1f}"
+            )
     out_dir = output_folder(args, EXPERIMENT)
     write_metrics(
         out_dir,
         {
+            "log_estimation": log_rows,
             "floating_base": rows,
             "residual_update": residual_rows,
             "force_observer": observer,

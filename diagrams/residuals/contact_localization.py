@@ -785,7 +785,7 @@ def trial_result(
         "estimated_body": handles.plant.get_body(BodyIndex(estimate.body_index)).name()
         if estimate.body_index >= 0
         else None,
-        "correct_link": estimate.body_index == spec["body_index"],
+        "correct_link": handles.localizer.same_link(estimate.body_index, spec["body_index"]),
         "position_error_m": None,
         "force_error_rel": None,
         "angle_error_deg": None,
@@ -838,7 +838,7 @@ def multi_contact_result(
     }
     if len(true_bodies) == 1:
         one = estimate.num_contacts == 1
-        out["fit_correct_link"] = bool(one and estimate.body_indices[0] == true_bodies[0])
+        out["fit_correct_link"] = bool(one and multi_contact.same_link(estimate.body_indices[0], true_bodies[0]))
         out["fit_valid"] = bool(estimate.valid)
         out["fit_position_error_m"] = float(np.linalg.norm(estimate.points_W[0] - true_points_W[0])) if one else None
     if len(true_bodies) == 2:

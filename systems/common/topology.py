@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import Frame, Joint, ModelInstanceIndex, RigidBody
+from pydrake.multibody.tree import BodyIndex, Frame, Joint, ModelInstanceIndex, RigidBody
 
 #: Joint type names (``Joint.type_name()``) accepted as the tree's 1-DoF joints.
 ONE_DOF_JOINT_TYPES = ("revolute", "prismatic")
@@ -142,3 +142,15 @@ def uniform_gravity(plant: MultibodyPlant) -> np.ndarray:
                 "the floating-base dynamics assume uniform gravity on every body"
             )
     return np.asarray(field.gravity_vector(), dtype=float).copy()
+
+
+def rigid_link_of_bodies(plant: MultibodyPlant) -> np.ndarray:
+    """(num_bodies,) int: for each BodyIndex, the smallest BodyIndex of the bodies welded to it
+    (``GetBodiesWeldedTo``): bodies joined by weld joints (a URDF's fixed joints, e.g. a
+    gripper's fingers fixed in a reduced model) move as one rigid link, on which no joint
+    effort can tell one from another. A finalized plant."""
+    link = np.arange(plant.num_bodies())
+    for index in range(plant.num_bodies()):
+        welded = plant.GetBodiesWeldedTo(plant.get_body(BodyIndex(index)))
+        link[index] = min(int(b.index()) for b in welded)
+    return link

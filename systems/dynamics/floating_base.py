@@ -87,6 +87,27 @@ class DrakeFloatingBaseDynamics:
 
     def compute(self, q: np.ndarray, v: np.ndarray) -> FloatingBaseTerms:
         """The decomposition of eq. (9) at (q, v), in the coordinates of ``FloatingBaseTerms``."""
+        M, M_dot, bias, R_WB, v0 = self.mass_matrix_terms(q, v)
+        return reduce_to_floating_terms(
+            H=M[6:, 6:],
+            F=M[:6, 6:],
+            I0c=M[:6, :6],
+            C_hat=bias[6:],
+            p_hat=bias[:6],
+            H_dot=M_dot[6:, 6:],
+            F_dot=M_dot[:6, 6:],
+            I0c_dot=M_dot[:6, :6],
+            R_WB=R_WB,
+            v0=v0,
+        )
+
+    def mass_matrix_terms(
+        self, q: np.ndarray, v: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(M, M_dot, bias, R_WB, v0) at (q, v), before the elimination of eq. (9): the mass
+        matrix in F0 coordinates [[I0c, F], [F^T, H]], its derivative along the motion, the
+        bias [p^; C^] (gravity included), F0's rotation and the base velocity [w; v] in
+        F0 (``compute`` reduces them; ``systems.residuals.offline`` reduces many at once)."""
         plant, n = self._plant, self._n
         q, v = checked_state(plant, q, v, self._sizes)
         # Drake's free joint gives the pose of F0 (its child frame M) in its parent frame P,
@@ -123,19 +144,7 @@ class DrakeFloatingBaseDynamics:
         gx, gy, gz = (self._gravity_W @ R_WB).tolist()
         a_fictitious = np.array((wy * vz - wz * vy - gx, wz * vx - wx * vz - gy, wx * vy - wy * vx - gz))
         bias = Cv + M[:, 3:6] @ a_fictitious
-
-        return reduce_to_floating_terms(
-            H=M[6:, 6:],
-            F=M[:6, 6:],
-            I0c=M[:6, :6],
-            C_hat=bias[6:],
-            p_hat=bias[:6],
-            H_dot=M_dot[6:, 6:],
-            F_dot=M_dot[:6, 6:],
-            I0c_dot=M_dot[:6, :6],
-            R_WB=R_WB,
-            v0=v0,
-        )
+        return M, M_dot, bias, R_WB, v0
 
     def floating_jacobian(self, q: np.ndarray, frame: Frame, p_FoP: np.ndarray, *, spatial: bool = False) -> np.ndarray:
         """J^fb of point P fixed in ``frame``, in world coordinates (eq. 12: tau = J^fb^T f_W).
@@ -214,6 +223,11 @@ class FloatingBaseDynamics:
     def compute(self, q: np.ndarray, v: np.ndarray) -> FloatingBaseTerms:
         """All terms of eq. (9) and their derivatives at (q, v) (Drake's coordinates in)."""
         return self._impl.compute(q, v)
+
+    def mass_matrix_terms(self, q: np.ndarray, v: np.ndarray):
+        """See ``DrakeFloatingBaseDynamics.mass_matrix_terms``; "fast" implementation only
+        (None for "reference")."""
+        return self._impl.mass_matrix_terms(q, v) if isinstance(self._impl, DrakeFloatingBaseDynamics) else None
 
     def floating_jacobian(self, q: np.ndarray, frame: Frame, p_FoP: np.ndarray, *, spatial: bool = False) -> np.ndarray:
         """J^fb (3 x n, or 6 x n with ``spatial``) of a point fixed in ``frame``, world coordinates."""

@@ -40,7 +40,7 @@ from scipy.stats import chi2
 
 from systems.common.checks import eval_finite_input, positive_number, resolve_body
 from systems.common.spatial import cross, skew
-from systems.common.topology import floating_base_topology
+from systems.common.topology import floating_base_topology, rigid_link_of_bodies
 from systems.residuals.geometry_intersection import (
     RobotGeometry,
     line_intersections,
@@ -645,17 +645,32 @@ class ContactDetector(LeafSystem):
         z_int = self._L_int @ np.asarray(residual)
         return float(z_ext @ z_ext), float(z_int @ z_int)
 
+    def statistics_of_samples(self, wrenches: np.ndarray, residuals: np.ndarray) -> np.ndarray:
+        """(N, 2) [s_ext, s_int] of N samples of the inputs ((N, 6) and (N, n)) at once:
+        ``statistics`` of each, to rounding."""
+        z_ext = np.asarray(wrenches)[:, 3:] @ self._L_ext.T
+        z_int = np.asarray(residuals) @ self._L_int.T
+        return np.stack((np.einsum("ij,ij->i", z_ext, z_ext), np.einsum("ij,ij->i", z_int, z_int)), axis=1)
+
     def _s(self, context: Context) -> _DetectorState:
         return _DetectorState(context.get_discrete_state(self._state_index).get_value())
 
     def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
         w = eval_finite_input(self._who, self._wrench_port, context)
         r = eval_finite_input(self._who, self._residual_port, context)
-        old = self._s(context)
+        state = self.advance(
+            context.get_discrete_state(self._state_index).get_value(), self.statistics(w, r), context.get_time()
+        )
+        discrete_state.set_value(self._state_index, state)
+
+    def advance(self, state: Sequence[float], s: tuple[float, float], t: float) -> list[float]:
+        """One update without a Context (``systems.residuals.offline`` replays logs with
+        it): the detector's next state (the layout of the class docstring) from its
+        ``state``, the test statistics ``s`` = (s_ext, s_int) of this update's inputs
+        (``statistics``) and the time t, s."""
+        old = _DetectorState(np.asarray(state, dtype=float))
         detected, t_detect, above, below_time = old.detected, old.detection_time, old.samples_above, old.time_below
-        s = self.statistics(w, r)
         use = self._use
-        t = context.get_time()
         is_above = t >= self._startup_time and any(u and si > th for u, si, th in zip(use, s, self._on))
         is_below = all((not u) or si < th for u, si, th in zip(use, s, self._off))
         if detected < 0.5:
@@ -667,7 +682,7 @@ class ContactDetector(LeafSystem):
             below_time = below_time + self._period if is_below else 0.0
             if below_time >= self._release_time - 1e-12 and is_below:
                 detected, below_time = 0.0, 0.0
-        discrete_state.set_value(self._state_index, [detected, t_detect, above, below_time, s[0], s[1]])
+        return [detected, t_detect, above, below_time, s[0], s[1]]
 
 
 # ---------------------------------------------------------------------------------------
@@ -761,7 +776,8 @@ class ContactLocalizer(LeafSystem):
        wrist as one body: no residual can tell them apart).
     4. Status: NO_CONTACT when ``contact_detected`` is 0; FORCE_TOO_SMALL when |f_hat| <
        ``min_force``; NO_INTERSECTION without candidates; AMBIGUOUS when another link's
-       best score is within ``ambiguity_margin`` of the best; else VALID. Degenerate inputs
+       best score is within ``ambiguity_margin`` of the best (bodies joined by welds are
+       one rigid link: ``systems.common.topology.rigid_link_of_bodies``); else VALID. Degenerate inputs
        never raise (only NaN/inf inputs do, as everywhere in this package).
 
     Averaging: after the contact has been detected for ``settle_time`` (the residuals'
@@ -871,6 +887,7 @@ class ContactLocalizer(LeafSystem):
             raise ValueError(f"{who}: limit_margin must be finite and non-negative, got {limit_margin}")
         self._stops = _JointStops(kin.topology.joints, self._limit_margin)
         self._same_body = self._geometry.body_indices[:, None] == self._geometry.body_indices[None, :]
+        self._rigid_link = rigid_link_of_bodies(plant)  # welded bodies are one link
 
         self._state_port = self.DeclareVectorInputPort("state", nq + nv)
         self._wrench_port = self.DeclareVectorInputPort("external_wrench_world", 6)
@@ -905,6 +922,11 @@ class ContactLocalizer(LeafSystem):
     @property
     def geometry(self) -> RobotGeometry:
         return self._geometry
+
+    def same_link(self, body_a: int, body_b: int) -> bool:
+        """Whether two BodyIndex values are one rigid link (the same body, or welded: no
+        joint effort tells them apart)."""
+        return body_a >= 0 and body_b >= 0 and bool(self._rigid_link[int(body_a)] == self._rigid_link[int(body_b)])
 
     @property
     def candidate_bodies(self) -> list[RigidBody]:
@@ -974,7 +996,8 @@ class ContactLocalizer(LeafSystem):
         # first entry along f.
         order = np.lexsort((l_in[index], np.round(reactions, 12), np.round(scores, 12)))
         best = order[0]
-        other = np.flatnonzero(body_of[order] != body_of[best])
+        link_of = self._rigid_link[body_of]
+        other = np.flatnonzero(link_of[order] != link_of[best])  # the runner-up is on another rigid link
         runner = order[other[0]] if other.size else None
         runner_up = float(scores[runner]) if runner is not None else math.inf
         status = AMBIGUOUS if runner_up - scores[best] < self._margin else VALID
@@ -1033,18 +1056,45 @@ class ContactLocalizer(LeafSystem):
         x = eval_finite_input(who, self._state_port, context)
         w = eval_finite_input(who, self._wrench_port, context)
         r = eval_finite_input(who, self._residual_port, context)
-        q = x[: self._nq]
         detected = True
         if self._detected_port is not None:
             detected = float(eval_finite_input(who, self._detected_port, context)[0]) > 0.5
-        avg = _Averaging(np.array(context.get_discrete_state(self._avg_index).get_value()))
-        t = context.get_time()
+        groups = (self._avg_index, self._means_index, self._localized_index, self._result_index)
+        state = tuple(context.get_discrete_state(i).get_value() for i in groups)
+        for index, value in zip(groups, self.advance(state, context.get_time(), x, w, r, detected)):
+            discrete_state.set_value(index, value)
+
+    def initial_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The discrete state of a new context, as ``advance`` takes it: (averaging, means,
+        inputs of the last localization, result)."""
+        context = self.CreateDefaultContext()
+        groups = (self._avg_index, self._means_index, self._localized_index, self._result_index)
+        return tuple(np.array(context.get_discrete_state(i).get_value()) for i in groups)
+
+    def advance(
+        self,
+        state: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+        t: float,
+        x: np.ndarray,
+        w: np.ndarray,
+        r: np.ndarray,
+        detected: bool,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """One update without a Context (``systems.residuals.offline`` replays logs with
+        it): the next (averaging, means, inputs of the last localization, result) from
+        ``state`` (as ``initial_state``), the time t (s) and this update's inputs: the
+        sensed state x, the external wrench w, the internal residual r and the detector's
+        flag. Inputs are not checked."""
+        avg_state, means, localized, result = state
+        q = x[: self._nq]
+        avg = _Averaging(np.array(avg_state))
         if not detected:
-            discrete_state.set_value(self._avg_index, np.zeros(len(_Averaging.get_fields())))
-            discrete_state.set_value(
-                self._result_index, self._pack(LocalizationResult(NO_CONTACT, force_W=np.array(w[3:])))
+            return (
+                np.zeros(len(_Averaging.get_fields())),
+                means,
+                localized,
+                self._pack(LocalizationResult(NO_CONTACT, force_W=np.array(w[3:]))),
             )
-            return
         if avg.active < 0.5:
             avg.active, avg.count, avg.onset, avg.localized = 1.0, 0.0, t, -math.inf
         if t - avg.onset >= self._settle_time - 1e-12:
@@ -1053,15 +1103,14 @@ class ContactLocalizer(LeafSystem):
             if self._tau is not None:
                 alpha = max(alpha, self._period / self._tau)
             sample = np.concatenate((w, r, q))
-            means = np.array(context.get_discrete_state(self._means_index).get_value())
+            means = np.array(means)
             means += alpha * (sample - means)
-            discrete_state.set_value(self._means_index, means)
             q, w, r = self._split_means(means)
         if t - avg.localized >= self._localization_period - 1e-9:
             avg.localized = t
-            discrete_state.set_value(self._localized_index, np.concatenate((w, r, q)))
-            discrete_state.set_value(self._result_index, self._pack(self.localize(q, w, r)))
-        discrete_state.set_value(self._avg_index, avg[:])
+            localized = np.concatenate((w, r, q))
+            result = self._pack(self.localize(q, w, r))
+        return avg[:], means, localized, result
 
     @staticmethod
     def _pack(result: LocalizationResult) -> np.ndarray:

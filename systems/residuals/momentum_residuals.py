@@ -373,36 +373,60 @@ class _MomentumResidual(LeafSystem):
     def known_wrench_frames(self) -> tuple[Frame, ...]:
         return self._frames
 
+    @property
+    def period(self) -> float:
+        """The update period T, s."""
+        return self._period
+
     def _checked_input(self, port, context: Context) -> np.ndarray:
         return eval_finite_input(type(self).__name__, port, context)
 
     def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
         x = self._checked_input(self._state_port, context)
+        torque = self._checked_input(self._torque_port, context) if self._torque_port is not None else None
+        wrenches = self._checked_input(self._wrench_port, context) if self._frames else None
+        previous = None
+        if context.get_discrete_state(self._flag_index).get_value()[0] > 0.5:
+            previous = context.get_discrete_state(self._integral_index).get_value()
+        integral, residual, terms = self.advance(x, torque, wrenches, previous)
+        discrete_state.set_value(self._flag_index, [1.0])
+        discrete_state.set_value(self._integral_index, integral)
+        discrete_state.set_value(self._residual_index, residual)
+        self._after_update(discrete_state, terms, x, residual)
+
+    def advance(
+        self, x: np.ndarray, measured_torque: np.ndarray | None, known_wrenches: np.ndarray | None, integral
+    ) -> tuple[np.ndarray, np.ndarray, object]:
+        """One update of the observer (module docstring) without a Context: what the
+        periodic update computes (``systems.residuals.offline`` replays logs with it).
+
+        Args:
+            x: the sensed [q; v]. measured_torque: n motor torques (None for the external
+                residual). known_wrenches: 6 per F/T frame, world (None without frames).
+            integral: the momentum integral I^+ of the previous update, or None at the
+                first update (I_0 = p_0, r_0 = 0).
+
+        Returns:
+            (I^+ of this update, the residual r, the model's terms at x). Inputs are not
+            checked (the caller checks them once).
+        """
         terms = self._model.evaluate(x)
         tau_m = None
         if self._torque_port is not None:
-            qdot = x[self._qdot_start :]
-            tau_m = self._checked_input(self._torque_port, context) - self._damping * qdot
+            tau_m = measured_torque - self._damping * x[self._qdot_start :]
         known = None
         if self._frames:
-            wrenches = self._checked_input(self._wrench_port, context)
-            known = self._model.known_wrench_forces(terms, self._frames, wrenches, self._frames_key)
+            known = self._model.known_wrench_forces(terms, self._frames, known_wrenches, self._frames_key)
         momentum, model_rate, measured_rate = self._momentum_and_rates(terms, x, tau_m, known)
 
         half_step = 0.5 * self._period * model_rate
-        initialised = context.get_discrete_state(self._flag_index).get_value()[0] > 0.5
-        if initialised:
-            integral = (
-                context.get_discrete_state(self._integral_index).get_value() + half_step + self._period * measured_rate
-            )
+        if integral is not None:
+            integral = integral + half_step + self._period * measured_rate
             residual = self._gain * (momentum - integral)
         else:  # First update: I_0 = p_0, so that r_0 = 0 (no measured period yet).
             integral = momentum
             residual = np.zeros(self._size)
-        discrete_state.set_value(self._flag_index, [1.0])
-        discrete_state.set_value(self._integral_index, integral + half_step + self._period * residual)
-        discrete_state.set_value(self._residual_index, residual)
-        self._after_update(discrete_state, terms, x, residual)
+        return integral + half_step + self._period * residual, residual, terms
 
     def _after_update(self, discrete_state: DiscreteValues, terms, x, residual) -> None:
         """Hook for subclasses that keep more discrete state."""
@@ -591,6 +615,10 @@ class ExternalResidual(_MomentumResidual):
 
     def _after_update(self, discrete_state: DiscreteValues, terms, x, residual) -> None:
         discrete_state.set_value(self._world_index, self._model.base_wrench_to_world(terms, x, residual))
+
+    def world_wrench(self, terms, x: np.ndarray, residual: np.ndarray) -> np.ndarray:
+        """``external_wrench_world`` of the residual ``residual`` (``advance``'s) at x."""
+        return self._model.base_wrench_to_world(terms, x, residual)
 
 
 def _has_free_joint(plant: MultibodyPlant) -> bool:

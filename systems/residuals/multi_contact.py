@@ -92,6 +92,7 @@ from scipy.stats import chi2
 from scipy.stats import f as f_distribution
 
 from systems.common.checks import check_plant, positive_number
+from systems.common.topology import rigid_link_of_bodies
 from systems.residuals.contact_estimation import _JointStops, _SensedConfiguration, candidate_geometry
 from systems.residuals.geometry_intersection import (
     BOX,
@@ -715,6 +716,7 @@ class MultiContactLocalizer:
             plant, scene_graph, bodies, exclude_bodies, who, skip_unsupported_shapes
         )
         geo = self._geometry
+        self._rigid_link = rigid_link_of_bodies(plant)  # welded bodies are one link
         self._n = n = kin.n
         self._rows = 6 + n
         default_ext = np.array([DEFAULT_EXTERNAL_MOMENT_STD] * 3 + [DEFAULT_EXTERNAL_FORCE_STD] * 3)
@@ -851,6 +853,10 @@ class MultiContactLocalizer:
         """(indices (v[6:] order), signs) of the joints within ``limit_margin`` of a limit:
         +1 at a lower limit (the stop pushes the joint up), -1 at an upper one."""
         return self._stops.limited(self._check_q(q))
+
+    def same_link(self, body_a: int, body_b: int) -> bool:
+        """Whether two BodyIndex values are one rigid link (the same body, or welded)."""
+        return body_a >= 0 and body_b >= 0 and bool(self._rigid_link[int(body_a)] == self._rigid_link[int(body_b)])
 
     def fit_one(self, q: np.ndarray, wrench_W: np.ndarray, residual: np.ndarray) -> ContactFit:
         """The best single contact (module docstring).
@@ -1348,7 +1354,14 @@ class MultiContactLocalizer:
                     k = rows[np.argmin(s[rows])]
                     if best[b] is None or s[k] < best[b].misfit:
                         best[b] = _Candidate(np.array([b]), pts.p_W[k][None], pts.n_W[k][None], float(s[k]))
-        cands = sorted((c for c in best if c is not None and math.isfinite(c.misfit)), key=lambda c: c.misfit)
+        # Bodies joined by welds are one rigid link: keep each link's best body.
+        link_best = {}
+        for c in best:
+            if c is not None and math.isfinite(c.misfit):
+                link = int(self._rigid_link[int(self._bodies[int(c.slots[0])].index())])
+                if link not in link_best or c.misfit < link_best[link].misfit:
+                    link_best[link] = c
+        cands = sorted(link_best.values(), key=lambda c: c.misfit)
         cands = cands[: self._refit_links]
         # A line entry is already the best point of its link; the best few grid points are
         # polished along their surfaces.

@@ -4,7 +4,12 @@ residual noise model a calibration log gives the contact detector.
 ``replay_residuals`` steps the same ``InternalResidual`` and ``ExternalResidual`` systems
 (and optionally the ``ClassicalResidual``)
 (``systems.residuals.momentum_residuals``) through the log's samples, so a log replays
-exactly as the robot's estimators would have run on it. Without an unknown contact, what
+exactly as the robot's estimators would have run on it. ``replay_contact_estimation`` adds
+the ``ContactDetector`` and the ``ContactLocalizer`` (``systems.residuals.contact_estimation``)
+with the one-update delay they have in a diagram. Both call each system's own update code
+(its ``advance`` method, which its periodic update event also runs) without the framework's
+contexts and fixed input ports, whose per-sample cost would exceed the dynamics' (the floor
+of issue 14: a 1 kHz log of a 34-joint robot at 5x real time on one core). Without an unknown contact, what
 they report is model error plus sensor noise: ``residual_noise_model`` takes their
 covariance over a calibration log as the detector's noise model (``ContactDetector``'s
 ``covariance_internal`` and ``covariance_external_force``), in place of the covariance
@@ -14,14 +19,15 @@ estimation error, model error left after refinement, friction).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import Frame
+from pydrake.multibody.tree import Frame, JacobianWrtVariable
 
+from systems.residuals.contact_estimation import ContactDetector, ContactLocalizer
 from systems.residuals.momentum_residuals import ClassicalResidual, ExternalResidual, InternalResidual, ResidualModel
 
 
@@ -145,36 +151,39 @@ def replay_residuals(
             raise ValueError(f"replay_residuals: {name} must be (N, {width}) with N = {samples}, got {array.shape}")
         if not np.isfinite(array).all():
             raise ValueError(f"replay_residuals: {name} holds NaN or inf")
-    systems = [
-        (InternalResidual(plant, internal_gain, period, frames, model=model), "residual", n),
-        (ExternalResidual(plant, external_gain, period, frames, model=model), "external_wrench_world", 6),
-    ]
+    internal = InternalResidual(plant, internal_gain, period, frames, model=model)
+    external = ExternalResidual(plant, external_gain, period, frames, model=model)
+    classical = None
     if classical_gain is not None:
-        systems.append((ClassicalResidual(plant, classical_gain, period, frames, model=model), "residual", n + 6))
-    outputs = [np.empty((samples, width)) for _, _, width in systems]
-    contexts = [system.CreateDefaultContext() for system, _, _ in systems]
-    state_values = [s.GetInputPort("state").FixValue(c, state[0]) for (s, _, _), c in zip(systems, contexts)]
-    wrench_values = [
-        s.GetInputPort("known_wrenches").FixValue(c, known_wrenches[0]) for (s, _, _), c in zip(systems, contexts)
-    ]
-    torque_values = [
-        s.GetInputPort("measured_torque").FixValue(c, joint_torque[0])
-        for (s, _, _), c in zip(systems, contexts)
-        if s.HasInputPort("measured_torque")
-    ]
-    ports = [s.GetOutputPort(name) for s, name, _ in systems]
+        classical = ClassicalResidual(plant, classical_gain, period, frames, model=model)
+    return _replay_residuals(internal, external, classical, state, joint_torque, known_wrenches)
+
+
+def _replay_residuals(
+    internal: InternalResidual,
+    external: ExternalResidual,
+    classical: ClassicalResidual | None,
+    state: np.ndarray,
+    joint_torque: np.ndarray,
+    known_wrenches: np.ndarray,
+) -> ReplayedResiduals:
+    """The residual systems' updates (``advance``: the code of their periodic update,
+    without the framework's contexts and ports) at every sample, one after another on the
+    shared model (one dynamics evaluation per sample)."""
+    samples = state.shape[0]
+    wrenches = known_wrenches if internal.known_wrench_frames else [None] * samples
+    out_internal = np.empty((samples, joint_torque.shape[1]))
+    out_external = np.empty((samples, 6))
+    out_classical = None if classical is None else np.empty((samples, joint_torque.shape[1] + 6))
+    integrals = [None, None, None]
     for k in range(samples):
-        for value in state_values:
-            value.GetMutableData().set_value(state[k])
-        for value in wrench_values:
-            value.GetMutableData().set_value(known_wrenches[k])
-        for value in torque_values:
-            value.GetMutableData().set_value(joint_torque[k])
-        for (system, _, _), context, port, out in zip(systems, contexts, ports, outputs):
-            context.SetTime(k * period)
-            context.SetDiscreteState(system.EvalUniquePeriodicDiscreteUpdate(context))
-            out[k] = port.Eval(context)
-    return ReplayedResiduals(outputs[0], outputs[1], outputs[2] if classical_gain is not None else None)
+        x, w = state[k], wrenches[k]
+        integrals[0], out_internal[k], _ = internal.advance(x, joint_torque[k], w, integrals[0])
+        integrals[1], residual, terms = external.advance(x, None, w, integrals[1])
+        out_external[k] = external.world_wrench(terms, x, residual)
+        if classical is not None:
+            integrals[2], out_classical[k], _ = classical.advance(x, joint_torque[k], w, integrals[2])
+    return ReplayedResiduals(out_internal, out_external, out_classical)
 
 
 def residual_noise_model(
@@ -217,3 +226,187 @@ def residual_noise_model(
         samples=int(internal.shape[0]),
         covariance_classical=None if classical is None else covariance(np.asarray(classical, dtype=float)[skip:, 6:]),
     )
+
+
+def _stacked_residuals(
+    internal: InternalResidual,
+    external: ExternalResidual,
+    state: np.ndarray,
+    joint_torque: np.ndarray,
+    known_wrenches: np.ndarray,
+    chunk: int = 1000,
+) -> ReplayedResiduals | None:
+    """The internal (eq. 11) and external (eq. 16) residuals of the whole log at once: per
+    sample only what needs the plant (the mass matrix, its derivative and the bias of
+    ``DrakeFloatingBaseDynamics.mass_matrix_terms``, the F/T frames' Jacobians); the
+    elimination of eq. (9) (``reduce_to_floating_terms``), eq. (10)'s known-wrench
+    torques, the momenta and rates of ``_momentum_and_rates`` and the world wrench of
+    ``ResidualModel.base_wrench_to_world`` over all samples as stacked numpy; then the
+    observer recursion of ``advance``, in its order of operations. Equal to the systems'
+    own updates to rounding (the tests compare them). None when the model's dynamics is
+    not the "fast" implementation (then ``advance`` runs per sample)."""
+    model = internal.model
+    if external.model is not model or internal.period != external.period:
+        return None
+    dynamics = model.dynamics
+    if dynamics.mass_matrix_terms(state[0, : model.num_positions], state[0, model.num_positions :]) is None:
+        return None
+    plant, nq, n = model.plant, model.num_positions, model.num_joints
+    frames = internal.known_wrench_frames
+    samples = state.shape[0]
+    out_internal, out_external = np.empty((samples, n)), np.empty((samples, 6))
+    world = plant.world_frame()
+    context = dynamics.context_F0
+    period = internal.period
+    gain = np.concatenate((internal._gain, external._gain))
+    previous = None  # I^+ of the last update, [internal; external]
+    for start in range(0, samples, chunk):
+        rows = range(start, min(start + chunk, samples))
+        K = len(rows)
+        M, M_dot, bias = np.empty((K, n + 6, n + 6)), np.empty((K, n + 6, n + 6)), np.empty((K, n + 6))
+        R_WB, v0 = np.empty((K, 3, 3)), np.empty((K, 6))
+        J = np.empty((K, len(frames), 6, n + 6))
+        for i, k in enumerate(rows):
+            M[i], M_dot[i], bias[i], R_WB[i], v0[i] = dynamics.mass_matrix_terms(state[k, :nq], state[k, nq:])
+            for f, frame in enumerate(frames):  # F0-expressed, at the joint positions just set
+                J[i, f] = plant.CalcJacobianSpatialVelocity(
+                    context, JacobianWrtVariable.kV, frame, _ORIGIN, world, world
+                )
+        x = state[rows.start : rows.stop]
+        qdot = x[:, nq + 6 :, None]
+        I0c, F, H = M[:, :6, :6], M[:, :6, 6:], M[:, 6:, 6:]
+        I0c_dot, F_dot, H_dot = M_dot[:, :6, :6], M_dot[:, :6, 6:], M_dot[:, 6:, 6:]
+        p_hat, C_hat = bias[:, :6, None], bias[:, 6:, None]
+        # Eq. (9)'s elimination (``reduce_to_floating_terms``) applied to the joint velocities
+        # rather than formed: H_fb qdot = H qdot - F^T G qdot, H_fb_dot qdot (eq. 13) =
+        # H_dot qdot - G^T F_dot qdot - F_dot^T G qdot + G^T I0c_dot G qdot, C_fb = C^ - G^T p^,
+        # with G = I0c^-1 F.
+        G = np.linalg.solve(I0c, F)
+        GT = G.transpose(0, 2, 1)
+        G_qdot = G @ qdot
+        H_fb_qdot = H @ qdot - F.transpose(0, 2, 1) @ G_qdot
+        H_fb_dot_qdot = H_dot @ qdot - GT @ (F_dot @ qdot) - F_dot.transpose(0, 2, 1) @ G_qdot + GT @ (I0c_dot @ G_qdot)
+        C_fb = C_hat - GT @ p_hat
+        # ResidualModel.known_wrench_forces: [m; f] per frame rotated into F0, through J^T.
+        generalized = np.zeros((K, n + 6, 1))
+        if frames:
+            w = known_wrenches[rows.start : rows.stop].reshape(K, len(frames), 2, 3) @ R_WB[:, None]
+            generalized = (J.transpose(0, 1, 3, 2) @ w.reshape(K, len(frames), 6, 1)).sum(axis=1)
+        w_F0, tau_joints = generalized[:, :6], generalized[:, 6:]
+        # InternalResidual and ExternalResidual._momentum_and_rates.
+        tau_m = joint_torque[rows.start : rows.stop, :, None] - internal._damping[:, None] * qdot
+        v0c = v0[:, :, None]
+        momentum = np.concatenate((H_fb_qdot, I0c @ v0c + F @ qdot), axis=1)[:, :, 0]
+        rate = np.concatenate((H_fb_dot_qdot - C_fb, I0c_dot @ v0c + F_dot @ qdot - p_hat), axis=1)[:, :, 0]
+        measured = np.concatenate((tau_m + tau_joints - GT @ w_F0, w_F0), axis=1)[:, :, 0]
+        # _MomentumResidual.advance, sample by sample.
+        half_step = 0.5 * period * rate
+        residual = np.empty((K, n + 6))
+        for i in range(K):
+            if previous is not None:
+                integral = previous + half_step[i] + period * measured[i]
+                residual[i] = gain * (momentum[i] - integral)
+            else:
+                integral = momentum[i]
+                residual[i] = 0.0
+            previous = integral + half_step[i] + period * residual[i]
+        out_internal[rows.start : rows.stop] = residual[:, :n]
+        # ResidualModel.base_wrench_to_world, stacked.
+        moment_W = (R_WB @ residual[:, n : n + 3, None])[:, :, 0]
+        force_W = (R_WB @ residual[:, n + 3 :, None])[:, :, 0]
+        p_WBo = model._p_WP + x[:, 4:7] @ model._R_WP.T
+        out_external[rows.start : rows.stop] = np.concatenate((moment_W + np.cross(p_WBo, force_W), force_W), axis=1)
+    return ReplayedResiduals(out_internal, out_external, None)
+
+
+_ORIGIN = np.zeros(3)
+
+
+class ReplayedEstimation(NamedTuple):
+    """What ``replay_contact_estimation`` returns, per log sample (N): the residuals (as
+    ``ReplayedResiduals``), the detector's flag (N,) and test statistics (N, 2), and the
+    localizer's outputs ({"status", "body_index", "point_world", "force_world"}), or None."""
+
+    internal: np.ndarray
+    external_wrench_world: np.ndarray
+    contact_detected: np.ndarray
+    test_statistics: np.ndarray
+    localization: dict | None
+
+
+def replay_contact_estimation(
+    internal: InternalResidual,
+    external: ExternalResidual,
+    make_detector: Callable[[np.ndarray, np.ndarray], ContactDetector],
+    localizer: ContactLocalizer | None,
+    state: np.ndarray,
+    joint_torque: np.ndarray,
+    known_wrenches: np.ndarray,
+) -> ReplayedEstimation:
+    """The residuals (eqs. 11, 16), the ContactDetector and the ContactLocalizer (Sec. VI)
+    stepped through a log of N samples taken every ``internal``'s period T, in the order
+    and with the timing they have in a diagram (``diagrams.residuals.log_estimation``):
+    at update k (time k T) the residuals read sample k, while the detector and the
+    localizer read the residuals' (and the detector's) outputs of update k - 1 (zeros at
+    k = 0) and the localizer sample k's state. Each system's update is its own code
+    (``advance``), so the outputs equal what the systems report online, to rounding.
+
+    Args:
+        internal, external: the residual systems (sharing one ``ResidualModel``).
+        make_detector: (internal residual (N, n), external wrench (N, 6)) -> the
+            ContactDetector to run (its noise model may be measured on them).
+        localizer: the ContactLocalizer, or None (no localization).
+        state, joint_torque, known_wrenches: the log as ``replay_residuals`` takes it.
+
+    Raises:
+        ValueError: arrays of inconsistent sizes or non-finite values (naming them).
+    """
+    plant = internal.model.plant
+    n = plant.num_velocities() - 6
+    state = np.asarray(state, dtype=float)
+    joint_torque = np.asarray(joint_torque, dtype=float)
+    known_wrenches = np.asarray(known_wrenches, dtype=float)
+    samples = state.shape[0] if state.ndim == 2 else -1
+    expected = {
+        "state": (state, plant.num_positions() + plant.num_velocities()),
+        "joint_torque": (joint_torque, n),
+        "known_wrenches": (known_wrenches, 6 * len(internal.known_wrench_frames)),
+    }
+    for name, (array, width) in expected.items():
+        if array.ndim != 2 or array.shape != (samples, width):
+            raise ValueError(
+                f"replay_contact_estimation: {name} must be (N, {width}) with N = {samples}, got {array.shape}"
+            )
+        if not np.isfinite(array).all():
+            raise ValueError(f"replay_contact_estimation: {name} holds NaN or inf")
+    residuals = _stacked_residuals(internal, external, state, joint_torque, known_wrenches)
+    if residuals is None:
+        residuals = _replay_residuals(internal, external, None, state, joint_torque, known_wrenches)
+    detector = make_detector(residuals.internal, residuals.external_wrench_world)
+    period = internal.period
+    # The detector and the localizer see the residuals one update late (see above).
+    late_internal = np.vstack((np.zeros((1, n)), residuals.internal[:-1]))
+    late_external = np.vstack((np.zeros((1, 6)), residuals.external_wrench_world[:-1]))
+    detector_state = detector.CreateDefaultContext().get_discrete_state_vector().CopyToVector()
+    detected = np.zeros(samples, dtype=bool)
+    statistics = detector.statistics_of_samples(late_external, late_internal)
+    for k, s in enumerate(statistics.tolist()):
+        detector_state = detector.advance(detector_state, s, k * period)
+        detected[k] = detector_state[0] > 0.5
+    localization = None
+    if localizer is not None:
+        late_detected = np.concatenate(([False], detected[:-1]))
+        results = np.empty((samples, 14))
+        localizer_state = localizer.initial_state()
+        for k in range(samples):
+            localizer_state = localizer.advance(
+                localizer_state, k * period, state[k], late_external[k], late_internal[k], bool(late_detected[k])
+            )
+            results[k] = localizer_state[3]
+        localization = {
+            "status": results[:, 0].copy(),
+            "body_index": results[:, 1].copy(),
+            "point_world": results[:, 2:5].copy(),
+            "force_world": results[:, 5:8].copy(),
+        }
+    return ReplayedEstimation(residuals.internal, residuals.external_wrench_world, detected, statistics, localization)

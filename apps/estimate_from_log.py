@@ -1,0 +1,232 @@
+"""Offline contact estimation from a recorded log (issue 14): the residuals of Flacco et al.
+(2016), the contact force (eq. 19), the contact detector and, on a robot with foot F/T
+sensors, the localizer (Sec. VI) run on a CSV, Parquet, MCAP, ROS 1 bag or ROS 2 bag log.
+
+The log's layout (columns, ROS topics and message types, frames and units) is in
+``systems/io/robot_log.py``; ROS topic names can be mapped with ``--topics FILE.yaml``
+(keys ``joint_states``, ``odometry``, ``imu``, ``wrenches: {FRAME: TOPIC}``). A log without
+the base's pose and velocity gets them from the contact-aided invariant EKF replayed on its
+IMU, joint positions and foot F/T forces (``diagrams.residuals.log_estimation``).
+
+Run: ``python -m apps.estimate_from_log --robot hrp4_like --log LOG [--topics FILE.yaml]
+[--out DIR] [--headless] [--no-replay] [--calibrate-first S] [--localization-period S]``, or try it end to end on a
+simulated push: ``python -m apps.estimate_from_log --write-demo-log out/demo_push.mcap``
+(simulates hrp4_like under a known 28 N push, writes the log, then estimates from it).
+Writes to ``DIR/estimate_from_log/``: ``estimates.csv`` (per sample: detection, test
+statistics, force, external wrench, localized link and point, internal residual),
+``contact_forces.png``, ``metrics.json`` (the contacts found, the real-time factor) and
+``replay.html`` (a self-contained Meshcat replay of the robot with the estimated contact
+force), and prints the contacts and the real-time factor of the estimation.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+from pathlib import Path
+
+import numpy as np
+
+from apps.runner import add_out_argument, output_folder, print_written, replay_meshcat, run_app, write_metrics
+from diagrams.residuals.log_estimation import (
+    LogEstimates,
+    LogEstimationSettings,
+    build_estimator_plant,
+    estimate_from_log,
+    record_replay,
+    simulate_push_log,
+    status_reason,
+)
+from systems.io.robot_log import read_log, write_log
+
+EXPERIMENT = "estimate_from_log"
+
+
+def _parse(argv):
+    parser = argparse.ArgumentParser(prog=f"python -m apps.{EXPERIMENT}", description=__doc__.split("\n\n")[0])
+    parser.add_argument(
+        "--robot",
+        default="hrp4_like",
+        metavar="FILE.yaml",
+        help="the robot: a robot description YAML (README, 'Bring your own robot') or a built-in name "
+        "(hrp4_like, nao_like; default hrp4_like)",
+    )
+    parser.add_argument(
+        "--log", type=Path, default=None, help="the log: .csv, .parquet, .mcap, .bag or a ROS 2 bag folder"
+    )
+    parser.add_argument("--topics", type=Path, default=None, metavar="FILE.yaml", help="ROS topic names by role")
+    add_out_argument(parser, EXPERIMENT)
+    parser.add_argument("--headless", action="store_true", help="no live Meshcat URL (the replay is still written)")
+    parser.add_argument("--no-replay", action="store_true", help="skip the Meshcat replay")
+    parser.add_argument(
+        "--calibrate-first",
+        type=float,
+        default=None,
+        metavar="S",
+        help="measure the detector's noise model on the log's first S seconds (free of contact) instead of "
+        "predicting it from the default sensor noise",
+    )
+    parser.add_argument(
+        "--localization-period",
+        type=float,
+        default=LogEstimationSettings.localization_period,
+        metavar="S",
+        help=f"s between two localizations in contact (default {LogEstimationSettings.localization_period}; the "
+        "online contact study uses 0.01)",
+    )
+    parser.add_argument(
+        "--write-demo-log",
+        type=Path,
+        default=None,
+        metavar="PATH",
+        help="simulate hrp4_like under a known push, write its log to PATH (format by extension) and, without "
+        "--log, estimate from it",
+    )
+    args = parser.parse_args(argv)
+    if args.log is None and args.write_demo_log is None:
+        parser.error("give --log LOG (or --write-demo-log PATH to make one)")
+    return args
+
+
+def write_estimates_csv(path: Path, estimates: LogEstimates) -> Path:
+    """One row per sample: time, contact flag, test statistics, force (eq. 19), external
+    wrench, the localizer's status, link, point and force, and the internal residual."""
+    names = estimates.body_names
+    header = ["time", "contact_detected", "statistic_external", "statistic_internal"]
+    header += [f"force_{a}" for a in "xyz"]
+    header += [f"external_wrench_{a}" for a in ("mx", "my", "mz", "fx", "fy", "fz")]
+    header += ["localization_status", "contact_link"] + [f"contact_point_{a}" for a in "xyz"]
+    header += [f"localized_force_{a}" for a in "xyz"]
+    header += [f"residual_{joint}" for joint in estimates.joint_names]
+    loc = estimates.localization
+    with open(path, "w", newline="") as stream:
+        writer = csv.writer(stream)
+        writer.writerow(header)
+        for k, t in enumerate(estimates.time):
+            row = [repr(float(t)), int(estimates.contact_detected[k])]
+            row += [repr(float(x)) for x in estimates.test_statistics[k]]
+            row += [repr(float(x)) for x in estimates.force_world[k]]
+            row += [repr(float(x)) for x in estimates.external_wrench_world[k]]
+            if loc is None:
+                row += ["", ""] + [""] * 6
+            else:
+                row += [int(loc["status"][k]), names.get(int(loc["body_index"][k]), "")]
+                row += [repr(float(x)) for x in loc["point_world"][k]]
+                row += [repr(float(x)) for x in loc["force_world"][k]]
+            row += [repr(float(x)) for x in estimates.internal_residual[k]]
+            writer.writerow(row)
+    return path
+
+
+def plot_contact_forces(path: Path, estimates: LogEstimates) -> Path:
+    """The estimated contact force (eq. 19) per axis and its norm, the detected contact
+    shaded; below, the detector's test statistics."""
+    import matplotlib.pyplot as plt
+
+    t, f = estimates.time, estimates.force_world
+    fig, axes = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True)
+    ax = axes[0]
+    for i, (axis, color) in enumerate(zip("xyz", ("tab:red", "tab:green", "tab:blue"))):
+        ax.plot(t, f[:, i], color=color, lw=0.8, label=f"f_{axis}")
+    ax.plot(t, np.linalg.norm(f, axis=1), color="k", lw=1.0, label="|f|")
+    top = max(1.0, float(np.linalg.norm(f, axis=1).max()))
+    ax.fill_between(t, -top, top, where=estimates.contact_detected, color="tab:orange", alpha=0.12, step="mid")
+    ax.set_ylabel("estimated force, eq. (19) [N]")
+    ax.set_title("contact force estimated from the log (shaded: contact detected)")
+    ax.legend(fontsize=8, ncol=4)
+    ax.grid(True, alpha=0.3)
+    ax = axes[1]
+    ax.semilogy(t, np.maximum(estimates.test_statistics[:, 0], 1e-3), lw=0.8, label="s_ext (3 dof)")
+    ax.semilogy(
+        t, np.maximum(estimates.test_statistics[:, 1], 1e-3), lw=0.8, label=f"s_int ({len(estimates.joint_names)} dof)"
+    )
+    ax.set_ylabel("test statistic")
+    ax.set_xlabel("time [s]")
+    ax.legend(fontsize=8)
+    ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _run(args: argparse.Namespace) -> int:
+    folder = output_folder(args, EXPERIMENT)
+    if not args.localization_period > 0:
+        raise ValueError(f"--localization-period must be positive, got {args.localization_period}")
+    settings = LogEstimationSettings(
+        noise_calibration_time=args.calibrate_first, localization_period=args.localization_period
+    )
+    log_path = args.log
+    if args.write_demo_log is not None:
+        print("simulating hrp4_like under a known push for the demo log ...")
+        demo, online = simulate_push_log("hrp4_like", settings=settings)
+        write_log(demo, args.write_demo_log)
+        force = online.push.force_W(0.5 * (online.push_start + online.push_end))
+        print(
+            f"wrote {args.write_demo_log}: {demo.num_samples} samples, a push of {np.linalg.norm(force):.1f} N "
+            f"{np.round(force, 2).tolist()} on {online.push.body_name} from {online.push_start} s to "
+            f"{online.push_end} s"
+        )
+        if log_path is None:
+            log_path, args.robot = args.write_demo_log, "hrp4_like"
+    log = read_log(log_path, args.topics)
+    robot = build_estimator_plant(args.robot)
+    estimates = estimate_from_log(robot, log, settings)
+    contacts = estimates.contacts()
+    duration = estimates.period * len(estimates.time)
+    print(
+        f"{log_path}: {log.num_samples} samples over {duration:.3f} s at {1.0 / estimates.period:.0f} Hz, "
+        f"{len(estimates.joint_names)} joints, F/T frames {sorted(log.wrenches)}"
+        + (" (resampled to a uniform period)" if estimates.resampled else "")
+        + f"; base state: {estimates.base_state}"
+    )
+    print(
+        f"estimation: {estimates.wall_time_s:.2f} s wall for {duration:.2f} s of log: real-time factor "
+        f"{estimates.real_time_factor:.2f} (one thread)"
+    )
+    if not contacts:
+        print("no contact detected")
+    for i, contact in enumerate(contacts):
+        force = np.asarray(contact["mean_force_world_N"])
+        where = f"on {contact['link']} at {np.round(contact['point_world_m'], 3).tolist()} m" if contact["link"] else ""
+        if estimates.localization is not None and not contact["link"]:
+            where = "not localized"
+        print(
+            f"contact {i + 1}: {contact['start_s']:.3f}-{contact['end_s']:.3f} s, force {np.linalg.norm(force):.2f} N "
+            f"{np.round(force, 2).tolist()} {where}".rstrip()
+        )
+    write_estimates_csv(folder / "estimates.csv", estimates)
+    plot_contact_forces(folder / "contact_forces.png", estimates)
+    last_status = None if estimates.localization is None else int(estimates.localization["status"][-1])
+    metrics = {
+        "robot": args.robot,
+        "log": str(log_path),
+        "samples": int(log.num_samples),
+        "duration_s": duration,
+        "period_s": estimates.period,
+        "resampled": estimates.resampled,
+        "noise_model": estimates.noise_model,
+        "base_state": estimates.base_state,
+        "wall_time_s": estimates.wall_time_s,
+        "real_time_factor": estimates.real_time_factor,
+        "contacts": contacts,
+        "localization": "none (no foot F/T sensors)" if last_status is None else status_reason(last_status),
+        "settings": vars(settings),
+    }
+    write_metrics(folder, metrics)
+    meshcat = replay_meshcat(not args.no_replay, args.headless)
+    if meshcat is not None:
+        record_replay(meshcat, robot, log, estimates)
+        (folder / "replay.html").write_text(meshcat.StaticHtml())
+    print_written(folder)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parse(argv)
+    return run_app(f"apps.{EXPERIMENT}", lambda: _run(args))
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,823 @@
+"""Offline contact estimation on a recorded log (issue 14): the residuals (Flacco et al. 2016,
+eqs. 11, 16), the force estimate (eq. 19), the contact detector and, on a robot with foot
+F/T sensors, the single-contact localizer (Sec. VI, eq. 22), run on a ``RobotLog``
+(``systems.io.robot_log``) instead of in a simulation.
+
+    RobotLog ──log_inputs──► sensed [q; v], motor torques, F/T wrenches (world), plant order
+                 │
+                 ▼  replay_contact_estimation (systems.residuals.offline)
+      InternalResidual, ExternalResidual ──► ContactDetector ──► ContactLocalizer
+                 │
+                 ▼
+            LogEstimates (per sample: residuals, force, detection, link and point)
+
+The estimators are the online systems themselves, built here by ``add_online_estimators``'s
+twin ``build_offline_estimators`` with the same ``LogEstimationSettings``; the replay steps
+them sample by sample (``systems.residuals.offline``), so a log replays as the robot's
+estimators would have run on it. ``simulate_push_log`` simulates a standing humanoid under a
+known push (``diagrams.station.humanoid_station``, the ideal world with sensor noise), and
+returns its log (what the estimators read, sample by sample) and what the same estimators
+reported online: the data of the tests and of ``apps.estimate_from_log --write-demo-log``.
+
+The log's base pose and velocity are the estimators' base state. A log without them (no
+base_* columns, no nav_msgs/Odometry) but with the IMU and the foot F/T wrenches gets them
+from the contact-aided invariant EKF (``systems.estimation.base_state_estimator``, Hartley
+et al. 2020) replayed on the log as the station runs it online (``base_state``
+"invariant_ekf"): gyro, accelerometer, joint positions and contact flags from the F/T
+normal forces, starting at rest, standing on level ground.
+"""
+
+from __future__ import annotations
+
+import math
+import time as _time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from pydrake.geometry import Meshcat, MeshcatVisualizer, Rgba, SceneGraph
+from pydrake.math import RigidTransform
+from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, ZeroOrderHold
+
+from diagrams.residuals.wiring import add_internal_and_external_residuals
+from diagrams.station.humanoid_station import add_humanoid_station
+from models import HumanoidHandles, add_ground, add_humanoid, point_contact_scene_graph_config, set_standing_state
+from systems.common.topology import floating_base_topology
+from systems.estimation.base_state_estimator import (
+    LEVEL_GROUND_TILT_STD,
+    STANDING_START_ORIENTATION_STD,
+    STANDING_START_VELOCITY_STD,
+    InvariantEkfBaseStateEstimator,
+    contact_flags_from_wrenches,
+)
+from systems.io.robot_log import RobotLog, resample_uniform
+from systems.residuals.contact_estimation import STATUS_REASONS, ContactDetector, ContactLocalizer
+from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual, ResidualModel
+from systems.residuals.offline import ReplayedEstimation, replay_contact_estimation, residual_noise_model
+from systems.simulation.disturbances import Push, PushSource, Step
+from systems.simulation.visualization import ForceArrows
+
+__all__ = [
+    "EstimatorPlant",
+    "LogEstimates",
+    "LogEstimationSettings",
+    "OnlineEstimates",
+    "build_estimator_plant",
+    "estimate_from_log",
+    "log_from_signals",
+    "log_inputs",
+    "simulate_push_log",
+]
+
+
+@dataclass
+class LogEstimationSettings:
+    """The estimators' settings (those of the contact study, ``diagrams.residuals.
+    contact_localization``). SI units.
+
+    Attributes:
+        internal_gain, external_gain: the residual gains K, 1/s (eqs. 11, 16).
+        settle_time: the localizer's wait after a detection before averaging, s.
+        localization_period: s between two localizations while in contact (the averaging
+            runs every sample all the same, so a longer period only delays the estimate by
+            up to it). 0.02 s (the contact study's online localizer: 0.01 s): one
+            localization costs about four updates of the residuals (``make benchmark``),
+            and at 100 Hz it would take a quarter of the offline time in contact, below
+            issue 14's floor of 5x real time on one core.
+        detector_startup_time: no detection before this time from the log's start, s.
+        detector_release_probability: the detector's p_off.
+        noise_calibration_time: None: the detector's noise model is predicted from the
+            default sensor noise; a time T > 0: measured on the log's first T seconds,
+            which must then be free of contact (``residual_noise_model``), as for a real
+            robot whose noise exceeds the white-noise prediction.
+        uniform_tolerance: the largest relative deviation of a time step from the median
+            one that is used as is; a log whose steps deviate more is resampled to the
+            median period first (``resample_uniform``).
+        estimate_imu_bias: for a log without base state, the invariant EKF estimates the
+            IMU biases (with the level-ground correction), as on a real robot (the
+            station's realistic world); False: the bias-free filter (an ideal IMU).
+    """
+
+    internal_gain: float = 35.0
+    external_gain: float = 35.0
+    settle_time: float = 0.1
+    localization_period: float | None = 0.02
+    detector_startup_time: float = 0.1
+    detector_release_probability: float = 1e-2
+    noise_calibration_time: float | None = None
+    uniform_tolerance: float = 0.01
+    estimate_imu_bias: bool = True
+
+
+@dataclass
+class EstimatorPlant:
+    """The robot's plant for the estimators (no ground, no simulation)."""
+
+    robot: str  # the name or description it was built from (``models.add_humanoid``)
+    plant: MultibodyPlant
+    scene_graph: SceneGraph
+    humanoid: HumanoidHandles
+    ft_frames: tuple  # the F/T sensor frames, sides sorted (left, right) as the station's
+    excluded_bodies: tuple[str, ...]  # the links below the F/T sensors (never localized)
+    standing_state: np.ndarray  # [q; v] standing, the detector's nominal configuration
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """The 1-DoF joints in the plant's v[6:] order."""
+        return tuple(j.name() for j in floating_base_topology(self.plant).joints)
+
+
+def build_estimator_plant(robot: str, time_step: float = 1e-3) -> EstimatorPlant:
+    """The plant of ``robot`` (passed to ``models.add_humanoid`` unchanged: a built-in name
+    such as ``hrp4_like`` or a robot description) with its SceneGraph, finalized."""
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(
+        MultibodyPlantConfig(time_step=time_step), point_contact_scene_graph_config(), builder
+    )
+    humanoid = add_humanoid(plant, robot, scene_graph=scene_graph)
+    plant.Finalize()
+    sides = sorted(humanoid.ft_sensor_joints)
+    context = plant.CreateDefaultContext()
+    set_standing_state(plant, context, humanoid)
+    return EstimatorPlant(
+        robot=robot,
+        plant=plant,
+        scene_graph=scene_graph,
+        humanoid=humanoid,
+        ft_frames=tuple(humanoid.ft_sensor_frames[s] for s in sides),
+        excluded_bodies=tuple(humanoid.ft_sensor_joints[s].child_body().name() for s in sides),
+        standing_state=plant.GetPositionsAndVelocities(context),
+    )
+
+
+def make_detector(
+    robot: EstimatorPlant, settings: LogEstimationSettings, period: float, covariances: dict | None = None
+) -> ContactDetector:
+    """The ContactDetector of ``settings`` (``covariances``: its ``covariance_internal`` and
+    ``covariance_external_force``, default predicted from the sensor noise)."""
+    return ContactDetector(
+        robot.plant,
+        internal_gain=settings.internal_gain,
+        external_gain=settings.external_gain,
+        known_wrench_frames=robot.ft_frames,
+        nominal_positions=robot.standing_state[: robot.plant.num_positions()],
+        period=period,
+        startup_time=settings.detector_startup_time,
+        release_probability=settings.detector_release_probability,
+        **(covariances or {}),
+    )
+
+
+def make_localizer(robot: EstimatorPlant, settings: LogEstimationSettings, period: float) -> ContactLocalizer | None:
+    """The ContactLocalizer of ``settings``, the soles excluded; None without foot F/T
+    sensors (the ground reaction is then an unknown force: no single contact to isolate)."""
+    if not robot.ft_frames:
+        return None
+    return ContactLocalizer(
+        robot.plant,
+        robot.scene_graph,
+        exclude_bodies=robot.excluded_bodies,
+        period=period,
+        localization_period=settings.localization_period,
+        settle_time=settings.settle_time,
+    )
+
+
+# ---------------------------------------------------------------------------------------
+# The log in the plant's coordinates.
+# ---------------------------------------------------------------------------------------
+
+
+@dataclass
+class LogInputs:
+    """A log in the estimators' layout: per sample the sensed state [q; v] (plant order),
+    the motor torques (v[6:] order, N m) and the F/T wrenches ([moment about the sensor
+    origin; force] per frame of ``EstimatorPlant.ft_frames``, world, N m and N)."""
+
+    time: np.ndarray
+    period: float
+    state: np.ndarray
+    joint_torque: np.ndarray
+    known_wrenches: np.ndarray
+    resampled: bool
+    base_estimated: bool = False
+
+
+def _frame_rotations(plant: MultibodyPlant, frames: Sequence, q: np.ndarray) -> np.ndarray:
+    """(N, k, 3, 3) R_WS of each frame at each of the positions q (N, nq)."""
+    context = plant.CreateDefaultContext()
+    out = np.empty((q.shape[0], len(frames), 3, 3))
+    for i, qi in enumerate(q):
+        plant.SetPositions(context, qi)
+        for j, frame in enumerate(frames):
+            out[i, j] = frame.CalcPoseInWorld(context).rotation().matrix()
+    return out
+
+
+def log_inputs(
+    robot: EstimatorPlant,
+    log: RobotLog,
+    settings: LogEstimationSettings | None = None,
+    initial_base_pose: np.ndarray | None = None,
+) -> LogInputs:
+    """The log's joints mapped to the plant's q and v order, its base state (or, without
+    one, the invariant EKF's estimate: module docstring; ``initial_base_pose`` (7, Drake's
+    free-joint q) its start, default standing on level ground with the log's first joint
+    positions), and its F/T wrenches rotated from their sensor frames to the world with the
+    logged configuration. Resampled to its median period when its steps are not uniform
+    (``settings``).
+
+    Raises:
+        ValueError: a joint of the log not on the robot, a robot joint missing from the
+            log, no base pose or velocity, an F/T frame that is not the robot's, a robot
+            F/T frame missing from the log.
+    """
+    settings = settings or LogEstimationSettings()
+    plant = robot.plant
+    topology = floating_base_topology(plant)
+    joints = {j.name(): j for j in topology.joints}
+    unknown = [name for name in log.joint_names if name not in joints]
+    if unknown:
+        raise ValueError(
+            f"the log's joints {unknown} are not joints of the robot {robot.humanoid.name!r} "
+            f"(its joints: {sorted(joints)})"
+        )
+    missing = [name for name in joints if name not in log.joint_names]
+    if missing:
+        raise ValueError(f"the log has no data for the robot's joints {missing}")
+    has_imu = log.imu_angular_velocity is not None and log.imu_linear_acceleration is not None
+    if (log.base_pose is None or log.base_velocity is None) and not (has_imu and robot.ft_frames):
+        raise ValueError(
+            "the log has no base pose and velocity (columns base_*, or a nav_msgs/Odometry topic), nor the IMU and "
+            "foot F/T wrenches to estimate them: the residuals need the floating base's state"
+        )
+    ft_names = [f.name() for f in robot.ft_frames]
+    foreign = [name for name in log.wrenches if name not in ft_names]
+    if foreign:
+        raise ValueError(f"the log's wrenches {foreign} are not F/T frames of the robot (its F/T frames: {ft_names})")
+    absent = [name for name in ft_names if name not in log.wrenches]
+    if absent:
+        raise ValueError(f"the log has no wrench for the robot's F/T frames {absent}")
+    steps = np.diff(log.time)
+    period = float(np.median(steps))
+    resampled = bool(np.max(np.abs(steps - period)) > settings.uniform_tolerance * period)
+    if resampled:
+        log = resample_uniform(log, period)
+    N, nq, nv = log.num_samples, plant.num_positions(), plant.num_velocities()
+    state = np.zeros((N, nq + nv))
+    q0, v0 = topology.free_joint.position_start(), topology.free_joint.velocity_start()
+    column = {name: i for i, name in enumerate(log.joint_names)}
+    order = np.array([column[j.name()] for j in topology.joints])
+    state[:, [j.position_start() for j in topology.joints]] = log.joint_positions[:, order]
+    state[:, [nq + j.velocity_start() for j in topology.joints]] = log.joint_velocities[:, order]
+    base_estimated = log.base_pose is None or log.base_velocity is None
+    if base_estimated:
+        _estimate_base_state(robot, log, state, period, settings, initial_base_pose)
+    else:
+        state[:, q0 : q0 + 7] = log.base_pose
+        state[:, nq + v0 : nq + v0 + 6] = log.base_velocity
+    wrenches = np.zeros((N, 6 * len(ft_names)))
+    if ft_names:
+        R_WS = _frame_rotations(plant, robot.ft_frames, state[:, :nq])
+        for j, name in enumerate(ft_names):
+            w = log.wrenches[name].reshape(N, 2, 3)
+            wrenches[:, 6 * j : 6 * j + 6] = np.einsum("nij,nkj->nki", R_WS[:, j], w).reshape(N, 6)
+    return LogInputs(
+        time=log.time,
+        period=period,
+        state=state,
+        joint_torque=log.joint_torques[:, order],
+        known_wrenches=wrenches,
+        resampled=resampled,
+        base_estimated=base_estimated,
+    )
+
+
+def standing_base_pose(robot: EstimatorPlant, q: np.ndarray) -> np.ndarray:
+    """Drake's free-joint q (7) of the robot at the positions ``q`` standing on level
+    ground: the left sole level, the soles' midpoint at the world origin
+    (``models.set_standing_state``'s pose, for any joint positions)."""
+    plant = robot.plant
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, q)
+    base = robot.humanoid.base_body
+    plant.SetFreeBodyPose(context, base, RigidTransform())
+    X_BL = robot.humanoid.sole_frames["left"].CalcPose(context, base.body_frame())
+    X_BR = robot.humanoid.sole_frames["right"].CalcPose(context, base.body_frame())
+    R_WB = X_BL.rotation().inverse()
+    plant.SetFreeBodyPose(
+        context, base, RigidTransform(R_WB, -R_WB.multiply(0.5 * (X_BL.translation() + X_BR.translation())))
+    )
+    free = floating_base_topology(plant).free_joint.position_start()
+    return plant.GetPositions(context)[free : free + 7].copy()
+
+
+def _estimate_base_state(
+    robot: EstimatorPlant,
+    log: RobotLog,
+    state: np.ndarray,
+    period: float,
+    settings: LogEstimationSettings,
+    initial_base_pose: np.ndarray | None,
+) -> None:
+    """Fills the base part of ``state`` (whose joint part is filled) with the invariant
+    EKF's estimate, replayed as the station runs it: at update k the residuals read the
+    filter's output of update k - 1 (the initial state at k = 0), the F/T sensors express
+    their wrenches in the world with that sensed state, and the filter then reads sample
+    k's gyro, accelerometer, joint positions and contact flags (F/T normal force)."""
+    plant = robot.plant
+    topology = floating_base_topology(plant)
+    nq = plant.num_positions()
+    q0, v0 = topology.free_joint.position_start(), topology.free_joint.velocity_start()
+    joints_q = [j.position_start() for j in topology.joints]
+    sides = sorted(robot.humanoid.ft_sensor_joints)
+    if initial_base_pose is None:
+        initial_base_pose = standing_base_pose(robot, np.concatenate(([1.0, 0, 0, 0, 0, 0, 0], state[0, 7:nq])))
+    estimator = InvariantEkfBaseStateEstimator(
+        plant,
+        robot.humanoid.imu_frame,
+        [robot.humanoid.sole_frames[side] for side in sides],
+        initial_base_pose=initial_base_pose,
+        initial_base_velocity=np.zeros(6),
+        period=period,
+        initial_orientation_std=STANDING_START_ORIENTATION_STD,
+        initial_velocity_std=STANDING_START_VELOCITY_STD,
+        estimate_imu_bias=settings.estimate_imu_bias,
+        level_ground_tilt_std=LEVEL_GROUND_TILT_STD if settings.estimate_imu_bias else None,
+    )
+    context = estimator.CreateDefaultContext()
+    estimator.SetInitialBaseState(context, initial_base_pose, np.zeros(6))
+    ports = [estimator.GetInputPort(name) for name in ("angular_velocity", "linear_acceleration", "joint_positions")]
+    contact_port = estimator.GetInputPort("foot_contact")
+    pose_port, velocity_port = estimator.GetOutputPort("base_pose"), estimator.GetOutputPort("base_velocity")
+    plant_context = plant.CreateDefaultContext()
+    names = [frame.name() for frame in robot.ft_frames]
+    for k in range(state.shape[0]):
+        state[k, q0 : q0 + 7] = pose_port.Eval(context)
+        state[k, nq + v0 : nq + v0 + 6] = velocity_port.Eval(context)
+        plant.SetPositions(plant_context, state[k, :nq])
+        wrenches_W = [
+            frame.CalcPoseInWorld(plant_context).rotation().matrix() @ log.wrenches[name][k].reshape(2, 3).T
+            for frame, name in zip(robot.ft_frames, names)
+        ]
+        flags = contact_flags_from_wrenches(np.concatenate([w.T.reshape(6) for w in wrenches_W]))
+        for port, value in zip(
+            ports, (log.imu_angular_velocity[k], log.imu_linear_acceleration[k], state[k, joints_q])
+        ):
+            port.FixValue(context, value)
+        contact_port.FixValue(context, flags)
+        context.SetTime(k * period)
+        context.SetDiscreteState(estimator.EvalUniquePeriodicDiscreteUpdate(context))
+
+
+# ---------------------------------------------------------------------------------------
+# Offline estimation.
+# ---------------------------------------------------------------------------------------
+
+
+@dataclass
+class LogEstimates:
+    """What ``estimate_from_log`` found, per log sample (N) unless said otherwise.
+
+    Attributes:
+        time: s, from the log's first sample.
+        joint_names: the plant's joints in v[6:] order (the residual's columns).
+        internal_residual: (N, n) eq. (11), N m.
+        external_wrench_world: (N, 6) eq. (16) in world, [moment about the world origin;
+            force], N m and N.
+        force_world: (N, 3) the single contact's force, eq. (19), N (the external
+            residual's force).
+        contact_detected: (N,) bool. test_statistics: (N, 2) [s_ext, s_int].
+        localization: the localizer's outputs, or None (a robot without F/T feet):
+            ``status`` (N,) int (``STATUS_REASONS``), ``body_index`` (N,), ``point_world``
+            (N, 3) m, ``force_world`` (N, 3) N, the averaged estimate (eq. 19).
+        body_names: {body index: name} of the plant.
+        period: s. resampled: whether the log was resampled to a uniform period.
+        noise_model: the detector's (predicted, or calibrated on the log's start).
+        base_state: "logged", or the invariant EKF's estimate (a log without base state).
+        wall_time_s: the replay's wall time; real_time_factor = log duration / it.
+    """
+
+    time: np.ndarray
+    joint_names: tuple[str, ...]
+    internal_residual: np.ndarray
+    external_wrench_world: np.ndarray
+    force_world: np.ndarray
+    contact_detected: np.ndarray
+    test_statistics: np.ndarray
+    localization: dict | None
+    body_names: dict
+    period: float
+    resampled: bool
+    wall_time_s: float
+    noise_model: str = "predicted"
+    base_state: str = "logged"
+
+    @property
+    def real_time_factor(self) -> float:
+        duration = self.period * len(self.time)
+        return duration / self.wall_time_s if self.wall_time_s > 0 else math.inf
+
+    def contacts(self) -> list[dict]:
+        """One dict per detected contact interval: ``start``, ``end`` (s), the mean force
+        (eq. 19) over its second half (N), and the last valid localization in it (link,
+        point), if any."""
+        out = []
+        flags = np.concatenate(([False], self.contact_detected, [False]))
+        starts = np.flatnonzero(~flags[:-1] & flags[1:])
+        ends = np.flatnonzero(flags[:-1] & ~flags[1:])
+        for a, b in zip(starts, ends):
+            half = slice(a + (b - a) // 2, b)
+            item = {
+                "start_s": float(self.time[a]),
+                "end_s": float(self.time[b - 1]),
+                "mean_force_world_N": self.force_world[half].mean(axis=0).tolist(),
+                "link": None,
+                "point_world_m": None,
+            }
+            if self.localization is not None:
+                valid = np.flatnonzero(self.localization["status"][a:b] == 0)
+                if valid.size:
+                    k = a + int(valid[-1])
+                    item["link"] = self.body_names[int(self.localization["body_index"][k])]
+                    item["point_world_m"] = self.localization["point_world"][k].tolist()
+                    item["localized_force_world_N"] = self.localization["force_world"][k].tolist()
+            out.append(item)
+        return out
+
+
+def build_offline_estimators(
+    robot: EstimatorPlant, settings: LogEstimationSettings, period: float
+) -> tuple[ResidualModel, InternalResidual, ExternalResidual]:
+    """The residual systems of ``settings`` on one shared ``ResidualModel``, as
+    ``diagrams.residuals.wiring`` builds them online."""
+    model = ResidualModel(robot.plant)
+    frames = robot.ft_frames
+    internal = InternalResidual(robot.plant, settings.internal_gain, period, frames, model=model)
+    external = ExternalResidual(robot.plant, settings.external_gain, period, frames, model=model)
+    return model, internal, external
+
+
+def estimate_from_log(
+    robot: str | EstimatorPlant,
+    log: RobotLog,
+    settings: LogEstimationSettings | None = None,
+    initial_base_pose: np.ndarray | None = None,
+) -> LogEstimates:
+    """Runs the residuals, the force estimate (eq. 19), the detector and (with foot F/T
+    sensors) the localizer on ``log`` (see the module docstring).
+
+    Raises:
+        ValueError: see ``log_inputs``; a noise calibration window with fewer than 100
+            samples or longer than the log.
+    """
+    settings = settings or LogEstimationSettings()
+    robot = robot if isinstance(robot, EstimatorPlant) else build_estimator_plant(robot)
+    start = _time.perf_counter()
+    inputs = log_inputs(robot, log, settings, initial_base_pose)
+    period = inputs.period
+    _, internal, external = build_offline_estimators(robot, settings, period)
+
+    def detector_for(internal_residual: np.ndarray, external_wrench: np.ndarray) -> ContactDetector:
+        covariances = None
+        if settings.noise_calibration_time is not None:
+            samples = int(round(settings.noise_calibration_time / period))
+            if samples > len(inputs.time):
+                raise ValueError(
+                    f"noise_calibration_time {settings.noise_calibration_time} s is longer than the log "
+                    f"({len(inputs.time) * period:.3f} s)"
+                )
+            skip = min(int(round(settings.detector_startup_time / period)), samples // 2)
+            noise = residual_noise_model(
+                internal_residual[:samples],
+                external_wrench[:samples],
+                internal_gain=settings.internal_gain,
+                external_gain=settings.external_gain,
+                period=period,
+                skip=skip,
+            )
+            covariances = {
+                "covariance_internal": noise.covariance_internal,
+                "covariance_external_force": noise.covariance_external_force,
+            }
+        return make_detector(robot, settings, period, covariances)
+
+    replay = replay_contact_estimation(
+        internal,
+        external,
+        detector_for,
+        make_localizer(robot, settings, period),
+        inputs.state,
+        inputs.joint_torque,
+        inputs.known_wrenches,
+    )
+    wall = _time.perf_counter() - start
+    return _estimates(robot, inputs, replay, wall, settings)
+
+
+def _estimates(
+    robot: EstimatorPlant, inputs: LogInputs, replay: ReplayedEstimation, wall: float, settings
+) -> LogEstimates:
+    plant = robot.plant
+    localization = None
+    if replay.localization is not None:
+        localization = dict(replay.localization)
+        localization["status"] = localization["status"].astype(int)
+        localization["body_index"] = localization["body_index"].astype(int)
+    return LogEstimates(
+        time=inputs.time - inputs.time[0],
+        joint_names=robot.joint_names,
+        internal_residual=replay.internal,
+        external_wrench_world=replay.external_wrench_world,
+        force_world=replay.external_wrench_world[:, 3:].copy(),
+        contact_detected=replay.contact_detected,
+        test_statistics=replay.test_statistics,
+        localization=localization,
+        body_names={
+            int(b.index()): b.name()
+            for b in (plant.get_body(i) for i in plant.GetBodyIndices(robot.humanoid.model_instance))
+        }
+        | {-1: ""},
+        period=inputs.period,
+        resampled=inputs.resampled,
+        wall_time_s=wall,
+        noise_model="predicted" if settings.noise_calibration_time is None else "calibrated on the log's start",
+        base_state="invariant EKF (IMU, joints, F/T contact)" if inputs.base_estimated else "logged",
+    )
+
+
+# ---------------------------------------------------------------------------------------
+# A simulated log with a known push.
+# ---------------------------------------------------------------------------------------
+
+
+@dataclass
+class OnlineEstimates:
+    """What the estimators reported in the simulation, per log sample: the internal
+    residual (N, n), the external wrench (N, 6), the detector's flag (N,) and, per sample,
+    the localizer's status, body, point (N, 3) and force (N, 3); and the push's truth."""
+
+    internal_residual: np.ndarray
+    external_wrench_world: np.ndarray
+    contact_detected: np.ndarray
+    status: np.ndarray
+    body_index: np.ndarray
+    point_world: np.ndarray
+    force_world: np.ndarray
+    push: Push
+    push_start: float
+    push_end: float
+    extra: dict = field(default_factory=dict)
+
+
+#: The demo log's push: 28 N on the outside of the right upper arm's collision surface
+#: (a contact of the contact study's sampler, ``sample_trials("hrp4_like", 12, 7)[5]``), in
+#: the link frame, m, and in world, N.
+DEMO_PUSH_BODY, DEMO_PUSH_POINT, DEMO_PUSH_FORCE = "R_SHOULDER_Y_LINK", (-0.0387, 0.0099, -0.1225), (17.5, -22.1, -0.4)
+
+
+def simulate_push_log(
+    robot: str = "hrp4_like",
+    *,
+    duration: float = 1.5,
+    push_body: str = DEMO_PUSH_BODY,
+    push_point: Sequence[float] = DEMO_PUSH_POINT,
+    push_force: Sequence[float] = DEMO_PUSH_FORCE,
+    push_start: float = 0.5,
+    push_end: float = 1.5,
+    noise: bool = True,
+    seed: int = 0,
+    base_state: str = "truth_plus_noise",
+    settings: LogEstimationSettings | None = None,
+) -> tuple[RobotLog, OnlineEstimates]:
+    """Simulates ``robot`` standing (ideal world: the default sensor noise, the sensed base
+    state from ``base_state``, ``diagrams.station.humanoid_station.BASE_STATE_SOURCES``)
+    under a constant push ``push_force`` (N, world) at ``push_point``
+    (m, in ``push_body``'s frame) for push_start <= t < push_end, with the estimators of
+    ``settings`` running online, and returns the log (every 1 ms: the sensed joint and base
+    state, motor torques, F/T wrenches in their sensor frames, IMU) and what the estimators
+    reported. Each logged sample is what the estimators read at that update (sample-and-
+    holds on their inputs), so the log replays them exactly.
+
+    Raises:
+        ValueError: a zero force or a bad body (see ``Push``); a robot without F/T feet.
+    """
+    settings = settings or LogEstimationSettings()
+    force = np.asarray(push_force, dtype=float)
+    magnitude = float(np.linalg.norm(force))
+    if magnitude == 0.0:
+        raise ValueError("simulate_push_log: push_force must be non-zero")
+    push = Push(
+        push_body, np.asarray(push_point, dtype=float), force / magnitude, Step(magnitude, push_start, push_end)
+    )
+    builder = DiagramBuilder()
+    station = add_humanoid_station(builder, robot, noise=noise, seed=seed, base_state=base_state)
+    if not station.known_wrench_frames:
+        raise ValueError(f"simulate_push_log: {robot!r} has no foot F/T sensors")
+    plant = station.plant
+    period = plant.time_step()
+    posture = builder.AddSystem(ConstantVectorSource(station.q_hold))
+    builder.Connect(posture.get_output_port(), station.desired_position)
+    source = builder.AddSystem(PushSource(plant, [push]))
+    builder.Connect(source.GetOutputPort("applied_spatial_forces"), plant.get_applied_spatial_force_input_port())
+    builder.Connect(plant.get_state_output_port(), source.GetInputPort("state"))
+    internal, external = add_internal_and_external_residuals(
+        builder, station, settings.internal_gain, settings.external_gain, period
+    )
+    sides = sorted(station.humanoid.ft_sensor_joints)
+    robot_view = EstimatorPlant(
+        robot=robot,
+        plant=plant,
+        scene_graph=station.scene_graph,
+        humanoid=station.humanoid,
+        ft_frames=tuple(station.known_wrench_frames),
+        excluded_bodies=tuple(station.humanoid.ft_sensor_joints[s].child_body().name() for s in sides),
+        standing_state=station.initial_state,
+    )
+    detector = builder.AddSystem(make_detector(robot_view, settings, period))
+    localizer = builder.AddSystem(make_localizer(robot_view, settings, period))
+    builder.Connect(external.GetOutputPort("external_wrench_world"), detector.GetInputPort("external_wrench_world"))
+    builder.Connect(internal.GetOutputPort("residual"), detector.GetInputPort("residual"))
+    builder.Connect(station.sensed_state, localizer.GetInputPort("state"))
+    builder.Connect(external.GetOutputPort("external_wrench_world"), localizer.GetInputPort("external_wrench_world"))
+    builder.Connect(internal.GetOutputPort("residual"), localizer.GetInputPort("residual"))
+    builder.Connect(detector.GetOutputPort("contact_detected"), localizer.GetInputPort("contact_detected"))
+    sensors = station.sensors
+    # Sample-and-holds: their output after the update at t_k is what the estimators read then.
+    held = {
+        "state": station.sensed_state,
+        "torque": station.measured_torque,
+        "wrenches": station.known_wrenches,
+        "gyro": sensors.imu.angular_velocity,
+        "accel": sensors.imu.linear_acceleration,
+    }
+    loggers = {}
+    for name, port in held.items():
+        hold = builder.AddSystem(ZeroOrderHold(period, port.size()))
+        hold.set_name(f"log_hold_{name}")
+        builder.Connect(port, hold.get_input_port())
+        loggers[name] = LogVectorOutput(hold.get_output_port(), builder, period)
+    outputs = {
+        "internal": internal.GetOutputPort("residual"),
+        "external": external.GetOutputPort("external_wrench_world"),
+        "detected": detector.GetOutputPort("contact_detected"),
+        "status": localizer.GetOutputPort("status"),
+        "body": localizer.GetOutputPort("contact_body"),
+        "point": localizer.GetOutputPort("contact_point_world"),
+        "force": localizer.GetOutputPort("contact_force_world"),
+    }
+    for name, port in outputs.items():
+        loggers[name] = LogVectorOutput(port, builder, period)
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    station.set_initial_state(context)
+    for name in held:
+        hold = diagram.GetSubsystemByName(f"log_hold_{name}")
+        hold.GetMyMutableContextFromRoot(context).SetDiscreteState(np.zeros(hold.get_output_port().size()))
+    simulator.Initialize()
+    simulator.AdvanceTo(duration)
+    data = {name: logger.FindLog(context).data().T.copy() for name, logger in loggers.items()}
+    times = loggers["state"].FindLog(context).sample_times()
+    # The first logged sample precedes the first update (the holds' initial zeros): drop it.
+    first = int(np.searchsorted(times, period * 0.5))
+    data = {name: values[first:] for name, values in data.items()}
+    times = times[first:] - times[first]
+    log = log_from_signals(
+        robot_view, times, data["state"], data["torque"], data["wrenches"], data["gyro"], data["accel"]
+    )
+    online = OnlineEstimates(
+        internal_residual=data["internal"],
+        external_wrench_world=data["external"],
+        contact_detected=data["detected"][:, 0] > 0.5,
+        status=data["status"][:, 0].astype(int),
+        body_index=data["body"][:, 0].astype(int),
+        point_world=data["point"],
+        force_world=data["force"],
+        push=push,
+        push_start=push_start,
+        push_end=push_end,
+    )
+    return log, online
+
+
+def log_from_signals(
+    robot: EstimatorPlant,
+    time: np.ndarray,
+    state: np.ndarray,
+    joint_torque: np.ndarray,
+    known_wrenches: np.ndarray,
+    gyro: np.ndarray | None = None,
+    accel: np.ndarray | None = None,
+) -> RobotLog:
+    """The ``RobotLog`` of the estimators' inputs in the plant's layout (the inverse of
+    ``log_inputs``): the sensed state (N, nq + nv), the motor torques (N, n), the F/T
+    wrenches in world (N, 6 k, ``robot.ft_frames`` order; rotated to their sensor frames
+    with the sensed configuration) and the IMU (N, 3 each, IMU frame)."""
+    plant = robot.plant
+    topology = floating_base_topology(plant)
+    nq = plant.num_positions()
+    q0, v0 = topology.free_joint.position_start(), topology.free_joint.velocity_start()
+    N = state.shape[0]
+    wrenches = {}
+    if robot.ft_frames:
+        R_WS = _frame_rotations(plant, robot.ft_frames, state[:, :nq])
+        for j, frame in enumerate(robot.ft_frames):
+            w_W = known_wrenches[:, 6 * j : 6 * j + 6].reshape(N, 2, 3)
+            wrenches[frame.name()] = np.einsum("nji,nkj->nki", R_WS[:, j], w_W).reshape(N, 6)
+    return RobotLog(
+        time=time,
+        joint_names=tuple(j.name() for j in topology.joints),
+        joint_positions=state[:, [j.position_start() for j in topology.joints]],
+        joint_velocities=state[:, [nq + j.velocity_start() for j in topology.joints]],
+        joint_torques=joint_torque,
+        base_pose=state[:, q0 : q0 + 7],
+        base_velocity=state[:, nq + v0 : nq + v0 + 6],
+        wrenches=wrenches,
+        imu_angular_velocity=gyro,
+        imu_linear_acceleration=accel,
+    )
+
+
+#: The replay's arrow of the estimated contact force (red, as the contact study's estimate).
+ESTIMATE_ARROW = {"path": "estimated_force", "rgba": Rgba(0.85, 0.0, 0.0, 1.0), "min_force": 0.5, "shaft_radius": 0.006}
+
+
+def record_replay(
+    meshcat: Meshcat,
+    robot: str | EstimatorPlant,
+    log: RobotLog,
+    estimates: LogEstimates,
+    *,
+    frames_per_second: float = 32.0,
+) -> None:
+    """Records into ``meshcat`` (then published: ``meshcat.StaticHtml()`` is the replay) the
+    robot moving through the log's configurations, on the ground, with an arrow for the
+    estimated contact force (eq. 19) ending at the localized point while the localization
+    is valid (at the external residual's line-of-action point nearest the base, eq. 22,
+    while a contact is detected but not localized; no arrow without contact).
+
+    Raises:
+        ValueError: ``estimates`` of another length than the log (see ``log_inputs``).
+    """
+    estimator = robot if isinstance(robot, EstimatorPlant) else build_estimator_plant(robot)
+    inputs = log_inputs(estimator, log)
+    if inputs.state.shape[0] != len(estimates.time):
+        raise ValueError(f"record_replay: {len(estimates.time)} estimates for a log of {inputs.state.shape[0]} samples")
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(
+        MultibodyPlantConfig(time_step=0.0), point_contact_scene_graph_config(), builder
+    )
+    add_humanoid(plant, estimator.robot, scene_graph=scene_graph)
+    add_ground(plant)
+    plant.Finalize()
+    MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)
+    arrows = builder.AddSystem(ForceArrows(meshcat, 1, **ESTIMATE_ARROW))
+    builder.ExportInput(arrows.get_force_world_input_port(), "force_world")
+    builder.ExportInput(arrows.get_point_world_input_port(), "point_world")
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    plant_context = plant.GetMyMutableContextFromRoot(context)
+    force_port, point_port = diagram.GetInputPort("force_world"), diagram.GetInputPort("point_world")
+    nq = plant.num_positions()
+    meshcat.Delete()
+    meshcat.DeleteRecording()
+    meshcat.StartRecording(frames_per_second=frames_per_second, set_visualizations_while_recording=False)
+    force_port.FixValue(context, np.zeros(3))
+    point_port.FixValue(context, np.zeros(3))
+    diagram.ExecuteInitializationEvents(context)
+    times = estimates.time
+    frame_times = np.arange(0.0, times[-1] + 1e-9, 1.0 / frames_per_second)
+    for t in frame_times:
+        k = min(int(np.searchsorted(times, t - 1e-9)), len(times) - 1)
+        force, point = np.zeros(3), np.zeros(3)
+        if estimates.contact_detected[k]:
+            force = estimates.force_world[k]
+            valid = estimates.localization is not None and estimates.localization["status"][k] == 0
+            if valid:
+                point = estimates.localization["point_world"][k]
+                force = estimates.localization["force_world"][k]
+            else:
+                m, f = estimates.external_wrench_world[k, :3], force
+                f2 = float(f @ f)
+                base = inputs.state[k, 4:7]
+                p0 = np.cross(f, m) / f2 if f2 > 0 else base  # eq. (22): the line of action
+                point = p0 + (f @ (base - p0)) / f2 * f if f2 > 0 else base
+        context.SetTime(float(t))
+        plant.SetPositions(plant_context, inputs.state[k, :nq])
+        force_port.FixValue(context, force)
+        point_port.FixValue(context, point)
+        diagram.ForcedPublish(context)
+    meshcat.StopRecording()
+    meshcat.PublishRecording()
+
+
+def status_reason(status: int) -> str:
+    """The localizer's status code in words."""
+    return STATUS_REASONS.get(int(status), f"unknown status {status}")
+
+
+__all__ += ["DEMO_PUSH_BODY", "record_replay", "status_reason"]

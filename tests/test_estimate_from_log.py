@@ -1,0 +1,250 @@
+"""Offline estimation from a log (issue 14): a simulated known push on hrp4_like, logged,
+written in every format, read back and estimated offline; the offline replay equals what the
+same estimators reported in the simulation; the app end to end."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from diagrams.residuals.log_estimation import (
+    LogEstimationSettings,
+    build_estimator_plant,
+    estimate_from_log,
+    log_inputs,
+    simulate_push_log,
+)
+from systems.io.robot_log import LOG_FORMATS, RobotLog, read_log, write_log
+from systems.residuals.contact_estimation import VALID
+from systems.simulation.visualization import read_static_html
+
+FORMATS = {"csv": "push.csv", "parquet": "push.parquet", "mcap": "push.mcap", "ros1": "push.bag", "ros2": "push_ros2"}
+
+
+@pytest.fixture(scope="module")
+def simulated():
+    """hrp4_like standing 1.5 s, pushed with 28 N on the right upper arm from 0.5 s: the log
+    and what the estimators reported online."""
+    return simulate_push_log("hrp4_like", duration=1.5)
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return build_estimator_plant("hrp4_like")
+
+
+def recovered_push(estimates, online) -> tuple[np.ndarray, str, np.ndarray]:
+    """(mean force of eq. 19 over the push's second half, N; the last valid localization's
+    link and force) of the one detected contact."""
+    contacts = estimates.contacts()
+    assert len(contacts) == 1, contacts
+    contact = contacts[0]
+    assert online.push_start <= contact["start_s"] < online.push_start + 0.02  # detected within 20 ms
+    return np.asarray(contact["mean_force_world_N"]), contact["link"], np.asarray(contact["localized_force_world_N"])
+
+
+def test_offline_replay_equals_the_online_estimators(simulated, robot):
+    log, online = simulated
+    estimates = estimate_from_log(robot, log)
+    scale_int = np.abs(online.internal_residual).max()
+    scale_ext = np.abs(online.external_wrench_world).max()
+    np.testing.assert_allclose(estimates.internal_residual, online.internal_residual, rtol=0, atol=1e-10 * scale_int)
+    np.testing.assert_allclose(
+        estimates.external_wrench_world, online.external_wrench_world, rtol=0, atol=1e-10 * scale_ext
+    )
+    np.testing.assert_array_equal(estimates.contact_detected, online.contact_detected)
+    loc = estimates.localization
+    np.testing.assert_array_equal(loc["status"], online.status)
+    np.testing.assert_array_equal(loc["body_index"], online.body_index)
+    np.testing.assert_allclose(loc["point_world"], online.point_world, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(loc["force_world"], online.force_world, rtol=0, atol=1e-9)
+    # Not vacuous: a contact was found and localized online.
+    assert online.contact_detected.any() and (online.status == VALID).any()
+    # One sample of shift breaks the equality (the test sees the timing).
+    assert np.abs(estimates.internal_residual[1:] - online.internal_residual[:-1]).max() > 1e3 * 1e-10 * scale_int
+
+
+def test_stacked_residuals_equal_the_systems_own_updates(simulated, robot):
+    """The whole-log residuals of ``replay_contact_estimation`` (eq. 9's elimination, the
+    momenta and rates stacked over the samples) equal ``replay_residuals``, which runs the
+    systems' own ``advance`` sample by sample; the detector's stacked test statistics equal
+    its per-sample ones."""
+    from diagrams.residuals.log_estimation import build_offline_estimators, make_detector
+    from systems.residuals.offline import _stacked_residuals, replay_residuals
+
+    log, _ = simulated
+    inputs = log_inputs(robot, log)
+    _, internal, external = build_offline_estimators(robot, LogEstimationSettings(), inputs.period)
+    stacked = _stacked_residuals(
+        internal, external, inputs.state, inputs.joint_torque, inputs.known_wrenches, chunk=400
+    )
+    one_by_one = replay_residuals(
+        robot.plant,
+        internal.model,
+        robot.ft_frames,
+        inputs.state,
+        inputs.joint_torque,
+        inputs.known_wrenches,
+        internal_gain=35.0,
+        external_gain=35.0,
+        period=inputs.period,
+    )
+    for a, b in (
+        (stacked.internal, one_by_one.internal),
+        (stacked.external_wrench_world, one_by_one.external_wrench_world),
+    ):
+        assert np.abs(b).max() > 1.0
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-11 * np.abs(b).max())
+    detector = make_detector(robot, LogEstimationSettings(), inputs.period)
+    rows = [0, 400, 900, 1400]
+    expected = [detector.statistics(one_by_one.external_wrench_world[k], one_by_one.internal[k]) for k in rows]
+    got = detector.statistics_of_samples(one_by_one.external_wrench_world[rows], one_by_one.internal[rows])
+    np.testing.assert_allclose(got, expected, rtol=1e-12)
+
+
+@pytest.mark.parametrize("kind", LOG_FORMATS)
+def test_push_recovered_through_each_format(simulated, robot, tmp_path: Path, kind: str):
+    log, online = simulated
+    back = read_log(write_log(log, tmp_path / FORMATS[kind]))
+    estimates = estimate_from_log(robot, back)
+    force, link, localized = recovered_push(estimates, online)
+    true = online.push.force_W(1.0)
+    assert np.linalg.norm(force - true) <= 0.05 * np.linalg.norm(true), (force, true)
+    assert np.linalg.norm(localized - true) <= 0.05 * np.linalg.norm(true), (localized, true)
+    assert link == online.push.body_name
+
+
+def test_log_without_base_state_gets_the_invariant_ekf(robot):
+    """A log without base pose and velocity: the invariant EKF replayed on its IMU, joint
+    positions and F/T contact reproduces the station's online filter (base_state
+    "invariant_ekf"), hence the same residuals; with its default settings (IMU biases
+    estimated, start standing on level ground from the log's joints) it still recovers
+    the push."""
+    log, online = simulate_push_log("hrp4_like", duration=1.0, base_state="invariant_ekf")
+    no_base = replace(log, base_pose=None, base_velocity=None)
+    station_like = LogEstimationSettings(estimate_imu_bias=False)  # the ideal IMU: the bias-free filter
+    inputs = log_inputs(robot, no_base, station_like, initial_base_pose=robot.standing_state[:7])
+    assert inputs.base_estimated
+    np.testing.assert_allclose(inputs.state[:, :7], log.base_pose, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(inputs.state[:, 41:47], log.base_velocity, rtol=0, atol=1e-12)
+    assert np.abs(inputs.state[1:, :7] - log.base_pose[:-1]).max() > 1e-6  # the timing matters
+    estimates = estimate_from_log(robot, no_base, station_like, initial_base_pose=robot.standing_state[:7])
+    np.testing.assert_allclose(estimates.internal_residual, online.internal_residual, rtol=0, atol=1e-10)
+    default = estimate_from_log(robot, no_base)
+    assert default.base_state.startswith("invariant EKF")
+    force, link, _ = recovered_push(default, online)
+    true = online.push.force_W(0.75)
+    assert np.linalg.norm(force - true) <= 0.05 * np.linalg.norm(true) and link == online.push.body_name
+    without_imu = replace(no_base, imu_angular_velocity=None, imu_linear_acceleration=None)
+    with pytest.raises(ValueError, match="no base pose and velocity .* nor the IMU and foot F/T wrenches"):
+        log_inputs(robot, without_imu)
+
+
+def test_log_inputs_errors(simulated, robot):
+    log, _ = simulated
+    short = log.select(slice(0, 20))
+    renamed = replace(short, joint_names=("R_KNEE",) + short.joint_names[1:])
+    with pytest.raises(ValueError, match=r"the log's joints \['R_KNEE'\] are not joints of the robot"):
+        log_inputs(robot, renamed)
+    fewer = replace(
+        short,
+        joint_names=short.joint_names[1:],
+        joint_positions=short.joint_positions[:, 1:],
+        joint_velocities=short.joint_velocities[:, 1:],
+        joint_torques=short.joint_torques[:, 1:],
+    )
+    with pytest.raises(ValueError, match=rf"no data for the robot's joints \['{short.joint_names[0]}'\]"):
+        log_inputs(robot, fewer)
+    with pytest.raises(ValueError, match="no base pose and velocity"):
+        log_inputs(robot, replace(short, base_pose=None, base_velocity=None, imu_angular_velocity=None))
+    wrenches = dict(short.wrenches)
+    wrenches["l_foot"] = wrenches.pop("L_FT_SENSOR_child")
+    wrong_frame = replace(short, wrenches=wrenches)
+    with pytest.raises(ValueError, match=r"wrenches \['l_foot'\] are not F/T frames of the robot"):
+        log_inputs(robot, wrong_frame)
+
+
+def test_jittered_log_is_resampled(simulated, robot):
+    log, _ = simulated
+    short = log.select(slice(0, 300))
+    jittered = short.select(slice(None))
+    jittered.time = short.time + np.where(np.arange(300) % 3 == 1, 3e-4, 0.0)
+    inputs = log_inputs(robot, jittered)
+    assert inputs.resampled and inputs.period == pytest.approx(1e-3)
+    assert not log_inputs(robot, short).resampled
+
+
+def test_noise_calibrated_on_the_log_start(simulated, robot):
+    log, online = simulated
+    estimates = estimate_from_log(robot, log, LogEstimationSettings(noise_calibration_time=0.45))
+    assert estimates.noise_model != "predicted"
+    force, link, _ = recovered_push(estimates, online)
+    assert link == online.push.body_name
+    with pytest.raises(ValueError, match="longer than the log"):
+        estimate_from_log(robot, log.select(slice(0, 200)), LogEstimationSettings(noise_calibration_time=0.45))
+
+
+def test_robot_without_ft_feet_has_no_localization():
+    """nao_like (FSR feet, no F/T): the residuals and the detector run, no localizer."""
+    nao = build_estimator_plant("nao_like")
+    nq = nao.plant.num_positions()
+    state = nao.standing_state
+    samples = 200
+    from systems.common.topology import floating_base_topology
+
+    joints = floating_base_topology(nao.plant).joints
+    q = np.tile([state[j.position_start()] for j in joints], (samples, 1))
+    log = RobotLog(
+        time=1e-3 * np.arange(samples),
+        joint_names=tuple(j.name() for j in joints),
+        joint_positions=q,
+        joint_velocities=np.zeros_like(q),
+        joint_torques=np.zeros_like(q),
+        base_pose=np.tile(state[:7], (samples, 1)),
+        base_velocity=np.zeros((samples, 6)),
+    )
+    estimates = estimate_from_log(nao, log)
+    assert estimates.localization is None
+    assert estimates.internal_residual.shape == (samples, len(joints))
+    assert nq == 7 + len(joints)
+    # Without motor torques the internal residual carries the robot's weight: detected.
+    assert estimates.contact_detected[-1]
+
+
+def test_app_end_to_end(simulated, tmp_path: Path):
+    from apps.estimate_from_log import main
+
+    log, online = simulated
+    path = write_log(log, tmp_path / "push.parquet")
+    assert main(["--robot", "hrp4_like", "--log", str(path), "--out", str(tmp_path), "--headless"]) == 0
+    folder = tmp_path / "estimate_from_log"
+    for name in ("estimates.csv", "contact_forces.png", "metrics.json", "replay.html"):
+        assert (folder / name).stat().st_size > 0, name
+    metrics = json.loads((folder / "metrics.json").read_text())
+    assert metrics["samples"] == log.num_samples and metrics["real_time_factor"] > 0
+    (contact,) = metrics["contacts"]
+    assert contact["link"] == online.push.body_name
+    header = (folder / "estimates.csv").read_text().splitlines()[0].split(",")
+    assert header[:2] == ["time", "contact_detected"] and "residual_R_KNEE_P" in header
+    scene = read_static_html((folder / "replay.html").read_text())
+    assert any(path.startswith("/drake/estimated_force") for path in scene.objects), sorted(scene.objects)[:5]
+    assert any("R_SHOULDER_Y_LINK" in path for path in scene.tracks)  # the robot moves in the recording
+    arrow = [v for path, tracks in scene.tracks.items() if path.startswith("/drake/estimated_force") for v in tracks]
+    assert arrow, "the estimated force's arrow is animated"
+    # A bad log is a clean error (exit code 2), not a traceback.
+    assert main(["--log", str(tmp_path / "missing.csv"), "--out", str(tmp_path), "--no-replay"]) == 2
+
+
+def test_benchmark_reports_the_real_time_factor():
+    """``make benchmark``'s figure for the issue's floor (timings are not asserted)."""
+    from apps.benchmark import benchmark_log_estimation
+
+    row = benchmark_log_estimation(0.7, repeats=1)
+    assert row["num_joints"] == 34 and row["log_rate_hz"] == pytest.approx(1000.0)
+    assert row["log_seconds"] == pytest.approx(0.7, abs=2e-3)
+    assert 0.1 < row["contact_fraction"] < 0.5  # the push from 0.5 s
+    assert row["real_time_factor"] == pytest.approx(row["log_seconds"] / row["wall_s"])

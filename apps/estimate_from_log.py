@@ -10,8 +10,8 @@ IMU, joint positions and foot F/T forces (``diagrams.residuals.log_estimation``)
 
 Run: ``python -m apps.estimate_from_log --robot hrp4_like --log LOG [--topics FILE.yaml]
 [--out DIR] [--headless] [--no-replay] [--calibrate-first S] [--localization-period S]``, or try it end to end on a
-simulated push: ``python -m apps.estimate_from_log --write-demo-log out/demo_push.mcap``
-(simulates hrp4_like under a known 28 N push, writes the log, then estimates from it).
+simulated push: ``python -m apps.estimate_from_log [--robot R] --write-demo-log out/demo_push.mcap``
+(simulates the robot under a known push, on hrp4_like 28 N, writes the log, then estimates from it).
 Writes to ``DIR/estimate_from_log/``: ``estimates.csv`` (per sample: detection, test
 statistics, force, external wrench, localized link and point, internal residual),
 ``contact_forces.png``, ``metrics.json`` (the contacts found, the real-time factor) and
@@ -32,6 +32,7 @@ from diagrams.residuals.log_estimation import (
     LogEstimates,
     LogEstimationSettings,
     build_estimator_plant,
+    demo_push,
     estimate_from_log,
     record_replay,
     simulate_push_log,
@@ -79,8 +80,8 @@ def _parse(argv):
         type=Path,
         default=None,
         metavar="PATH",
-        help="simulate hrp4_like under a known push, write its log to PATH (format by extension) and, without "
-        "--log, estimate from it",
+        help="simulate --robot under a known push (on hrp4_like a fixed 28 N push, elsewhere a random contact "
+        "of the contact study), write its log to PATH (format by extension) and, without --log, estimate from it",
     )
     args = parser.parse_args(argv)
     if args.log is None and args.write_demo_log is None:
@@ -159,8 +160,11 @@ def _run(args: argparse.Namespace) -> int:
     )
     log_path = args.log
     if args.write_demo_log is not None:
-        print("simulating hrp4_like under a known push for the demo log ...")
-        demo, online = simulate_push_log("hrp4_like", settings=settings)
+        print(f"simulating {args.robot} under a known push for the demo log ...")
+        body, point, force = demo_push(args.robot)
+        demo, online = simulate_push_log(
+            args.robot, push_body=body, push_point=point, push_force=force, settings=settings
+        )
         write_log(demo, args.write_demo_log)
         force = online.push.force_W(0.5 * (online.push_start + online.push_end))
         print(
@@ -169,7 +173,7 @@ def _run(args: argparse.Namespace) -> int:
             f"{online.push_end} s"
         )
         if log_path is None:
-            log_path, args.robot = args.write_demo_log, "hrp4_like"
+            log_path = args.write_demo_log
     log = read_log(log_path, args.topics)
     robot = build_estimator_plant(args.robot)
     estimates = estimate_from_log(robot, log, settings)

@@ -104,6 +104,11 @@ def test_stacked_residuals_equal_the_systems_own_updates(simulated, robot):
     expected = [detector.statistics(one_by_one.external_wrench_world[k], one_by_one.internal[k]) for k in rows]
     got = detector.statistics_of_samples(one_by_one.external_wrench_world[rows], one_by_one.internal[rows])
     np.testing.assert_allclose(got, expected, rtol=1e-12)
+    # The stacked path checks the log's quaternions once (not per sample): a bad one is named.
+    bad = inputs.state.copy()
+    bad[700, :4] *= 1.2
+    with pytest.raises(ValueError, match="quaternion of sample 700 is not of unit norm"):
+        _stacked_residuals(internal, external, bad, inputs.joint_torque, inputs.known_wrenches)
 
 
 @pytest.mark.parametrize("kind", LOG_FORMATS)

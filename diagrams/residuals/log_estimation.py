@@ -579,6 +579,18 @@ class OnlineEstimates:
 DEMO_PUSH_BODY, DEMO_PUSH_POINT, DEMO_PUSH_FORCE = "R_SHOULDER_Y_LINK", (-0.0387, 0.0099, -0.1225), (17.5, -22.1, -0.4)
 
 
+def demo_push(robot: str, seed: int = 0) -> tuple[str, tuple[float, ...], tuple[float, ...]]:
+    """(body, point in its frame (m), force in world (N)) of the demo log's push: on
+    hrp4_like the fixed ``DEMO_PUSH_*``; on another robot one random contact of the contact
+    study (``sample_trials``: a point of a link's outer surface, 5-40 N into it)."""
+    if robot == "hrp4_like":
+        return DEMO_PUSH_BODY, DEMO_PUSH_POINT, DEMO_PUSH_FORCE
+    from diagrams.residuals.contact_localization import sample_trials
+
+    (spec,) = sample_trials(robot, 1, seed)
+    return spec["body"], tuple(spec["point_body"]), tuple(spec["force_world"])
+
+
 def simulate_push_log(
     robot: str = "hrp4_like",
     *,
@@ -820,4 +832,4 @@ def status_reason(status: int) -> str:
     return STATUS_REASONS.get(int(status), f"unknown status {status}")
 
 
-__all__ += ["DEMO_PUSH_BODY", "record_replay", "status_reason"]
+__all__ += ["DEMO_PUSH_BODY", "demo_push", "record_replay", "status_reason"]

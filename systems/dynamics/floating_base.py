@@ -102,14 +102,16 @@ class DrakeFloatingBaseDynamics:
         )
 
     def mass_matrix_terms(
-        self, q: np.ndarray, v: np.ndarray
+        self, q: np.ndarray, v: np.ndarray, *, checked: bool = True
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(M, M_dot, bias, R_WB, v0) at (q, v), before the elimination of eq. (9): the mass
         matrix in F0 coordinates [[I0c, F], [F^T, H]], its derivative along the motion, the
         bias [p^; C^] (gravity included), F0's rotation and the base velocity [w; v] in
-        F0 (``compute`` reduces them; ``systems.residuals.offline`` reduces many at once)."""
+        F0 (``compute`` reduces them; ``systems.residuals.offline`` reduces many at once).
+        ``checked=False`` skips ``checked_state`` for float arrays the caller checked."""
         plant, n = self._plant, self._n
-        q, v = checked_state(plant, q, v, self._sizes)
+        if checked:
+            q, v = checked_state(plant, q, v, self._sizes)
         # Drake's free joint gives the pose of F0 (its child frame M) in its parent frame P,
         # which is fixed in the world (usually the world frame itself), and velocities
         # expressed in P.
@@ -224,10 +226,12 @@ class FloatingBaseDynamics:
         """All terms of eq. (9) and their derivatives at (q, v) (Drake's coordinates in)."""
         return self._impl.compute(q, v)
 
-    def mass_matrix_terms(self, q: np.ndarray, v: np.ndarray):
+    def mass_matrix_terms(self, q: np.ndarray, v: np.ndarray, *, checked: bool = True):
         """See ``DrakeFloatingBaseDynamics.mass_matrix_terms``; "fast" implementation only
         (None for "reference")."""
-        return self._impl.mass_matrix_terms(q, v) if isinstance(self._impl, DrakeFloatingBaseDynamics) else None
+        if not isinstance(self._impl, DrakeFloatingBaseDynamics):
+            return None
+        return self._impl.mass_matrix_terms(q, v, checked=checked)
 
     def floating_jacobian(self, q: np.ndarray, frame: Frame, p_FoP: np.ndarray, *, spatial: bool = False) -> np.ndarray:
         """J^fb (3 x n, or 6 x n with ``spatial``) of a point fixed in ``frame``, world coordinates."""

@@ -27,6 +27,7 @@ import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Frame, JacobianWrtVariable
 
+from systems.dynamics.base_state import QUATERNION_NORM_TOLERANCE
 from systems.residuals.contact_estimation import ContactDetector, ContactLocalizer
 from systems.residuals.momentum_residuals import ClassicalResidual, ExternalResidual, InternalResidual, ResidualModel
 
@@ -252,6 +253,10 @@ def _stacked_residuals(
     if dynamics.mass_matrix_terms(state[0, : model.num_positions], state[0, model.num_positions :]) is None:
         return None
     plant, nq, n = model.plant, model.num_positions, model.num_joints
+    terms_at = dynamics.mass_matrix_terms
+    off = np.flatnonzero(np.abs(np.linalg.norm(state[:, :4], axis=1) - 1.0) > QUATERNION_NORM_TOLERANCE)
+    if off.size:
+        raise ValueError(f"replay: the base quaternion of sample {int(off[0])} is not of unit norm")
     frames = internal.known_wrench_frames
     samples = state.shape[0]
     out_internal, out_external = np.empty((samples, n)), np.empty((samples, 6))
@@ -267,7 +272,8 @@ def _stacked_residuals(
         R_WB, v0 = np.empty((K, 3, 3)), np.empty((K, 6))
         J = np.empty((K, len(frames), 6, n + 6))
         for i, k in enumerate(rows):
-            M[i], M_dot[i], bias[i], R_WB[i], v0[i] = dynamics.mass_matrix_terms(state[k, :nq], state[k, nq:])
+            # The log was checked once (finite, unit quaternions): no per-sample check.
+            M[i], M_dot[i], bias[i], R_WB[i], v0[i] = terms_at(state[k, :nq], state[k, nq:], checked=False)
             for f, frame in enumerate(frames):  # F0-expressed, at the joint positions just set
                 J[i, f] = plant.CalcJacobianSpatialVelocity(
                     context, JacobianWrtVariable.kV, frame, _ORIGIN, world, world
@@ -299,17 +305,28 @@ def _stacked_residuals(
         momentum = np.concatenate((H_fb_qdot, I0c @ v0c + F @ qdot), axis=1)[:, :, 0]
         rate = np.concatenate((H_fb_dot_qdot - C_fb, I0c_dot @ v0c + F_dot @ qdot - p_hat), axis=1)[:, :, 0]
         measured = np.concatenate((tau_m + tau_joints - GT @ w_F0, w_F0), axis=1)[:, :, 0]
-        # _MomentumResidual.advance, sample by sample.
+        # _MomentumResidual.advance's recursion, as the first-order linear filter it is: with
+        # y_k its state I^+ after update k and a_k = T/2 rate_k + T measured_k,
+        #   I_k = y_{k-1} + a_k,  r_k = K (p_k - I_k),  y_k = I_k + T/2 rate_k + T r_k,
+        # so y_k = c y_{k-1} + u_k with c = 1 - K T and u_k = c a_k + T/2 rate_k + K T p_k
+        # (the first update: I_0 = p_0, r_0 = 0, y_0 = p_0 + T/2 rate_0).
         half_step = 0.5 * period * rate
-        residual = np.empty((K, n + 6))
-        for i in range(K):
-            if previous is not None:
-                integral = previous + half_step[i] + period * measured[i]
-                residual[i] = gain * (momentum[i] - integral)
-            else:
-                integral = momentum[i]
-                residual[i] = 0.0
-            previous = integral + half_step[i] + period * residual[i]
+        a = half_step + period * measured
+        c = 1.0 - gain * period
+        u = c * a + half_step + (gain * period) * momentum
+        first = 0
+        if previous is None:
+            previous = momentum[0] + half_step[0]
+            first = 1
+        y = np.empty((K, n + 6))
+        if first:
+            y[0] = previous
+        y[first:] = _first_order_filter(c, u[first:], previous)
+        y_before = np.concatenate((previous[None] if not first else y[:1], y[:-1]), axis=0)
+        residual = gain * (momentum - (y_before + a))
+        if first:
+            residual[0] = 0.0
+        previous = y[-1]
         out_internal[rows.start : rows.stop] = residual[:, :n]
         # ResidualModel.base_wrench_to_world, stacked.
         moment_W = (R_WB @ residual[:, n : n + 3, None])[:, :, 0]
@@ -320,6 +337,18 @@ def _stacked_residuals(
 
 
 _ORIGIN = np.zeros(3)
+
+
+def _first_order_filter(c: np.ndarray, u: np.ndarray, y0: np.ndarray) -> np.ndarray:
+    """(K, m) y_k = c * y_{k-1} + u_k for k = 1..K from y_0 (per column, c (m,) the pole of
+    each column): scipy.signal.lfilter once per distinct pole."""
+    from scipy.signal import lfilter
+
+    y = np.empty_like(u)
+    for pole in np.unique(c):
+        cols = np.flatnonzero(c == pole)
+        y[:, cols], _ = lfilter([1.0], [1.0, -pole], u[:, cols], axis=0, zi=(pole * y0[cols])[None, :])
+    return y
 
 
 class ReplayedEstimation(NamedTuple):

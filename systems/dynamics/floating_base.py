@@ -19,7 +19,7 @@ Jacobian is returned in world coordinates.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
@@ -148,6 +148,54 @@ class DrakeFloatingBaseDynamics:
         bias = Cv + M[:, 3:6] @ a_fictitious
         return M, M_dot, bias, R_WB, v0
 
+    def mass_matrix_terms_of_samples(
+        self, q: np.ndarray, v: np.ndarray, frames: Sequence[Frame] = ()
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``mass_matrix_terms`` of K checked samples (q (K, nq), v (K, nv), unit
+        quaternions) at once: per sample only Drake's calls (three mass matrices, the bias
+        and, for each of ``frames``, the spatial-velocity Jacobian of its origin in F0
+        coordinates, world-aligned F0 axes), the rest stacked over the samples. Returns
+        (M, M_dot, bias, R_WB, v0) as in ``mass_matrix_terms`` with a leading K axis, and J
+        (K, len(frames), 6, nv); equal to ``mass_matrix_terms`` to rounding (tests)."""
+        plant, n, context = self._plant, self._n, self._context_F0
+        K = q.shape[0]
+        w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+        R_PB = np.empty((K, 3, 3))
+        R_PB[:, 0, 0], R_PB[:, 0, 1], R_PB[:, 0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)
+        R_PB[:, 1, 0], R_PB[:, 1, 1], R_PB[:, 1, 2] = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)
+        R_PB[:, 2, 0], R_PB[:, 2, 1], R_PB[:, 2, 2] = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
+        R_WB = R_PB if self._R_WP is None else self._R_WP @ R_PB
+        v0 = (v[:, None, :6].reshape(K, 2, 3) @ R_PB).reshape(K, 6)
+        q_joints, qdot = q[:, 7:], v[:, 6:]
+        speed = np.sqrt(np.einsum("ki,ki->k", qdot, qdot))
+        h = np.where(speed > 0.0, self._step / np.where(speed > 0.0, speed, 1.0), 0.0)
+        M, M_dot, Cv = np.empty((K, 6 + n, 6 + n)), np.zeros((K, 6 + n, 6 + n)), np.empty((K, 6 + n))
+        J = np.empty((K, len(frames), 6, 6 + n))
+        v_F0 = v.copy()
+        v_F0[:, :6] = v0
+        world = plant.world_frame()
+        dq = h[:, None] * qdot
+        q_plus, q_minus = q_joints + dq, q_joints - dq
+        mass_matrix = self._mass_matrix_F0
+        for k in np.flatnonzero(speed > 0.0).tolist():
+            np.subtract(mass_matrix(q_plus[k]), mass_matrix(q_minus[k]), out=M_dot[k])
+        for k in range(K):
+            M[k] = mass_matrix(q_joints[k])
+            plant.SetVelocities(context, v_F0[k])
+            Cv[k] = plant.CalcBiasTerm(context)
+            for f, frame in enumerate(frames):  # at the joint positions just set
+                J[k, f] = plant.CalcJacobianSpatialVelocity(
+                    context, JacobianWrtVariable.kV, frame, np.zeros(3), world, world
+                )
+        moving = speed > 0.0
+        M_dot[moving] *= (0.5 / h[moving])[:, None, None]
+        # The bias of ``mass_matrix_terms``: Cv + M[:, 3:6] a, a = w x v - g (in F0).
+        g = np.einsum("i,kij->kj", self._gravity_W, R_WB)
+        wx, wy, wz, vx, vy, vz = v0.T
+        a = np.stack((wy * vz - wz * vy - g[:, 0], wz * vx - wx * vz - g[:, 1], wx * vy - wy * vx - g[:, 2]), axis=1)
+        bias = Cv + (M[:, :, 3:6] @ a[:, :, None])[:, :, 0]
+        return M, M_dot, bias, R_WB, v0, J
+
     def floating_jacobian(self, q: np.ndarray, frame: Frame, p_FoP: np.ndarray, *, spatial: bool = False) -> np.ndarray:
         """J^fb of point P fixed in ``frame``, in world coordinates (eq. 12: tau = J^fb^T f_W).
 
@@ -232,6 +280,13 @@ class FloatingBaseDynamics:
         if not isinstance(self._impl, DrakeFloatingBaseDynamics):
             return None
         return self._impl.mass_matrix_terms(q, v, checked=checked)
+
+    def mass_matrix_terms_of_samples(self, q: np.ndarray, v: np.ndarray, frames: Sequence[Frame] = ()):
+        """See ``DrakeFloatingBaseDynamics.mass_matrix_terms_of_samples``; "fast"
+        implementation only (None for "reference")."""
+        if not isinstance(self._impl, DrakeFloatingBaseDynamics):
+            return None
+        return self._impl.mass_matrix_terms_of_samples(q, v, frames)
 
     def floating_jacobian(self, q: np.ndarray, frame: Frame, p_FoP: np.ndarray, *, spatial: bool = False) -> np.ndarray:
         """J^fb (3 x n, or 6 x n with ``spatial``) of a point fixed in ``frame``, world coordinates."""

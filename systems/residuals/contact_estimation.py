@@ -668,8 +668,7 @@ class ContactDetector(LeafSystem):
         it): the detector's next state (the layout of the class docstring) from its
         ``state``, the test statistics ``s`` = (s_ext, s_int) of this update's inputs
         (``statistics``) and the time t, s."""
-        old = _DetectorState(np.asarray(state, dtype=float))
-        detected, t_detect, above, below_time = old.detected, old.detection_time, old.samples_above, old.time_below
+        detected, t_detect, above, below_time = (float(v) for v in state[:4])  # the _DetectorState fields
         use = self._use
         is_above = t >= self._startup_time and any(u and si > th for u, si, th in zip(use, s, self._on))
         is_below = all((not u) or si < th for u, si, th in zip(use, s, self._off))
@@ -1111,6 +1110,57 @@ class ContactLocalizer(LeafSystem):
             localized = np.concatenate((w, r, q))
             result = self._pack(self.localize(q, w, r))
         return avg[:], means, localized, result
+
+    def replay(
+        self, times: np.ndarray, x: np.ndarray, w: np.ndarray, r: np.ndarray, detected: np.ndarray
+    ) -> np.ndarray:
+        """(N, 14) the packed result of N successive ``advance`` calls from
+        ``initial_state`` (times (N,), s; x, w, r, detected per sample as ``advance``
+        takes them), without stepping each sample: a contact's averaged inputs are running
+        means (cumulative sums; past ``averaging_time_constant``, its exponential filter),
+        needed only where a localization happens. Equal to stepping ``advance`` to
+        rounding (tests). Inputs are not checked."""
+        from scipy.signal import lfilter
+
+        N = len(times)
+        out = np.empty((N, 14))
+        detected = np.asarray(detected, dtype=bool)
+        idle = ~detected
+        out[idle] = self._pack(LocalizationResult(NO_CONTACT, force_W=np.zeros(3)))
+        out[idle, 5:8] = w[idle, 3:]
+        samples = np.concatenate((w, r, x[:, : self._nq]), axis=1)
+        edges = np.flatnonzero(np.diff(np.concatenate(([0], detected.astype(np.int8), [0]))))
+        for a, b in zip(edges[::2].tolist(), edges[1::2].tolist()):
+            t = times[a:b]
+            settled = np.flatnonzero(t - t[0] >= self._settle_time - 1e-12)
+            first = int(settled[0]) if settled.size else b - a
+            means = None
+            if settled.size:
+                s = samples[a + first : b]
+                count = np.arange(1.0, len(s) + 1.0)
+                means = np.cumsum(s, axis=0) / count[:, None]
+                if self._tau is not None:
+                    beta = self._period / self._tau
+                    tail = np.flatnonzero(1.0 / count < beta)  # alpha = max(1/count, T/tau) = beta
+                    if tail.size:
+                        c = int(tail[0])
+                        y0 = means[c - 1] if c > 0 else np.zeros(s.shape[1])
+                        means[c:], _ = lfilter(
+                            [beta], [1.0, beta - 1.0], s[c:], axis=0, zi=((1.0 - beta) * y0)[None, :]
+                        )
+            i, last = 0, -math.inf
+            while i < b - a:
+                if t[i] - last >= self._localization_period - 1e-9:
+                    last = float(t[i])
+                    if i >= first:
+                        q, wi, ri = self._split_means(means[i - first])
+                    else:
+                        q, wi, ri = x[a + i, : self._nq], w[a + i], r[a + i]
+                    out[a + i] = self._pack(self.localize(q, wi, ri))
+                else:
+                    out[a + i] = out[a + i - 1]
+                i += 1
+        return out
 
     @staticmethod
     def _pack(result: LocalizationResult) -> np.ndarray:

@@ -25,7 +25,7 @@ from typing import NamedTuple
 
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import Frame, JacobianWrtVariable
+from pydrake.multibody.tree import Frame
 
 from systems.dynamics.base_state import QUATERNION_NORM_TOLERANCE
 from systems.residuals.contact_estimation import ContactDetector, ContactLocalizer
@@ -239,11 +239,11 @@ def _stacked_residuals(
 ) -> ReplayedResiduals | None:
     """The internal (eq. 11) and external (eq. 16) residuals of the whole log at once: per
     sample only what needs the plant (the mass matrix, its derivative and the bias of
-    ``DrakeFloatingBaseDynamics.mass_matrix_terms``, the F/T frames' Jacobians); the
+    ``DrakeFloatingBaseDynamics.mass_matrix_terms_of_samples``, the F/T frames' Jacobians); the
     elimination of eq. (9) (``reduce_to_floating_terms``), eq. (10)'s known-wrench
     torques, the momenta and rates of ``_momentum_and_rates`` and the world wrench of
     ``ResidualModel.base_wrench_to_world`` over all samples as stacked numpy; then the
-    observer recursion of ``advance``, in its order of operations. Equal to the systems'
+    observer recursion of ``advance`` as the linear filter it is. Equal to the systems'
     own updates to rounding (the tests compare them). None when the model's dynamics is
     not the "fast" implementation (then ``advance`` runs per sample)."""
     model = internal.model
@@ -252,32 +252,22 @@ def _stacked_residuals(
     dynamics = model.dynamics
     if dynamics.mass_matrix_terms(state[0, : model.num_positions], state[0, model.num_positions :]) is None:
         return None
-    plant, nq, n = model.plant, model.num_positions, model.num_joints
-    terms_at = dynamics.mass_matrix_terms
+    nq, n = model.num_positions, model.num_joints
     off = np.flatnonzero(np.abs(np.linalg.norm(state[:, :4], axis=1) - 1.0) > QUATERNION_NORM_TOLERANCE)
     if off.size:
         raise ValueError(f"replay: the base quaternion of sample {int(off[0])} is not of unit norm")
     frames = internal.known_wrench_frames
     samples = state.shape[0]
     out_internal, out_external = np.empty((samples, n)), np.empty((samples, 6))
-    world = plant.world_frame()
-    context = dynamics.context_F0
     period = internal.period
     gain = np.concatenate((internal._gain, external._gain))
     previous = None  # I^+ of the last update, [internal; external]
     for start in range(0, samples, chunk):
         rows = range(start, min(start + chunk, samples))
         K = len(rows)
-        M, M_dot, bias = np.empty((K, n + 6, n + 6)), np.empty((K, n + 6, n + 6)), np.empty((K, n + 6))
-        R_WB, v0 = np.empty((K, 3, 3)), np.empty((K, 6))
-        J = np.empty((K, len(frames), 6, n + 6))
-        for i, k in enumerate(rows):
-            # The log was checked once (finite, unit quaternions): no per-sample check.
-            M[i], M_dot[i], bias[i], R_WB[i], v0[i] = terms_at(state[k, :nq], state[k, nq:], checked=False)
-            for f, frame in enumerate(frames):  # F0-expressed, at the joint positions just set
-                J[i, f] = plant.CalcJacobianSpatialVelocity(
-                    context, JacobianWrtVariable.kV, frame, _ORIGIN, world, world
-                )
+        M, M_dot, bias, R_WB, v0, J = dynamics.mass_matrix_terms_of_samples(
+            state[rows.start : rows.stop, :nq], state[rows.start : rows.stop, nq:], frames
+        )
         x = state[rows.start : rows.stop]
         qdot = x[:, nq + 6 :, None]
         I0c, F, H = M[:, :6, :6], M[:, :6, 6:], M[:, 6:, 6:]
@@ -334,9 +324,6 @@ def _stacked_residuals(
         p_WBo = model._p_WP + x[:, 4:7] @ model._R_WP.T
         out_external[rows.start : rows.stop] = np.concatenate((moment_W + np.cross(p_WBo, force_W), force_W), axis=1)
     return ReplayedResiduals(out_internal, out_external, None)
-
-
-_ORIGIN = np.zeros(3)
 
 
 def _first_order_filter(c: np.ndarray, u: np.ndarray, y0: np.ndarray) -> np.ndarray:
@@ -425,13 +412,8 @@ def replay_contact_estimation(
     localization = None
     if localizer is not None:
         late_detected = np.concatenate(([False], detected[:-1]))
-        results = np.empty((samples, 14))
-        localizer_state = localizer.initial_state()
-        for k in range(samples):
-            localizer_state = localizer.advance(
-                localizer_state, k * period, state[k], late_external[k], late_internal[k], bool(late_detected[k])
-            )
-            results[k] = localizer_state[3]
+        times = np.arange(samples) * period
+        results = localizer.replay(times, state, late_external, late_internal, late_detected)
         localization = {
             "status": results[:, 0].copy(),
             "body_index": results[:, 1].copy(),

@@ -184,7 +184,8 @@ def main(argv: list[str] | None = None) -> int:
         meshcat = replay_meshcat(True, args.headless)
         print(
             f"push and comply: {scenario.model}, {scenario.push_peak_force:g} N"
-            f"{' (hrp4_like scaled to the robot)' if scenario.scale_to_robot else ''} down on each shoulder from "
+            f"{' (on hrp4_like; scaled to the robot: see the table)' if scenario.scale_to_robot else ''} down on each "
+            "shoulder from "
             f"{scenario.push_start:g} s (peak {scenario.push_peak_time:g} s, off {scenario.push_end:g} s), "
             f"{scenario.duration:g} s"
         )
@@ -196,6 +197,7 @@ def main(argv: list[str] | None = None) -> int:
         _plot(out_dir, scenario, runs)
         write_metrics(out_dir, metrics, scenario)
         _print_table(metrics)
+        print(f"push peak force on this robot: {next(iter(metrics.values()))['push_peak_force_N']:.1f} N per shoulder")
         print(f"memory allocator: {memory_allocator()} (make preloads tcmalloc when installed; see BENCHMARKS.md)")
         print_written(out_dir)
         return 0

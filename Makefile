@@ -17,7 +17,7 @@ export MPLBACKEND
 TEST_WORKERS ?= auto
 RUN = LD_PRELOAD="$(TCMALLOC)$${LD_PRELOAD:+ $$LD_PRELOAD}" $(PY)
 
-.PHONY: demo contact residuals push-and-comply standing residual-comparison contact-localization model-refinement nao-force-observer nao-walk nao-walk-pulled nao-force-guided-walk nao-compliant-arms benchmark test install clean
+.PHONY: demo contact residuals push-and-comply standing residual-comparison contact-localization model-refinement estimate-from-log nao-force-observer nao-walk nao-walk-pulled nao-force-guided-walk nao-compliant-arms benchmark test install clean
 
 install: $(STAMP)
 
@@ -61,6 +61,10 @@ contact-localization: $(STAMP)
 
 model-refinement: $(STAMP)
 	$(RUN) -m apps.model_refinement $(ARGS)
+
+# Offline: the estimators on a recorded log (ARGS="--robot FILE.yaml --log LOG").
+estimate-from-log: $(STAMP)
+	$(RUN) -m apps.estimate_from_log $(ARGS)
 
 nao-force-observer: $(STAMP)
 	$(RUN) -m apps.nao_force_observer $(ARGS)

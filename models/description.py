@@ -78,6 +78,7 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from pydrake.math import RollPitchYaw
 
 #: The groups every description has, in the order their joints are listed.
 JOINT_GROUPS = ("left_leg", "right_leg", "torso", "head", "left_arm", "right_arm", "left_hand", "right_hand")
@@ -512,18 +513,6 @@ def mesh_vertices(path: Path) -> np.ndarray:
     )
 
 
-def _rpy_matrix(rpy) -> np.ndarray:
-    r, p, y = rpy
-    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
-
-
 def prepare_urdf(description: RobotDescription) -> str:
     """The description's URDF text, ready for Drake's parser: mesh file names made absolute
     (package:// URIs resolved), the ``remove_collisions`` bodies' collision elements dropped,
@@ -582,7 +571,7 @@ def prepare_urdf(description: RobotDescription) -> str:
                         origin = ET.SubElement(element, "origin")
                     xyz = np.array([float(s) for s in (origin.get("xyz") or "0 0 0").split()])
                     rpy = np.array([float(s) for s in (origin.get("rpy") or "0 0 0").split()])
-                    center = xyz + _rpy_matrix(rpy) @ (0.5 * (low + high))
+                    center = xyz + RollPitchYaw(rpy).ToRotationMatrix().matrix() @ (0.5 * (low + high))
                     origin.set("xyz", " ".join(f"{c:.9g}" for c in center))
                     geometry = element.find("geometry")
                     geometry.remove(mesh)

@@ -144,6 +144,12 @@ def uniform_gravity(plant: MultibodyPlant) -> np.ndarray:
     return np.asarray(field.gravity_vector(), dtype=float).copy()
 
 
+def same_rigid_link(rigid_link: np.ndarray, body_a: int, body_b: int) -> bool:
+    """Whether two BodyIndex values (-1: none) are one rigid link of ``rigid_link``
+    (``rigid_link_of_bodies``): the same body, or welded to each other."""
+    return body_a >= 0 and body_b >= 0 and bool(rigid_link[int(body_a)] == rigid_link[int(body_b)])
+
+
 def rigid_link_of_bodies(plant: MultibodyPlant) -> np.ndarray:
     """(num_bodies,) int: for each BodyIndex, the smallest BodyIndex of the bodies welded to it
     (``GetBodiesWeldedTo``): bodies joined by weld joints (a URDF's fixed joints, e.g. a

@@ -29,6 +29,17 @@ def quaternion_to_rotation(quaternion_wxyz: np.ndarray) -> np.ndarray:
     )
 
 
+def quaternions_to_rotations(quaternions_wxyz: np.ndarray) -> np.ndarray:
+    """(K, 3, 3) rotation matrices of K unit quaternions (K, 4) [w, x, y, z]: the formula of
+    ``quaternion_to_rotation``, stacked (the same numbers)."""
+    w, x, y, z = np.asarray(quaternions_wxyz, dtype=float).T
+    R = np.empty((len(w), 3, 3))
+    R[:, 0, 0], R[:, 0, 1], R[:, 0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)
+    R[:, 1, 0], R[:, 1, 1], R[:, 1, 2] = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)
+    R[:, 2, 0], R[:, 2, 1], R[:, 2, 2] = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
+    return R
+
+
 def checked_state(
     plant: MultibodyPlant, q: np.ndarray, v: np.ndarray, sizes: tuple[int, int] | None = None
 ) -> tuple[np.ndarray, np.ndarray]:

@@ -27,7 +27,7 @@ from pydrake.multibody.tree import BodyIndex, Frame, JacobianWrtVariable, Spatia
 from pydrake.systems.framework import Context
 
 from systems.common.topology import floating_base_topology, uniform_gravity
-from systems.dynamics.base_state import checked_state, quaternion_to_rotation
+from systems.dynamics.base_state import checked_state, quaternion_to_rotation, quaternions_to_rotations
 from systems.dynamics.floating_base_terms import FloatingBaseTerms, reduce_to_floating_terms
 
 IMPLEMENTATIONS = ("fast", "reference")
@@ -102,16 +102,14 @@ class DrakeFloatingBaseDynamics:
         )
 
     def mass_matrix_terms(
-        self, q: np.ndarray, v: np.ndarray, *, checked: bool = True
+        self, q: np.ndarray, v: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(M, M_dot, bias, R_WB, v0) at (q, v), before the elimination of eq. (9): the mass
         matrix in F0 coordinates [[I0c, F], [F^T, H]], its derivative along the motion, the
         bias [p^; C^] (gravity included), F0's rotation and the base velocity [w; v] in
-        F0 (``compute`` reduces them; ``systems.residuals.offline`` reduces many at once).
-        ``checked=False`` skips ``checked_state`` for float arrays the caller checked."""
+        F0 (``compute`` reduces them; ``mass_matrix_terms_of_samples`` does many at once)."""
         plant, n = self._plant, self._n
-        if checked:
-            q, v = checked_state(plant, q, v, self._sizes)
+        q, v = checked_state(plant, q, v, self._sizes)
         # Drake's free joint gives the pose of F0 (its child frame M) in its parent frame P,
         # which is fixed in the world (usually the world frame itself), and velocities
         # expressed in P.
@@ -159,11 +157,7 @@ class DrakeFloatingBaseDynamics:
         (K, len(frames), 6, nv); equal to ``mass_matrix_terms`` to rounding (tests)."""
         plant, n, context = self._plant, self._n, self._context_F0
         K = q.shape[0]
-        w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-        R_PB = np.empty((K, 3, 3))
-        R_PB[:, 0, 0], R_PB[:, 0, 1], R_PB[:, 0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)
-        R_PB[:, 1, 0], R_PB[:, 1, 1], R_PB[:, 1, 2] = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)
-        R_PB[:, 2, 0], R_PB[:, 2, 1], R_PB[:, 2, 2] = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
+        R_PB = quaternions_to_rotations(q[:, :4])
         R_WB = R_PB if self._R_WP is None else self._R_WP @ R_PB
         v0 = (v[:, None, :6].reshape(K, 2, 3) @ R_PB).reshape(K, 6)
         q_joints, qdot = q[:, 7:], v[:, 6:]
@@ -273,13 +267,6 @@ class FloatingBaseDynamics:
     def compute(self, q: np.ndarray, v: np.ndarray) -> FloatingBaseTerms:
         """All terms of eq. (9) and their derivatives at (q, v) (Drake's coordinates in)."""
         return self._impl.compute(q, v)
-
-    def mass_matrix_terms(self, q: np.ndarray, v: np.ndarray, *, checked: bool = True):
-        """See ``DrakeFloatingBaseDynamics.mass_matrix_terms``; "fast" implementation only
-        (None for "reference")."""
-        if not isinstance(self._impl, DrakeFloatingBaseDynamics):
-            return None
-        return self._impl.mass_matrix_terms(q, v, checked=checked)
 
     def mass_matrix_terms_of_samples(self, q: np.ndarray, v: np.ndarray, frames: Sequence[Frame] = ()):
         """See ``DrakeFloatingBaseDynamics.mass_matrix_terms_of_samples``; "fast"

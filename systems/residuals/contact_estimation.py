@@ -40,7 +40,7 @@ from scipy.stats import chi2
 
 from systems.common.checks import eval_finite_input, positive_number, resolve_body
 from systems.common.spatial import cross, skew
-from systems.common.topology import floating_base_topology, rigid_link_of_bodies
+from systems.common.topology import floating_base_topology, rigid_link_of_bodies, same_rigid_link
 from systems.residuals.geometry_intersection import (
     RobotGeometry,
     line_intersections,
@@ -925,7 +925,7 @@ class ContactLocalizer(LeafSystem):
     def same_link(self, body_a: int, body_b: int) -> bool:
         """Whether two BodyIndex values are one rigid link (the same body, or welded: no
         joint effort tells them apart)."""
-        return body_a >= 0 and body_b >= 0 and bool(self._rigid_link[int(body_a)] == self._rigid_link[int(body_b)])
+        return same_rigid_link(self._rigid_link, body_a, body_b)
 
     @property
     def candidate_bodies(self) -> list[RigidBody]:

@@ -92,7 +92,7 @@ from scipy.stats import chi2
 from scipy.stats import f as f_distribution
 
 from systems.common.checks import check_plant, positive_number
-from systems.common.topology import rigid_link_of_bodies
+from systems.common.topology import rigid_link_of_bodies, same_rigid_link
 from systems.residuals.contact_estimation import _JointStops, _SensedConfiguration, candidate_geometry
 from systems.residuals.geometry_intersection import (
     BOX,
@@ -856,7 +856,7 @@ class MultiContactLocalizer:
 
     def same_link(self, body_a: int, body_b: int) -> bool:
         """Whether two BodyIndex values are one rigid link (the same body, or welded)."""
-        return body_a >= 0 and body_b >= 0 and bool(self._rigid_link[int(body_a)] == self._rigid_link[int(body_b)])
+        return same_rigid_link(self._rigid_link, body_a, body_b)
 
     def fit_one(self, q: np.ndarray, wrench_W: np.ndarray, residual: np.ndarray) -> ContactFit:
         """The best single contact (module docstring).

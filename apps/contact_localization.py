@@ -74,12 +74,15 @@ from diagrams.residuals.contact_localization import (
     build_contact_localization_diagram,
     contact_localization_metrics,
     cross_fitting_folds,
+    estimate_run,
+    estimator_log,
     floors_for,
     load_model_error,
     multi_contact_localizer,
     multi_contact_result,
     no_contact_result,
     no_contact_scenario,
+    offline_trial,
     run_schedule,
     sample_study_trials,
     slow_motion_scenario,
@@ -99,7 +102,7 @@ REPLAY_AFTER_PUSH_S = 0.3
 
 
 #: Trials a worker process runs per job (at least one run of ``trials_per_run``).
-TRIALS_PER_JOB = 10
+TRIALS_PER_JOB = 25
 #: Trials per job of the one-or-two-contact localization (after the simulations).
 MULTI_CONTACT_TRIALS_PER_JOB = 25
 
@@ -159,17 +162,33 @@ def run_trials(specs: list[dict], scenario: ContactLocalizationScenario) -> list
         start = {name: frame.CalcPoseInWorld(plant_context) for name, frame in soles.items()}
         simulator.Initialize()
         standing = None
+        # Offline estimation (``handles.online`` False): the run's replays so far, the
+        # estimators' state after them, and the logged updates they covered.
+        replays, resume, covered, standing_end = [], None, 0, None
+        detected_at_start = False  # the detector's flag at the standing start's end
         if shared_start:
             simulator.AdvanceTo(scenario.push_start)
             standing = context.Clone()
+            if handles.online:
+                detector_context = handles.detector.GetMyContextFromRoot(standing)
+                detected_at_start = handles.detector.GetOutputPort("contact_detected").Eval(detector_context)[0] > 0.5
+            else:
+                _, replays, resume, covered = _estimate_more(handles, replays, resume, covered)
+                standing_end = resume
+                detected_at_start = standing_end.detected
         done = len(run_specs)
         for k, (spec, window, indices) in enumerate(zip(run_specs, windows, push_indices)):
             restored = shared_start and k > 0
             if restored:
                 context.SetStateAndParametersFrom(standing)  # the standing start; the time goes on
                 window = (window[1], window[1], window[2])
+                replays, resume = [], standing_end
             wall_start = time.perf_counter()
             simulator.AdvanceTo(window[2])
+            offline = None
+            if not handles.online:
+                log, replays, resume, covered = _estimate_more(handles, replays, resume, covered)
+                offline = offline_trial(handles, log, replays, restored and detected_at_start)
             result = trial_result(
                 scenario,
                 spec,
@@ -179,6 +198,8 @@ def run_trials(specs: list[dict], scenario: ContactLocalizationScenario) -> list
                 push_indices=indices,
                 window=window,
                 restored_at_start=restored,
+                detected_at_start=bool(detected_at_start),
+                offline=offline,
             )
             moved, turned = sole_slip(handles.plant, plant_context, soles, start)
             result["sole_slip_m"], result["sole_slip_deg"] = moved, math.degrees(turned)
@@ -190,6 +211,16 @@ def run_trials(specs: list[dict], scenario: ContactLocalizationScenario) -> list
                 break
         remaining = remaining[done:]
     return results
+
+
+def _estimate_more(handles, replays: list, resume, covered: int) -> tuple:
+    """Runs the offline estimators (``estimate_run``) on the updates logged since the first
+    ``covered`` ones, from the state ``resume`` they ended in. Returns the log, ``replays``
+    with this one appended (rows, replay), its end state and the updates now covered."""
+    log = estimator_log(handles)
+    rows = slice(covered, len(log.update_times))
+    replay = estimate_run(handles, log, rows, resume)
+    return log, [*replays, (rows, replay)], replay.end, rows.stop
 
 
 def localize_multi_contact(
@@ -251,7 +282,7 @@ def record_replay(spec: dict, scenario: ContactLocalizationScenario, meshcat, *,
     trial = trial_scenario(scenario, spec)
     pushes, _, _ = run_schedule(scenario, [spec])
     diagram, handles = build_contact_localization_diagram(
-        trial, meshcat, model_corrections=refined_model(scenario), pushes=pushes
+        trial, meshcat, model_corrections=refined_model(scenario), pushes=pushes, online=True
     )
     simulate(
         diagram,

@@ -80,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
             ModelRefinementScenario, args, seed=args.seed, calibration_duration=args.calibration_duration
         ).validate()
         out_dir = output_folder(args, "model_refinement")
-        diagram, handles = build_refinement_diagram(scenario, scenario.calibration_motion)
+        diagram, handles = build_refinement_diagram(scenario, scenario.calibration_motion, residuals=False)
         if args.log is not None:
             log = CalibrationLog.from_npz(args.log)
             print(f"model refinement: identifying from {args.log} ({log.time.size} samples)")

@@ -79,7 +79,7 @@ def test_stacked_residuals_equal_the_systems_own_updates(simulated, robot):
     log, _ = simulated
     inputs = log_inputs(robot, log)
     _, internal, external = build_offline_estimators(robot, LogEstimationSettings(), inputs.period)
-    stacked = _stacked_residuals(
+    stacked, _ = _stacked_residuals(
         internal, external, inputs.state, inputs.joint_torque, inputs.known_wrenches, chunk=400
     )
     one_by_one = replay_residuals(
@@ -282,12 +282,82 @@ def test_localizer_replay_equals_stepping_its_updates(simulated, robot, time_con
     times = np.arange(N) * inputs.period
     state = localizer.initial_state()
     stepped = np.empty((N, 14))
+    states = {}
     for k in range(N):
         state = localizer.advance(state, times[k], x[k], w[k], r[k], bool(detected[k]))
         stepped[k] = state[3]
+        states[k] = state
     replayed = localizer.replay(times, x, w, r, detected)
+    # replay_from's end state is the stepped one: after the last sample (idle, the means of
+    # the first contact, the raw inputs of the second's last localization) and in the
+    # middle of an averaging (sample 700), from which it goes on as stepping does.
+    for stop in (N, 701):
+        _, end = localizer.replay_from(None, times[:stop], x[:stop], w[:stop], r[:stop], detected[:stop])
+        for a, b in zip(end, states[stop - 1]):
+            np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9)
+    rest, _ = localizer.replay_from(end, times[701:], x[701:], w[701:], r[701:], detected[701:])
+    np.testing.assert_allclose(rest[:, :8], stepped[701:, :8], rtol=1e-9, atol=1e-9)
+    # end_only: the same state with one localization (the means are the last contact's:
+    # after sample N - 1 that contact never settled, so the stepped means are the first's).
+    for stop in (N, 701):
+        out, end = localizer.replay_from(
+            None, times[:stop], x[:stop], w[:stop], r[:stop], detected[:stop], end_only=True
+        )
+        assert out is None
+        for i, (a, b) in enumerate(zip(end, states[stop - 1])):
+            if i != 1 or stop == 701:
+                np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9)
     np.testing.assert_array_equal(replayed[:, :2], stepped[:, :2])  # status, link
     finite = np.isfinite(stepped)
     np.testing.assert_array_equal(finite, np.isfinite(replayed))
     np.testing.assert_allclose(replayed[finite], stepped[finite], rtol=1e-9, atol=1e-9)
     assert (stepped[600:1100, 0] == VALID).mean() > 0.9  # not vacuous: it localized
+
+
+@pytest.mark.parametrize("split", [300, 800])
+def test_a_replay_continued_from_where_it_left_off_equals_the_whole(simulated, robot, split):
+    """``replay_contact_estimation`` over the log's first samples and then, from their
+    ``end`` state, over the rest (before the push, split 300; in the middle of the
+    localizer's averaging, split 800) gives what one replay of the whole log gives: the
+    residuals, the detector and the localizer's results, and the same end state."""
+    from diagrams.residuals.log_estimation import build_offline_estimators, make_detector, make_localizer
+    from systems.residuals.offline import replay_contact_estimation
+
+    log, _ = simulated
+    settings = LogEstimationSettings()
+    inputs = log_inputs(robot, log)
+    period = inputs.period
+    times = np.arange(len(inputs.time)) * period
+
+    def replay(rows, start=None):
+        _, internal, external = build_offline_estimators(robot, settings, period)
+        return replay_contact_estimation(
+            internal,
+            external,
+            lambda *_: make_detector(robot, settings, period),
+            make_localizer(robot, settings, period),
+            inputs.state[rows],
+            inputs.joint_torque[rows],
+            inputs.known_wrenches[rows],
+            start=start,
+            times=times[rows],
+        )
+
+    whole = replay(slice(None))
+    first = replay(slice(0, split))
+    rest = replay(slice(split, None), start=first.end)
+    assert first.end.detected == (split == 800) and whole.contact_detected[600:1400].all()
+    scale = np.abs(whole.internal).max()
+    np.testing.assert_allclose(rest.internal, whole.internal[split:], rtol=0, atol=1e-11 * scale)
+    np.testing.assert_allclose(
+        rest.external_wrench_world, whole.external_wrench_world[split:], rtol=0, atol=1e-11 * scale
+    )
+    np.testing.assert_array_equal(rest.contact_detected, whole.contact_detected[split:])
+    for key in ("status", "body_index"):
+        np.testing.assert_array_equal(rest.localization[key], whole.localization[key][split:])
+    for key in ("point_world", "force_world"):
+        np.testing.assert_allclose(rest.localization[key], whole.localization[key][split:], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(rest.end.integral, whole.end.integral, rtol=1e-11)
+    np.testing.assert_array_equal(rest.end.detector[:4], whole.end.detector[:4])
+    for a, b in zip(rest.end.localizer, whole.end.localizer):
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9)

@@ -226,6 +226,36 @@ def test_gravity_from_a_shared_residual_model_equals_drakes_gravity():
         np.testing.assert_allclose(u_shared, u_own, atol=1e-9 * np.abs(u_own).max())
 
 
+def test_gravity_of_a_mismatched_model_uses_the_models_inertias():
+    """With the estimators' inertias perturbed (5 % mass, 10 % CoM, the realistic world's
+    mismatch), the PD's gravity is the model's: uniform gravity's generalized force is
+    M[:, 3:6] g, so its joint entries are F[3:6]^T R_WB^T g of the model's own
+    floating-base decomposition (an independent route through three mass matrices), and
+    they differ from the plant's defaults."""
+    from systems.residuals.momentum_residuals import ResidualModel
+    from systems.simulation.imperfections import ModelMismatch, perturbed_spatial_inertias
+
+    plant = MultibodyPlant(1e-3)
+    add_humanoid(plant, "hrp4_like")
+    plant.Finalize()
+    model = ResidualModel(plant)
+    model.set_spatial_inertias(perturbed_spatial_inertias(plant, ModelMismatch(5.0, 10.0, 10.0), seed=3))
+    rng = np.random.default_rng(11)
+    context = plant.CreateDefaultContext()
+    g_W = plant.gravity_field().gravity_vector()
+    for _ in range(3):
+        q = plant.GetPositions(context)
+        q[:4] = RollPitchYaw(rng.uniform(-0.6, 0.6, 3)).ToQuaternion().wxyz()
+        q[7:] = rng.uniform(-0.3, 0.3, q.size - 7)
+        x = np.concatenate([q, rng.normal(size=plant.num_velocities())])
+        terms = model.evaluate(x)
+        expected = terms.F[3:6].T @ (g_W @ terms.R_WB)
+        np.testing.assert_allclose(model.gravity_joint_torques(x), expected, atol=1e-9 * np.abs(expected).max())
+        plant.SetPositions(context, q)
+        default = plant.CalcGravityGeneralizedForces(context)[6:]
+        assert np.abs(expected - default).max() > 1e-3 * np.abs(default).max()
+
+
 def test_a_gravity_model_of_another_plant_is_refused():
     from systems.residuals.momentum_residuals import ResidualModel
 

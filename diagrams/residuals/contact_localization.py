@@ -19,6 +19,13 @@ of the measured wrench and invisible to the residuals.
 The Monte Carlo study (``apps.contact_localization``) samples random contacts
 (``sample_trials``), runs one diagram per trial and one without contact, and computes its
 metrics here (``trial_result``, ``no_contact_result``, ``contact_localization_metrics``).
+By default (``estimation: offline``) its diagrams hold the robot, its sensors and its
+base-state estimator only, and an ``UpdateRecorder`` of the estimators' inputs at each
+update; the residuals, the detector and the localizer, which do not act on the robot here,
+run on that record afterwards (``estimate_run``: their own update code, the residuals
+stacked over the samples, ``systems.residuals.offline``). They report the same as in the
+loop, to rounding (``tests/test_contact_localization.py``), for a fraction of the cost of
+Python systems stepped at 1 kHz.
 Scenarios are YAML files loaded into ``ContactLocalizationScenario`` with
 ``pydrake.common.yaml.yaml_load_typed`` (``diagrams.scenarios``).
 
@@ -51,15 +58,18 @@ from diagrams.station.conditions import is_ideal, set_ideal_conditions
 from diagrams.station.humanoid_station import HumanoidStation, add_scenario_station, default_plant_config
 from diagrams.station.motions import SlowMotion, slow_whole_body_motion
 from systems.estimation.model_identification import ModelCorrections
+from systems.io.update_recorder import UpdateRecorder
 from systems.residuals.contact_estimation import (
     ContactDetector,
     ContactLocalizer,
     GatedEstimate,
+    LocalizationResult,
     _SensedConfiguration,
 )
 from systems.residuals.geometry_intersection import inward_direction, sample_surface, surface_areas
 from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual, ResidualModel
 from systems.residuals.multi_contact import MultiContactLocalizer
+from systems.residuals.offline import ReplayedEstimation, ReplayState, replay_contact_estimation
 from systems.simulation.disturbances import Push, PushSource, Step
 from systems.simulation.imperfections import Imperfections
 from systems.simulation.visualization import add_force_arrows
@@ -205,6 +215,15 @@ class ContactLocalizationScenario:
             detected only from then on).
         log_period: period of the loggers (detector outputs, residuals), s; the localizer's
             outputs are logged every ``localization_period`` (its rate of estimates).
+        estimation: where the residuals, the detector and the localizer run: "offline"
+            (the study's default) simulates the robot, its sensors and its base-state
+            estimator with the estimators' inputs logged at every update, and runs the
+            estimators on that log afterwards (``systems.residuals.offline``, their own
+            update code, stacked over the samples); "online" runs them in the diagram. They
+            do not act on the robot here (no admittance), so both give the same results to
+            rounding (``tests/test_contact_localization.py``); offline costs a fraction
+            of the per-step time of Python systems in the loop. The Meshcat replays run
+            online (they draw the estimate as it comes).
         simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``); the plant
             is discrete, so only ``target_realtime_rate`` and the publishing matter.
         base_state, imperfections, model_refinement: the world of the study
@@ -239,6 +258,7 @@ class ContactLocalizationScenario:
     detector_release_probability: float = 1e-2
     detector_startup_time: float = 0.1
     log_period: float = 1e-3
+    estimation: str = "offline"
     simulator_config: SimulatorConfig = field(default_factory=SimulatorConfig)
     base_state: str = "invariant_ekf"
     imperfections: Imperfections = field(default_factory=Imperfections.realistic)
@@ -259,6 +279,16 @@ class ContactLocalizationHandles:
     excluded_bodies: tuple[str, ...]
     loggers: dict[str, VectorLogSink] = field(default_factory=dict)
     meshcat_visualizer: MeshcatVisualizer | None = None
+    recorder: UpdateRecorder | None = None
+
+    @property
+    def online(self) -> bool:
+        """The estimators run in the diagram (else on the ``recorder``'s record)."""
+        return self.recorder is None
+
+
+#: ``ContactLocalizationScenario.estimation`` values.
+ESTIMATIONS = ("offline", "online")
 
 
 def scenario_push(scenario: ContactLocalizationScenario) -> Push:
@@ -291,14 +321,16 @@ def build_contact_localization_diagram(
     *,
     model_corrections: ModelCorrections | None = None,
     pushes: Sequence[Push] | None = None,
-    log_residuals: bool = False,
+    online: bool | None = None,
 ) -> tuple[Diagram, ContactLocalizationHandles]:
     """Builds the diagram of the module docstring for ``scenario`` (one run: its push, or
     none; its posture held, or following ``scenario.motion``) with the refined model
     ``model_corrections`` (the scenario's ``model_refinement``), if given. ``pushes``, if
     given, replaces the scenario's push (e.g. the trials of one run, ``run_schedule``).
-    ``log_residuals`` also logs the two residuals (``external_wrench_world``,
-    ``residual``) at ``log_period``.
+    ``online``: the estimators in the diagram (default: ``scenario.estimation``
+    "online", or a ``meshcat`` to draw in); otherwise the handles' residuals, detector and
+    localizer are built outside it, and the diagram records their inputs at every update
+    instead (the handles' ``recorder``: ``estimator_log``, ``estimate_run``).
 
     Raises:
         ValueError: a model without foot F/T sensors, an unknown or excluded push body,
@@ -308,6 +340,12 @@ def build_contact_localization_diagram(
         raise ValueError("push_duration and log_period must be positive, push_start non-negative")
     if scenario.trial_gap < 0 or scenario.trials_per_run < 1 or scenario.num_seeds < 1:
         raise ValueError("trial_gap must be non-negative, trials_per_run and num_seeds at least 1")
+    if scenario.estimation not in ESTIMATIONS:
+        raise ValueError(f"estimation must be one of {ESTIMATIONS}, got {scenario.estimation!r}")
+    if online is None:
+        online = scenario.estimation == "online" or meshcat is not None
+    if meshcat is not None and not online:
+        raise ValueError("a Meshcat replay draws the estimate as it comes: build it with online=True")
     builder = DiagramBuilder()
     station = add_scenario_station(builder, scenario, model_corrections)
     if station.humanoid is None or not station.known_wrench_frames:
@@ -335,9 +373,14 @@ def build_contact_localization_diagram(
     builder.Connect(plant.get_state_output_port(), push_source.GetInputPort("state"))
 
     frames = station.known_wrench_frames
-    internal, external = add_internal_and_external_residuals(
-        builder, station, scenario.internal_gain, scenario.external_gain, scenario.period
-    )
+    if online:
+        internal, external = add_internal_and_external_residuals(
+            builder, station, scenario.internal_gain, scenario.external_gain, scenario.period
+        )
+    else:
+        model = station.dynamics_model
+        internal = InternalResidual(plant, scenario.internal_gain, scenario.period, frames, model=model)
+        external = ExternalResidual(plant, scenario.external_gain, scenario.period, frames, model=model)
     model = internal.model
 
     nq = plant.num_positions()
@@ -351,33 +394,46 @@ def build_contact_localization_diagram(
             "covariance_internal": noise.covariance_internal,
             "covariance_external_force": noise.covariance_external_force,
         }
-    detector = builder.AddSystem(
-        ContactDetector(
-            plant,
-            internal_gain=scenario.internal_gain,
-            external_gain=scenario.external_gain,
-            known_wrench_frames=frames,
-            nominal_positions=station.initial_state[:nq],
-            period=scenario.period,
-            startup_time=scenario.detector_startup_time,
-            release_probability=scenario.detector_release_probability,
-            **covariances,
-        )
+    detector = ContactDetector(
+        plant,
+        internal_gain=scenario.internal_gain,
+        external_gain=scenario.external_gain,
+        known_wrench_frames=frames,
+        nominal_positions=station.initial_state[:nq],
+        period=scenario.period,
+        startup_time=scenario.detector_startup_time,
+        release_probability=scenario.detector_release_probability,
+        **covariances,
     )
     detector.set_name("contact_detector")
-    builder.Connect(external.GetOutputPort("external_wrench_world"), detector.GetInputPort("external_wrench_world"))
-    builder.Connect(internal.GetOutputPort("residual"), detector.GetInputPort("residual"))
-    localizer = builder.AddSystem(
-        ContactLocalizer(
-            plant,
-            station.scene_graph,
-            exclude_bodies=excluded,
-            period=scenario.period,
-            localization_period=scenario.localization_period,
-            settle_time=scenario.settle_time,
-        )
+    localizer = ContactLocalizer(
+        plant,
+        station.scene_graph,
+        exclude_bodies=excluded,
+        period=scenario.period,
+        localization_period=scenario.localization_period,
+        settle_time=scenario.settle_time,
     )
     localizer.set_name("contact_localizer")
+    handles = {
+        "plant": plant,
+        "scene_graph": station.scene_graph,
+        "station": station,
+        "push_source": push_source,
+        "model": model,
+        "internal": internal,
+        "external": external,
+        "detector": detector,
+        "localizer": localizer,
+        "excluded_bodies": excluded,
+    }
+    if not online:
+        diagram, recorder = _build_with_estimator_logs(builder, station, scenario.period)
+        return diagram, ContactLocalizationHandles(**handles, recorder=recorder)
+    builder.AddSystem(detector)
+    builder.AddSystem(localizer)
+    builder.Connect(external.GetOutputPort("external_wrench_world"), detector.GetInputPort("external_wrench_world"))
+    builder.Connect(internal.GetOutputPort("residual"), detector.GetInputPort("residual"))
     builder.Connect(station.sensed_state, localizer.GetInputPort("state"))
     builder.Connect(external.GetOutputPort("external_wrench_world"), localizer.GetInputPort("external_wrench_world"))
     builder.Connect(internal.GetOutputPort("residual"), localizer.GetInputPort("residual"))
@@ -395,11 +451,6 @@ def build_contact_localization_diagram(
         "contact_force_world": LogVectorOutput(localizer.GetOutputPort("contact_force_world"), builder, estimate_log),
         "contact_body": LogVectorOutput(localizer.GetOutputPort("contact_body"), builder, estimate_log),
     }
-    if log_residuals:
-        loggers["external_wrench_world"] = LogVectorOutput(
-            external.GetOutputPort("external_wrench_world"), builder, log
-        )
-        loggers["residual"] = LogVectorOutput(internal.GetOutputPort("residual"), builder, log)
     visualizer = None
     if meshcat is not None:
         visualizer = MeshcatVisualizer.AddToBuilder(builder, station.scene_graph, meshcat)
@@ -432,20 +483,32 @@ def build_contact_localization_diagram(
         )
     diagram = builder.Build()
     diagram.set_name("contact_localization")
-    return diagram, ContactLocalizationHandles(
-        plant=plant,
-        scene_graph=station.scene_graph,
-        station=station,
-        push_source=push_source,
-        model=model,
-        internal=internal,
-        external=external,
-        detector=detector,
-        localizer=localizer,
-        excluded_bodies=excluded,
-        loggers=loggers,
-        meshcat_visualizer=visualizer,
+    return diagram, ContactLocalizationHandles(**handles, loggers=loggers, meshcat_visualizer=visualizer)
+
+
+def _build_with_estimator_logs(
+    builder: DiagramBuilder, station: HumanoidStation, period: float
+) -> tuple[Diagram, UpdateRecorder]:
+    """Builds the diagram with the estimators' inputs recorded instead of the estimators:
+    an ``UpdateRecorder`` updated when they would be, reading what they would read (the
+    sensed state, the motor torque the internal residual reads, the F/T wrenches)."""
+    recorder = builder.AddSystem(
+        UpdateRecorder(
+            {
+                "state": station.sensed_state.size(),
+                "torque": station.measured_torque.size(),
+                "wrenches": station.known_wrenches.size(),
+            },
+            period,
+        )
     )
+    recorder.set_name("estimator_input_recorder")
+    builder.Connect(station.sensed_state, recorder.GetInputPort("state"))
+    builder.Connect(station.measured_torque, recorder.GetInputPort("torque"))
+    builder.Connect(station.known_wrenches, recorder.GetInputPort("wrenches"))
+    diagram = builder.Build()
+    diagram.set_name("contact_localization_sensing")
+    return diagram, recorder
 
 
 def sample_trials(model: str, trials: int, seed: int, contacts: int = 1) -> list[dict]:
@@ -600,17 +663,22 @@ def averaged_input_covariances(
         scenario, push_body=None, motion=None, seed=(scenario.seed * 100003 + 99971) % (2**31 - 1)
     )
     diagram, handles = build_contact_localization_diagram(
-        calibration, model_corrections=model_corrections, log_residuals=True
+        calibration, model_corrections=model_corrections, online=False
     )
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
     handles.station.set_initial_state(context)
     simulator.Initialize()
     simulator.AdvanceTo(AVERAGED_NOISE_RUN_S)
+    inputs = estimator_log(handles)
+    replay = estimate_run(handles, inputs, slice(None))
+    keep = inputs.log_times >= AVERAGED_NOISE_STARTUP_S
     blocks = []
-    for name, gain in (("external_wrench_world", scenario.external_gain), ("residual", scenario.internal_gain)):
-        log = handles.loggers[name].FindLog(context)
-        x = log.data()[:, log.sample_times() >= AVERAGED_NOISE_STARTUP_S]
+    for values, gain in (
+        (replay.external_wrench_world, scenario.external_gain),
+        (replay.internal, scenario.internal_gain),
+    ):
+        x = values[keep].T
         mean = x.mean(axis=1)
         averaging = max(scenario.push_duration - scenario.settle_time, scenario.period)
         blocks.append(np.outer(mean, mean) + np.cov(x) * min(1.0, 2.0 / (gain * averaging)))
@@ -712,17 +780,139 @@ def time_localizer_update(handles: ContactLocalizationHandles, context: Context,
     for name in ("external_wrench_world", "residual", "contact_detected"):
         localizer.GetInputPort(name).FixValue(probe, np.array(localizer.GetInputPort(name).Eval(lc)))
     localizer.GetInputPort("contact_detected").FixValue(probe, [1.0])
+
+    def update(x2: np.ndarray) -> None:
+        state_value.GetMutableData().set_value(x2)
+        localizer.EvalUniquePeriodicDiscreteUpdate(probe)
+
+    return _median_update_time(update, x, handles.plant.num_positions(), repeats)
+
+
+def time_localizer_advance(
+    localizer: ContactLocalizer, x: np.ndarray, w: np.ndarray, r: np.ndarray, repeats: int = 20
+) -> float:
+    """``time_localizer_update`` without a diagram (offline estimation): the median wall
+    time [s] of one update (``advance``, the code of the periodic update) from a new
+    context's state with contact detected, at the inputs x, w, r."""
+    start = localizer.initial_state()
+
+    def update(x2: np.ndarray) -> None:
+        localizer.advance(start, 0.0, x2, w, r, True)
+
+    nq = len(x) - (len(r) + 6)  # x = [q; v], v = 6 base + n joint velocities
+    return _median_update_time(update, np.array(x), nq, repeats)
+
+
+def _median_update_time(update, x: np.ndarray, nq: int, repeats: int) -> float:
     rng = np.random.default_rng(0)
-    nq = handles.plant.num_positions()
     samples = []
     for _ in range(repeats):
         x2 = x.copy()
         x2[7:nq] += 1e-6 * rng.normal(size=nq - 7)
-        state_value.GetMutableData().set_value(x2)
         start = time.perf_counter()
-        localizer.EvalUniquePeriodicDiscreteUpdate(probe)
+        update(x2)
         samples.append(time.perf_counter() - start)
     return float(np.median(samples))
+
+
+@dataclass
+class EstimatorLog:
+    """The estimators' inputs at every update of a run built with ``online=False``, in the
+    order the updates ran: their times (N,), s, the times the online systems' outputs of
+    each update would be logged (the next update's), and per update the sensed state
+    [q; v], the motor torque the internal residual reads and the F/T wrenches in world."""
+
+    update_times: np.ndarray
+    log_times: np.ndarray
+    state: np.ndarray
+    torque: np.ndarray
+    wrenches: np.ndarray
+
+
+def estimator_log(handles: ContactLocalizationHandles) -> EstimatorLog:
+    """The ``EstimatorLog`` of a run so far (its ``recorder``'s records)."""
+    recorder = handles.recorder
+    if recorder is None:
+        raise ValueError("estimator_log: the estimators ran in the diagram (online): nothing was recorded")
+    times = recorder.times
+    period = handles.internal.period
+    return EstimatorLog(
+        update_times=times,
+        log_times=np.append(times[1:], times[-1] + period) if times.size else times,
+        state=recorder.values("state"),
+        torque=recorder.values("torque"),
+        wrenches=recorder.values("wrenches"),
+    )
+
+
+def estimate_run(
+    handles: ContactLocalizationHandles, log: EstimatorLog, rows: slice, start: ReplayState | None = None
+) -> ReplayedEstimation:
+    """The handles' residuals, detector and localizer run on the updates ``rows`` of
+    ``log`` (``replay_contact_estimation``), going on from ``start`` (the ``end`` of the
+    updates before them; None: the run's first updates). The localizer's result is its
+    state after the last update (what the study reads at a trial's end: ``end``)."""
+    return replay_contact_estimation(
+        handles.internal,
+        handles.external,
+        lambda *_: handles.detector,
+        handles.localizer,
+        log.state[rows],
+        log.torque[rows],
+        log.wrenches[rows],
+        start=start,
+        times=log.update_times[rows],
+        localize_end_only=True,
+    )
+
+
+@dataclass
+class OfflineTrial:
+    """One trial's estimation from the log (``estimate_run``), as ``trial_result`` reads
+    it: per logged update (log times, the window's updates and, for a run's first trial,
+    the standing start's before them) the detector's flag and the time its detection began,
+    the localization at the end, the inputs it was computed from ((q, wrench, residual),
+    ``ContactLocalizer.localization_inputs``), and the last sensed state, external wrench
+    and internal residual (the localizer's update time is measured at them)."""
+
+    log_times: np.ndarray
+    detected: np.ndarray
+    detection_time: np.ndarray
+    estimate: LocalizationResult
+    localization_inputs: tuple[np.ndarray, np.ndarray, np.ndarray]
+    last_inputs: tuple[np.ndarray, np.ndarray, np.ndarray]
+
+
+def offline_trial(
+    handles: ContactLocalizationHandles,
+    log: EstimatorLog,
+    replays: Sequence[tuple[slice, ReplayedEstimation]],
+    detected_before: bool,
+) -> OfflineTrial:
+    """The ``OfflineTrial`` of the replays ``(rows of log, replay)`` of one trial, in time
+    order (the last one ends at the trial's end); ``detected_before``: the detector's flag
+    before the first of them."""
+    times = np.concatenate([log.log_times[rows] for rows, _ in replays])
+    update_times = np.concatenate([log.update_times[rows] for rows, _ in replays])
+    detected = np.concatenate([replay.contact_detected for _, replay in replays])
+    # The detector's detection_time output: the time of the update at which it last switched on.
+    rising = np.flatnonzero(np.diff(np.concatenate(([detected_before], detected)).astype(np.int8)) > 0)
+    since = np.full(detected.size, -1)
+    since[rising] = rising
+    since = np.maximum.accumulate(since)
+    detection_time = np.where(since >= 0, update_times[np.maximum(since, 0)], 0.0)
+    rows, last = replays[-1]
+    localizer = handles.localizer
+    end = last.end.localizer
+    k = (rows.stop if rows.stop is not None else len(log.update_times)) - 1
+    return OfflineTrial(
+        log_times=times,
+        detected=detected.astype(float),
+        detection_time=detection_time,
+        estimate=localizer.unpack(end[3]),
+        localization_inputs=localizer.split_localized(end[2]),
+        last_inputs=(log.state[k], last.external_wrench_world[-1], last.internal[-1]),
+    )
 
 
 def trial_result(
@@ -735,6 +925,8 @@ def trial_result(
     push_indices: Sequence[int] = (0,),
     window: tuple[float, float, float] | None = None,
     restored_at_start: bool = False,
+    detected_at_start: bool = False,
+    offline: OfflineTrial | None = None,
 ) -> dict:
     """The results of the trial ``spec`` at the end of its push, from the simulator's root
     ``context``: detection and its delay, the localized link and point, the force errors,
@@ -750,22 +942,32 @@ def trial_result(
     offline; the study's one-or-two-contact localization, ``multi_contact_result``, runs on
     them after all trials). ``restored_at_start``: the run's state was
     restored to its standing start at the window's start (``shared_standing_start``), so
-    the detector was off there whatever the log's last sample before it says."""
+    the detector's flag there is the saved start's, ``detected_at_start``, whatever the
+    log's last sample before it says. ``offline``:
+    the trial's estimation from the log (``online=False`` diagrams), read instead of the
+    online estimators' loggers and state."""
     if window is None:
         window = (0.0, scenario.push_start, scenario.push_start + scenario.push_duration)
     previous_end, push_start, t_end = window
-    estimate = handles.localizer.estimate(handles.localizer.GetMyContextFromRoot(context))
+    if offline is None:
+        estimate = handles.localizer.estimate(handles.localizer.GetMyContextFromRoot(context))
+        log = handles.loggers["contact_detected"].FindLog(context)
+        t, detected = log.sample_times(), log.data()[0]
+        times = handles.loggers["detection_time"].FindLog(context).data()[0]
+    else:
+        estimate = offline.estimate
+        t, detected, times = offline.log_times, offline.detected, offline.detection_time
     pc = handles.push_source.GetMyContextFromRoot(context)
     points = np.array(handles.push_source.GetOutputPort("point_world").Eval(pc)).reshape(-1, 3)
     true_points = points[list(push_indices)]
     true_point = true_points[0]
     f_true = np.asarray(spec["force_world"])
 
-    log = handles.loggers["contact_detected"].FindLog(context)
-    t, detected = log.sample_times(), log.data()[0]
-    times = handles.loggers["detection_time"].FindLog(context).data()[0]
     before = t <= previous_end
-    state_before = detected[before][-1] if before.any() and not restored_at_start else 0.0
+    if restored_at_start:
+        state_before = 1.0 if detected_at_start else 0.0
+    else:
+        state_before = detected[before][-1] if before.any() else 0.0
     inside = ~before & (t <= t_end)
     t, detected, times = t[inside], detected[inside], times[inside]
     rising = np.flatnonzero(np.diff(np.concatenate(([state_before], detected))) > 0.5)
@@ -805,8 +1007,12 @@ def trial_result(
         result["angle_error_deg"] = math.degrees(math.acos(min(1.0, max(-1.0, cos))))
     if estimate.body_index >= 0:
         result["position_error_m"] = float(np.linalg.norm(estimate.point_W - true_point))
-    result["localizer_update_s"] = time_localizer_update(handles, context)
-    q, wrench, residual = handles.localizer.localization_inputs(handles.localizer.GetMyContextFromRoot(context))
+    if offline is None:
+        result["localizer_update_s"] = time_localizer_update(handles, context)
+        q, wrench, residual = handles.localizer.localization_inputs(handles.localizer.GetMyContextFromRoot(context))
+    else:
+        result["localizer_update_s"] = time_localizer_advance(handles.localizer, *offline.last_inputs)
+        q, wrench, residual = offline.localization_inputs
     result["localizer_inputs"] = {"q": q, "external_wrench_world": wrench, "residual": residual}
     result["true_points_world"] = true_points.tolist()
     return result
@@ -871,11 +1077,18 @@ def no_contact_result(
     """The run without contact (``no_contact_scenario``) of ``scenario.no_contact_duration`` s:
     the number of OFF->ON switches of the detector, and the largest test statistics over
     their thresholds after the detector's start-up time (before it the detector ignores
-    them: the residuals and the base-state estimator start)."""
-    log = handles.loggers["contact_detected"].FindLog(context)
-    detected = log.data()[0]
-    stats_log = handles.loggers["test_statistics"].FindLog(context)
-    stats = stats_log.data()[:, stats_log.sample_times() >= handles.detector.startup_time]
+    them: the residuals and the base-state estimator start). A run built with
+    ``online=False`` runs its estimators on its log here (``estimate_run``)."""
+    if handles.online:
+        log = handles.loggers["contact_detected"].FindLog(context)
+        detected = log.data()[0]
+        stats_log = handles.loggers["test_statistics"].FindLog(context)
+        stats = stats_log.data()[:, stats_log.sample_times() >= handles.detector.startup_time]
+    else:
+        inputs = estimator_log(handles)
+        replay = estimate_run(handles, inputs, slice(None))
+        detected = replay.contact_detected.astype(float)
+        stats = replay.test_statistics[inputs.log_times >= handles.detector.startup_time].T
     on = handles.detector.thresholds["on"]
     return {
         "duration_s": scenario.no_contact_duration,

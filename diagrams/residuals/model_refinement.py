@@ -138,8 +138,8 @@ class RefinementHandles:
 
     plant: MultibodyPlant
     station: HumanoidStation
-    internal: InternalResidual
-    external: ExternalResidual
+    internal: InternalResidual | None
+    external: ExternalResidual | None
     loggers: dict[str, VectorLogSink]
 
 
@@ -147,12 +147,15 @@ def build_refinement_diagram(
     scenario: ModelRefinementScenario,
     motion: SlowMotion | None,
     corrections: ModelCorrections | None = None,
+    *,
+    residuals: bool = True,
 ) -> tuple[Diagram, RefinementHandles]:
     """The station of ``scenario`` (with ``corrections`` applied, if given) following
     ``motion`` (None: holding its posture), with the internal and external residuals, and
     loggers at every plant step: ``sensed_state``, ``measured_torque`` (the torque sensor's
     raw output), ``known_wrenches``, ``external_wrench_world``, ``internal_residual``,
-    ``true_state``.
+    ``true_state``. ``residuals`` False: without the residuals and their loggers (a
+    calibration log, whose residuals are replayed offline with the refined model).
 
     Raises:
         ValueError: a model without foot F/T sensors, bad scenario fields.
@@ -173,17 +176,19 @@ def build_refinement_diagram(
     reference.set_name("posture_reference")
     builder.Connect(reference.get_output_port(), station.desired_position)
     T = scenario.plant_config.time_step
-    internal, external = add_internal_and_external_residuals(
-        builder, station, scenario.internal_gain, scenario.external_gain, T
-    )
     loggers = {
         "sensed_state": LogVectorOutput(station.sensed_state, builder, T),
         "measured_torque": LogVectorOutput(station.raw_measured_torque, builder, T),
         "known_wrenches": LogVectorOutput(station.known_wrenches, builder, T),
-        "external_wrench_world": LogVectorOutput(external.GetOutputPort("external_wrench_world"), builder, T),
-        "internal_residual": LogVectorOutput(internal.GetOutputPort("residual"), builder, T),
         "true_state": LogVectorOutput(plant.get_state_output_port(), builder, T),
     }
+    internal = external = None
+    if residuals:
+        internal, external = add_internal_and_external_residuals(
+            builder, station, scenario.internal_gain, scenario.external_gain, T
+        )
+        loggers["external_wrench_world"] = LogVectorOutput(external.GetOutputPort("external_wrench_world"), builder, T)
+        loggers["internal_residual"] = LogVectorOutput(internal.GetOutputPort("residual"), builder, T)
     diagram = builder.Build()
     diagram.set_name("model_refinement")
     return diagram, RefinementHandles(plant, station, internal, external, loggers)
@@ -222,7 +227,7 @@ def calibrate_model(scenario: ModelRefinementScenario) -> tuple[ModelCorrections
     """Runs the calibration motion on the (uncorrected) station and identifies the model
     corrections from its log, with the residual noise model of the refined model on the same
     log (``calibrate_from_log``)."""
-    diagram, handles = build_refinement_diagram(scenario, scenario.calibration_motion)
+    diagram, handles = build_refinement_diagram(scenario, scenario.calibration_motion, residuals=False)
     context = run_refinement_diagram(diagram, handles, scenario.calibration_duration, scenario.simulator_config)
     log = calibration_log(handles, context)
     return calibrate_from_log(scenario, handles, log), log

@@ -164,7 +164,7 @@ def build_residual_comparison_diagram(
     known_frames, known_wrenches = station.known_wrench_frames, station.known_wrenches
 
     # The three residuals, sharing one model (one dynamics computation per update).
-    # The station's model: the PD's gravity comes from the same per-state computation.
+    # The station's model: the estimators' inertias, which the PD's gravity also uses.
     model = station.dynamics_model if station.dynamics_model is not None else ResidualModel(plant)
     classical = builder.AddSystem(
         ClassicalResidual(plant, scenario.classical_gain, scenario.period, known_frames, model=model)

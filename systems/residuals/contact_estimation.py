@@ -1020,9 +1020,7 @@ class ContactLocalizer(LeafSystem):
         result was computed from: the running means once averaging had started, else the
         inputs of that update (zeros before the first localization). With them
         ``localize`` replays the result offline (e.g. to study its settings)."""
-        localized = np.array(context.get_discrete_state(self._localized_index).get_value())
-        n = self._n
-        return localized[6 + n :], localized[:6], localized[6 : 6 + n]
+        return self.split_localized(np.array(context.get_discrete_state(self._localized_index).get_value()))
 
     def _split_means(self, means: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(q, wrench, residual) of the averaging state's means; q's quaternion (the mean
@@ -1034,17 +1032,7 @@ class ContactLocalizer(LeafSystem):
 
     def estimate(self, context: Context) -> LocalizationResult:
         """The localization stored in ``context``'s state (without candidates)."""
-        s = self._r(context)
-        return LocalizationResult(
-            int(s[0]),
-            int(s[1]),
-            s[2:5].copy(),
-            s[5:8].copy(),
-            float(s[8]),
-            float(s[9]),
-            runner_up_body_index=int(s[10]),
-            runner_up_point_W=s[11:14].copy(),
-        )
+        return self.unpack(self._r(context))
 
     # -- system -----------------------------------------------------------------------------
     def _r(self, context: Context) -> np.ndarray:
@@ -1120,17 +1108,51 @@ class ContactLocalizer(LeafSystem):
         means (cumulative sums; past ``averaging_time_constant``, its exponential filter),
         needed only where a localization happens. Equal to stepping ``advance`` to
         rounding (tests). Inputs are not checked."""
+        return self.replay_from(None, times, x, w, r, detected)[0]
+
+    def replay_from(
+        self,
+        start: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None,
+        times: np.ndarray,
+        x: np.ndarray,
+        w: np.ndarray,
+        r: np.ndarray,
+        detected: np.ndarray,
+        *,
+        end_only: bool = False,
+    ) -> tuple[np.ndarray | None, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+        """``replay`` from the state ``start`` (as ``advance`` takes it; None:
+        ``initial_state``), e.g. where a replay of the samples before left off: returns the
+        (N, 14) packed results and the state after the last sample, as stepping
+        ``advance`` would (to rounding). A ``start`` in the middle of an averaging is
+        stepped sample by sample (exact by construction); otherwise as ``replay``.
+        ``end_only``: only the state after the last sample is wanted (the results are
+        None): of the localizations only the last one runs, the one that state holds
+        (each localization depends on its own averaged inputs only); the state's running
+        means are then those of the last contact (an averaging restarts from its first
+        sample, so earlier ones do not matter)."""
         from scipy.signal import lfilter
 
         N = len(times)
         out = np.empty((N, 14))
         detected = np.asarray(detected, dtype=bool)
+        state = self.initial_state() if start is None else tuple(np.array(part) for part in start)
+        if N == 0:
+            return out, state
+        if _Averaging(state[0]).active > 0.5:
+            for k in range(N):
+                state = self.advance(state, float(times[k]), x[k], w[k], r[k], bool(detected[k]))
+                out[k] = state[3]
+            return (None if end_only else out), state
+        _, means_end, localized, _ = state
         idle = ~detected
         out[idle] = self._pack(LocalizationResult(NO_CONTACT, force_W=np.zeros(3)))
         out[idle, 5:8] = w[idle, 3:]
         samples = np.concatenate((w, r, x[:, : self._nq]), axis=1)
         edges = np.flatnonzero(np.diff(np.concatenate(([0], detected.astype(np.int8), [0]))))
-        for a, b in zip(edges[::2].tolist(), edges[1::2].tolist()):
+        avg_end = np.zeros(len(_Averaging.get_fields()))
+        intervals = list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+        for a, b in intervals[-1:] if end_only else intervals:
             t = times[a:b]
             settled = np.flatnonzero(t - t[0] >= self._settle_time - 1e-12)
             first = int(settled[0]) if settled.size else b - a
@@ -1148,19 +1170,52 @@ class ContactLocalizer(LeafSystem):
                         means[c:], _ = lfilter(
                             [beta], [1.0, beta - 1.0], s[c:], axis=0, zi=((1.0 - beta) * y0)[None, :]
                         )
-            i, last = 0, -math.inf
-            while i < b - a:
-                if t[i] - last >= self._localization_period - 1e-9:
-                    last = float(t[i])
-                    if i >= first:
-                        q, wi, ri = self._split_means(means[i - first])
-                    else:
-                        q, wi, ri = x[a + i, : self._nq], w[a + i], r[a + i]
-                    out[a + i] = self._pack(self.localize(q, wi, ri))
+                means_end = means[-1]
+            # The localizations: at the first sample, then each one localization period
+            # after the last (the ticks depend on the times only).
+            ticks, last = [], -math.inf
+            for i, ti in enumerate(t.tolist()):
+                if ti - last >= self._localization_period - 1e-9:
+                    ticks.append(i)
+                    last = ti
+            for i in ticks[-1:] if end_only else ticks:
+                if i >= first:
+                    q, wi, ri = self._split_means(means[i - first])
                 else:
-                    out[a + i] = out[a + i - 1]
-                i += 1
-        return out
+                    q, wi, ri = x[a + i, : self._nq], w[a + i], r[a + i]
+                localized = np.concatenate((wi, ri, q))
+                out[a + i] = self._pack(self.localize(q, wi, ri))
+            if end_only:
+                out[b - 1] = out[a + ticks[-1]]
+            else:
+                localized_at = set(ticks)
+                for i in range(1, b - a):  # between localizations the result holds
+                    if i not in localized_at:
+                        out[a + i] = out[a + i - 1]
+            if b == N:  # still averaging after the last sample
+                avg_end = np.array([1.0, float(max(b - a - first, 0)), float(t[0]), last])
+        return (None if end_only else out), (avg_end, np.array(means_end), np.array(localized), out[-1].copy())
+
+    @staticmethod
+    def unpack(s: np.ndarray) -> LocalizationResult:
+        """The localization of a packed result (a row of ``replay``, the last part of
+        ``advance``'s state), without candidates."""
+        return LocalizationResult(
+            int(s[0]),
+            int(s[1]),
+            np.array(s[2:5]),
+            np.array(s[5:8]),
+            float(s[8]),
+            float(s[9]),
+            runner_up_body_index=int(s[10]),
+            runner_up_point_W=np.array(s[11:14]),
+        )
+
+    def split_localized(self, localized: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(q, external wrench in world, internal residual) of the inputs of the last
+        localization as ``advance``'s state holds them (``localization_inputs``)."""
+        n = self._n
+        return localized[6 + n :], localized[:6], localized[6 : 6 + n]
 
     @staticmethod
     def _pack(result: LocalizationResult) -> np.ndarray:

@@ -56,11 +56,10 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import Frame, JacobianWrtVariable, SpatialInertia
+from pydrake.multibody.tree import BodyIndex, Frame, JacobianWrtVariable, SpatialInertia
 from pydrake.systems.framework import Context, DiscreteValues, LeafSystem
 
 from systems.common.checks import eval_finite_input
-from systems.common.topology import uniform_gravity
 from systems.dynamics.floating_base import FloatingBaseDynamics
 from systems.dynamics.floating_base_terms import FloatingBaseTerms
 
@@ -102,7 +101,10 @@ class ResidualModel:
         X_WP = free_parent.CalcPoseInWorld(plant.CreateDefaultContext())
         self._p_WP = X_WP.translation().copy()
         self._R_WP = X_WP.rotation().matrix().copy()
-        self._gravity_W = uniform_gravity(plant)
+        # Its own context for the PD's gravity (``gravity_joint_torques``), with this model's
+        # inertias.
+        self._context_gravity = plant.CreateDefaultContext()
+        self._joint_velocities = np.arange(6, self.num_velocities)
         self._key: bytes | None = None
         self._terms: FloatingBaseTerms | None = None
         self._jacobians: dict[int, np.ndarray] = {}
@@ -117,6 +119,8 @@ class ResidualModel:
             ValueError: the "reference" implementation.
         """
         self.dynamics.set_spatial_inertias(inertias)
+        for index, M in inertias.items():
+            self.plant.get_body(BodyIndex(int(index))).SetSpatialInertiaInBodyFrame(self._context_gravity, M)
         self._key = None
 
     def check_frames(self, frames: Sequence[Frame | str]) -> tuple[Frame, ...]:
@@ -139,16 +143,16 @@ class ResidualModel:
 
     def gravity_joint_torques(self, x: np.ndarray) -> np.ndarray:
         """The joint entries (v[6:] order) of Drake's generalized gravity force tau_g
-        (``CalcGravityGeneralizedForces``) at the state x = [q; v], N m.
+        (``CalcGravityGeneralizedForces``) of this model (its inertias, not the plant's
+        defaults) at the state x = [q; v], N m.
 
-        Uniform gravity's generalized force is M[:, 3:6] g (the base's translational columns
-        of the mass matrix are m J_com^T); in F0 coordinates its joint entries are
-        F[3:6]^T g_B with g_B = R_WB^T g_W. Free when x is the state of the last
-        ``evaluate`` (a PD controller reading the sample the residuals evaluated one step
-        earlier shares their mass matrix instead of computing gravity again).
+        One Drake call on a context of its own, whatever was evaluated before: a PD
+        controller computes the same torque whether or not residual systems share this
+        model (the contact study simulates its sensors without them and runs the
+        estimators on the log afterwards, ``diagrams.residuals.contact_localization``).
         """
-        terms = self.evaluate(x)
-        return terms.F[3:6].T @ (self._gravity_W @ terms.R_WB)
+        self.plant.SetPositions(self._context_gravity, x[: self.num_positions])
+        return self.plant.CalcGravityGeneralizedForces(self._context_gravity)[self._joint_velocities]
 
     def spatial_jacobian_F0(self, frame: Frame) -> np.ndarray:
         """(6, nv) Jacobian of ``frame``'s origin w.r.t. [v0; qdot], expressed in F0, rows

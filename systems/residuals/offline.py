@@ -157,7 +157,7 @@ def replay_residuals(
     classical = None
     if classical_gain is not None:
         classical = ClassicalResidual(plant, classical_gain, period, frames, model=model)
-    return _replay_residuals(internal, external, classical, state, joint_torque, known_wrenches)
+    return _replay_residuals(internal, external, classical, state, joint_torque, known_wrenches)[0]
 
 
 def _replay_residuals(
@@ -167,16 +167,22 @@ def _replay_residuals(
     state: np.ndarray,
     joint_torque: np.ndarray,
     known_wrenches: np.ndarray,
-) -> ReplayedResiduals:
+    integral: np.ndarray | None = None,
+) -> tuple[ReplayedResiduals, np.ndarray | None]:
     """The residual systems' updates (``advance``: the code of their periodic update,
     without the framework's contexts and ports) at every sample, one after another on the
-    shared model (one dynamics evaluation per sample)."""
+    shared model (one dynamics evaluation per sample). ``integral`` and the second result:
+    the internal and external observers' I^+ before the first and after the last sample,
+    as ``_stacked_residuals``'s (the classical residual starts afresh)."""
     samples = state.shape[0]
+    n = joint_torque.shape[1]
     wrenches = known_wrenches if internal.known_wrench_frames else [None] * samples
-    out_internal = np.empty((samples, joint_torque.shape[1]))
+    out_internal = np.empty((samples, n))
     out_external = np.empty((samples, 6))
-    out_classical = None if classical is None else np.empty((samples, joint_torque.shape[1] + 6))
+    out_classical = None if classical is None else np.empty((samples, n + 6))
     integrals = [None, None, None]
+    if integral is not None:
+        integrals[:2] = [np.array(integral[:n], dtype=float), np.array(integral[n:], dtype=float)]
     for k in range(samples):
         x, w = state[k], wrenches[k]
         integrals[0], out_internal[k], _ = internal.advance(x, joint_torque[k], w, integrals[0])
@@ -184,7 +190,8 @@ def _replay_residuals(
         out_external[k] = external.world_wrench(terms, x, residual)
         if classical is not None:
             integrals[2], out_classical[k], _ = classical.advance(x, joint_torque[k], w, integrals[2])
-    return ReplayedResiduals(out_internal, out_external, out_classical)
+    end = None if integrals[0] is None else np.concatenate(integrals[:2])
+    return ReplayedResiduals(out_internal, out_external, out_classical), end
 
 
 def residual_noise_model(
@@ -236,7 +243,8 @@ def _stacked_residuals(
     joint_torque: np.ndarray,
     known_wrenches: np.ndarray,
     chunk: int = 1000,
-) -> ReplayedResiduals | None:
+    integral: np.ndarray | None = None,
+) -> tuple[ReplayedResiduals, np.ndarray] | None:
     """The internal (eq. 11) and external (eq. 16) residuals of the whole log at once: per
     sample only what needs the plant (the mass matrix, its derivative and the bias of
     ``DrakeFloatingBaseDynamics.mass_matrix_terms_of_samples``, the F/T frames' Jacobians); the
@@ -244,8 +252,11 @@ def _stacked_residuals(
     torques, the momenta and rates of ``_momentum_and_rates`` and the world wrench of
     ``ResidualModel.base_wrench_to_world`` over all samples as stacked numpy; then the
     observer recursion of ``advance`` as the linear filter it is. Equal to the systems'
-    own updates to rounding (the tests compare them). None when the model's dynamics is
-    not the "fast" implementation (then ``advance`` runs per sample)."""
+    own updates to rounding (the tests compare them). ``integral``: the observers' momentum
+    integral I^+ [internal (n); external (6)] of the update before the first sample (None:
+    the first sample is the first update). Returns the residuals and I^+ after the last
+    sample; None when the model's dynamics is not the "fast" implementation (then
+    ``advance`` runs per sample)."""
     model = internal.model
     if external.model is not model or internal.period != external.period:
         return None
@@ -261,7 +272,7 @@ def _stacked_residuals(
     out_internal, out_external = np.empty((samples, n)), np.empty((samples, 6))
     period = internal.period
     gain = np.concatenate((internal._gain, external._gain))
-    previous = None  # I^+ of the last update, [internal; external]
+    previous = None if integral is None else np.array(integral, dtype=float)  # I^+ of the last update
     for start in range(0, samples, chunk):
         rows = range(start, min(start + chunk, samples))
         K = len(rows)
@@ -323,7 +334,7 @@ def _stacked_residuals(
         force_W = (R_WB @ residual[:, n + 3 :, None])[:, :, 0]
         p_WBo = model._p_WP + x[:, 4:7] @ model._R_WP.T
         out_external[rows.start : rows.stop] = np.concatenate((moment_W + np.cross(p_WBo, force_W), force_W), axis=1)
-    return ReplayedResiduals(out_internal, out_external, None)
+    return ReplayedResiduals(out_internal, out_external, None), previous
 
 
 def _first_order_filter(c: np.ndarray, u: np.ndarray, y0: np.ndarray) -> np.ndarray:
@@ -338,16 +349,33 @@ def _first_order_filter(c: np.ndarray, u: np.ndarray, y0: np.ndarray) -> np.ndar
     return y
 
 
+class ReplayState(NamedTuple):
+    """Where a ``replay_contact_estimation`` left off, to continue from (its ``start``):
+    the observers' momentum integral I^+ [internal (n); external (6)] of the last update,
+    that update's internal residual (n,) and external wrench in world (6,) (the detector's
+    and the localizer's next inputs), the detector's state and flag, and the localizer's
+    state (as ``ContactLocalizer.advance`` takes it, or None)."""
+
+    integral: np.ndarray
+    internal: np.ndarray
+    external_wrench_world: np.ndarray
+    detector: np.ndarray
+    detected: bool
+    localizer: tuple | None
+
+
 class ReplayedEstimation(NamedTuple):
     """What ``replay_contact_estimation`` returns, per log sample (N): the residuals (as
     ``ReplayedResiduals``), the detector's flag (N,) and test statistics (N, 2), and the
-    localizer's outputs ({"status", "body_index", "point_world", "force_world"}), or None."""
+    localizer's outputs ({"status", "body_index", "point_world", "force_world"}), or None;
+    and the state after the last sample (``ReplayState``; None for an empty log)."""
 
     internal: np.ndarray
     external_wrench_world: np.ndarray
     contact_detected: np.ndarray
     test_statistics: np.ndarray
     localization: dict | None
+    end: ReplayState | None = None
 
 
 def replay_contact_estimation(
@@ -358,6 +386,10 @@ def replay_contact_estimation(
     state: np.ndarray,
     joint_torque: np.ndarray,
     known_wrenches: np.ndarray,
+    *,
+    start: ReplayState | None = None,
+    times: np.ndarray | None = None,
+    localize_end_only: bool = False,
 ) -> ReplayedEstimation:
     """The residuals (eqs. 11, 16), the ContactDetector and the ContactLocalizer (Sec. VI)
     stepped through a log of N samples taken every ``internal``'s period T, in the order
@@ -373,6 +405,13 @@ def replay_contact_estimation(
             ContactDetector to run (its noise model may be measured on them).
         localizer: the ContactLocalizer, or None (no localization).
         state, joint_torque, known_wrenches: the log as ``replay_residuals`` takes it.
+        start: the ``end`` of a replay of the samples just before these (None: these
+            are the first updates): the systems go on from it, as they do online.
+        times: (N,) the updates' times, s, one period apart (default k T): the detector's
+            start-up and detection time and the localizer's settling and localization
+            period read them.
+        localize_end_only: only the localizer's state after the last sample is wanted
+            (``ContactLocalizer.replay_from``'s ``end_only``; no per-sample localization).
 
     Raises:
         ValueError: arrays of inconsistent sizes or non-finite values (naming them).
@@ -395,29 +434,63 @@ def replay_contact_estimation(
             )
         if not np.isfinite(array).all():
             raise ValueError(f"replay_contact_estimation: {name} holds NaN or inf")
-    residuals = _stacked_residuals(internal, external, state, joint_torque, known_wrenches)
-    if residuals is None:
-        residuals = _replay_residuals(internal, external, None, state, joint_torque, known_wrenches)
+    integral = None if start is None else start.integral
+    stacked = _stacked_residuals(internal, external, state, joint_torque, known_wrenches, integral=integral)
+    if stacked is None:
+        stacked = _replay_residuals(internal, external, None, state, joint_torque, known_wrenches, integral)
+    residuals, integral_end = stacked
     detector = make_detector(residuals.internal, residuals.external_wrench_world)
     period = internal.period
+    if times is None:
+        times = np.arange(samples) * period
+    times = np.asarray(times, dtype=float)
+    if times.shape != (samples,):
+        raise ValueError(f"replay_contact_estimation: times must be ({samples},), got {times.shape}")
     # The detector and the localizer see the residuals one update late (see above).
-    late_internal = np.vstack((np.zeros((1, n)), residuals.internal[:-1]))
-    late_external = np.vstack((np.zeros((1, 6)), residuals.external_wrench_world[:-1]))
-    detector_state = detector.CreateDefaultContext().get_discrete_state_vector().CopyToVector()
+    before_internal = np.zeros((1, n)) if start is None else np.asarray(start.internal, dtype=float)[None]
+    before_external = np.zeros((1, 6)) if start is None else np.asarray(start.external_wrench_world, dtype=float)[None]
+    late_internal = np.vstack((before_internal, residuals.internal[:-1]))
+    late_external = np.vstack((before_external, residuals.external_wrench_world[:-1]))
+    if start is None:
+        detector_state = detector.CreateDefaultContext().get_discrete_state_vector().CopyToVector()
+    else:
+        detector_state = np.array(start.detector, dtype=float)
     detected = np.zeros(samples, dtype=bool)
     statistics = detector.statistics_of_samples(late_external, late_internal)
     for k, s in enumerate(statistics.tolist()):
-        detector_state = detector.advance(detector_state, s, k * period)
+        detector_state = detector.advance(detector_state, s, float(times[k]))
         detected[k] = detector_state[0] > 0.5
     localization = None
+    localizer_end = None
     if localizer is not None:
-        late_detected = np.concatenate(([False], detected[:-1]))
-        times = np.arange(samples) * period
-        results = localizer.replay(times, state, late_external, late_internal, late_detected)
-        localization = {
-            "status": results[:, 0].copy(),
-            "body_index": results[:, 1].copy(),
-            "point_world": results[:, 2:5].copy(),
-            "force_world": results[:, 5:8].copy(),
-        }
-    return ReplayedEstimation(residuals.internal, residuals.external_wrench_world, detected, statistics, localization)
+        before = False if start is None else bool(start.detected)
+        late_detected = np.concatenate(([before], detected[:-1]))
+        results, localizer_end = localizer.replay_from(
+            None if start is None else start.localizer,
+            times,
+            state,
+            late_external,
+            late_internal,
+            late_detected,
+            end_only=localize_end_only,
+        )
+        if results is not None:
+            localization = {
+                "status": results[:, 0].copy(),
+                "body_index": results[:, 1].copy(),
+                "point_world": results[:, 2:5].copy(),
+                "force_world": results[:, 5:8].copy(),
+            }
+    end = None
+    if samples:
+        end = ReplayState(
+            integral=integral_end,
+            internal=residuals.internal[-1].copy(),
+            external_wrench_world=residuals.external_wrench_world[-1].copy(),
+            detector=np.array(detector_state, dtype=float),
+            detected=bool(detected[-1]),
+            localizer=localizer_end,
+        )
+    return ReplayedEstimation(
+        residuals.internal, residuals.external_wrench_world, detected, statistics, localization, end
+    )

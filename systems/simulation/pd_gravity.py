@@ -81,9 +81,8 @@ class PdGravityController(LeafSystem):
                 default: each actuator's ``effort_limit()`` (inf for unactuated joints).
             gravity_model: optional object with ``plant`` (this plant) and
                 ``gravity_joint_torques(x)`` returning tau_g[6:] at a state, e.g. the
-                ``systems.residuals.momentum_residuals.ResidualModel`` the residuals of the same diagram use:
-                the PD's state (the sensed sample held for one step) is then the state
-                the residuals evaluated at the previous update, and gravity costs nothing.
+                ``systems.residuals.momentum_residuals.ResidualModel`` the residuals of the same diagram use
+                (gravity from the estimators' model, e.g. a refined or mismatched one).
 
         Raises:
             ValueError: bad gain/limit shapes, negative values, or an unsupported plant.

@@ -162,9 +162,9 @@ def run_trials(specs: list[dict], scenario: ContactLocalizationScenario) -> list
         start = {name: frame.CalcPoseInWorld(plant_context) for name, frame in soles.items()}
         simulator.Initialize()
         standing = None
-        # Offline estimation (``handles.online`` False): the run's replays so far, the
-        # estimators' state after them, and the logged updates they covered.
-        replays, resume, covered, standing_end = [], None, 0, None
+        # Offline estimation (``handles.online`` False): the run's replayed segments so far
+        # and the estimators' state after them.
+        segments, resume, standing_end = [], None, None
         detected_at_start = False  # the detector's flag at the standing start's end
         if shared_start:
             simulator.AdvanceTo(scenario.push_start)
@@ -173,7 +173,7 @@ def run_trials(specs: list[dict], scenario: ContactLocalizationScenario) -> list
                 detector_context = handles.detector.GetMyContextFromRoot(standing)
                 detected_at_start = handles.detector.GetOutputPort("contact_detected").Eval(detector_context)[0] > 0.5
             else:
-                _, replays, resume, covered = _estimate_more(handles, replays, resume, covered)
+                segments, resume = _estimate_more(handles, segments, resume)
                 standing_end = resume
                 detected_at_start = standing_end.detected
         done = len(run_specs)
@@ -182,13 +182,13 @@ def run_trials(specs: list[dict], scenario: ContactLocalizationScenario) -> list
             if restored:
                 context.SetStateAndParametersFrom(standing)  # the standing start; the time goes on
                 window = (window[1], window[1], window[2])
-                replays, resume = [], standing_end
+                segments, resume = [], standing_end
             wall_start = time.perf_counter()
             simulator.AdvanceTo(window[2])
             offline = None
             if not handles.online:
-                log, replays, resume, covered = _estimate_more(handles, replays, resume, covered)
-                offline = offline_trial(handles, log, replays, restored and detected_at_start)
+                segments, resume = _estimate_more(handles, segments, resume)
+                offline = offline_trial(handles, segments, restored and detected_at_start)
             result = trial_result(
                 scenario,
                 spec,
@@ -213,14 +213,17 @@ def run_trials(specs: list[dict], scenario: ContactLocalizationScenario) -> list
     return results
 
 
-def _estimate_more(handles, replays: list, resume, covered: int) -> tuple:
-    """Runs the offline estimators (``estimate_run``) on the updates logged since the first
-    ``covered`` ones, from the state ``resume`` they ended in. Returns the log, ``replays``
-    with this one appended (rows, replay), its end state and the updates now covered."""
+def _estimate_more(handles, segments: list, resume) -> tuple:
+    """Runs the offline estimators (``estimate_run``) on the updates recorded since the
+    last call (the records are then cleared), from the state ``resume`` the last replay
+    ended in. Returns ``segments`` with this one appended (its ``EstimatorLog`` and
+    replay) and its end state."""
     log = estimator_log(handles)
-    rows = slice(covered, len(log.update_times))
-    replay = estimate_run(handles, log, rows, resume)
-    return log, [*replays, (rows, replay)], replay.end, rows.stop
+    if not log.update_times.size:
+        return segments, resume
+    handles.recorder.clear()
+    replay = estimate_run(handles, log, slice(None), resume)
+    return [*segments, (log, replay)], replay.end
 
 
 def localize_multi_contact(

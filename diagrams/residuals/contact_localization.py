@@ -885,33 +885,31 @@ class OfflineTrial:
 
 def offline_trial(
     handles: ContactLocalizationHandles,
-    log: EstimatorLog,
-    replays: Sequence[tuple[slice, ReplayedEstimation]],
+    segments: Sequence[tuple[EstimatorLog, ReplayedEstimation]],
     detected_before: bool,
 ) -> OfflineTrial:
-    """The ``OfflineTrial`` of the replays ``(rows of log, replay)`` of one trial, in time
-    order (the last one ends at the trial's end); ``detected_before``: the detector's flag
-    before the first of them."""
-    times = np.concatenate([log.log_times[rows] for rows, _ in replays])
-    update_times = np.concatenate([log.update_times[rows] for rows, _ in replays])
-    detected = np.concatenate([replay.contact_detected for _, replay in replays])
+    """The ``OfflineTrial`` of one trial's replayed segments ``(log, replay)``
+    (``estimate_run``), in time order, the last one ending at the trial's end;
+    ``detected_before``: the detector's flag before the first of them."""
+    times = np.concatenate([log.log_times for log, _ in segments])
+    update_times = np.concatenate([log.update_times for log, _ in segments])
+    detected = np.concatenate([replay.contact_detected for _, replay in segments])
     # The detector's detection_time output: the time of the update at which it last switched on.
     rising = np.flatnonzero(np.diff(np.concatenate(([detected_before], detected)).astype(np.int8)) > 0)
     since = np.full(detected.size, -1)
     since[rising] = rising
     since = np.maximum.accumulate(since)
     detection_time = np.where(since >= 0, update_times[np.maximum(since, 0)], 0.0)
-    rows, last = replays[-1]
+    log, last = segments[-1]
     localizer = handles.localizer
     end = last.end.localizer
-    k = (rows.stop if rows.stop is not None else len(log.update_times)) - 1
     return OfflineTrial(
         log_times=times,
         detected=detected.astype(float),
         detection_time=detection_time,
         estimate=localizer.unpack(end[3]),
         localization_inputs=localizer.split_localized(end[2]),
-        last_inputs=(log.state[k], last.external_wrench_world[-1], last.internal[-1]),
+        last_inputs=(log.state[-1], last.external_wrench_world[-1], last.internal[-1]),
     )
 
 

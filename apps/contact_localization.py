@@ -9,10 +9,12 @@ constant force of 5-40 N, within 60 deg of the inward surface normal, pushes a r
 of the outer collision surface of a random link (upper body and legs; the soles, below the
 F/T sensors, are excluded) for 1 s. The trials (1000 by default) are drawn from several
 seeds (5 by default: seed, seed + 1, ...). The internal and external residuals, the
-ContactDetector and the ContactLocalizer see only the sensors (``--contacts 2``: two links
-pushed at once; every trial also goes through the one-or-two-contact MultiContactLocalizer,
-after all trials: each seed's trials with the model error under load measured on the other
-seeds' trials, whose pushes are known: cross-fitting, ``multi_contact_jobs``).
+ContactDetector and the ContactLocalizer see only the sensors; by default they run after
+each trial's simulation on the inputs it recorded at each update (``estimation: offline``),
+as they would have in the loop. ``--contacts 2`` pushes two links at once. Every trial
+also goes through the one-or-two-contact MultiContactLocalizer, after all trials
+(cross-fitted: each seed's trials with the model error under load measured on the other
+seeds' trials, whose pushes are known, ``multi_contact_jobs``).
 Per trial the app records
 detection and its delay, the localized link and point and the force at the end of the push
 (the localizer averages its inputs from 0.1 s after detection and localizes at 100 Hz),

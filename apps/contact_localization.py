@@ -224,7 +224,7 @@ def _estimate_more(handles, segments: list, resume) -> tuple:
     if not log.update_times.size:
         return segments, resume
     handles.recorder.clear()
-    replay = estimate_run(handles, log, slice(None), resume)
+    replay = estimate_run(handles, log, resume)
     return [*segments, (log, replay)], replay.end
 
 

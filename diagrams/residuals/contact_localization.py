@@ -428,7 +428,7 @@ def build_contact_localization_diagram(
         "excluded_bodies": excluded,
     }
     if not online:
-        diagram, recorder = _build_with_estimator_logs(builder, station, scenario.period)
+        diagram, recorder = _build_with_estimator_recorder(builder, station, scenario.period)
         return diagram, ContactLocalizationHandles(**handles, recorder=recorder)
     builder.AddSystem(detector)
     builder.AddSystem(localizer)
@@ -486,7 +486,7 @@ def build_contact_localization_diagram(
     return diagram, ContactLocalizationHandles(**handles, loggers=loggers, meshcat_visualizer=visualizer)
 
 
-def _build_with_estimator_logs(
+def _build_with_estimator_recorder(
     builder: DiagramBuilder, station: HumanoidStation, period: float
 ) -> tuple[Diagram, UpdateRecorder]:
     """Builds the diagram with the estimators' inputs recorded instead of the estimators:
@@ -671,7 +671,7 @@ def averaged_input_covariances(
     simulator.Initialize()
     simulator.AdvanceTo(AVERAGED_NOISE_RUN_S)
     inputs = estimator_log(handles)
-    replay = estimate_run(handles, inputs, slice(None))
+    replay = estimate_run(handles, inputs)
     keep = inputs.log_times >= AVERAGED_NOISE_STARTUP_S
     blocks = []
     for values, gain in (
@@ -846,22 +846,22 @@ def estimator_log(handles: ContactLocalizationHandles) -> EstimatorLog:
 
 
 def estimate_run(
-    handles: ContactLocalizationHandles, log: EstimatorLog, rows: slice, start: ReplayState | None = None
+    handles: ContactLocalizationHandles, log: EstimatorLog, start: ReplayState | None = None
 ) -> ReplayedEstimation:
-    """The handles' residuals, detector and localizer run on the updates ``rows`` of
-    ``log`` (``replay_contact_estimation``), going on from ``start`` (the ``end`` of the
-    updates before them; None: the run's first updates). The localizer's result is its
+    """The handles' residuals, detector and localizer run on the updates of ``log``
+    (``replay_contact_estimation``), going on from ``start`` (the ``end`` of the updates
+    before them; None: the run's first updates). The localizer's result is its
     state after the last update (what the study reads at a trial's end: ``end``)."""
     return replay_contact_estimation(
         handles.internal,
         handles.external,
         lambda *_: handles.detector,
         handles.localizer,
-        log.state[rows],
-        log.torque[rows],
-        log.wrenches[rows],
+        log.state,
+        log.torque,
+        log.wrenches,
         start=start,
-        times=log.update_times[rows],
+        times=log.update_times,
         localize_end_only=True,
     )
 
@@ -1084,7 +1084,7 @@ def no_contact_result(
         stats = stats_log.data()[:, stats_log.sample_times() >= handles.detector.startup_time]
     else:
         inputs = estimator_log(handles)
-        replay = estimate_run(handles, inputs, slice(None))
+        replay = estimate_run(handles, inputs)
         detected = replay.contact_detected.astype(float)
         stats = replay.test_statistics[inputs.log_times >= handles.detector.startup_time].T
     on = handles.detector.thresholds["on"]

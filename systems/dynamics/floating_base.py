@@ -190,6 +190,13 @@ class DrakeFloatingBaseDynamics:
         bias = Cv + (M[:, :, 3:6] @ a[:, :, None])[:, :, 0]
         return M, M_dot, bias, R_WB, v0, J
 
+    def gravity_generalized_forces(self, q: np.ndarray) -> np.ndarray:
+        """Drake's generalized gravity force tau_g (nv, ``CalcGravityGeneralizedForces``) at
+        the positions q, with this model's inertias (``set_spatial_inertias``), N m / N.
+        Inputs are not checked (a PD controller calls it at every step)."""
+        self._plant.SetPositions(self._context_W, q)
+        return self._plant.CalcGravityGeneralizedForces(self._context_W)
+
     def floating_jacobian(self, q: np.ndarray, frame: Frame, p_FoP: np.ndarray, *, spatial: bool = False) -> np.ndarray:
         """J^fb of point P fixed in ``frame``, in world coordinates (eq. 12: tau = J^fb^T f_W).
 
@@ -241,6 +248,7 @@ class FloatingBaseDynamics:
             self._impl = RecursiveFloatingBaseDynamics(plant)
         self.topology = floating_base_topology(plant)
         self.plant = plant
+        self._gravity_context: Context | None = None  # the "reference" implementation's
 
     @property
     def num_joints(self) -> int:
@@ -253,6 +261,16 @@ class FloatingBaseDynamics:
         joint positions of the last ``compute`` (see ``DrakeFloatingBaseDynamics.context_F0``);
         None for the "reference" implementation, which keeps no such context."""
         return self._impl.context_F0 if isinstance(self._impl, DrakeFloatingBaseDynamics) else None
+
+    def gravity_generalized_forces(self, q: np.ndarray) -> np.ndarray:
+        """See ``DrakeFloatingBaseDynamics.gravity_generalized_forces``; the "reference"
+        implementation reads the plant's default inertias (it has no others)."""
+        if isinstance(self._impl, DrakeFloatingBaseDynamics):
+            return self._impl.gravity_generalized_forces(q)
+        if self._gravity_context is None:
+            self._gravity_context = self.plant.CreateDefaultContext()
+        self.plant.SetPositions(self._gravity_context, q)
+        return self.plant.CalcGravityGeneralizedForces(self._gravity_context)
 
     def set_spatial_inertias(self, inertias: Mapping[int, SpatialInertia]) -> None:
         """See ``DrakeFloatingBaseDynamics.set_spatial_inertias``; "fast" implementation only.

@@ -56,7 +56,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import BodyIndex, Frame, JacobianWrtVariable, SpatialInertia
+from pydrake.multibody.tree import Frame, JacobianWrtVariable, SpatialInertia
 from pydrake.systems.framework import Context, DiscreteValues, LeafSystem
 
 from systems.common.checks import eval_finite_input
@@ -101,10 +101,6 @@ class ResidualModel:
         X_WP = free_parent.CalcPoseInWorld(plant.CreateDefaultContext())
         self._p_WP = X_WP.translation().copy()
         self._R_WP = X_WP.rotation().matrix().copy()
-        # Its own context for the PD's gravity (``gravity_joint_torques``), with this model's
-        # inertias.
-        self._context_gravity = plant.CreateDefaultContext()
-        self._joint_velocities = np.arange(6, self.num_velocities)
         self._key: bytes | None = None
         self._terms: FloatingBaseTerms | None = None
         self._jacobians: dict[int, np.ndarray] = {}
@@ -119,8 +115,6 @@ class ResidualModel:
             ValueError: the "reference" implementation.
         """
         self.dynamics.set_spatial_inertias(inertias)
-        for index, M in inertias.items():
-            self.plant.get_body(BodyIndex(int(index))).SetSpatialInertiaInBodyFrame(self._context_gravity, M)
         self._key = None
 
     def check_frames(self, frames: Sequence[Frame | str]) -> tuple[Frame, ...]:
@@ -146,13 +140,12 @@ class ResidualModel:
         (``CalcGravityGeneralizedForces``) of this model (its inertias, not the plant's
         defaults) at the state x = [q; v], N m.
 
-        One Drake call on a context of its own, whatever was evaluated before: a PD
-        controller computes the same torque whether or not residual systems share this
-        model (the contact study simulates its sensors without them and runs the
-        estimators on the log afterwards, ``diagrams.residuals.contact_localization``).
+        One Drake call (``FloatingBaseDynamics.gravity_generalized_forces``), whatever was
+        evaluated before: a PD controller computes the same torque whether or not residual
+        systems share this model (the contact study simulates its sensors without them and
+        runs the estimators on the log afterwards, ``diagrams.residuals.contact_localization``).
         """
-        self.plant.SetPositions(self._context_gravity, x[: self.num_positions])
-        return self.plant.CalcGravityGeneralizedForces(self._context_gravity)[self._joint_velocities]
+        return self.dynamics.gravity_generalized_forces(x[: self.num_positions])[6:]
 
     def spatial_jacobian_F0(self, frame: Frame) -> np.ndarray:
         """(6, nv) Jacobian of ``frame``'s origin w.r.t. [v0; qdot], expressed in F0, rows

@@ -8,7 +8,10 @@ squat: hip, knee and ankle pitch in the ratio -1 : 2 : -1; a lateral sway: hip a
 roll in the ratio 1 : -1 on both legs) and one sinusoid per torso, head and arm joint.
 Frequencies and phases are drawn from ``SlowMotion.seed``; amplitudes are scaled by
 ``amplitude_scale`` and capped at 80 % of the distance to the nearest joint limit (a joint
-resting on a limit, such as the hand joints of ``hrp4_like``, does not move).
+resting on a limit, such as the hand joints of ``hrp4_like``, does not move). With
+``SlowMotion.min_peak_speed`` a synergy too slow for it (a small or limit-capped amplitude
+at a low drawn frequency) is sped up: a calibration motion must move every joint fast
+enough to tell its Coulomb from its viscous friction.
 """
 
 # No ``from __future__ import annotations``: yaml_load_typed reads SlowMotion's field types.
@@ -37,6 +40,15 @@ class SlowMotion:
         amplitude_scale: scales every amplitude (0 = stand still).
         min_frequency, max_frequency: each synergy's frequency is uniform in this band, Hz.
         ramp_time: the motion fades in over this time, s.
+        min_peak_speed: rad/s (>= 0): each synergy's frequency is raised, if needed and
+            within ``max_frequency``, until its fastest joint's peak speed 2 pi f a |d_j|
+            reaches this value (the drawn frequencies and phases are kept otherwise; 0:
+            the drawn frequencies). For a calibration: below a few times the friction
+            model's smoothing velocity v_s, F_c tanh(qdot / v_s) + b qdot ~ (F_c / v_s + b)
+            qdot and the log cannot split Coulomb from viscous friction, so a joint whose
+            drawn motion is slow (the right elbow of the default calibration: 0.24 rad
+            capped by its joint limit at 0.062 Hz, 0.093 rad/s) gets a split that errs at
+            the faster motions of the experiments.
     """
 
     seed: int = 0
@@ -44,6 +56,7 @@ class SlowMotion:
     min_frequency: float = 0.05
     max_frequency: float = 0.25
     ramp_time: float = 2.0
+    min_peak_speed: float = 0.0
 
     def validate(self) -> "SlowMotion":
         if int(self.seed) != self.seed or self.seed < 0:
@@ -56,6 +69,8 @@ class SlowMotion:
             )
         if not (np.isfinite(self.ramp_time) and self.ramp_time > 0.0):
             raise ValueError(f"motion.ramp_time must be positive, got {self.ramp_time}")
+        if not (np.isfinite(self.min_peak_speed) and self.min_peak_speed >= 0.0):
+            raise ValueError(f"motion.min_peak_speed must be >= 0 rad/s, got {self.min_peak_speed}")
         return self
 
 
@@ -112,6 +127,10 @@ def slow_whole_body_motion(station: HumanoidStation, motion: SlowMotion) -> Sinu
     k = len(directions)
     frequencies = rng.uniform(motion.min_frequency, motion.max_frequency, k)
     phases = rng.uniform(0.0, 2.0 * np.pi, k)
+    if k and motion.min_peak_speed > 0.0:
+        reach = np.array([a * np.max(np.abs(d)) for d, a in zip(directions, amplitudes)])  # rad
+        needed = motion.min_peak_speed / (2.0 * np.pi * reach)  # Hz
+        frequencies = np.maximum(frequencies, np.minimum(needed, motion.max_frequency))
     if k == 0:  # standing still: one synergy of zero amplitude keeps the system's shape
         directions, amplitudes, frequencies, phases = [np.zeros(n)], [0.0], [0.0], [0.0]
     return SinusoidalPostureMotion(

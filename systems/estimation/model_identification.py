@@ -585,9 +585,12 @@ class ModelCorrections:
         residual_noise: optional ``systems.residuals.offline.ResidualNoiseModel``: the
             covariances of the residuals on the calibration log with this model (the
             contact detector's noise model); None if not measured.
-        diagnostics: rank, num_samples, num_clipped_masses and the RMS of the regression
-            residual of (R3) with the nominal model (``rms_before``) and the corrected one
-            (``rms_after``), per row group: ``base_force`` (N), ``base_moment`` (N m),
+        diagnostics: rank, num_samples, num_clipped_masses, joints_without_viscous,
+            joint_speed_p95 (each joint's 95th-percentile |qdot| in the log, rad/s: the
+            friction is calibrated up to about this speed and extrapolates beyond it; a
+            joint below ~2 v_s has a poorly determined Coulomb/viscous split) and the RMS
+            of the regression residual of (R3) with the nominal model (``rms_before``) and
+            the corrected one (``rms_after``), per row group: ``base_force`` (N), ``base_moment`` (N m),
             ``joints`` (N m).
     """
 
@@ -967,6 +970,7 @@ def identify_model_corrections(
     diagnostics = {
         "rank": int(base.rank),
         "joints_without_viscous": [topology.joints[k].name() for k in np.flatnonzero(slow_joints)],
+        "joint_speed_p95": [float(x) for x in joint_speed],
         "num_inertial_columns": int(live.sum()),
         "num_samples": int(S),
         "num_clipped_masses": int(clipped.sum()),

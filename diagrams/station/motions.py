@@ -129,8 +129,9 @@ def slow_whole_body_motion(station: HumanoidStation, motion: SlowMotion) -> Sinu
     phases = rng.uniform(0.0, 2.0 * np.pi, k)
     if k and motion.min_peak_speed > 0.0:
         reach = np.array([a * np.max(np.abs(d)) for d, a in zip(directions, amplitudes)])  # rad
-        needed = motion.min_peak_speed / (2.0 * np.pi * reach)  # Hz
-        frequencies = np.maximum(frequencies, np.minimum(needed, motion.max_frequency))
+        moving = reach > 0.0  # a synergy of zero amplitude keeps its frequency
+        needed = motion.min_peak_speed / (2.0 * np.pi * reach[moving])  # Hz
+        frequencies[moving] = np.maximum(frequencies[moving], np.minimum(needed, motion.max_frequency))
     if k == 0:  # standing still: one synergy of zero amplitude keeps the system's shape
         directions, amplitudes, frequencies, phases = [np.zeros(n)], [0.0], [0.0], [0.0]
     return SinusoidalPostureMotion(

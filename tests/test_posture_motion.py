@@ -98,23 +98,26 @@ def test_the_seed_changes_the_motion_and_zero_scale_stands_still(station):
 def test_min_peak_speed_speeds_up_only_the_slow_synergies(station):
     drawn = slow_whole_body_motion(station, SlowMotion(seed=1, amplitude_scale=1.5))
     fast = slow_whole_body_motion(station, SlowMotion(seed=1, amplitude_scale=1.5, min_peak_speed=0.4))
-    np.testing.assert_array_equal(fast._amplitudes, drawn._amplitudes)
-    np.testing.assert_array_equal(fast._phases, drawn._phases)
-    reach = np.abs(drawn._directions).max(axis=1) * drawn._amplitudes
-    peak = 2.0 * np.pi * fast._frequencies * reach  # each synergy's fastest joint, rad/s
+    directions, amplitudes, drawn_frequencies, phases = drawn.synergies
+    fast_directions, fast_amplitudes, fast_frequencies, fast_phases = fast.synergies
+    np.testing.assert_array_equal(fast_directions, directions)
+    np.testing.assert_array_equal(fast_amplitudes, amplitudes)
+    np.testing.assert_array_equal(fast_phases, phases)
+    reach = np.abs(directions).max(axis=1) * amplitudes
+    peak = 2.0 * np.pi * fast_frequencies * reach  # each synergy's fastest joint, rad/s
     # Every synergy reaches 0.4 rad/s unless the band's top (0.25 Hz) stops it first; the
     # synergies already faster keep their drawn frequency.
-    at_top = np.isclose(fast._frequencies, 0.25)
+    at_top = np.isclose(fast_frequencies, 0.25)
     assert np.all((peak >= 0.4 - 1e-12) | at_top)
-    np.testing.assert_array_equal(fast._frequencies >= drawn._frequencies, True)
-    kept = 2.0 * np.pi * drawn._frequencies * reach >= 0.4
+    np.testing.assert_array_equal(fast_frequencies >= drawn_frequencies, True)
+    kept = 2.0 * np.pi * drawn_frequencies * reach >= 0.4
     assert kept.any() and (~kept).any()
-    np.testing.assert_array_equal(fast._frequencies[kept], drawn._frequencies[kept])
+    np.testing.assert_array_equal(fast_frequencies[kept], drawn_frequencies[kept])
     # The default calibration's right elbow: 0.24 rad (its joint limit) at a drawn 0.062 Hz
     # peaks at 0.093 rad/s, at 0.25 Hz at 0.377 rad/s.
     elbow = station.joint_names.index("R_ELBOW_P")
-    k = int(np.flatnonzero(drawn._directions[:, elbow])[0])
-    assert 2.0 * np.pi * drawn._frequencies[k] * reach[k] < 0.1
-    assert 2.0 * np.pi * fast._frequencies[k] * reach[k] > 0.35
+    k = int(np.flatnonzero(directions[:, elbow])[0])
+    assert 2.0 * np.pi * drawn_frequencies[k] * reach[k] < 0.1
+    assert 2.0 * np.pi * fast_frequencies[k] * reach[k] > 0.35
     with pytest.raises(ValueError, match="min_peak_speed"):
         slow_whole_body_motion(station, SlowMotion(min_peak_speed=-0.1))

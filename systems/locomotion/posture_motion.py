@@ -88,6 +88,11 @@ class SinusoidalPostureMotion(LeafSystem):
         """The largest possible |q - q_c| per joint, rad."""
         return np.abs(self._directions * self._amplitudes[:, None]).sum(axis=0)
 
+    @property
+    def synergies(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(directions (k, n), amplitudes (k) rad, frequencies (k) Hz, phases (k) rad), copies."""
+        return self._directions.copy(), self._amplitudes.copy(), self._frequencies.copy(), self._phases.copy()
+
     def value(self, t: float) -> np.ndarray:
         """q(t), rad."""
         ramp = smoothstep5(min(max(t / self._ramp_time, 0.0), 1.0))

@@ -145,6 +145,7 @@ from systems.common.checks import check_plant, eval_finite_input, positive_numbe
 from systems.common.spatial import cross, skew
 from systems.common.topology import floating_base_topology
 from systems.dynamics.base_state import quaternion_to_rotation
+from systems.estimation import invariant_ekf_steps as steps
 
 #: BMI088 gyro output noise density, 0.014 °/s/√Hz, in rad/s/√Hz (data sheet, see module).
 GYRO_NOISE_DENSITY = 0.014 * math.pi / 180.0
@@ -241,27 +242,6 @@ def so3_gamma(phi: np.ndarray, order: int) -> np.ndarray:
 def so3_exp(phi: np.ndarray) -> np.ndarray:
     """Exp(φ) ∈ SO(3) of a rotation vector φ (rad), Rodrigues' formula."""
     return so3_gamma(phi, 0)
-
-
-def so3_gammas(phi: np.ndarray, orders: int = 3) -> tuple[np.ndarray, ...]:
-    """(Γ_0(φ), Γ_1(φ), Γ_2(φ)) of :func:`so3_gamma` (the first ``orders`` of them) from one
-    [φ]× and one [φ]×², the filter's per-step form of the same closed-form expressions."""
-    x, y, z = phi.tolist()
-    theta2 = x * x + y * y + z * z
-    K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-    K2 = K @ K
-    if theta2 < 1e-12:
-        c0, c1 = 1.0, 0.5
-        d0, d1 = 0.5, 1.0 / 6.0
-        c2, d2 = 1.0 / 6.0, 1.0 / 24.0
-    else:
-        theta = math.sqrt(theta2)
-        sin, cos = math.sin(theta), math.cos(theta)
-        c0, d0 = sin / theta, (1.0 - cos) / theta2
-        c1, d1 = d0, (theta - sin) / (theta2 * theta)
-        c2, d2 = d1, (theta2 + 2.0 * cos - 2.0) / (2.0 * theta2 * theta2)
-    out = (_I3 + c0 * K + d0 * K2, _I3 + c1 * K + d1 * K2, 0.5 * _I3 + c2 * K + d2 * K2)
-    return out[:orders]
 
 
 def rotation_to_quaternion(R: np.ndarray) -> np.ndarray:
@@ -391,8 +371,6 @@ class ContactAidedInvariantEkf:
         #: First index of ζ = [ζ_g; ζ_a] in ξ (after the foot slots), when estimated.
         self._b0 = 9 + 3 * self._K
         self._dim = self._b0 + (6 if self._bias else 0)
-        self._eye = np.eye(self._dim)
-        self._eye.flags.writeable = False
         self._g = np.array(gravity, dtype=float).reshape(3)
         self._var_g = positive_number(gyro_noise_density, f"{who}: gyro_noise_density") ** 2
         self._var_a = positive_number(accel_noise_density, f"{who}: accel_noise_density") ** 2
@@ -415,6 +393,7 @@ class ContactAidedInvariantEkf:
         )
         # Φ = I + A dt + ½ A² dt² (E5): the pieces that do not change with dt.
         self._g_skew = skew(self._g)
+        self._noise = np.array([self._var_g, self._var_a, self._var_c, self._var_bg, self._var_ba])
         self.reset(rotation, velocity, position)
 
     # -- state --------------------------------------------------------------------------
@@ -539,56 +518,13 @@ class ContactAidedInvariantEkf:
         return 15 + 4 * self._K + (6 if self._bias else 0) + self._dim**2
 
     # -- propagation --------------------------------------------------------------------
+    # The arithmetic is compiled (``invariant_ekf_steps``); these methods hold the state.
 
-    def _active_feet(self) -> list[int]:
-        """The slots of the feet in the state (in contact), as a list of ints."""
-        return [j for j, on in enumerate(self._in_contact.tolist()) if on]
-
-    def _adjoint(self) -> np.ndarray:
-        """Ad_X̄ of SE_{2+K}(3) (E5); the rows of feet out of contact are left 0; with bias
-        states, blkdiag(Ad_X̄, I_6) (E11)."""
-        n = self._dim
-        R = self._R
-        Ad = np.zeros((n, n))
-        Ad[0:3, 0:3] = R
-        Ad[3:6, 0:3] = skew(self._v) @ R
-        Ad[3:6, 3:6] = R
-        Ad[6:9, 0:3] = skew(self._p) @ R
-        Ad[6:9, 6:9] = R
-        for j in self._active_feet():
-            s = 9 + 3 * j
-            Ad[s : s + 3, 0:3] = skew(self._d[j]) @ R
-            Ad[s : s + 3, s : s + 3] = R
-        if self._bias:
-            Ad[self._b0 :, self._b0 :] = np.eye(6)
-        return Ad
-
-    def _bias_columns(self, dt: float, adjoint: np.ndarray | None = None) -> np.ndarray:
-        """Φ's bias columns (E11), rows ξ (9 + 3 K) by ζ (6): B dt + A_X B dt²/2 + A_X² B dt³/6,
-        B = A's bias columns at X̄ (A_X B has [g]× B_R in rows v and B_v in rows p; A_X² B has
-        [g]× B_R in rows p). B's gyro columns are minus Ad_X̄'s first three columns (E5),
-        its accelerometer columns -R in rows v."""
-        Ad = self._adjoint() if adjoint is None else adjoint
-        B = np.zeros((self._b0, 6))
-        B[:, 0:3] = -Ad[: self._b0, 0:3]
-        B[3:6, 3:6] = -self._R
-        gB = self._g_skew @ B[0:3]
-        columns = B * dt
-        columns[3:6] += gB * (0.5 * dt * dt)
-        columns[6:9] += B[3:6] * (0.5 * dt * dt) + gB * (dt * dt * dt / 6.0)
-        return columns
-
-    def transition_matrix(self, dt: float, adjoint: np.ndarray | None = None) -> np.ndarray:
+    def transition_matrix(self, dt: float) -> np.ndarray:
         """Φ over dt at the current state (E5; with bias states its bias columns, E11): the
-        linearised error ξ(t + dt) = Φ ξ(t) without noise, X̄ held over the step.
-        ``adjoint``: this state's :meth:`_adjoint`, if already computed."""
-        Phi = self._eye.copy()
-        Phi[3:6, 0:3] = self._g_skew * dt
-        Phi[6:9, 0:3] = 0.5 * self._g_skew * dt * dt
-        Phi[6:9, 3:6] = _I3 * dt
-        if self._bias:
-            Phi[: self._b0, self._b0 :] = self._bias_columns(dt, adjoint)
-        return Phi
+        linearised error ξ(t + dt) = Φ ξ(t) without noise, X̄ held over the step."""
+        Ad = steps.adjoint(self._R, self._v, self._p, self._d, self._in_contact, self._dim, self._b0)
+        return steps.transition(self._R, Ad, self._g_skew, float(dt), self._dim, self._b0)
 
     def propagate(self, omega: np.ndarray, a: np.ndarray, dt: float) -> None:
         """IMU propagation over dt (E1)-(E5), measurements held over the step; with bias states
@@ -600,64 +536,21 @@ class ContactAidedInvariantEkf:
             a: accelerometer ã, specific force R_WIᵀ (a_WIo − g) in I, m/s² (3).
             dt: s, > 0.
         """
-        omega = np.asarray(omega, dtype=float)
-        a = np.asarray(a, dtype=float)
-        if self._bias:
-            omega = omega - self._b[:3]
-            a = a - self._b[3:]
-        phi = omega * dt
-        # Covariance first: Φ and Ad_X̄ at the state before the step.
-        n = self._dim
-        Ad = self._adjoint()
-        Phi = self.transition_matrix(dt, Ad)
-        q = np.zeros(n)
-        q[0:3] = self._var_g
-        q[3:6] = self._var_a
-        for j in self._active_feet():
-            q[9 + 3 * j : 12 + 3 * j] = self._var_c
-        if self._bias:
-            q[self._b0 : self._b0 + 3] = self._var_bg
-            q[self._b0 + 3 :] = self._var_ba
-        G = Phi @ Ad
-        self._P = Phi @ self._P @ Phi.T + (G * q) @ G.T * dt
-        self._P = 0.5 * (self._P + self._P.T)
-        # Mean (E1)-(E4).
-        R = self._R
-        g = self._g
-        exp_phi, gamma1, gamma2 = so3_gammas(phi)
-        Ra1 = R @ (gamma1 @ a)
-        Ra2 = R @ (gamma2 @ a)
-        self._p = self._p + self._v * dt + Ra2 * dt * dt + 0.5 * g * dt * dt
-        self._v = self._v + Ra1 * dt + g * dt
-        self._R = R @ exp_phi
+        omega = np.asarray(omega, dtype=float).reshape(3)
+        a = np.asarray(a, dtype=float).reshape(3)
+        self._R, self._v, self._p, self._P = steps.propagate_step(
+            self._R, self._v, self._p, self._d, self._in_contact, self._b, self._P,
+            omega, a, float(dt), self._g, self._g_skew, self._noise, self._b0,
+        )  # fmt: skip
 
     # -- correction ---------------------------------------------------------------------
 
-    def _apply_correction(self, delta: np.ndarray) -> None:
-        """X⁺ = Exp(δ) X̄ (E7), δ = [δ_R; δ_v; δ_p; δ_d1; ...]; with bias states θ⁺ = θ̄ + δ_θ
-        (E11)."""
-        dR, J = so3_gammas(delta[0:3], 2)
-        self._R = dR @ self._R
-        self._v = dR @ self._v + J @ delta[3:6]
-        self._p = dR @ self._p + J @ delta[6:9]
-        active = self._active_feet()
-        if active:
-            dd = delta[9 : self._b0].reshape(self._K, 3)[active]
-            self._d[active] = self._d[active] @ dR.T + dd @ J.T
-        if self._bias:
-            self._b = self._b + delta[self._b0 :]
-
     def _update(self, H: np.ndarray, r: np.ndarray, var: float) -> None:
-        """(E7) with measurement noise var I: S = H P Hᵀ + N, K = P Hᵀ S⁻¹, X⁺ = Exp(K r) X̄,
-        Joseph-form P⁺ = (I − KH) P (I − KH)ᵀ + K N Kᵀ (symmetrised)."""
-        PHt = self._P @ H.T
-        S = H @ PHt
-        S.flat[:: S.shape[0] + 1] += var
-        K = np.linalg.solve(S, PHt.T).T
-        self._apply_correction(K @ r)
-        IKH = self._eye - K @ H
-        self._P = IKH @ self._P @ IKH.T + var * (K @ K.T)
-        self._P = 0.5 * (self._P + self._P.T)
+        """(E7) with measurement noise var I (``invariant_ekf_steps.update_step``)."""
+        self._R, self._v, self._p, self._d, self._b, self._P = steps.update_step(
+            self._R, self._v, self._p, self._d, self._in_contact, self._b, self._P,
+            np.ascontiguousarray(H, dtype=float), np.ascontiguousarray(r, dtype=float), float(var), self._b0,
+        )  # fmt: skip
 
     def correct_level_ground(
         self,
@@ -711,32 +604,12 @@ class ContactAidedInvariantEkf:
                 m (K_max x 3); rows of feet not in contact are ignored.
             in_contact: one flag per foot (K_max).
         """
-        h = np.asarray(foot_positions, dtype=float).reshape(self._K, 3)
+        h = np.ascontiguousarray(foot_positions, dtype=float).reshape(self._K, 3)
         flags = np.asarray(in_contact, dtype=bool).reshape(self._K)
-        # (E9) contact lost: marginalise the slot.
-        for j in np.flatnonzero(self._in_contact & ~flags).tolist():
-            s = 9 + 3 * j
-            self._P[s : s + 3, :] = 0.0
-            self._P[:, s : s + 3] = 0.0
-            self._in_contact[j] = False
-        # (E6), (E7) feet in contact and in the state.
-        update = np.flatnonzero(self._in_contact & flags).tolist()
-        if update:
-            m = len(update)
-            r = (h[update] @ self._R.T - (self._d[update] - self._p)).reshape(-1)
-            H = np.zeros((3 * m, self._dim))
-            for i, j in enumerate(update):
-                H[3 * i : 3 * i + 3, 6:9] = -_I3
-                H[3 * i : 3 * i + 3, 9 + 3 * j : 12 + 3 * j] = _I3
-            self._update(H, r, self._var_k)
-        # (E8) contact made: d_j = p + R h_j, ξ_dj = ξ_p + R n_j.
-        for j in np.flatnonzero(flags & ~self._in_contact).tolist():
-            s = 9 + 3 * j
-            self._d[j] = self._p + self._R @ h[j]
-            self._P[s : s + 3, :] = self._P[6:9, :]
-            self._P[:, s : s + 3] = self._P[:, 6:9]
-            self._P[s : s + 3, s : s + 3] = self._P[6:9, 6:9] + self._var_k * _I3
-            self._in_contact[j] = True
+        self._R, self._v, self._p, self._d, self._in_contact, self._b, self._P = steps.correct_kinematics_step(
+            self._R, self._v, self._p, self._d, self._in_contact, self._b, self._P,
+            h, flags, self._var_k, self._b0,
+        )  # fmt: skip
 
 
 # ---------------------------------------------------------------------------------------

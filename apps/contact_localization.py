@@ -7,7 +7,7 @@ calibration motion before the trials); ``--ideal`` runs it in the ideal world.
 The humanoid (``hrp4_like``) stands holding its posture with noisy sensors; in each trial a
 constant force of 5-40 N, within 60 deg of the inward surface normal, pushes a random point
 of the outer collision surface of a random link (upper body and legs; the soles, below the
-F/T sensors, are excluded) for 1 s. The trials (1000 by default) are drawn from several
+F/T sensors, are excluded) for 0.5 s. The trials (1000 by default) are drawn from several
 seeds (5 by default: seed, seed + 1, ...). The internal and external residuals, the
 ContactDetector and the ContactLocalizer see only the sensors; by default they run after
 each trial's simulation on the inputs it recorded at each update (``estimation: offline``),
@@ -314,14 +314,26 @@ def run_no_contact(scenario: ContactLocalizationScenario, kind: str = "no_contac
     return no_contact_result(run_scenario, handles, run.context)
 
 
+def save_trial_replay(spec: dict, scenario: ContactLocalizationScenario, out_dir: Path) -> Path:
+    """Records the trial ``spec`` (``record_replay``, not live) in a Meshcat of its own and
+    writes it to ``out_dir/replay_trial_<i>.html``: a headless run's replays, recorded in
+    the worker processes beside the trials."""
+    meshcat = replay_meshcat(True, headless=True)
+    record_replay(spec, scenario, meshcat, live=False)
+    return save_replay(meshcat, Path(out_dir) / f"replay_trial_{spec['trial']}.html")
+
+
 def _job(job: tuple) -> tuple[str, dict]:
     # The scenario travels as YAML: Drake's config types do not pickle.
-    kind, spec, scenario_yaml, covariances = job  # covariances: (noise, load) of "multi_contact"
+    # extra: the (noise, load) covariances of a "multi_contact" job, the folder of a "replay".
+    kind, spec, scenario_yaml, extra = job
     scenario = load_scenario(ContactLocalizationScenario, text=scenario_yaml)
     if kind == "trials":
         return kind, run_trials(spec, scenario)
     if kind == "multi_contact":
-        return kind, localize_multi_contact(spec, scenario, *covariances)
+        return kind, localize_multi_contact(spec, scenario, *extra)
+    if kind == "replay":
+        return kind, [str(save_trial_replay(spec, scenario, extra))]
     return kind, run_no_contact(scenario, kind)
 
 
@@ -375,7 +387,7 @@ def _parse(argv):
         "--contact-duration",
         type=float,
         default=None,
-        help="contact duration, s (the scenario's push_duration, default 1)",
+        help="contact duration, s (the scenario's push_duration, default 0.5)",
     )
     parser.add_argument(
         "--no-contact-duration",
@@ -410,7 +422,7 @@ def _parse(argv):
 def _run_jobs(jobs: list, workers: int) -> dict:
     """Runs the jobs (in ``workers`` spawned processes when more than one); returns their
     results by kind: the "trials" and "multi_contact" jobs' lists joined, in trial order,
-    and the runs without contact's ("no_contact", "slow_motion")."""
+    the "replay" jobs' files, and the runs without contact's ("no_contact", "slow_motion")."""
     outputs_by_kind: dict = {}
     if workers == 1:
         outputs = map(_job, jobs)
@@ -420,7 +432,7 @@ def _run_jobs(jobs: list, workers: int) -> dict:
         outputs = pool.imap_unordered(_job, jobs)
     try:
         for done, (kind, value) in enumerate(outputs, 1):
-            if kind in ("trials", "multi_contact"):
+            if kind in ("trials", "multi_contact", "replay"):
                 outputs_by_kind.setdefault(kind, []).extend(value)
             else:
                 outputs_by_kind[kind] = value
@@ -475,10 +487,14 @@ def main(argv: list[str] | None = None) -> int:
             jobs.append(("no_contact", None, scenario_yaml, None))
         if scenario.slow_motion_duration > 0:
             jobs.append(("slow_motion", None, scenario_yaml, None))
+        # Headless, the replays are recorded in the workers too; live, here after the study.
+        live_replays = specs[: args.replays] if not args.headless else []
+        jobs += [("replay", spec, scenario_yaml, out_dir) for spec in specs[: args.replays] if args.headless]
         size = max(scenario.trials_per_run, TRIALS_PER_JOB)
         jobs += [("trials", specs[i : i + size], scenario_yaml, None) for i in range(0, len(specs), size)]
         no_contact = _run_jobs(jobs, args.workers)
         results = no_contact.pop("trials")
+        no_contact.pop("replay", None)  # the files are written
         if scenario.multi_contact:
             # After all trials: each seed's trials whitened with the model error under load
             # measured on the other seeds' (cross-fitting).
@@ -510,9 +526,9 @@ def main(argv: list[str] | None = None) -> int:
             }
         )
 
-        meshcat = replay_meshcat(args.replays > 0, args.headless)
-        for spec in specs[: args.replays]:
-            record_replay(spec, scenario, meshcat, live=not args.headless)
+        meshcat = replay_meshcat(bool(live_replays), args.headless)
+        for spec in live_replays:
+            record_replay(spec, scenario, meshcat)
             save_replay(meshcat, out_dir / f"replay_trial_{spec['trial']}.html")
         metrics["wall_time_s"] = time.perf_counter() - start
         inputs = [r.pop("localizer_inputs") for r in results]

@@ -235,7 +235,7 @@ class ContactLocalizationScenario:
     push_point: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
     push_force: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
     push_start: float = 0.5
-    push_duration: float = 1.0
+    push_duration: float = 0.5
     trial_gap: float = 0.4
     trials_per_run: int = 1
     shared_standing_start: bool = True

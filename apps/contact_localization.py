@@ -475,6 +475,7 @@ def main(argv: list[str] | None = None) -> int:
             # Calibrated once, here; the workers read the saved corrections.
             refined_model(scenario, Path(args.out) / "model_refinement")
             scenario.model_refinement = str(calibration_file(scenario, Path(args.out) / "model_refinement"))
+        phases = {"calibration": time.perf_counter() - start}  # wall time of each phase, s
         scenario_yaml = scenario_as_yaml(scenario)
         if scenario.contacts not in (1, 2):
             raise ValueError(f"contacts must be 1 or 2, got contacts: {scenario.contacts}")
@@ -492,9 +493,12 @@ def main(argv: list[str] | None = None) -> int:
         jobs += [("replay", spec, scenario_yaml, out_dir) for spec in specs[: args.replays] if args.headless]
         size = max(scenario.trials_per_run, TRIALS_PER_JOB)
         jobs += [("trials", specs[i : i + size], scenario_yaml, None) for i in range(0, len(specs), size)]
+        mark = time.perf_counter()
         no_contact = _run_jobs(jobs, args.workers)
+        phases["simulations"] = time.perf_counter() - mark
         results = no_contact.pop("trials")
         no_contact.pop("replay", None)  # the files are written
+        mark = time.perf_counter()
         if scenario.multi_contact:
             # After all trials: each seed's trials whitened with the model error under load
             # measured on the other seeds' (cross-fitting).
@@ -503,6 +507,7 @@ def main(argv: list[str] | None = None) -> int:
             by_trial = {m.pop("trial"): m for m in _run_jobs(multi_jobs, args.workers)["multi_contact"]}
             for r in results:
                 r.update(by_trial[r["trial"]])
+        phases["one_or_two_contact_fits"] = time.perf_counter() - mark
         metrics = contact_localization_metrics(
             results, no_contact.get("no_contact"), no_contact.get("slow_motion"), floors_for(scenario)
         )
@@ -526,11 +531,14 @@ def main(argv: list[str] | None = None) -> int:
             }
         )
 
+        mark = time.perf_counter()
         meshcat = replay_meshcat(bool(live_replays), args.headless)
         for spec in live_replays:
             record_replay(spec, scenario, meshcat)
             save_replay(meshcat, out_dir / f"replay_trial_{spec['trial']}.html")
+        phases["live_replays"] = time.perf_counter() - mark
         metrics["wall_time_s"] = time.perf_counter() - start
+        metrics["phase_wall_s"] = phases
         inputs = [r.pop("localizer_inputs") for r in results]
         metrics["per_trial"] = results
         write_metrics(out_dir, metrics, scenario)
@@ -596,7 +604,8 @@ def _print_summary(metrics: dict) -> None:
         print("  misses (true link -> estimated link or status: count):")
         for row in metrics["confusion"]:
             print(f"    {row['true']} -> {row['estimated']}: {row['count']}")
-    print(f"wall time {metrics['wall_time_s']:.1f} s")
+    phases = ", ".join(f"{name.replace('_', ' ')} {t:.0f} s" for name, t in metrics.get("phase_wall_s", {}).items())
+    print(f"wall time {metrics['wall_time_s']:.1f} s ({phases})")
 
 
 if __name__ == "__main__":

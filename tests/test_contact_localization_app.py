@@ -78,6 +78,11 @@ def test_app_smoke(tmp_path):
     low, high = metrics["intervals"]["correct_link_rate"]
     assert low <= metrics["correct_link_rate"] <= high == 1.0
     assert sum(row["trials"] for row in metrics["per_link"]) == 2 and metrics["confusion"] == []
+    # The wall time split by phase (headless: the replays are recorded in the workers).
+    phases = metrics["phase_wall_s"]
+    assert set(phases) == {"calibration", "simulations", "one_or_two_contact_fits", "live_replays"}
+    assert all(t >= 0.0 for t in phases.values()) and sum(phases.values()) <= metrics["wall_time_s"]
+    assert phases["simulations"] > phases["live_replays"]
     # The recorded localizer inputs replay to the study's own results.
     inputs = np.load(out / "localizer_inputs.npz")
     assert list(inputs["trial"]) == [0, 1]

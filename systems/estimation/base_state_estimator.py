@@ -536,8 +536,9 @@ class ContactAidedInvariantEkf:
             a: accelerometer ã, specific force R_WIᵀ (a_WIo − g) in I, m/s² (3).
             dt: s, > 0.
         """
-        omega = np.asarray(omega, dtype=float).reshape(3)
-        a = np.asarray(a, dtype=float).reshape(3)
+        # Contiguous float64 arrays: one compiled signature (another layout would compile anew).
+        omega = np.ascontiguousarray(omega, dtype=float).reshape(3)
+        a = np.ascontiguousarray(a, dtype=float).reshape(3)
         self._R, self._v, self._p, self._P = steps.propagate_step(
             self._R, self._v, self._p, self._d, self._in_contact, self._b, self._P,
             omega, a, float(dt), self._g, self._g_skew, self._noise, self._b0,
@@ -605,7 +606,7 @@ class ContactAidedInvariantEkf:
             in_contact: one flag per foot (K_max).
         """
         h = np.ascontiguousarray(foot_positions, dtype=float).reshape(self._K, 3)
-        flags = np.asarray(in_contact, dtype=bool).reshape(self._K)
+        flags = np.ascontiguousarray(in_contact, dtype=bool).reshape(self._K)
         self._R, self._v, self._p, self._d, self._in_contact, self._b, self._P = steps.correct_kinematics_step(
             self._R, self._v, self._p, self._d, self._in_contact, self._b, self._P,
             h, flags, self._var_k, self._b0,

@@ -334,6 +334,8 @@ def _job(job: tuple) -> tuple[str, dict]:
         return kind, localize_multi_contact(spec, scenario, *extra)
     if kind == "replay":
         return kind, [str(save_trial_replay(spec, scenario, extra))]
+    if kind == "covariances":
+        return kind, averaged_input_covariances(scenario, refined_model(scenario))
     return kind, run_no_contact(scenario, kind)
 
 
@@ -419,28 +421,18 @@ def _parse(argv):
     return args
 
 
-def _run_jobs(jobs: list, workers: int) -> dict:
-    """Runs the jobs (in ``workers`` spawned processes when more than one); returns their
-    results by kind: the "trials" and "multi_contact" jobs' lists joined, in trial order,
-    the "replay" jobs' files, and the runs without contact's ("no_contact", "slow_motion")."""
+def _run_jobs(jobs: list, pool) -> dict:
+    """Runs the jobs (in ``pool``, a process pool, or here when None); returns their results
+    by kind: the "trials" and "multi_contact" jobs' lists joined, in trial order, the
+    "replay" jobs' files, and the others' ("no_contact", "slow_motion", "covariances")."""
     outputs_by_kind: dict = {}
-    if workers == 1:
-        outputs = map(_job, jobs)
-        pool = None
-    else:
-        pool = multiprocessing.get_context("spawn").Pool(min(workers, len(jobs)))
-        outputs = pool.imap_unordered(_job, jobs)
-    try:
-        for done, (kind, value) in enumerate(outputs, 1):
-            if kind in ("trials", "multi_contact", "replay"):
-                outputs_by_kind.setdefault(kind, []).extend(value)
-            else:
-                outputs_by_kind[kind] = value
-            print(f"\r{done}/{len(jobs)} jobs done", end="", flush=True)
-    finally:
-        if pool is not None:
-            pool.close()
-            pool.join()
+    outputs = map(_job, jobs) if pool is None else pool.imap_unordered(_job, jobs)
+    for done, (kind, value) in enumerate(outputs, 1):
+        if kind in ("trials", "multi_contact", "replay"):
+            outputs_by_kind.setdefault(kind, []).extend(value)
+        else:
+            outputs_by_kind[kind] = value
+        print(f"\r{done}/{len(jobs)} jobs done", end="", flush=True)
     print()
     for kind in ("trials", "multi_contact"):
         outputs_by_kind.get(kind, []).sort(key=lambda r: r["trial"])
@@ -480,34 +472,41 @@ def main(argv: list[str] | None = None) -> int:
         if scenario.contacts not in (1, 2):
             raise ValueError(f"contacts must be 1 or 2, got contacts: {scenario.contacts}")
         scenario.multi_contact = scenario.multi_contact or scenario.contacts == 2
-        covariances = None
-        if scenario.multi_contact:
-            covariances = averaged_input_covariances(scenario, refined_model(scenario))
         jobs = []
         if scenario.no_contact_duration > 0:  # the longest jobs first
             jobs.append(("no_contact", None, scenario_yaml, None))
         if scenario.slow_motion_duration > 0:
             jobs.append(("slow_motion", None, scenario_yaml, None))
+        if scenario.multi_contact:  # the noise of the averaged inputs, for the fits after the trials
+            jobs.append(("covariances", None, scenario_yaml, None))
         # Headless, the replays are recorded in the workers too; live, here after the study.
         live_replays = specs[: args.replays] if not args.headless else []
         jobs += [("replay", spec, scenario_yaml, out_dir) for spec in specs[: args.replays] if args.headless]
         size = max(scenario.trials_per_run, TRIALS_PER_JOB)
         jobs += [("trials", specs[i : i + size], scenario_yaml, None) for i in range(0, len(specs), size)]
-        mark = time.perf_counter()
-        no_contact = _run_jobs(jobs, args.workers)
-        phases["simulations"] = time.perf_counter() - mark
-        results = no_contact.pop("trials")
-        no_contact.pop("replay", None)  # the files are written
-        mark = time.perf_counter()
-        if scenario.multi_contact:
-            # After all trials: each seed's trials whitened with the model error under load
-            # measured on the other seeds' (cross-fitting).
-            _, handles = build_contact_localization_diagram(scenario, model_corrections=refined_model(scenario))
-            multi_jobs = multi_contact_jobs(results, handles.plant, scenario_yaml, covariances)
-            by_trial = {m.pop("trial"): m for m in _run_jobs(multi_jobs, args.workers)["multi_contact"]}
-            for r in results:
-                r.update(by_trial[r["trial"]])
-        phases["one_or_two_contact_fits"] = time.perf_counter() - mark
+        # One pool of spawned processes for both passes (one process: here).
+        pool = multiprocessing.get_context("spawn").Pool(min(args.workers, len(jobs))) if args.workers > 1 else None
+        try:
+            mark = time.perf_counter()
+            no_contact = _run_jobs(jobs, pool)
+            phases["simulations"] = time.perf_counter() - mark
+            results = no_contact.pop("trials")
+            no_contact.pop("replay", None)  # the files are written
+            mark = time.perf_counter()
+            if scenario.multi_contact:
+                # After all trials: each seed's trials whitened with the model error under
+                # load measured on the other seeds' (cross-fitting).
+                _, handles = build_contact_localization_diagram(scenario, model_corrections=refined_model(scenario))
+                covariances = no_contact.pop("covariances")
+                multi_jobs = multi_contact_jobs(results, handles.plant, scenario_yaml, covariances)
+                by_trial = {m.pop("trial"): m for m in _run_jobs(multi_jobs, pool)["multi_contact"]}
+                for r in results:
+                    r.update(by_trial[r["trial"]])
+            phases["one_or_two_contact_fits"] = time.perf_counter() - mark
+        finally:
+            if pool is not None:
+                pool.close()
+                pool.join()
         metrics = contact_localization_metrics(
             results, no_contact.get("no_contact"), no_contact.get("slow_motion"), floors_for(scenario)
         )

@@ -503,10 +503,13 @@ def main(argv: list[str] | None = None) -> int:
                 for r in results:
                     r.update(by_trial[r["trial"]])
             phases["one_or_two_contact_fits"] = time.perf_counter() - mark
-        finally:
+        except BaseException:
             if pool is not None:
-                pool.close()
-                pool.join()
+                pool.terminate()  # a job failed (or Ctrl-C): do not wait for the others
+            raise
+        if pool is not None:
+            pool.close()
+            pool.join()
         metrics = contact_localization_metrics(
             results, no_contact.get("no_contact"), no_contact.get("slow_motion"), floors_for(scenario)
         )

@@ -33,9 +33,10 @@ The scenario is a ``ContactLocalizationScenario``; ``--trials``, ``--contacts``,
 ``--slow-motion-duration`` and ``--no-noise`` override its fields, ``--ideal`` its world;
 ``--workers`` and ``--replays`` are how it runs. Trials run in parallel processes ('spawn').
 Writes to ``DIR/contact_localization/``: ``metrics.json`` (totals, floors, per-trial
-results, per-link and per-seed tables, the scenario), ``localizer_inputs.npz`` (per trial
-the averaged q, external wrench and internal residual the final localization used:
-``ContactLocalizer.localize`` replays it), ``position_errors.png`` (histogram), and
+results, per-link and per-seed tables, the scenario, the wall time by phase),
+``localizer_inputs.npz`` (per trial the averaged q, external wrench and internal residual
+the final localization used: ``ContactLocalizer.localize`` replays it),
+``position_errors.png`` (histogram), and
 ``replay_trial_<i>.html`` (Meshcat replays of the first R trials: green arrow = true force
 ending at the true contact point, red arrow = the localizer's estimate, shown while valid).
 
@@ -323,7 +324,7 @@ def save_trial_replay(spec: dict, scenario: ContactLocalizationScenario, out_dir
     return save_replay(meshcat, Path(out_dir) / f"replay_trial_{spec['trial']}.html")
 
 
-def _job(job: tuple) -> tuple[str, dict]:
+def _job(job: tuple) -> tuple[str, object]:
     # The scenario travels as YAML: Drake's config types do not pickle.
     # extra: the (noise, load) covariances of a "multi_contact" job, the folder of a "replay".
     kind, spec, scenario_yaml, extra = job

@@ -1,18 +1,19 @@
 """The contact-aided invariant EKF's per-step arithmetic, compiled (numba).
 
 ``ContactAidedInvariantEkf`` (``base_state_estimator``) runs at the IMU rate, 1 kHz in the
-simulations, with a 21 x 21 covariance (two feet and the IMU bias states). In numpy each of
-its ~100 small-matrix operations per step costs a few microseconds of call overhead, about
-0.8 ms per step in all, a third of a realistic simulation step; compiled, the same
-arithmetic takes a few tens of microseconds. The equations and their labels (E1)-(E11) are
-those of ``base_state_estimator``'s docstring; the filter's state is passed as arrays:
+simulations, with a 21 x 21 covariance (two feet and the IMU bias states). In numpy its
+small-matrix operations cost mostly call overhead: 275 us per propagation and kinematic
+correction; compiled, 64 us (BENCHMARKS.md, "0.5 s pushes and the compiled EKF"). The
+equations and their labels (E1)-(E11) are those of ``base_state_estimator``'s docstring;
+the filter's state is passed as arrays:
 
     R (3 x 3), v (3), p (3): R_WI, v_WIo (m/s), p_WIo (m);
     d (K x 3): the foot points in contact, world, m; in_contact (K, bool);
     b (6): [b_g (rad/s); b_a (m/s^2)] (zeros without bias states);
     P (n x n): the covariance over [ξ_R; ξ_v; ξ_p; ξ_d1 ...; (ζ_g; ζ_a)], n = b0 (+ 6).
 
-Each function returns the arrays it changes (new arrays; the arguments are not modified).
+Each function returns the state arrays it may change; it never modifies its arguments (an
+array it leaves unchanged may be returned as the argument itself).
 Compiled once per machine (``cache=True``: numba's cache beside this file).
 """
 

@@ -481,8 +481,9 @@ def main(argv: list[str] | None = None) -> int:
         if scenario.multi_contact:  # the noise of the averaged inputs, for the fits after the trials
             jobs.append(("covariances", None, scenario_yaml, None))
         # Headless, the replays are recorded in the workers too; live, here after the study.
-        live_replays = specs[: args.replays] if not args.headless else []
-        jobs += [("replay", spec, scenario_yaml, out_dir) for spec in specs[: args.replays] if args.headless]
+        live_replays = [] if args.headless else specs[: args.replays]
+        if args.headless:
+            jobs += [("replay", spec, scenario_yaml, out_dir) for spec in specs[: args.replays]]
         size = max(scenario.trials_per_run, TRIALS_PER_JOB)
         jobs += [("trials", specs[i : i + size], scenario_yaml, None) for i in range(0, len(specs), size)]
         # One pool of spawned processes for both passes (one process: here).

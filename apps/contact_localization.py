@@ -590,9 +590,10 @@ def _print_summary(metrics: dict) -> None:
             print(f"  {key:32s} {metrics[key]:>10.4g} {ci:>20s}")
     print(f"  ({level:.0f} % intervals: Clopper-Pearson for rates, order statistics for quantiles)")
     print(f"  status counts: {metrics['status_counts']}")
+    two = metrics.get("contacts") == 2
     per_seed = metrics.get("per_seed", [])
     if len(per_seed) > 1:
-        print("  right-link rate per seed:")
+        print("  both-links-right rate per seed:" if two else "  right-link rate per seed:")
         for row in per_seed:
             low, high = row["interval"]
             print(
@@ -601,11 +602,12 @@ def _print_summary(metrics: dict) -> None:
             )
     worst = [row for row in metrics.get("per_link", []) if row["rate"] < 1.0]
     if worst:
-        print("  right-link rate per pushed link, below 100 % (all links: metrics.json 'per_link'):")
+        what = "found (two contacts, this link among them)" if two else "right-link"
+        print(f"  {what} rate per pushed link, below 100 % (all links: metrics.json 'per_link'):")
         for row in worst:
             print(f"    {row['group']:20s} {row['successes']:4d} / {row['trials']:<4d} {100 * row['rate']:5.1f} %")
     if metrics.get("confusion"):
-        print("  misses (true link -> estimated link or status: count):")
+        print(f"  misses (true {'links' if two else 'link'} -> estimated or status: count):")
         for row in metrics["confusion"]:
             print(f"    {row['true']} -> {row['estimated']}: {row['count']}")
     phases = ", ".join(f"{name.replace('_', ' ')} {t:.0f} s" for name, t in metrics.get("phase_wall_s", {}).items())

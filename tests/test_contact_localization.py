@@ -213,3 +213,40 @@ def test_offline_estimation_of_the_trials_equals_the_estimators_in_the_loop(worl
         for name in ("q", "external_wrench_world", "residual"):
             x, y = a["localizer_inputs"][name], b["localizer_inputs"][name]
             np.testing.assert_allclose(x, y, rtol=0, atol=1e-9 * max(1.0, np.abs(y).max()))
+
+
+def test_two_contact_tables_count_both_links():
+    """With two contacts per trial the per-link table counts each pushed link as found when
+    the answer has two contacts and names it, the per-seed table counts trials with both
+    links right, and the confusion list names the true pair and what was found."""
+    from diagrams.residuals.contact_localization import _intervals_and_tables
+
+    def trial(seed, true, found):
+        return {
+            "seed": seed,
+            "body": true[0],
+            "correct_link": False,  # the single-contact localizer's: not used with two contacts
+            "estimated_body": None,
+            "status_reason": "n/a",
+            "contacts": [{"body": b} for b in true],
+            "contacts_estimated": len(found),
+            "estimated_contact_body_names": list(found),
+            "contact_links_right": sorted(found) == sorted(true),
+            "contact_position_errors_m": [0.001, 0.002] if sorted(found) == sorted(true) else [np.inf, np.inf],
+        }
+
+    results = [
+        trial(1, ("A", "B"), ("B", "A")),
+        trial(1, ("A", "C"), ("A", "D")),
+        trial(2, ("C", "B"), ("C",)),
+    ]
+    tables = _intervals_and_tables(results, results, [], [0.0] * 3, [])
+    per_link = {row["group"]: (row["successes"], row["trials"]) for row in tables["per_link"]}
+    assert per_link == {"A": (2, 2), "B": (1, 2), "C": (0, 2)}
+    per_seed = {row["group"]: (row["successes"], row["trials"]) for row in tables["per_seed"]}
+    assert per_seed == {"1": (1, 2), "2": (0, 1)}
+    assert tables["confusion"] == [
+        {"true": "A + C", "estimated": "A + D", "count": 1},
+        {"true": "B + C", "estimated": "C (one contact)", "count": 1},
+    ]
+    assert tables["intervals"]["both_links_right_rate"][0] < 1 / 3 < tables["intervals"]["both_links_right_rate"][1]

@@ -120,6 +120,17 @@ def test_app_two_contacts(tmp_path):
         assert len(trial["true_points_world"]) == 2
     assert metrics["both_links_right_rate"] == 1.0  # seed 50's first two: a wrist and an ankle, a wrist and a hand
     assert metrics["median_contact_position_error_m"] < 0.01 and metrics["median_contact_force_error_rel"] < 0.05
+    # The tables count two-contact outcomes: a row per pushed link (found), per seed (both
+    # links right), no misses.
+    pushed = sorted(c["body"] for trial in metrics["per_trial"] for c in trial["contacts"])
+    assert sorted(row["group"] for row in metrics["per_link"] for _ in range(row["trials"])) == pushed
+    assert all(row["rate"] == 1.0 for row in metrics["per_link"])
+    assert metrics["per_seed"] == [
+        {"group": "50", "trials": 2, "successes": 2, "rate": 1.0, "interval": metrics["per_seed"][0]["interval"]}
+    ]
+    assert metrics["confusion"] == []
+    for trial in metrics["per_trial"]:
+        assert sorted(trial["estimated_contact_body_names"]) == sorted(c["body"] for c in trial["contacts"])
     scene = read_static_html((out / "replay_trial_0.html").read_text())
     assert {"/drake/true_force/0", "/drake/true_force/1"} <= set(scene.tracks)
 

@@ -1039,6 +1039,7 @@ def multi_contact_result(
         "contacts_estimated": int(estimate.num_contacts),
         "p_value_one": None if math.isnan(estimate.p_value_one) else float(estimate.p_value_one),
         "estimated_contact_bodies": [int(b) for b in estimate.body_indices],
+        "estimated_contact_body_names": [multi_contact.body_name(b) for b in estimate.body_indices],
     }
     if len(true_bodies) == 1:
         one = estimate.num_contacts == 1
@@ -1196,15 +1197,39 @@ def _intervals_and_tables(results: list[dict], detected: list, valid: list, posi
     if forces:
         intervals["median_force_error_rel"] = quantile_interval(forces, 0.5)
     confusion: dict[tuple[str, str], int] = {}
-    for r in results:
-        if not r["correct_link"]:
-            key = (r["body"], r["estimated_body"] or f"none ({r['status_reason']})")
-            confusion[key] = confusion.get(key, 0) + 1
+    if two and len(two) == n:
+        # Two contacts per trial: a trial is right when both links are; a pushed link is
+        # found when the answer has two contacts and names it.
+        for r in results:
+            if not r["contact_links_right"]:
+                found = r.get("estimated_contact_body_names", [])
+                shown = " + ".join(sorted(found)) if found else "no contact"
+                if len(found) == 1:
+                    shown += " (one contact)"
+                key = (" + ".join(sorted(c["body"] for c in r["contacts"])), shown)
+                confusion[key] = confusion.get(key, 0) + 1
+        pushed = [
+            {
+                "body": c["body"],
+                "found": r["contacts_estimated"] == 2 and c["body"] in r["estimated_contact_body_names"],
+            }
+            for r in results
+            for c in r["contacts"]
+        ]
+        per_link = rate_table(pushed, lambda p: p["body"], lambda p: p["found"])
+        per_seed = rate_table(results, lambda r: str(r.get("seed", "")), lambda r: r["contact_links_right"])
+    else:
+        for r in results:
+            if not r["correct_link"]:
+                key = (r["body"], r["estimated_body"] or f"none ({r['status_reason']})")
+                confusion[key] = confusion.get(key, 0) + 1
+        per_link = rate_table(results, lambda r: r["body"], lambda r: r["correct_link"])
+        per_seed = rate_table(results, lambda r: str(r.get("seed", "")), lambda r: r["correct_link"])
     return {
         "intervals": {k: [float(a), float(b)] for k, (a, b) in intervals.items()},
         "interval_level": CONFIDENCE_LEVEL,
-        "per_link": rate_table(results, lambda r: r["body"], lambda r: r["correct_link"]),
-        "per_seed": rate_table(results, lambda r: str(r.get("seed", "")), lambda r: r["correct_link"]),
+        "per_link": per_link,
+        "per_seed": per_seed,
         "confusion": [
             {"true": t, "estimated": e, "count": c}
             for (t, e), c in sorted(confusion.items(), key=lambda item: (-item[1], item[0]))

@@ -39,14 +39,38 @@ surface (outside every other link's primitives).
   the projection trick (A_i = U_i R_i; b and every A_j projected on the complement of A_i,
   then one 3 x 3 solve per pair, component-wise numpy over the pairs; the parts that depend
   on the pose only are computed once per pose), both forces pushing in, the best pair of
-  every link pair; (b) the 5 K best link pairs (K = ``link_pairs``) searched again on their
-  medium grids; (c) then all pairs of their dense points within ``medium_spacing`` of that
-  best pair; (d) line polish of all of them at once: each contact in turn moves to the
-  entry of its link's best zero-pitch wrench given the other contact (9 unknowns: that
-  wrench and the other force; eq. 22 on what the other contact leaves), a block-coordinate
-  descent that never raises the misfit (``polish_iterations`` rounds); the K best kept and
-  the best four polished along their surfaces (Levenberg-Marquardt); (e) the final refits:
-  the best link pair and the runner-up (an upper bound when it was not polished).
+  every link pair; (a') a lower bound of every link pair's misfit: the misfit of two FREE
+  wrenches on the two links (12 unknowns, one 12 x 12 solve per pair, all at once; a point
+  force is a zero-pitch wrench); (b) the 5 K best link pairs of (a) (K = ``link_pairs``),
+  each started from its lines (the entry into each link of the line of its best zero-pitch
+  wrench with a free wrench on the other: eq. 22 for two contacts) and from its best pair
+  on the medium grids, (c) that one refined on all pairs of dense points within
+  ``medium_spacing`` of it; (b') then branch and bound: the other link pairs in increasing
+  order of their bounds, the same way, while a bound is below the best misfit found plus
+  a margin (at most ``max_link_pairs`` link pairs: the coarse grid alone ranks link pairs
+  badly, since the misfit changes by hundreds within a grid spacing); (d) line polish of
+  all of them at once: each contact in turn moves to the entry of its link's best
+  zero-pitch wrench given the other contact (9 unknowns: that wrench and the other force;
+  eq. 22 on what the other contact leaves), a block-coordinate descent that never raises
+  the misfit (``polish_iterations`` rounds); the K best link pairs kept and the best four
+  polished along their surfaces (Levenberg-Marquardt); (e) the final refits, and the
+  choice among them by the evidence below, with the runner-up.
+
+Choosing the link pair by its evidence, not its least misfit: under model errors (the
+realistic world), neighbouring links often explain the residuals about equally well (the
+misfits of the true pair and of a neighbour pair differ by less than the chi-square's
+spread). The Bayesian choice weighs each pair by p(residuals | pair) = integral over its
+forces and surface points of the likelihood exp(-s/2) times their prior, which the
+particle filter above approximates by sampling; here by Laplace's method (MacKay,
+"Bayesian interpolation", Neural Computation 4(3), 1992; Bishop, "Pattern Recognition and
+Machine Learning", 2006, Secs. 3.5 and 4.4): log evidence = -s/2 - 1/2 log det(I + S0^1/2
+J^T J S0^1/2) + const, J the derivative of the whitened model with respect to the three
+force components and two surface coordinates of each contact at the fit, S0 the prior
+covariance: each force component broad (``_FORCE_PRIOR_STD``), each surface coordinate
+a / (2 pi) with a the link's outer surface area (``contact_prior`` "link": every link
+equally likely and the point uniform over it, the study's own sampling of contacts; the
+Gaussian of the same peak density). A pair whose fit is sharp (a small region of its links
+explains the data) or whose links are large pays an Occam factor.
 
 Joint stops (as ``ContactLocalizer``): a joint within ``limit_margin`` of a position limit
 may carry a stop reaction mu_j of the stop's sign (+1 at a lower limit), which the internal
@@ -86,7 +110,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from pydrake.geometry import SceneGraph, SceneGraphInspector
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import JacobianWrtVariable, RigidBody
+from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable, RigidBody
 from scipy.optimize import linprog, nnls
 from scipy.stats import chi2
 from scipy.stats import f as f_distribution
@@ -141,6 +165,22 @@ _LM_GAIN = 1e-6  # it stops when an iteration gains less than this times (1 + mi
 _LM_CANDIDATES = 4  # fit_two polishes the best this many link pairs with it (fit_one: 2 links)
 _MEDIUM_PAIRS = 5  # times link_pairs: the link pairs searched on the medium grids
 _PAIR_BLOCK = 8192  # point pairs per block of the vectorised pair search (cache-sized arrays)
+#: The pair searches skip a pair of points whose 3 x 3 Schur complement S (the second
+#: force's columns projected off the first's) has a trace below ``_WELL_POSED`` times its
+#: Gram matrix's or a determinant below ``_WELL_POSED`` times (trace / 3)^3 (the second
+#: force nearly in the span of the first's columns: the solve is rounding noise), and a
+#: misfit below -``_ROUNDING`` relative to |b|^2.
+_WELL_POSED = 1e-10
+_ROUNDING = 1e-9
+#: fit_two's bound step goes on while a link pair's lower bound is below the best misfit
+#: found plus this (whitened chi-square units): the answer is chosen by the evidence, which
+#: may prefer a pair of slightly larger misfit (its Occam factor, a few units of log).
+_BOUND_MARGIN = 10.0
+_BOUND_BATCH = 10  # link pairs refined per round of the bound step
+#: The evidence's force prior: each force component N(0, this^2), N. Nearly the same for
+#: every link pair (the forces are well determined); it only needs to be broad.
+_FORCE_PRIOR_STD = 20.0
+CONTACT_PRIORS = ("link", "surface")
 
 
 # ---------------------------------------------------------------------------------------
@@ -167,6 +207,11 @@ class ContactFit:
             cannot place the contact, e.g. two contacts on one leg, whose parallel pitch
             axes leave a family of exact fits).
         force_std: (k,) the same for the forces (root of the trace of their covariance), N.
+        log_evidence: ``fit_two`` (k = 2): the Laplace approximation of the log evidence of
+            this link pair (module docstring), up to a constant shared by all pairs; the
+            pair is the one of the largest evidence, not always of the least misfit. nan for
+            k = 1.
+        runner_up_log_evidence: the runner-up pair's (``runner_up_body_indices``) for k = 2.
     """
 
     body_indices: tuple[int, ...]
@@ -180,6 +225,8 @@ class ContactFit:
     stop_torques: np.ndarray = field(default_factory=lambda: np.zeros(0))
     point_std: np.ndarray = field(default_factory=lambda: np.zeros(0))
     force_std: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    log_evidence: float = math.nan
+    runner_up_log_evidence: float = math.nan
 
     @property
     def p_value(self) -> float:
@@ -672,6 +719,12 @@ class MultiContactLocalizer:
             scale error, or a model's inertial error, times the contact's effort): each call
             whitens with the covariances plus diag((eps b)^2), b its own inputs (default 0:
             the covariances alone, right for sensor noise on an exact model).
+        max_link_pairs: at most this many link pairs refined in ``fit_two`` (the K best
+            coarse ones and the bound step's, default 100).
+        contact_prior: where an unknown contact is a priori, for ``fit_two``'s choice of
+            link pair by the evidence: "link" (default: every candidate link equally likely,
+            the point uniform over that link's outer surface) or "surface" (the point
+            uniform over the robot's whole outer surface: large links likelier).
         load_covariance_external, load_covariance_internal: a model error that grows with
             the load, as covariances per N^2 of the total external force (6 x 6 and n x n):
             each call whitens with the covariances plus |f|^2 times these, f the external
@@ -707,6 +760,8 @@ class MultiContactLocalizer:
         relative_error: float = 0.0,
         load_covariance_external=None,
         load_covariance_internal=None,
+        max_link_pairs: int = 100,
+        contact_prior: str = "link",
     ):
         who = self._who = "MultiContactLocalizer"
         check_plant(plant, who)
@@ -747,6 +802,7 @@ class MultiContactLocalizer:
             ("link_pairs", link_pairs),
             ("polish_iterations", polish_iterations),
             ("refit_links", refit_links),
+            ("max_link_pairs", max_link_pairs),
         ):
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
                 raise ValueError(f"{who}: {name} must be a positive integer, got {value!r}")
@@ -754,6 +810,10 @@ class MultiContactLocalizer:
         self._link_pairs = int(link_pairs)
         self._polish_iterations = int(polish_iterations)
         self._refit_links = int(refit_links)
+        self._max_link_pairs = int(max_link_pairs)
+        if contact_prior not in CONTACT_PRIORS:
+            raise ValueError(f"{who}: contact_prior must be one of {CONTACT_PRIORS}, got {contact_prior!r}")
+        self._contact_prior = contact_prior
         self._tolerance = positive_number(surface_tolerance, f"{who}: surface_tolerance", allow_zero=True)
         if limit_margin is None:
             self._limit_margin = -math.inf
@@ -853,6 +913,10 @@ class MultiContactLocalizer:
         """(indices (v[6:] order), signs) of the joints within ``limit_margin`` of a limit:
         +1 at a lower limit (the stop pushes the joint up), -1 at an upper one."""
         return self._stops.limited(self._check_q(q))
+
+    def body_name(self, body_index: int) -> str:
+        """The plant's name of the body of this BodyIndex value."""
+        return self._plant.get_body(BodyIndex(int(body_index))).name()
 
     def same_link(self, body_a: int, body_b: int) -> bool:
         """Whether two BodyIndex values are one rigid link (the same body, or welded)."""
@@ -1295,20 +1359,26 @@ class MultiContactLocalizer:
         pulls = np.any(np.einsum("pci,pci->pc", x.reshape(P, k, 3), normals) > 0.0, axis=1)
         return np.where(pulls | ~np.isfinite(s), np.inf, s)
 
-    def _result(self, pose: _Pose, bt: np.ndarray, bp: np.ndarray, cands: list[_Candidate], k: int) -> ContactFit:
+    def _result(
+        self, pose: _Pose, bt: np.ndarray, bp: np.ndarray, cands: list[_Candidate], k: int, by_evidence: bool = False
+    ) -> ContactFit:
         """Final refits (sign-constrained stops) of candidates on different links or link
-        pairs; the best, ties to the least stop torque, and the runner-up."""
+        pairs; the best (the least misfit, ties to the least stop torque; ``by_evidence``:
+        the largest evidence, ``_log_evidence``) and the runner-up."""
         finals = []
         for cand in cands:
             forces, stop, s = self._final_fit(pose, bt, cand)
-            finals.append((s, float(np.linalg.norm(stop)), cand, forces, stop))
+            evidence = self._log_evidence(pose, bp, cand, s) if by_evidence and math.isfinite(s) else math.nan
+            finals.append((s, float(np.linalg.norm(stop)), cand, forces, stop, evidence))
         scale = max(float(bp @ bp), 1.0)
         finals.sort(key=lambda t: (round(t[0] / scale, 12), round(t[1], 9)))
+        if by_evidence:
+            finals.sort(key=lambda t: -t[5] if math.isfinite(t[5]) else math.inf)  # stable: ties keep that order
         limited = tuple(int(j) for j in pose.limited)
         if not finals or not math.isfinite(finals[0][0]):
             dof = self._rows - 5 * k - len(limited)
             return ContactFit((), np.zeros((0, 3)), np.zeros((0, 3)), math.inf, dof, limited_joints=limited)
-        s, _, cand, forces, stop = finals[0]
+        s, _, cand, forces, stop, evidence = finals[0]
         dof = self._rows - 5 * k - int(np.count_nonzero(stop))  # the stops engaged are fitted too
         point_std, force_std = self._uncertainty(pose, bp, cand)
         bodies = self._geometry.bodies
@@ -1325,7 +1395,29 @@ class MultiContactLocalizer:
             stop,
             point_std,
             force_std,
+            evidence,
+            runner[5] if runner else math.nan,
         )
+
+    def _log_evidence(self, pose: _Pose, bp: np.ndarray, cand: _Candidate, misfit: float) -> float:
+        """Laplace approximation of log p(residuals | these k links), up to a constant
+        shared by every candidate of k contacts (module docstring): -s/2 - 1/2 log det(I +
+        S0^1/2 J^T J S0^1/2), J the whitened model's derivative with respect to the forces
+        and the points' tangent coordinates at the fit, S0 the prior covariance (forces:
+        ``_FORCE_PRIOR_STD``^2; each tangent coordinate: a_c / (2 pi), a_c the link's outer
+        surface area with ``contact_prior`` "link", the same for every link with "surface":
+        the Gaussian of the uniform density's peak)."""
+        k = len(cand.slots)
+        J = self._jacobian(pose, bp, cand)[0]
+        if self._contact_prior == "link":
+            areas = np.array([max(len(pose.dense.by_slot[b]), 1) for b in cand.slots]) * self._spacing**2
+        else:  # the whole outer surface's area, the same for every candidate
+            areas = np.full(k, max(len(pose.dense.slot), 1) * self._spacing**2)
+        variances = np.concatenate((np.full(3 * k, _FORCE_PRIOR_STD**2), np.repeat(areas / (2.0 * math.pi), 2)))
+        prior_std = np.sqrt(variances)
+        Js = J * prior_std
+        _, logdet = np.linalg.slogdet(np.eye(5 * k) + Js.T @ Js)
+        return -0.5 * misfit - 0.5 * float(logdet)
 
     # -- one contact --------------------------------------------------------------------------
     def _fit_one(self, pose: _Pose, bt: np.ndarray, bp: np.ndarray) -> ContactFit:
@@ -1395,6 +1487,7 @@ class MultiContactLocalizer:
             a0 = (t[0] - R[0, 1] * a1 - R[0, 2] * a2) / R[0, 0]
             nI, nJ = pc["nI"], pc["nJ"]
             ok = (a0 * nI[0] + a1 * nI[1] + a2 * nI[2] <= 0.0) & (f[0] * nJ[0] + f[1] * nJ[1] + f[2] * nJ[2] <= 0.0)
+        ok &= pc["well_posed"] & (s >= -_ROUNDING * c0)
         s = np.where(ok & np.isfinite(s), np.maximum(s, 0.0), np.inf)
         # The best pair of each link pair: pairs are sorted by link pair (segments).
         B = len(self._bodies)
@@ -1413,30 +1506,106 @@ class MultiContactLocalizer:
         c0 = float(bp @ bp)
         self._search_points(pose)
         table, where = self._pair_table(pose, bp, c0)  # (a)
-        # (b) The 5 K best link pairs, searched again on their medium grids; (c) then on
-        # their dense grids near the best pair.
         a_all, b_all = np.triu_indices(len(self._bodies), 1)
-        order = np.argsort(table[a_all, b_all], kind="stable")[: _MEDIUM_PAIRS * self._link_pairs]
-        P, starts = pose.search, []
-        for m in order:
-            a, b = int(a_all[m]), int(b_all[m])
-            if not math.isfinite(table[a, b]):
-                continue
-            i, j = where[a, b]
-            start = _Candidate(np.array([a, b]), P.p_W[[i, j]], P.n_W[[i, j]], float(table[a, b]))
-            Ma, Mb = pose.medium[a], pose.medium[b]
-            s, i, j = _best_pair(Ma, Mb, bp, c0)
-            if s < start.misfit:
-                start = _Candidate(
-                    np.array([a, b]), np.stack((Ma.p_W[i], Mb.p_W[j])), np.stack((Ma.n_W[i], Mb.n_W[j])), s
-                )
-            starts.append(self._dense_refine(pose, bp, c0, start))
-        # (d) Line steps on all of them at once; the K best kept, the best few polished
-        # along their surfaces.
-        cands = sorted(self._line_polish(pose, bp, starts), key=lambda c: c.misfit)[: self._link_pairs]
+        bounds, H, g = self._pair_bounds(pose, bp, c0, a_all, b_all)  # (a')
+        done: set[int] = set()
+
+        def refine(pairs) -> list[_Candidate]:
+            """(b)-(d) on the link pairs ``pairs`` (indices into a_all, b_all) not yet done."""
+            pairs = np.array([m for m in pairs if m not in done], dtype=int)
+            done.update(pairs.tolist())
+            if not pairs.size:
+                return []
+            starts = self._line_starts(pose, bp, a_all[pairs], b_all[pairs], H[pairs], g[pairs])
+            for m in pairs:
+                start = self._medium_start(pose, bp, c0, table, where, int(a_all[m]), int(b_all[m]))
+                if start is not None:
+                    starts.append(self._dense_refine(pose, bp, c0, start))
+            return self._line_polish(pose, bp, starts)
+
+        # (b) The 5 K best link pairs of the coarse table; (b') then, in increasing order of
+        # their lower bounds, every link pair that could still beat the best so far.
+        table_order = np.argsort(table[a_all, b_all], kind="stable")[: _MEDIUM_PAIRS * self._link_pairs]
+        cands = refine(m for m in table_order if math.isfinite(table[a_all[m], b_all[m]]))
+        best = min((c.misfit for c in cands), default=math.inf)
+        order = [int(m) for m in np.argsort(bounds, kind="stable") if m not in done]
+        while order and len(done) < self._max_link_pairs:
+            room = min(_BOUND_BATCH, self._max_link_pairs - len(done))
+            batch = [m for m in order[:room] if bounds[m] < best + _BOUND_MARGIN]
+            if not batch:
+                break
+            order = order[len(batch) :]
+            cands += refine(batch)
+            best = min([best, *(c.misfit for c in cands)])
+        # One candidate per link pair; of those within the margin of the best misfit, the K
+        # of the largest evidence; the best few polished along their surfaces.
+        per_pair: dict[tuple, _Candidate] = {}
+        for cand in cands:
+            key = tuple(int(x) for x in cand.slots)
+            if key not in per_pair or cand.misfit < per_pair[key].misfit:
+                per_pair[key] = cand
+        cands = sorted(per_pair.values(), key=lambda c: c.misfit)
+        close = [c for c in cands if c.misfit < best + _BOUND_MARGIN]
+        if len(close) > self._link_pairs:
+            evidence = [self._log_evidence(pose, bp, c, c.misfit) for c in close]
+            cands = [close[m] for m in np.argsort(evidence, kind="stable")[::-1][: self._link_pairs]]
+        else:
+            cands = cands[: self._link_pairs]
         for m in range(min(len(cands), _LM_CANDIDATES)):
             cands[m] = self._lm_polish(pose, bp, cands[m])
-        return self._result(pose, bt, bp, cands, 2)  # (e)
+        return self._result(pose, bt, bp, cands, 2, by_evidence=True)  # (e)
+
+    def _pair_bounds(
+        self, pose: _Pose, bp: np.ndarray, c0: float, a: np.ndarray, b: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(a') Lower bounds of the misfit of two point forces on links a and b (arrays of
+        slots): the misfit of two FREE wrenches on them (12 unknowns; a point force is a
+        zero-pitch wrench, 5 of them), all link pairs at once. Returns (bounds (P,), the
+        normal matrices H (P, 12, 12) and right-hand sides g (P, 12))."""
+        A = np.concatenate((pose.Tp[a], pose.Tp[b]), axis=2)  # (P, rows, 12)
+        H = np.swapaxes(A, 1, 2) @ A
+        g = np.matmul(bp, A)
+        jitter = 1e-12 * np.trace(H, axis1=1, axis2=2)[:, None, None] / 12.0 * np.eye(12)
+        x = np.linalg.solve(H + jitter, g[..., None])[..., 0]
+        return np.maximum(c0 - np.einsum("pi,pi->p", g, x), 0.0), H, g
+
+    def _line_starts(
+        self, pose: _Pose, bp: np.ndarray, a: np.ndarray, b: np.ndarray, H: np.ndarray, g: np.ndarray
+    ) -> list[_Candidate]:
+        """Starts of the link pairs (a, b) from their lines (eq. 22 for two contacts): the
+        entry into a of the line of a's best zero-pitch wrench with a free wrench on b, and
+        the same for b; only where both lines enter their links and both forces push in."""
+        swap = np.r_[6:12, 0:6]
+        points, normals, ok = [], [], np.ones(len(a), dtype=bool)
+        for slots, Hs, gs in ((a, H, g), (b, H[:, swap][:, :, swap], g[:, swap])):
+            x = _zero_pitch_solve(Hs, gs)
+            p, n, valid = self._line_points(pose, slots, x[:, :6])
+            points.append(p)
+            normals.append(n)
+            ok &= valid
+        slots = np.stack((a, b), axis=1)
+        points, normals = np.stack(points, axis=1), np.stack(normals, axis=1)
+        misfits = self._misfits_at(pose, bp, slots, points, normals)
+        return [
+            _Candidate(slots[m].copy(), points[m], normals[m], float(misfits[m]))
+            for m in np.flatnonzero(ok & np.isfinite(misfits))
+        ]
+
+    def _medium_start(
+        self, pose: _Pose, bp: np.ndarray, c0: float, table: np.ndarray, where: np.ndarray, a: int, b: int
+    ) -> _Candidate | None:
+        """(b) The better of the link pair's coarse-table pair and its best pair on the
+        medium grids (None when neither pushes in)."""
+        P = pose.search
+        start = None
+        if math.isfinite(table[a, b]):
+            i, j = where[a, b]
+            start = _Candidate(np.array([a, b]), P.p_W[[i, j]], P.n_W[[i, j]], float(table[a, b]))
+        Ma, Mb = pose.medium[a], pose.medium[b]
+        s, i, j = _best_pair(Ma, Mb, bp, c0)
+        if math.isfinite(s) and (start is None or s < start.misfit):
+            start = _Candidate(np.array([a, b]), np.stack((Ma.p_W[i], Mb.p_W[j])), np.stack((Ma.n_W[i], Mb.n_W[j])), s)
+        return start
 
     def _dense_refine(self, pose: _Pose, bp: np.ndarray, c0: float, cand: _Candidate) -> _Candidate:
         """(c) The best of the start and all pairs of dense points within ``medium_spacing``
@@ -1484,7 +1653,13 @@ def _pair_precomputation(P: _Points) -> dict:
         C[1, 2] = S[0, 2] * S[1, 0] - S[0, 0] * S[1, 2]
         C[2, 2] = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
         C[1, 0], C[2, 0], C[2, 1] = C[0, 1], C[0, 2], C[1, 2]
-        Sinv = C / (S[0, 0] * C[0, 0] + S[0, 1] * C[1, 0] + S[0, 2] * C[2, 0])
+        det = S[0, 0] * C[0, 0] + S[0, 1] * C[1, 0] + S[0, 2] * C[2, 0]
+        Sinv = C / det
+        # Pairs whose second force is (nearly) in the span of the first's columns: their
+        # 3 x 3 solve is rounding noise (misfits far below zero); _pair_table skips them.
+        trace = (S[0, 0] + S[1, 1] + S[2, 2]) / 3.0
+        trace_j = (G[0, 0] + G[1, 1] + G[2, 2]) / 3.0
+        well_posed = (trace > _WELL_POSED * trace_j) & (det > _WELL_POSED * trace**3)
     link_pair = P.slot[I] * (P.slot.max() + 1) + P.slot[J]
     seg_start = np.flatnonzero(np.r_[True, link_pair[1:] != link_pair[:-1]])
     return {
@@ -1492,6 +1667,7 @@ def _pair_precomputation(P: _Points) -> dict:
         "J": J,
         "V": V,
         "Sinv": Sinv,
+        "well_posed": well_posed,
         "R": np.ascontiguousarray(R[I].transpose(1, 2, 0)),
         "nI": np.ascontiguousarray(P.n_W[I].T),
         "nJ": np.ascontiguousarray(P.n_W[J].T),
@@ -1573,7 +1749,8 @@ def _pair_misfits(
             C11 = s00 * s22 - s02 * s02
             C12 = s01 * s02 - s00 * s12
             C22 = s00 * s11 - s01 * s01
-            inv_det = 1.0 / (s00 * C00 + s01 * C01 + s02 * C02)
+            det = s00 * C00 + s01 * C01 + s02 * C02
+            inv_det = 1.0 / det
             f0 = (C00 * rhs[0] + C01 * rhs[1] + C02 * rhs[2]) * inv_det
             f1 = (C01 * rhs[0] + C11 * rhs[1] + C12 * rhs[2]) * inv_det
             f2 = (C02 * rhs[0] + C12 * rhs[1] + C22 * rhs[2]) * inv_det
@@ -1585,5 +1762,9 @@ def _pair_misfits(
             ok = (a0 * na[:, 0] + a1 * na[:, 1] + a2 * na[:, 2] <= 0.0) & (
                 f0 * nb[:, 0] + f1 * nb[:, 1] + f2 * nb[:, 2] <= 0.0
             )
+            # As in _pair_precomputation: ill-posed pairs and rounding noise are skipped.
+            trace = (s00 + s11 + s22) / 3.0
+            trace_j = (G[:, 0, 0] + G[:, 1, 1] + G[:, 2, 2]) / 3.0
+            ok &= (trace > _WELL_POSED * trace_j) & (det > _WELL_POSED * trace**3) & (s >= -_ROUNDING * c0)
             out[:, sl] = np.where(ok & np.isfinite(s), np.maximum(s, 0.0), np.inf)
     return out

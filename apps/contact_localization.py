@@ -591,23 +591,26 @@ def _print_summary(metrics: dict) -> None:
     print(f"  ({level:.0f} % intervals: Clopper-Pearson for rates, order statistics for quantiles)")
     print(f"  status counts: {metrics['status_counts']}")
     two = metrics.get("contacts") == 2
-    per_seed = metrics.get("per_seed", [])
-    if len(per_seed) > 1:
-        print("  both-links-right rate per seed:" if two else "  right-link rate per seed:")
-        for row in per_seed:
-            low, high = row["interval"]
-            print(
-                f"    seed {row['group']:>8s} {row['successes']:4d} / {row['trials']:<4d} {100 * row['rate']:5.1f} %"
-                f"  [{100 * low:.1f}, {100 * high:.1f}]"
-            )
+    seeds_title = "both-links-right rate per seed:" if two else "eq. (22) localizer's right-link rate per seed:"
+    for title, rows in (
+        (seeds_title, metrics.get("per_seed", [])),
+        ("stacked fit's right-link rate per seed:", metrics.get("fit_per_seed", [])),
+    ):
+        if len(rows) > 1:
+            print(f"  {title}")
+            for row in rows:
+                low, high = row["interval"]
+                counts = f"{row['successes']:4d} / {row['trials']:<4d} {100 * row['rate']:5.1f} %"
+                print(f"    seed {row['group']:>8s} {counts}  [{100 * low:.1f}, {100 * high:.1f}]")
     worst = [row for row in metrics.get("per_link", []) if row["rate"] < 1.0]
     if worst:
-        what = "found (two contacts, this link among them)" if two else "right-link"
+        what = "found (two contacts, this link among them)" if two else "eq. (22) localizer's right-link"
         print(f"  {what} rate per pushed link, below 100 % (all links: metrics.json 'per_link'):")
         for row in worst:
             print(f"    {row['group']:20s} {row['successes']:4d} / {row['trials']:<4d} {100 * row['rate']:5.1f} %")
     if metrics.get("confusion"):
-        print(f"  misses (true {'links' if two else 'link'} -> estimated or status: count):")
+        whose = "misses (true links" if two else "eq. (22) localizer's misses (true link"
+        print(f"  {whose} -> estimated or status: count):")
         for row in metrics["confusion"]:
             print(f"    {row['true']} -> {row['estimated']}: {row['count']}")
     phases = ", ".join(f"{name.replace('_', ' ')} {t:.0f} s" for name, t in metrics.get("phase_wall_s", {}).items())

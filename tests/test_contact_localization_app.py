@@ -78,6 +78,10 @@ def test_app_smoke(tmp_path):
     low, high = metrics["intervals"]["correct_link_rate"]
     assert low <= metrics["correct_link_rate"] <= high == 1.0
     assert sum(row["trials"] for row in metrics["per_link"]) == 2 and metrics["confusion"] == []
+    # The stacked fit's own tables count its right links.
+    fit_right = sum(trial["fit_correct_link"] for trial in metrics["per_trial"])
+    assert sum(row["successes"] for row in metrics["fit_per_seed"]) == fit_right
+    assert sum(row["trials"] for row in metrics["fit_per_link"]) == 2
     # The wall time split by phase (headless: the replays are recorded in the workers).
     phases = metrics["phase_wall_s"]
     assert set(phases) == {"calibration", "simulations", "one_or_two_contact_fits", "live_replays"}
@@ -128,7 +132,7 @@ def test_app_two_contacts(tmp_path):
     assert metrics["per_seed"] == [
         {"group": "50", "trials": 2, "successes": 2, "rate": 1.0, "interval": metrics["per_seed"][0]["interval"]}
     ]
-    assert metrics["confusion"] == []
+    assert metrics["confusion"] == [] and "fit_per_seed" not in metrics
     for trial in metrics["per_trial"]:
         assert sorted(trial["estimated_contact_body_names"]) == sorted(c["body"] for c in trial["contacts"])
     scene = read_static_html((out / "replay_trial_0.html").read_text())

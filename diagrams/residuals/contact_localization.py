@@ -1225,9 +1225,16 @@ def _intervals_and_tables(results: list[dict], detected: list, valid: list, posi
                 confusion[key] = confusion.get(key, 0) + 1
         per_link = rate_table(results, lambda r: r["body"], lambda r: r["correct_link"])
         per_seed = rate_table(results, lambda r: str(r.get("seed", "")), lambda r: r["correct_link"])
+    fit_tables = {}
+    if single and len(single) == n:  # the stacked fit as the single-contact localizer
+        fit_tables = {
+            "fit_per_link": rate_table(single, lambda r: r["body"], lambda r: r["fit_correct_link"]),
+            "fit_per_seed": rate_table(single, lambda r: str(r.get("seed", "")), lambda r: r["fit_correct_link"]),
+        }
     return {
         "intervals": {k: [float(a), float(b)] for k, (a, b) in intervals.items()},
         "interval_level": CONFIDENCE_LEVEL,
+        **fit_tables,
         "per_link": per_link,
         "per_seed": per_seed,
         "confusion": [

@@ -348,7 +348,8 @@ def test_noise_false_alarm_and_calibration(hrp4, localizer):
 
 
 def test_noise_two_contacts_detected(hrp4, localizer):
-    """Two contacts with the same noise, 40 seeded pairs: localize says 2 in >= 90 %."""
+    """Two contacts with the same noise, 40 seeded pairs: localize says 2 in >= 90 %, and
+    names both links right in >= 90 %."""
     plant, _, context = hrp4
     q = plant.GetPositions(context)
     n = plant.num_velocities() - 6

@@ -198,7 +198,8 @@ class ContactFit:
         forces_W: (k, 3) forces, world.
         statistic: the whitened squared misfit s_k (inf when no candidate was feasible).
         dof: its chi-square degrees of freedom, 6 + n - 5 k - (stop reactions engaged).
-        runner_up_statistic: the best s_k with another link (k = 1) or link pair (k = 2).
+        runner_up_statistic: s_k of the runner-up: the best fit with another link (k = 1),
+            the link pair of the next largest evidence (k = 2).
         runner_up_body_indices: those links (() if none).
         limited_joints: joints (v[6:] order) taken as resting on a position limit.
         stop_torques: their stop reactions in the fit (N m, signed as joint efforts).
@@ -1657,9 +1658,7 @@ def _pair_precomputation(P: _Points) -> dict:
         Sinv = C / det
         # Pairs whose second force is (nearly) in the span of the first's columns: their
         # 3 x 3 solve is rounding noise (misfits far below zero); _pair_table skips them.
-        trace = (S[0, 0] + S[1, 1] + S[2, 2]) / 3.0
-        trace_j = (G[0, 0] + G[1, 1] + G[2, 2]) / 3.0
-        well_posed = (trace > _WELL_POSED * trace_j) & (det > _WELL_POSED * trace**3)
+        well_posed = _well_posed(S[0, 0] + S[1, 1] + S[2, 2], G[0, 0] + G[1, 1] + G[2, 2], det)
     link_pair = P.slot[I] * (P.slot.max() + 1) + P.slot[J]
     seg_start = np.flatnonzero(np.r_[True, link_pair[1:] != link_pair[:-1]])
     return {
@@ -1676,6 +1675,14 @@ def _pair_precomputation(P: _Points) -> dict:
         "seg_a": P.slot[I[seg_start]],
         "seg_b": P.slot[J[seg_start]],
     }
+
+
+def _well_posed(trace_S, trace_G, det_S):
+    """Whether a pair search's 3 x 3 Schur complement S (the second force's columns
+    projected off the first's; G: their Gram matrix) gives a solve worth its name
+    (``_WELL_POSED``), from the traces of S and G and the determinant of S (arrays)."""
+    trace = trace_S / 3.0
+    return (trace > _WELL_POSED * trace_G / 3.0) & (det_S > _WELL_POSED * trace**3)
 
 
 def _jittered_solve(H: np.ndarray, g: np.ndarray) -> np.ndarray:
@@ -1763,8 +1770,6 @@ def _pair_misfits(
                 f0 * nb[:, 0] + f1 * nb[:, 1] + f2 * nb[:, 2] <= 0.0
             )
             # As in _pair_precomputation: ill-posed pairs and rounding noise are skipped.
-            trace = (s00 + s11 + s22) / 3.0
-            trace_j = (G[:, 0, 0] + G[:, 1, 1] + G[:, 2, 2]) / 3.0
-            ok &= (trace > _WELL_POSED * trace_j) & (det > _WELL_POSED * trace**3) & (s >= -_ROUNDING * c0)
+            ok &= _well_posed(s00 + s11 + s22, G[:, 0, 0] + G[:, 1, 1] + G[:, 2, 2], det) & (s >= -_ROUNDING * c0)
             out[:, sl] = np.where(ok & np.isfinite(s), np.maximum(s, 0.0), np.inf)
     return out

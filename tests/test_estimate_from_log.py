@@ -69,20 +69,33 @@ def test_offline_replay_equals_the_online_estimators(simulated, robot):
 
 
 def test_stacked_residuals_equal_the_systems_own_updates(simulated, robot):
-    """The whole-log residuals of ``replay_contact_estimation`` (eq. 9's elimination, the
-    momenta and rates stacked over the samples) equal ``replay_residuals``, which runs the
-    systems' own ``advance`` sample by sample; the detector's stacked test statistics equal
-    its per-sample ones."""
+    """The whole-log residuals of ``replay_contact_estimation`` and ``replay_residuals(stacked=True)``
+    (eq. 9's elimination, the momenta and rates stacked over the samples; the classical
+    residual of eq. 7 alongside) equal the systems' own ``advance`` run sample by sample;
+    the detector's stacked test statistics equal its per-sample ones."""
     from diagrams.residuals.log_estimation import build_offline_estimators, make_detector
-    from systems.residuals.offline import _stacked_residuals, replay_residuals
+    from systems.residuals.momentum_residuals import ClassicalResidual
+    from systems.residuals.offline import _replay_residuals, _stacked_residuals, replay_residuals
 
     log, _ = simulated
     inputs = log_inputs(robot, log)
     _, internal, external = build_offline_estimators(robot, LogEstimationSettings(), inputs.period)
+    classical = ClassicalResidual(robot.plant, 30.0, inputs.period, robot.ft_frames, model=internal.model)
     stacked, _ = _stacked_residuals(
-        internal, external, inputs.state, inputs.joint_torque, inputs.known_wrenches, chunk=400
+        internal, external, inputs.state, inputs.joint_torque, inputs.known_wrenches, chunk=400, classical=classical
     )
-    one_by_one = replay_residuals(
+    one_by_one, _ = _replay_residuals(
+        internal, external, classical, inputs.state, inputs.joint_torque, inputs.known_wrenches
+    )
+    for a, b in (
+        (stacked.internal, one_by_one.internal),
+        (stacked.external_wrench_world, one_by_one.external_wrench_world),
+        (stacked.classical, one_by_one.classical),
+    ):
+        assert np.abs(b).max() > 1.0
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-11 * np.abs(b).max())
+    # replay_residuals's stacked path (same numbers as above).
+    public = replay_residuals(
         robot.plant,
         internal.model,
         robot.ft_frames,
@@ -92,12 +105,10 @@ def test_stacked_residuals_equal_the_systems_own_updates(simulated, robot):
         internal_gain=35.0,
         external_gain=35.0,
         period=inputs.period,
+        classical_gain=30.0,
+        stacked=True,
     )
-    for a, b in (
-        (stacked.internal, one_by_one.internal),
-        (stacked.external_wrench_world, one_by_one.external_wrench_world),
-    ):
-        assert np.abs(b).max() > 1.0
+    for a, b in ((public.internal, one_by_one.internal), (public.classical, one_by_one.classical)):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-11 * np.abs(b).max())
     detector = make_detector(robot, LogEstimationSettings(), inputs.period)
     rows = [0, 400, 900, 1400]

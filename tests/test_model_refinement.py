@@ -242,3 +242,40 @@ def test_residuals_replayed_on_the_log_match_the_live_ones():
             external_gain=35.0,
             period=1e-3,
         )
+
+
+def test_calibration_log_records_what_the_updates_read_once_per_step(monkeypatch):
+    """A calibration diagram (``residuals`` False) records its log with an UpdateRecorder:
+    one sample per update at 0, T, ..., each sensor evaluated once per step (a logger's
+    publish, between the updates, evaluated them a second time on another state), and the
+    samples are the inputs the next update's estimators read (the live residuals' diagram
+    logs them one publish later)."""
+    from systems.simulation.sensors import FootForceTorqueSensors
+
+    calls = []
+    calc = FootForceTorqueSensors._CalcWrenches
+
+    def counted(self, context, output):
+        calls.append(context.get_time())
+        calc(self, context, output)
+
+    monkeypatch.setattr(FootForceTorqueSensors, "_CalcWrenches", counted)
+    # Noise-free sensors on the true state, so that the two logs can be compared sample by sample.
+    scenario = _short(imperfections=Imperfections(), calibration_duration=0.1, noise=False)
+    diagram, handles = build_refinement_diagram(scenario, scenario.calibration_motion, residuals=False)
+    assert handles.recorder is not None and not handles.loggers
+    context = run_refinement_diagram(diagram, handles, 0.1, scenario.simulator_config)
+    log = calibration_log(handles, context)
+    np.testing.assert_allclose(log.time, 1e-3 * np.arange(100), atol=1e-12)
+    assert log.q.shape == (100, handles.plant.num_positions()) and np.isfinite(log.known_wrenches).all()
+    assert len(calls) <= 101  # once per step (plus at most one outside the steps)
+    # The same run with the loggers (``residuals`` True): their sample k + 1 is the
+    # recorder's sample k, the inputs of the update at k T.
+    calls.clear()
+    diagram, logged = build_refinement_diagram(scenario, scenario.calibration_motion)
+    context = run_refinement_diagram(diagram, logged, 0.1, scenario.simulator_config)
+    assert len(calls) > 150  # the loggers' second evaluation
+    sensed = logged.loggers["sensed_state"].FindLog(context).data().T
+    np.testing.assert_array_equal(np.hstack((log.q, log.v)), sensed[1:101])
+    np.testing.assert_array_equal(log.known_wrenches, logged.loggers["known_wrenches"].FindLog(context).data().T[1:101])
+    assert np.abs(sensed[1:101] - sensed[:100]).max() > 1e-6  # a shift would be seen

@@ -23,12 +23,15 @@ authors' ``Force_Y_data``, shipped in ``data/hawley2019-nao``; ``HCO_SHARED_DIR`
 ``systems.observer.nao_dataset``: a missing recording stops the run with an error naming the
 path); one update of the contact localizer (Flacco et al. Sec. VI) on ``hrp4_like``; and the
 offline estimation from a 1 kHz ``hrp4_like`` log (``--log-seconds``, issue 14: residuals,
-force, detector and localizer on one core), as its real-time factor.
+force, detector and localizer on one core), as its real-time factor; and, on the same log,
+the calibration's replay of the three residuals (``replay_residuals`` with the classical
+one, as ``calibrate_from_log`` runs it): sample by sample and stacked.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import statistics
 import time
 from collections.abc import Callable
@@ -355,6 +358,52 @@ def benchmark_log_estimation(seconds: float = 2.0, *, repeats: int = 3, push_sec
     }
 
 
+def benchmark_residual_replay(seconds: float = 2.0, *, repeats: int = 3) -> dict:
+    """The three residuals (internal, external, classical; one shared model) replayed on the
+    1 kHz log of ``benchmark_log_estimation``'s push (``hrp4_like``, ``seconds`` long), as
+    ``calibrate_from_log`` replays a calibration log: each system's own update sample by
+    sample (``stacked`` False) and the whole log stacked; the best of ``repeats``, in
+    microseconds per sample, and the largest difference between the two, N m."""
+    from diagrams.residuals.log_estimation import build_estimator_plant, log_inputs, simulate_push_log
+    from systems.residuals.offline import replay_residuals
+
+    log, _ = simulate_push_log("hrp4_like", duration=seconds, push_end=seconds + 1.0)
+    robot = build_estimator_plant("hrp4_like")
+    inputs = log_inputs(robot, log)
+    model = ResidualModel(robot.plant)
+    replayed, us = {}, {}
+    for stacked in (False, True):
+        best = math.inf
+        for _ in range(repeats):
+            start = time.perf_counter()
+            replayed[stacked] = replay_residuals(
+                robot.plant,
+                model,
+                robot.ft_frames,
+                inputs.state,
+                inputs.joint_torque,
+                inputs.known_wrenches,
+                internal_gain=35.0,
+                external_gain=35.0,
+                period=inputs.period,
+                classical_gain=35.0,
+                stacked=stacked,
+            )
+            best = min(best, time.perf_counter() - start)
+        us[stacked] = 1e6 * best / inputs.state.shape[0]
+    difference = max(
+        float(np.abs(np.asarray(a) - np.asarray(b)).max()) for a, b in zip(replayed[False], replayed[True])
+    )
+    return {
+        "model": "hrp4_like",
+        "samples": int(inputs.state.shape[0]),
+        "per_sample_us": us[False],
+        "stacked_us": us[True],
+        "speedup": us[False] / us[True],
+        "largest_difference": difference,
+    }
+
+
 def _table_header(title: str, header: str, *, blank_line: bool = True) -> None:
     """Prints a table's title, its column header and a rule."""
     if blank_line:
@@ -474,11 +523,25 @@ def _run(args: argparse.Namespace) -> int:
                 f" {100 * r['contact_fraction']:>8.0f} % {r['us_per_sample']:>8.0f} us"
                 f" {r['real_time_factor']:>17.2f} {r['floor']:>6.1f}"
             )
+    replay_rows = []
+    if "hrp4_like" in names and args.log_seconds > 0:
+        replay_rows = [benchmark_residual_replay(args.log_seconds)]
+        _table_header(
+            "Calibration's residual replay (internal, external, classical) on the same log, one process",
+            f"{'model':<10} {'samples':>7} {'sample by sample':>17} {'stacked':>10} {'speed-up':>9}"
+            f" {'largest difference':>19}",
+        )
+        for r in replay_rows:
+            print(
+                f"{r['model']:<10} {r['samples']:>7} {r['per_sample_us']:>14.0f} us {r['stacked_us']:>7.0f} us"
+                f" {r['speedup']:>8.1f}x {r['largest_difference']:>14.1e} N m"
+            )
     out_dir = output_folder(args, EXPERIMENT)
     write_metrics(
         out_dir,
         {
             "log_estimation": log_rows,
+            "residual_replay": replay_rows,
             "floating_base": rows,
             "residual_update": residual_rows,
             "force_observer": observer,

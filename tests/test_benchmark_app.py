@@ -39,3 +39,13 @@ def test_benchmark_stops_with_a_clear_error_when_the_nao_recording_is_missing(tm
     assert benchmark.main(["--model", "nao_like", "--loop-seconds", "0"]) == 2
     err = capsys.readouterr().err
     assert "benchmark: error:" in err and str(tmp_path / "datasets" / "hawley2019-nao") in err
+
+
+def test_residual_replay_benchmark_times_both_paths_on_one_log():
+    """The calibration replay's timing (``benchmark_residual_replay``): both paths on the same
+    short log, and they agree (to the mass matrix's central difference)."""
+    row = benchmark.benchmark_residual_replay(0.3, repeats=1)
+    assert row["samples"] == 300
+    assert row["per_sample_us"] > 0.0 and row["stacked_us"] > 0.0
+    assert row["speedup"] == row["per_sample_us"] / row["stacked_us"]
+    assert row["largest_difference"] < 1e-6

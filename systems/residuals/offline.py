@@ -133,10 +133,10 @@ def replay_residuals(
         known_wrenches: (N, 6 k) the F/T wrenches, world.
         internal_gain, external_gain: K, 1/s. period: T, s.
         classical_gain: K of the classical residual, 1/s; None: not replayed.
-        stacked: True: the whole log at once (``_stacked_residuals``, 2.5x faster on a
-            calibration log), equal to the per-sample updates to the rounding of the mass
-            matrix's central difference (1e-7 N m after 1 s of motion); False (default):
-            the systems' own updates, sample by sample.
+        stacked: True: the whole log at once (``_stacked_residuals``; 2.4x faster,
+            ``make benchmark``), equal to the per-sample updates to the rounding of the
+            mass matrix's central difference (1e-7 N m after 1 s of motion); False
+            (default): the systems' own updates, sample by sample.
 
     Raises:
         ValueError: arrays of inconsistent sizes or non-finite values (naming them).

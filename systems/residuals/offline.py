@@ -328,14 +328,13 @@ def _stacked_residuals(
         out_internal[rows.start : rows.stop] = residual[:, :n]
         if classical is not None:
             # ClassicalResidual._momentum_and_rates: the virtual-joint model's momentum and
-            # rates, [base (F0); joints], with its own joint damping.
+            # rates, [base (F0), the external residual's rows; joints], with its own damping.
             tau_c = joint_torque[rows.start : rows.stop, :, None] - classical._damping[:, None] * qdot
-            F_T = F.transpose(0, 2, 1)
-            momentum_c = np.concatenate((I0c @ v0c + F @ qdot, F_T @ v0c + H @ qdot), axis=1)[:, :, 0]
-            rate_c = np.concatenate(
-                (I0c_dot @ v0c + F_dot @ qdot - p_hat, F_dot.transpose(0, 2, 1) @ v0c + H_dot @ qdot - C_hat), axis=1
-            )[:, :, 0]
-            measured_c = np.concatenate((w_F0, tau_c + tau_joints), axis=1)[:, :, 0]
+            joints_momentum = (F.transpose(0, 2, 1) @ v0c + H @ qdot)[:, :, 0]
+            joints_rate = (F_dot.transpose(0, 2, 1) @ v0c + H_dot @ qdot - C_hat)[:, :, 0]
+            momentum_c = np.concatenate((momentum[:, n:], joints_momentum), axis=1)
+            rate_c = np.concatenate((rate[:, n:], joints_rate), axis=1)
+            measured_c = np.concatenate((measured[:, n:], (tau_c + tau_joints)[:, :, 0]), axis=1)
             out_classical[rows.start : rows.stop], previous_classical = _momentum_observer(
                 classical._gain, period, momentum_c, rate_c, measured_c, previous_classical
             )

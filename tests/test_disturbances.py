@@ -25,7 +25,7 @@ from pydrake.systems.primitives import LogVectorOutput
 
 from models import add_humanoid
 from systems.dynamics.floating_base import FloatingBaseDynamics
-from systems.simulation.disturbances import PolynomialRampUpDown, Push, PushSource, Sinusoid, Step
+from systems.simulation.disturbances import PolynomialRampUpDown, Push, PushSource, Sinusoid, Step, profile_support
 
 # ---------------------------------------------------------------------------------------
 # Profiles.
@@ -282,8 +282,9 @@ def _check_against_drake(plant, pushes, x, t, dynamics=None):
     forces, points, wrench_W, wrench_F0, tau = _expected_ground_truth(plant, base_frame, pushes, x, t)
 
     applied = dut.get_applied_spatial_forces_output_port().Eval(ctx)
-    assert len(applied) == len(pushes)
-    for push, a, f in zip(pushes, applied, forces):
+    on = [i for i, f in enumerate(forces) if f.any()]  # the pushes at zero are left out
+    assert len(applied) == len(on)
+    for push, a, f in zip([pushes[i] for i in on], applied, forces[on]):
         assert a.body_index == plant.GetBodyByName(push.body_name).index()
         np.testing.assert_array_equal(a.p_BoBq_B, push.p_BoP_B)
         np.testing.assert_array_equal(a.F_Bq_W.rotational(), np.zeros(3))
@@ -349,9 +350,11 @@ def test_zero_forces_give_zero_ground_truth():
         for name in ("force_world", "total_wrench_world", "total_wrench_base", "tau_c_real"):
             np.testing.assert_array_equal(dut.GetOutputPort(name).Eval(ctx), 0.0)
         assert np.linalg.norm(dut.GetOutputPort("point_world").Eval(ctx)) > 0.0
-        applied = dut.get_applied_spatial_forces_output_port().Eval(ctx)
-        np.testing.assert_array_equal(applied[0].F_Bq_W.translational(), 0.0)
+        assert dut.get_applied_spatial_forces_output_port().Eval(ctx) == []  # off: nothing applied
     ctx.SetTime(1.5)  # on: the cached values must be recomputed
+    applied = dut.get_applied_spatial_forces_output_port().Eval(ctx)
+    assert len(applied) == 1
+    np.testing.assert_array_equal(applied[0].F_Bq_W.translational(), [5.0, 0.0, 0.0])
     assert np.linalg.norm(dut.GetOutputPort("tau_c_real").Eval(ctx)) > 0.0
     np.testing.assert_allclose(dut.GetOutputPort("force_world").Eval(ctx), [5.0, 0.0, 0.0])
 
@@ -423,7 +426,49 @@ def test_applied_forces_do_not_depend_on_state():
     # Evaluates without the state input connected.
     ctx = dut.CreateDefaultContext()
     ctx.SetTime(0.3)
-    assert len(dut.get_applied_spatial_forces_output_port().Eval(ctx)) == 4
+    assert len(dut.get_applied_spatial_forces_output_port().Eval(ctx)) == 3  # the hand's push starts at 2 s
+
+
+class _CustomProfile:
+    """A user profile with no known support: on in [0.5, 0.6) only."""
+
+    def value(self, t):
+        return 2.0 if 0.5 <= t < 0.6 else 0.0
+
+
+def test_applied_forces_are_the_pushes_on_at_t_in_order():
+    """A run's schedule of many pushes (the contact study's) hands the plant only those on at
+    t, with each force; support windows and user profiles without one give the same list."""
+    plant = _small_floating_plant()
+    pushes = [
+        Push("arm", [0.0, 0.0, -0.2], [1.0, 0.0, 0.0], Step(1.0 + k, t_on=0.1 * k, t_off=0.1 * k + 0.1))
+        for k in range(10)
+    ]
+    pushes.append(Push("head", [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], _CustomProfile()))
+    pushes.append(Push("hand", [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], Sinusoid(3.0, 2.0, t_start=0.55, t_end=0.7)))
+    dut = PushSource(plant, pushes)
+    ctx = dut.CreateDefaultContext()
+    for t in (0.0, 0.25, 0.52, 0.57, 0.65, 0.95, 1.5):
+        ctx.SetTime(t)
+        applied = dut.get_applied_spatial_forces_output_port().Eval(ctx)
+        expected = [(i, p) for i, p in enumerate(pushes) if p.force_W(t).any()]
+        assert [a.body_index for a in applied] == [dut.bodies[i].index() for i, _ in expected]
+        for a, (_, push) in zip(applied, expected):
+            np.testing.assert_array_equal(a.F_Bq_W.translational(), push.force_W(t))
+            np.testing.assert_array_equal(a.p_BoBq_B, push.p_BoP_B)
+    ctx.SetTime(1.5)
+    assert dut.get_applied_spatial_forces_output_port().Eval(ctx) == []
+
+
+def test_profile_support_bounds_each_profile_of_this_module():
+    assert profile_support(Step(2.0, t_on=0.5, t_off=0.7)) == (0.5, 0.7)
+    assert profile_support(Sinusoid(1.0, 2.0, t_start=0.3)) == (0.3, math.inf)
+    assert profile_support(PolynomialRampUpDown(peak=5.0, t_start=0.1, t_peak=0.6, t_end=1.2)) == (0.1, 1.2)
+    assert profile_support(_CustomProfile()) == (-math.inf, math.inf)
+    for profile in (Step(2.0, 0.5, 0.7), Sinusoid(1.0, 2.0, t_start=0.3, t_end=0.9, offset=0.5)):
+        start, end = profile_support(profile)
+        outside = np.array([start - 0.2, start - 1e-9, end + 1e-9, end + 0.3])
+        np.testing.assert_array_equal(profile.value(outside), 0.0)
 
 
 def test_empty_push_list_connects_and_outputs_zeros():

@@ -53,6 +53,7 @@ __all__ = [
     "Sinusoid",
     "SmoothPiecewise",
     "Step",
+    "profile_support",
 ]
 
 
@@ -258,6 +259,18 @@ class SmoothPiecewise:
 Profile = Sinusoid | PolynomialRampUpDown | Step | SmoothPiecewise | ForceProfile
 
 
+def profile_support(profile: Profile) -> tuple[float, float]:
+    """(t_a, t_b), s: the closed interval outside which ``profile`` is zero, for the
+    profiles of this module (``Step``: [t_on, t_off], ``Sinusoid`` and
+    ``PolynomialRampUpDown``: [t_start, t_end]); (-inf, inf) for any other profile
+    (``SmoothPiecewise``, user profiles), which is then always evaluated."""
+    if isinstance(profile, Step):
+        return profile.t_on, profile.t_off
+    if isinstance(profile, (Sinusoid, PolynomialRampUpDown)):
+        return profile.t_start, profile.t_end
+    return -math.inf, math.inf
+
+
 # ---------------------------------------------------------------------------------------
 # Push.
 # ---------------------------------------------------------------------------------------
@@ -389,9 +402,10 @@ class PushSource(LeafSystem):
 
     Outputs:
         applied_spatial_forces: abstract ``list[ExternallyAppliedSpatialForce]``, one per
-            push (in the order given, zero force while its profile is zero): body index,
-            ``p_BoBq_B`` = the push's p_BoP_B, ``F_Bq_W`` = [0; f_W(t)]. Depends on time
-            only (no algebraic loop); connect to
+            push whose force is non-zero at t (in the order given; pushes at zero are left
+            out, so a study with many scheduled pushes hands the plant only the active
+            one): body index, ``p_BoBq_B`` = the push's p_BoP_B, ``F_Bq_W`` = [0; f_W(t)].
+            Depends on time only (no algebraic loop); connect to
             ``plant.get_applied_spatial_force_input_port()``.
         force_world: (3k) each push's force f_W, N, stacked in push order.
         point_world: (3k) each application point p_WP, m.
@@ -410,10 +424,11 @@ class PushSource(LeafSystem):
     describe the external forces on the robot (see ``on_robot``).
 
     Cost (``hrp4_like``, two shoulder pushes, per evaluation after a time step, 2-core
-    machine): the applied forces ~15 µs; the ground-truth outputs share one cached
-    kinematics evaluation (~25 µs); ``tau_c_real`` adds ~40 µs: one translational Jacobian
-    per push whose force is non-zero at t, one mass matrix and one 6x6 solve (nothing when
-    all forces are zero). Log ground truth at the rate you need. ``tau_c_real`` equals
+    machine): the applied forces ~15 µs (25 scheduled pushes, one of them on, as in the
+    contact study's runs: ~8 µs; ~150 µs when every push was handed over); the ground-truth
+    outputs share one cached kinematics evaluation (~25 µs); ``tau_c_real`` adds ~40 µs:
+    one translational Jacobian per push whose force is non-zero at t, one mass matrix and
+    one 6x6 solve (nothing when all forces are zero). Log ground truth at the rate you need. ``tau_c_real`` equals
     Σ_c ``dynamics.floating_jacobian(q, B_c, p_c)``^T f_c, summed before the base
     elimination so that k pushes need one mass matrix rather than k.
     """
@@ -466,18 +481,16 @@ class PushSource(LeafSystem):
             f.F_Bq_W = SpatialForce(np.zeros(3), np.zeros(3))
             template.append(f)
         self._template = template
-        self._active = []
-        for f in template:
-            applied = ExternallyAppliedSpatialForce()
-            applied.body_index = f.body_index
-            applied.p_BoBq_B = f.p_BoBq_B
-            self._active.append(applied)
+        # When each push can be non-zero (``profile_support``): the applied forces evaluate
+        # only the profiles whose support holds t.
+        support = np.array([profile_support(p.profile) for p in pushes], dtype=float).reshape(k, 2)
+        self._support_start, self._support_end = support[:, 0].copy(), support[:, 1].copy()
 
         time_only = {self.time_ticket()}
         truth = {self.time_ticket(), self.input_port_ticket(self._state_port.get_index())}
         self._forces_port = self.DeclareAbstractOutputPort(
             "applied_spatial_forces",
-            lambda: _ForceListValue(list(self._template)),
+            lambda: _ForceListValue([]),
             self._CalcAppliedForces,
             prerequisites_of_calc=time_only,
         )
@@ -560,15 +573,17 @@ class PushSource(LeafSystem):
     # -- calculations ---------------------------------------------------------------------
 
     def _CalcAppliedForces(self, context: Context, output: AbstractValue) -> None:
-        magnitudes = self._magnitudes(context.get_time())
-        if not any(magnitudes):  # no push active (most of an experiment): the zero-force list
-            output.set_value(self._template)
-            return
-        # The plant copies the list: one set of force objects, refilled at each step
-        # (magnitude times direction, as ``forces_at``, without the array: every step).
-        for applied, push, magnitude in zip(self._active, self._pushes, magnitudes):
-            applied.F_Bq_W = SpatialForce(_ZERO3, magnitude * push.direction_W)
-        output.set_value(self._active)
+        t = context.get_time()
+        # The plant copies the list: the template's force objects, refilled (magnitude times
+        # direction, as ``forces_at``), only for the pushes that are on.
+        applied = []
+        for i in np.flatnonzero((self._support_start <= t) & (t <= self._support_end)).tolist():
+            magnitude = float(self._pushes[i].profile.value(t))
+            if magnitude != 0.0:
+                force = self._template[i]
+                force.F_Bq_W = SpatialForce(_ZERO3, magnitude * self._pushes[i].direction_W)
+                applied.append(force)
+        output.set_value(applied)
 
     def _CalcKinematics(self, context: Context, value: AbstractValue) -> None:
         kin = value.get_mutable_value()

@@ -207,6 +207,27 @@ def test_contact_switching_adds_and_removes_feet_and_imu_only_propagation():
     np.testing.assert_allclose(ekf.position, p + 0.5 * G * 0.01, atol=1e-12)
 
 
+@pytest.mark.parametrize("bias", [False, True])
+def test_one_call_step_equals_correction_then_propagation_bit_for_bit(bias):
+    """``correct_and_propagate`` (the Drake wrapper's step) is set_state_vector,
+    correct_kinematics and propagate, to the last bit, through contact changes."""
+    rng = np.random.default_rng(7)
+    R, p = rot_z(0.3), np.array([0.01, -0.02, 0.8])
+    ekf = ContactAidedInvariantEkf(2, rotation=R, velocity=np.array([0.1, 0.0, 0.0]), position=p, gravity=G,
+                                   estimate_imu_bias=bias)  # fmt: skip
+    x = ekf.state_vector()
+    for flags in ([True, True], [True, True], [True, False], [False, False], [False, True], [True, True]):
+        h = (FEET - p) @ R + rng.normal(0.0, 1e-3, (2, 3))
+        omega, a = rng.normal(0.0, 0.1, 3), R.T @ (-G) + rng.normal(0.0, 0.05, 3)
+        one_call = ekf.correct_and_propagate(x, h, np.array(flags), omega, a, DT)
+        ekf.set_state_vector(x)
+        ekf.correct_kinematics(h, flags)
+        ekf.propagate(omega, a, DT)
+        x = ekf.state_vector()
+        np.testing.assert_array_equal(one_call, x)
+    assert ekf.in_contact.tolist() == [True, True] and x.shape == (ekf.state_size,)
+
+
 def test_contact_flags_from_wrenches():
     w = np.array([0, 0, 0, 0, 0, 150.0, 1, 2, 3, 5, 5, 10.0])
     np.testing.assert_array_equal(contact_flags_from_wrenches(w, 20.0), [1.0, 0.0])

@@ -544,6 +544,28 @@ class ContactAidedInvariantEkf:
             omega, a, float(dt), self._g, self._g_skew, self._noise, self._b0,
         )  # fmt: skip
 
+    def correct_and_propagate(
+        self,
+        x: np.ndarray,
+        foot_positions: np.ndarray,
+        in_contact: np.ndarray,
+        omega: np.ndarray,
+        a: np.ndarray,
+        dt: float,
+    ) -> np.ndarray:
+        """One step on a :meth:`state_vector` x, in one compiled call: the new state vector
+        of ``set_state_vector(x)``, ``correct_kinematics(foot_positions, in_contact)``,
+        ``propagate(omega, a, dt)`` (the same arithmetic, bit for bit). This object's own
+        state is left as it was."""
+        return steps.correct_and_propagate_state_vector(
+            np.ascontiguousarray(x, dtype=float),
+            np.ascontiguousarray(foot_positions, dtype=float).reshape(self._K, 3),
+            np.ascontiguousarray(in_contact, dtype=bool).reshape(self._K),
+            np.ascontiguousarray(omega, dtype=float).reshape(3),
+            np.ascontiguousarray(a, dtype=float).reshape(3),
+            float(dt), self._var_k, self._g, self._g_skew, self._noise, self._dim, self._b0,
+        )  # fmt: skip
+
     # -- correction ---------------------------------------------------------------------
 
     def _update(self, H: np.ndarray, r: np.ndarray, var: float) -> None:
@@ -832,6 +854,7 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         self._imu_frame = imu_frame
         self._foot_frames = tuple(frames)
         self._q_index = np.array([j.position_start() for j in topology.joints], dtype=int)
+        self._positions = plant.GetPositions(self._plant_context)  # q of the foot kinematics
         X_BI = imu_frame.CalcPose(self._plant_context, topology.base_frame)
         self._R_BI = X_BI.rotation().matrix()
         self._p_BI = X_BI.translation().copy()
@@ -925,15 +948,17 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         """σ_t of the level-ground correction (E12), rad; None when off."""
         return self._tilt_std
 
-    def _foot_kinematics(self, joint_positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _foot_kinematics(
+        self, joint_positions: np.ndarray, with_normals: bool = True
+    ) -> tuple[np.ndarray, np.ndarray | None]:
         """h_j, the foot frames' origins in the IMU frame, m (K x 3) (E6), and n_j, their z
-        axes in the IMU frame (K x 3) (E12)."""
-        q = self._plant.GetPositions(self._plant_context)
+        axes in the IMU frame (K x 3) (E12; None unless ``with_normals``)."""
+        q = self._positions  # the base's part stays the default pose: only relative poses are read
         q[self._q_index] = joint_positions
         self._plant.SetPositions(self._plant_context, q)
         poses = [f.CalcPose(self._plant_context, self._imu_frame) for f in self._foot_frames]
         h = np.array([X.translation() for X in poses])
-        normals = np.array([X.rotation().matrix()[:, 2] for X in poses])
+        normals = np.array([X.rotation().matrix()[:, 2] for X in poses]) if with_normals else None
         return h, normals
 
     def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
@@ -943,34 +968,42 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         joints = eval_finite_input(who, self._joints, context)
         flags = eval_finite_input(who, self._contact, context) > 0.5
         core = self._core
-        core.set_state_vector(context.get_discrete_state(self._filter_index).value())
+        x = context.get_discrete_state(self._filter_index).value()
+        step = int(round(context.get_time() / self._period))
+        level_ground = self._tilt_std is not None and step % self._level_ground_every == 0
         if flags.any():
-            h, normals = self._foot_kinematics(joints)
+            h, normals = self._foot_kinematics(joints, with_normals=level_ground)
         else:
             h = normals = np.zeros((core.num_feet, 3))
-        core.correct_kinematics(h, flags)  # with no flag set this only removes feet (E9)
-        world_normals = context.get_discrete_state(self._normals_index).value().reshape(-1, 3)
-        step = int(round(context.get_time() / self._period))
-        if self._tilt_std is not None and step % self._level_ground_every == 0:
+        world_normals = context.get_discrete_state(self._normals_index).value()
+        if not level_ground:
+            # Most steps: the correction (E6-E9) and the propagation in one compiled call.
+            x = core.correct_and_propagate(x, h, flags, omega, accel, self._period)
+        else:
+            core.set_state_vector(x)
+            core.correct_kinematics(h, flags)  # with no flag set this only removes feet (E9)
             # E12 on the feet in contact whose soles turned by less than the rate limit
             # since the previous update (a zero row: no previous normal, not still).
-            previous = world_normals
+            previous = world_normals.reshape(-1, 3)
             turned = np.linalg.norm(normals @ core.rotation.T - previous, axis=1)
             still = (np.linalg.norm(previous, axis=1) > 0.5) & (
                 turned < LEVEL_GROUND_MAX_RATE * self._level_ground_every * self._period
             )
             core.correct_level_ground(normals, self._tilt_std, still=still)
-            world_normals = normals @ core.rotation.T if flags.any() else np.zeros_like(normals)
-        valid = 1.0 if core.num_contacts else 0.0
-        if core.estimates_imu_bias:
-            omega_corrected = omega - core.gyro_bias  # the bias this propagation uses (E11)
-        else:
-            omega_corrected = omega
-        core.propagate(omega, accel, self._period)
-        discrete_state.set_value(self._filter_index, core.state_vector())
+            world_normals = (normals @ core.rotation.T if flags.any() else np.zeros_like(normals)).reshape(-1)
+            core.propagate(omega, accel, self._period)
+            x = core.state_vector()
+        # The propagation changes neither the feet in the state nor the bias estimate: both
+        # are read from the new state, as the correction left them.
+        K = core.num_feet
+        valid = 1.0 if x[15 + 3 * K : 15 + 4 * K].any() else 0.0
+        # The gyro sample of the output angular velocity, corrected by the bias this
+        # propagation used (E11).
+        omega_corrected = omega - core.imu_bias_of(x)[:3] if core.estimates_imu_bias else omega
+        discrete_state.set_value(self._filter_index, x)
         discrete_state.set_value(self._gyro_index, omega_corrected)
         discrete_state.set_value(self._valid_index, [valid])
-        discrete_state.set_value(self._normals_index, world_normals.reshape(-1))
+        discrete_state.set_value(self._normals_index, world_normals)
 
     def _CalcPose(self, context: Context, output: BasicVector) -> None:
         # imu_to_base's pose (E10), without its velocity.

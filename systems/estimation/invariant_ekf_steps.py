@@ -211,3 +211,43 @@ def correct_kinematics_step(R, v, p, d, in_contact, b, P, h, flags, var_k: float
                 P[s + k, s + k] += var_k
             in_contact[j] = True
     return R, v, p, d, in_contact, b, P
+
+
+@njit(cache=True)
+def correct_and_propagate_state_vector(
+    x, h, flags, omega, a, dt: float, var_k: float, g, g_skew, noise, n: int, b0: int
+):
+    """One filter step on a flat state vector (``ContactAidedInvariantEkf.state_vector``:
+    [R (9, row-major); v; p; d (3 K); in_contact (K); (b (6) with bias states); P
+    (row-major)]): the kinematic correction (E6)-(E9) with the foot points ``h`` (K x 3, in
+    the IMU frame, m) and the contact ``flags`` (K), then the IMU propagation over dt (E1)-(E5),
+    (E11). ``n``: P's size (b0, or b0 + 6 with bias states). The same arithmetic as
+    ``correct_kinematics_step`` then ``propagate_step`` on the unpacked state, in one call
+    (the Drake wrapper's every step). Returns the new vector."""
+    K = flags.shape[0]
+    R = x[0:9].copy().reshape(3, 3)
+    v = x[9:12].copy()
+    p = x[12:15].copy()
+    d = x[15 : 15 + 3 * K].copy().reshape(K, 3)
+    in_contact = x[15 + 3 * K : 15 + 4 * K] > 0.5
+    s = 15 + 4 * K
+    b = np.zeros(6)
+    if n > b0:
+        b = x[s : s + 6].copy()
+        s += 6
+    P = x[s : s + n * n].copy().reshape(n, n)
+    R, v, p, d, in_contact, b, P = correct_kinematics_step(R, v, p, d, in_contact, b, P, h, flags, var_k, b0)
+    R, v, p, P = propagate_step(R, v, p, d, in_contact, b, P, omega, a, dt, g, g_skew, noise, b0)
+    out = np.empty(x.shape[0])
+    out[0:9] = R.reshape(9)
+    out[9:12] = v
+    out[12:15] = p
+    out[15 : 15 + 3 * K] = d.reshape(3 * K)
+    for j in range(K):
+        out[15 + 3 * K + j] = 1.0 if in_contact[j] else 0.0
+    s = 15 + 4 * K
+    if n > b0:
+        out[s : s + 6] = b
+        s += 6
+    out[s : s + n * n] = P.reshape(n * n)
+    return out

@@ -28,7 +28,7 @@ from systems.simulation.imperfections import (
     rated_joint_torques,
     torque_measurement_errors,
 )
-from systems.simulation.noise import RandomWalkBias
+from systems.simulation.noise import NoisyVector, RandomWalkBias
 from systems.simulation.sensors import JointEncoders, MotorTorqueSensor
 
 
@@ -183,6 +183,37 @@ def test_bias_random_walk_grows_as_sigma_sqrt_t():
     again.get_input_port().FixValue(simulator2.get_mutable_context(), clean)
     simulator2.AdvanceTo(1.0)
     np.testing.assert_array_equal(again.get_bias(simulator2.get_context()), walk.get_bias(context))
+
+
+def test_bias_with_white_noise_equals_a_noisy_vector_then_the_bias_bit_for_bit():
+    """RandomWalkBias with white_noise_std (the IMU's one system per sensor) gives the
+    numbers of NoisyVector followed by RandomWalkBias, at every step."""
+    size, sigma, std = 3, [0.02, 0.0, 0.05], [1e-3, 2e-3, 0.0]
+    builder = DiagramBuilder()
+    source = builder.AddSystem(ConstantVectorSource(np.array([0.3, -1.2, 9.81])))
+    noisy = builder.AddSystem(NoisyVector(size, std, 1e-3, 11))
+    chained = builder.AddSystem(RandomWalkBias(size, sigma, 1e-3, 29))
+    fused = builder.AddSystem(RandomWalkBias(size, sigma, 1e-3, 29, white_noise_std=std, white_noise_seed=11))
+    builder.Connect(source.get_output_port(), noisy.get_input_port())
+    builder.Connect(noisy.get_output_port(), chained.get_input_port())
+    builder.Connect(source.get_output_port(), fused.get_input_port())
+    logs = [LogVectorOutput(system.get_output_port(), builder, 1e-3) for system in (chained, fused)]
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    simulator.AdvanceTo(0.3)
+    context = simulator.get_context()
+    a, b = (log.FindLog(context).data() for log in logs)
+    assert a.shape == b.shape and a.shape[1] > 250
+    np.testing.assert_array_equal(a, b)
+    assert np.all(np.abs(np.diff(a, axis=1)).max(axis=1) > 0.0)  # each entry noisy, biased or both
+    assert fused.noise.seed == 11 and fused.noise.std.tolist() == std
+    assert chained.noise.is_zero and RandomWalkBias(size, sigma, white_noise_std=0.0, white_noise_seed=1).noise.is_zero
+    with pytest.raises(ValueError, match="go together"):
+        RandomWalkBias(size, sigma, white_noise_std=std)
+    with pytest.raises(ValueError, match="go together"):
+        RandomWalkBias(size, sigma, white_noise_seed=3)
+    with pytest.raises(ValueError, match="white_noise_std"):
+        RandomWalkBias(size, sigma, white_noise_std=[-1.0, 0.0, 0.0], white_noise_seed=3)
 
 
 def test_station_imu_gets_the_bias_and_the_datasheet_noise():

@@ -137,9 +137,10 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+from pydrake.common.value import AbstractValue
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Frame
-from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem
+from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem, ValueProducer
 
 from systems.common.checks import check_plant, eval_finite_input, positive_number
 from systems.common.spatial import cross, skew
@@ -901,6 +902,12 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         self._normals_index = self.DeclareDiscreteState(np.zeros(3 * len(frames)))
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._Update)
         xd = {self.xd_ticket()}
+        # The base pose and velocity (E10), computed once per state for both outputs.
+        self._base_state = self.DeclareCacheEntry(
+            "base pose and velocity",
+            ValueProducer(allocate=lambda: AbstractValue.Make(np.zeros(13)), calc=self._CalcBaseState),
+            prerequisites_of_calc=xd,
+        )
         self.DeclareVectorOutputPort("base_pose", 7, self._CalcPose, prerequisites_of_calc=xd)
         self.DeclareVectorOutputPort("base_velocity", 6, self._CalcVelocity, prerequisites_of_calc=xd)
         self.DeclareVectorOutputPort("valid", 1, self._CalcValid, prerequisites_of_calc=xd)
@@ -1005,18 +1012,19 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         discrete_state.set_value(self._valid_index, [valid])
         discrete_state.set_value(self._normals_index, world_normals)
 
-    def _CalcPose(self, context: Context, output: BasicVector) -> None:
-        # imu_to_base's pose (E10), without its velocity.
-        R, _, p = self._core.navigation_state(context.get_discrete_state(self._filter_index).value())
+    def _CalcBaseState(self, context: Context, value: AbstractValue) -> None:
+        # imu_to_base (E10): [base_pose (7); base_velocity (6)].
+        R, v, p = self._core.navigation_state(context.get_discrete_state(self._filter_index).value())
         R_WB = R @ self._R_BI.T
-        output.SetFromVector(np.concatenate([rotation_to_quaternion(R_WB), p - R_WB @ self._p_BI]))
+        r = R_WB @ self._p_BI  # p_BoIo_W
+        omega_W = R @ context.get_discrete_state(self._gyro_index).value()
+        value.set_value(np.concatenate([rotation_to_quaternion(R_WB), p - r, omega_W, v - cross(omega_W, r)]))
+
+    def _CalcPose(self, context: Context, output: BasicVector) -> None:
+        output.SetFromVector(self._base_state.Eval(context)[:7])
 
     def _CalcVelocity(self, context: Context, output: BasicVector) -> None:
-        # imu_to_base's velocity (E10), without its pose.
-        R, v, _ = self._core.navigation_state(context.get_discrete_state(self._filter_index).value())
-        omega_W = R @ context.get_discrete_state(self._gyro_index).value()
-        r = (R @ self._R_BI.T) @ self._p_BI
-        output.SetFromVector(np.concatenate([omega_W, v - cross(omega_W, r)]))
+        output.SetFromVector(self._base_state.Eval(context)[7:])
 
     def _CalcValid(self, context: Context, output: BasicVector) -> None:
         output.SetFromVector(context.get_discrete_state(self._valid_index).value())

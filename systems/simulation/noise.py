@@ -13,7 +13,8 @@ Two noises with different seeds are independent (different entropy for NumPy's
 ``SeedSequence``); the realisation does not depend on ``std`` other than by scaling, so
 changing one entry's standard deviation leaves the others' samples unchanged.
 
-``NoisyVector`` is a LeafSystem adding such noise to a vector signal.
+``NoisyVector`` is a LeafSystem adding such noise to a vector signal; ``RandomWalkBias``
+adds a random-walk bias (and optionally the white noise too, in one system).
 """
 
 from __future__ import annotations
@@ -184,7 +185,8 @@ class NoisyVector(LeafSystem):
 
 
 class RandomWalkBias(LeafSystem):
-    """Adds a slowly varying bias, a Gaussian random walk, to a vector signal.
+    """Adds a slowly varying bias, a Gaussian random walk, to a vector signal, and
+    optionally white noise.
 
     The bias b is discrete state, updated every ``period`` T seconds:
     b_{k+1} = b_k + sigma sqrt(T) n_k, n_k ~ N(0, I) a pure function of (seed, k) (see
@@ -192,29 +194,52 @@ class RandomWalkBias(LeafSystem):
     t = k T has standard deviation sigma sqrt(t) per entry (Kalibr's "bias random walk"
     model, sigma in signal units per sqrt(s), i.e. per s per sqrt(Hz)).
 
+    With ``white_noise_std`` the system also adds the white noise w(t) of a
+    ``NoisyVector(size, white_noise_std, period, white_noise_seed)``, before the bias: the
+    output is then (clean + w) + b, the same numbers as that NoisyVector followed by this
+    system, in one system (an IMU axis's noise and bias, evaluated once per step).
+
     Inputs:
         clean: the signal, ``size`` entries (any units).
 
     Outputs:
-        biased: clean(t) + b(t), same units; direct feedthrough from ``clean``.
+        biased: clean(t) (+ w(t)) + b(t), same units; direct feedthrough from ``clean``.
 
     Args:
         size: signal size (>= 1).
         random_walk: sigma per entry, scalar or ``size`` entries (>= 0), signal units / sqrt(s).
-        period: update period T, s (> 0).
+        period: update period T, s (> 0); also the white noise's sample-and-hold period.
         seed: non-negative integer.
+        white_noise_std: the white noise's standard deviation, scalar or ``size`` entries
+            (>= 0), signal units; None (default): none.
+        white_noise_seed: its seed (non-negative integer; needed with ``white_noise_std``).
 
     Raises:
-        ValueError: bad size, random_walk, period or seed.
+        ValueError: bad size, random_walk, period, seed or white noise (the message names it),
+            NaN/inf on ``clean`` (at evaluation).
     """
 
-    def __init__(self, size: int, random_walk, period: float = 1e-3, seed: int = 0):
+    def __init__(
+        self,
+        size: int,
+        random_walk,
+        period: float = 1e-3,
+        seed: int = 0,
+        *,
+        white_noise_std=None,
+        white_noise_seed: int | None = None,
+    ):
         super().__init__()
         if isinstance(size, (bool, np.bool_)) or not isinstance(size, (int, np.integer)) or size < 1:
             raise ValueError(f"size must be a positive integer, got {size!r}")
         period = check_period(period)
         sigma = as_std_vector(random_walk, int(size), "random_walk")
         self._increments = SampledNoise(int(size), sigma * math.sqrt(period), period, seed)
+        if (white_noise_std is None) != (white_noise_seed is None):
+            raise ValueError("white_noise_std and white_noise_seed go together (one was given without the other)")
+        white_std = 0.0 if white_noise_std is None else as_std_vector(white_noise_std, int(size), "white_noise_std")
+        white_seed = 0 if white_noise_seed is None else check_seed(white_noise_seed, "white_noise_seed")
+        self._white = SampledNoise(int(size), white_std, period, white_seed)
         self._period = period
         self._clean = self.DeclareVectorInputPort("clean", int(size))
         self._bias = self.DeclareDiscreteState(int(size))
@@ -225,6 +250,12 @@ class RandomWalkBias(LeafSystem):
     def increments(self) -> SampledNoise:
         """The increments' noise stream (std sigma sqrt(T) per entry)."""
         return self._increments
+
+    @property
+    def noise(self) -> SampledNoise:
+        """The white noise added before the bias (all stds 0 without ``white_noise_std``),
+        as ``NoisyVector.noise``."""
+        return self._white
 
     def get_bias(self, context: Context) -> np.ndarray:
         """The current bias b, signal units (a copy)."""
@@ -238,6 +269,8 @@ class RandomWalkBias(LeafSystem):
     def _CalcBiased(self, context: Context, output: BasicVector) -> None:
         clean = self._clean.Eval(context)
         check_finite_input("RandomWalkBias", "clean", clean)
+        if not self._white.is_zero:
+            clean = clean + self._white.value(context.get_time())
         output.SetFromVector(clean + context.get_discrete_state(self._bias).get_value())
 
 

@@ -567,19 +567,20 @@ class Imu:
         frame: the IMU frame S.
         gyroscope: Drake's Gyroscope (noise-free ω_WS expressed in S).
         accelerometer: Drake's Accelerometer (noise-free R_SW (a_WS − g_W)).
-        gyro_noise, accel_noise: the NoisyVector systems adding the noise.
+        gyro_noise, accel_noise: the systems adding the white noise: a NoisyVector, or
+            with a bias random walk the RandomWalkBias, which then adds both.
         angular_velocity: output port, ω_WS expressed in S + noise (+ bias), rad/s (3).
         linear_acceleration: output port, proper acceleration R_SW (a_WS − g_W) + noise
             (+ bias), m/s^2 (3); +9.81 along the sensor's up axis at rest.
-        gyro_bias, accel_bias: the RandomWalkBias systems after the noise, or None (no
-            bias random walk).
+        gyro_bias, accel_bias: the RandomWalkBias systems adding the noise and the bias,
+            or None (no bias random walk).
     """
 
     frame: Frame
     gyroscope: Gyroscope
     accelerometer: Accelerometer
-    gyro_noise: NoisyVector
-    accel_noise: NoisyVector
+    gyro_noise: NoisyVector | RandomWalkBias
+    accel_noise: NoisyVector | RandomWalkBias
     angular_velocity: OutputPort
     linear_acceleration: OutputPort
     gyro_bias: RandomWalkBias | None = None
@@ -604,7 +605,9 @@ def add_imu(
     Drake's ``Gyroscope(body, X_BS)`` and ``Accelerometer(body, X_BS, g_W)`` with X_BS the
     frame's fixed pose in its body, fed by the plant's body poses, spatial velocities and
     spatial accelerations output ports; each followed by a NoisyVector (seeds ``seed`` and
-    ``seed`` + 1000003 for gyro and accelerometer).
+    ``seed`` + 1000003 for gyro and accelerometer), or with a bias random walk by a
+    RandomWalkBias that adds the same noise and the bias (one system per sensor, one
+    evaluation per step; the same numbers as the NoisyVector then the RandomWalkBias).
 
     Args:
         builder: the DiagramBuilder holding ``plant``.
@@ -616,7 +619,7 @@ def add_imu(
         seed: noise seed; default 3.
         name: prefix of the added systems' names.
         gyro_bias_random_walk: sigma of the gyro bias random walk, rad/s^2/sqrt(Hz), scalar
-            or 3 entries; > 0 adds a RandomWalkBias (seed ``seed`` + 2000003) after the
+            or 3 entries; > 0 adds a RandomWalkBias (seed ``seed`` + 2000003) to the
             noise: bias std sigma sqrt(t). Default 0 (none).
         accel_bias_random_walk: the same for the accelerometer, m/s^3/sqrt(Hz) (seed
             ``seed`` + 3000003).
@@ -652,26 +655,39 @@ def add_imu(
     builder.Connect(plant.get_body_poses_output_port(), accel.get_body_poses_input_port())
     builder.Connect(plant.get_body_spatial_velocities_output_port(), accel.get_body_velocities_input_port())
     builder.Connect(plant.get_body_spatial_accelerations_output_port(), accel.get_body_accelerations_input_port())
-    gyro_noise = builder.AddSystem(NoisyVector(3, gyro_std, period, seed))
-    gyro_noise.set_name(f"{name}_gyro_noise")
-    accel_noise = builder.AddSystem(NoisyVector(3, accel_std, period, seed + 1000003))
-    accel_noise.set_name(f"{name}_accel_noise")
-    builder.Connect(gyro.get_measurement_output_port(), gyro_noise.get_input_port())
-    builder.Connect(accel.get_measurement_output_port(), accel_noise.get_input_port())
-    imu = Imu(frame, gyro, accel, gyro_noise, accel_noise, gyro_noise.get_output_port(), accel_noise.get_output_port())
-    for kind, offset in (("gyro", 2000003), ("accel", 3000003)):
-        sigma = walks[kind]
-        if not np.any(sigma > 0.0):
-            continue
-        bias = builder.AddSystem(RandomWalkBias(3, sigma, period, seed + offset))
-        bias.set_name(f"{name}_{kind}_bias")
-        if kind == "gyro":
-            builder.Connect(imu.angular_velocity, bias.get_input_port())
-            imu.gyro_bias, imu.angular_velocity = bias, bias.get_output_port()
+    systems, outputs, biases = {}, {}, {}
+    measurements = {"gyro": gyro.get_measurement_output_port(), "accel": accel.get_measurement_output_port()}
+    stds = {"gyro": gyro_std, "accel": accel_std}
+    for kind, noise_offset, bias_offset in (("gyro", 0, 2000003), ("accel", 1000003, 3000003)):
+        if np.any(walks[kind] > 0.0):
+            system = builder.AddSystem(
+                RandomWalkBias(
+                    3,
+                    walks[kind],
+                    period,
+                    seed + bias_offset,
+                    white_noise_std=stds[kind],
+                    white_noise_seed=seed + noise_offset,
+                )
+            )
+            system.set_name(f"{name}_{kind}_noise_and_bias")
+            biases[kind] = system
         else:
-            builder.Connect(imu.linear_acceleration, bias.get_input_port())
-            imu.accel_bias, imu.linear_acceleration = bias, bias.get_output_port()
-    return imu
+            system = builder.AddSystem(NoisyVector(3, stds[kind], period, seed + noise_offset))
+            system.set_name(f"{name}_{kind}_noise")
+        builder.Connect(measurements[kind], system.get_input_port())
+        systems[kind], outputs[kind] = system, system.get_output_port()
+    return Imu(
+        frame,
+        gyro,
+        accel,
+        systems["gyro"],
+        systems["accel"],
+        outputs["gyro"],
+        outputs["accel"],
+        gyro_bias=biases.get("gyro"),
+        accel_bias=biases.get("accel"),
+    )
 
 
 # ---------------------------------------------------------------------------------------

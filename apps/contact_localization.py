@@ -94,6 +94,7 @@ from diagrams.residuals.contact_localization import (
 )
 from diagrams.residuals.model_refinement import calibration_file, refined_model
 from diagrams.scenarios import load_scenario, scenario_as_yaml
+from systems.estimation.base_state_estimator import load_compiled_filter_steps
 
 #: The replays go on 0.3 s after the push, to show its release.
 REPLAY_AFTER_PUSH_S = 0.3
@@ -462,101 +463,125 @@ def main(argv: list[str] | None = None) -> int:
         if scenario.trials < 1:
             raise ValueError(f"the study needs at least one trial, got trials: {scenario.trials}")
         out_dir = output_folder(args, "contact_localization")
-        start = time.perf_counter()
-        specs = sample_study_trials(scenario)
-        if scenario.model_refinement == "calibrate":
-            # Calibrated once, here; the workers read the saved corrections.
-            refined_model(scenario, Path(args.out) / "model_refinement")
-            scenario.model_refinement = str(calibration_file(scenario, Path(args.out) / "model_refinement"))
-        phases = {"calibration": time.perf_counter() - start}  # wall time of each phase, s
-        scenario_yaml = scenario_as_yaml(scenario)
         if scenario.contacts not in (1, 2):
             raise ValueError(f"contacts must be 1 or 2, got contacts: {scenario.contacts}")
-        scenario.multi_contact = scenario.multi_contact or scenario.contacts == 2
-        jobs = []
-        if scenario.no_contact_duration > 0:  # the longest jobs first
-            jobs.append(("no_contact", None, scenario_yaml, None))
-        if scenario.slow_motion_duration > 0:
-            jobs.append(("slow_motion", None, scenario_yaml, None))
-        if scenario.multi_contact:  # the noise of the averaged inputs, for the fits after the trials
-            jobs.append(("covariances", None, scenario_yaml, None))
-        # Headless, the replays are recorded in the workers too; live, here after the study.
-        live_replays = [] if args.headless else specs[: args.replays]
-        if args.headless:
-            jobs += [("replay", spec, scenario_yaml, out_dir) for spec in specs[: args.replays]]
-        size = max(scenario.trials_per_run, TRIALS_PER_JOB)
-        jobs += [("trials", specs[i : i + size], scenario_yaml, None) for i in range(0, len(specs), size)]
-        # One pool of spawned processes for both passes (one process: here).
-        pool = multiprocessing.get_context("spawn").Pool(min(args.workers, len(jobs))) if args.workers > 1 else None
+        start = time.perf_counter()
+        # One pool of spawned processes for both passes (one process: here), started first:
+        # the workers import and load the compiled filter while the model is calibrated.
+        pool = None
+        if args.workers > 1:
+            pool = multiprocessing.get_context("spawn").Pool(
+                min(args.workers, _job_count(scenario, args)), initializer=load_compiled_filter_steps
+            )
         try:
-            mark = time.perf_counter()
-            no_contact = _run_jobs(jobs, pool)
-            phases["simulations"] = time.perf_counter() - mark
-            results = no_contact.pop("trials")
-            no_contact.pop("replay", None)  # the files are written
-            mark = time.perf_counter()
-            if scenario.multi_contact:
-                # After all trials: each seed's trials whitened with the model error under
-                # load measured on the other seeds' (cross-fitting).
-                _, handles = build_contact_localization_diagram(scenario, model_corrections=refined_model(scenario))
-                covariances = no_contact.pop("covariances")
-                multi_jobs = multi_contact_jobs(results, handles.plant, scenario_yaml, covariances)
-                by_trial = {m.pop("trial"): m for m in _run_jobs(multi_jobs, pool)["multi_contact"]}
-                for r in results:
-                    r.update(by_trial[r["trial"]])
-            phases["one_or_two_contact_fits"] = time.perf_counter() - mark
+            return _study(scenario, args, out_dir, start, pool)
         except BaseException:
             if pool is not None:
                 pool.terminate()  # a job failed (or Ctrl-C): do not wait for the others
             raise
-        if pool is not None:
-            pool.close()
-            pool.join()
-        metrics = contact_localization_metrics(
-            results, no_contact.get("no_contact"), no_contact.get("slow_motion"), floors_for(scenario)
-        )
-        metrics.update(
-            {
-                "model": scenario.model,
-                "seed": scenario.seed,
-                "seeds": list(range(scenario.seed, scenario.seed + scenario.num_seeds)),
-                "trials_per_run": scenario.trials_per_run,
-                "contacts": scenario.contacts,
-                "trials_with_a_sole_slip": sum(r["sole_slipped"] for r in results),
-                "noise": scenario.noise,
-                "workers": args.workers,
-                "push_start_s": scenario.push_start,
-                "contact_duration_s": scenario.push_duration,
-                "force_range_N": [MIN_FORCE, MAX_FORCE],
-                "max_angle_from_normal_deg": MAX_ANGLE_DEG,
-                "wall_time_s": None,
-                "no_contact_run": no_contact.get("no_contact"),
-                "slow_motion_run": no_contact.get("slow_motion"),
-            }
-        )
-
-        mark = time.perf_counter()
-        meshcat = replay_meshcat(bool(live_replays), args.headless)
-        for spec in live_replays:
-            record_replay(spec, scenario, meshcat)
-            save_replay(meshcat, out_dir / f"replay_trial_{spec['trial']}.html")
-        phases["live_replays"] = time.perf_counter() - mark
-        metrics["wall_time_s"] = time.perf_counter() - start
-        metrics["phase_wall_s"] = phases
-        inputs = [r.pop("localizer_inputs") for r in results]
-        metrics["per_trial"] = results
-        write_metrics(out_dir, metrics, scenario)
-        np.savez_compressed(
-            out_dir / "localizer_inputs.npz",
-            trial=np.array([r["trial"] for r in results]),
-            **{name: np.array([i[name] for i in inputs]) for name in inputs[0]},
-        )
-        plot_position_errors(out_dir / "position_errors.png", results)
-        _print_summary(metrics)
-        print_written(out_dir)
-        return 0
 
     return run_app("contact_localization", body)
+
+
+def _job_count(scenario: ContactLocalizationScenario, args) -> int:
+    """The number of jobs of the study's first pass (``_study``)."""
+    size = max(scenario.trials_per_run, TRIALS_PER_JOB)
+    multi_contact = scenario.multi_contact or scenario.contacts == 2
+    return (
+        (scenario.no_contact_duration > 0)
+        + (scenario.slow_motion_duration > 0)
+        + bool(multi_contact)
+        + (min(args.replays, scenario.trials) if args.headless else 0)
+        + math.ceil(scenario.trials / size)
+    )
+
+
+def _study(scenario: ContactLocalizationScenario, args, out_dir: Path, start: float, pool) -> int:
+    """The study of ``main``, run in ``pool`` (None: in this process), from its start time
+    ``start`` (s, ``time.perf_counter``)."""
+    specs = sample_study_trials(scenario)
+    if scenario.model_refinement == "calibrate":
+        # Calibrated once, here; the workers read the saved corrections.
+        refined_model(scenario, Path(args.out) / "model_refinement")
+        scenario.model_refinement = str(calibration_file(scenario, Path(args.out) / "model_refinement"))
+    phases = {"calibration": time.perf_counter() - start}  # wall time of each phase, s
+    scenario_yaml = scenario_as_yaml(scenario)
+    scenario.multi_contact = scenario.multi_contact or scenario.contacts == 2
+    jobs = []
+    if scenario.no_contact_duration > 0:  # the longest jobs first
+        jobs.append(("no_contact", None, scenario_yaml, None))
+    if scenario.slow_motion_duration > 0:
+        jobs.append(("slow_motion", None, scenario_yaml, None))
+    if scenario.multi_contact:  # the noise of the averaged inputs, for the fits after the trials
+        jobs.append(("covariances", None, scenario_yaml, None))
+    # Headless, the replays are recorded in the workers too; live, here after the study.
+    live_replays = [] if args.headless else specs[: args.replays]
+    if args.headless:
+        jobs += [("replay", spec, scenario_yaml, out_dir) for spec in specs[: args.replays]]
+    size = max(scenario.trials_per_run, TRIALS_PER_JOB)
+    jobs += [("trials", specs[i : i + size], scenario_yaml, None) for i in range(0, len(specs), size)]
+    mark = time.perf_counter()
+    no_contact = _run_jobs(jobs, pool)
+    phases["simulations"] = time.perf_counter() - mark
+    results = no_contact.pop("trials")
+    no_contact.pop("replay", None)  # the files are written
+    mark = time.perf_counter()
+    if scenario.multi_contact:
+        # After all trials: each seed's trials whitened with the model error under
+        # load measured on the other seeds' (cross-fitting).
+        _, handles = build_contact_localization_diagram(scenario, model_corrections=refined_model(scenario))
+        covariances = no_contact.pop("covariances")
+        multi_jobs = multi_contact_jobs(results, handles.plant, scenario_yaml, covariances)
+        by_trial = {m.pop("trial"): m for m in _run_jobs(multi_jobs, pool)["multi_contact"]}
+        for r in results:
+            r.update(by_trial[r["trial"]])
+    phases["one_or_two_contact_fits"] = time.perf_counter() - mark
+    if pool is not None:
+        pool.close()
+        pool.join()
+    metrics = contact_localization_metrics(
+        results, no_contact.get("no_contact"), no_contact.get("slow_motion"), floors_for(scenario)
+    )
+    metrics.update(
+        {
+            "model": scenario.model,
+            "seed": scenario.seed,
+            "seeds": list(range(scenario.seed, scenario.seed + scenario.num_seeds)),
+            "trials_per_run": scenario.trials_per_run,
+            "contacts": scenario.contacts,
+            "trials_with_a_sole_slip": sum(r["sole_slipped"] for r in results),
+            "noise": scenario.noise,
+            "workers": args.workers,
+            "push_start_s": scenario.push_start,
+            "contact_duration_s": scenario.push_duration,
+            "force_range_N": [MIN_FORCE, MAX_FORCE],
+            "max_angle_from_normal_deg": MAX_ANGLE_DEG,
+            "wall_time_s": None,
+            "no_contact_run": no_contact.get("no_contact"),
+            "slow_motion_run": no_contact.get("slow_motion"),
+        }
+    )
+
+    mark = time.perf_counter()
+    meshcat = replay_meshcat(bool(live_replays), args.headless)
+    for spec in live_replays:
+        record_replay(spec, scenario, meshcat)
+        save_replay(meshcat, out_dir / f"replay_trial_{spec['trial']}.html")
+    phases["live_replays"] = time.perf_counter() - mark
+    metrics["wall_time_s"] = time.perf_counter() - start
+    metrics["phase_wall_s"] = phases
+    inputs = [r.pop("localizer_inputs") for r in results]
+    metrics["per_trial"] = results
+    write_metrics(out_dir, metrics, scenario)
+    np.savez_compressed(
+        out_dir / "localizer_inputs.npz",
+        trial=np.array([r["trial"] for r in results]),
+        **{name: np.array([i[name] for i in inputs]) for name in inputs[0]},
+    )
+    plot_position_errors(out_dir / "position_errors.png", results)
+    _print_summary(metrics)
+    print_written(out_dir)
+    return 0
 
 
 def _print_summary(metrics: dict) -> None:

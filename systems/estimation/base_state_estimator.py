@@ -636,6 +636,20 @@ class ContactAidedInvariantEkf:
         )  # fmt: skip
 
 
+def load_compiled_filter_steps() -> None:
+    """Loads the filter's compiled steps (``invariant_ekf_steps``) into this process: one
+    step of a small filter through each of them. A process's first filter step otherwise
+    spends ~1 s loading them from numba's cache (longer on a machine's first run, which
+    compiles them); a worker pool can do it at start-up, while other work runs."""
+    ekf = ContactAidedInvariantEkf(2, estimate_imu_bias=True)
+    feet, flags = np.array([[0.0, 0.1, -0.7], [0.0, -0.1, -0.7]]), np.array([True, True])
+    specific_force = -np.asarray(DEFAULT_GRAVITY, dtype=float)
+    ekf.set_state_vector(ekf.correct_and_propagate(ekf.state_vector(), feet, flags, np.zeros(3), specific_force, 1e-3))
+    ekf.correct_kinematics(feet, flags)
+    ekf.correct_level_ground(np.tile([0.0, 0.0, 1.0], (2, 1)), LEVEL_GROUND_TILT_STD)
+    ekf.propagate(np.zeros(3), specific_force, 1e-3)
+
+
 # ---------------------------------------------------------------------------------------
 # Contact flags from the F/T sensors or the FSRs.
 # ---------------------------------------------------------------------------------------
@@ -1053,6 +1067,7 @@ __all__ = [
     "contact_flags_from_fsr",
     "contact_flags_from_wrenches",
     "imu_to_base",
+    "load_compiled_filter_steps",
     "rotation_to_quaternion",
     "so3_exp",
     "so3_gamma",

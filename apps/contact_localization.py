@@ -514,12 +514,13 @@ def _study(scenario: ContactLocalizationScenario, args, out_dir: Path, start: fl
         jobs.append(("slow_motion", None, scenario_yaml, None))
     if scenario.multi_contact:  # the noise of the averaged inputs, for the fits after the trials
         jobs.append(("covariances", None, scenario_yaml, None))
-    # Headless, the replays are recorded in the workers too; live, here after the study.
+    size = max(scenario.trials_per_run, TRIALS_PER_JOB)
+    jobs += [("trials", specs[i : i + size], scenario_yaml, None) for i in range(0, len(specs), size)]
+    # Headless, the replays are recorded in the workers too, last (short jobs: they fill
+    # the pool's tail); live, here after the study.
     live_replays = [] if args.headless else specs[: args.replays]
     if args.headless:
         jobs += [("replay", spec, scenario_yaml, out_dir) for spec in specs[: args.replays]]
-    size = max(scenario.trials_per_run, TRIALS_PER_JOB)
-    jobs += [("trials", specs[i : i + size], scenario_yaml, None) for i in range(0, len(specs), size)]
     mark = time.perf_counter()
     no_contact = _run_jobs(jobs, pool)
     phases["simulations"] = time.perf_counter() - mark

@@ -343,6 +343,44 @@ def _standalone_estimator():
     return estimator, context
 
 
+def test_loading_the_compiled_steps_covers_what_the_filter_runs():
+    """``load_compiled_filter_steps`` (a worker pool's start-up) loads every compiled step
+    with the argument types the Drake filter passes: its updates then add no signature (a
+    new one would be compiled, or loaded, in the middle of a simulation)."""
+    from pydrake.multibody.plant import MultibodyPlant
+
+    from models import add_humanoid
+    from systems.estimation import invariant_ekf_steps as steps
+    from systems.estimation.base_state_estimator import load_compiled_filter_steps
+
+    load_compiled_filter_steps()
+    kernels = (steps.correct_and_propagate_state_vector, steps.correct_kinematics_step, steps.propagate_step,
+               steps.update_step)  # fmt: skip
+    loaded = [list(kernel.signatures) for kernel in kernels]
+    assert all(loaded)
+    plant = MultibodyPlant(0.0)
+    handles = add_humanoid(plant, "hrp4_like")
+    plant.Finalize()
+    estimator = InvariantEkfBaseStateEstimator(
+        plant,
+        handles.imu_frame,
+        [handles.sole_frames["left"], handles.sole_frames["right"]],
+        estimate_imu_bias=True,
+        level_ground_tilt_std=LEVEL_GROUND_TILT_STD,
+    )
+    context = estimator.CreateDefaultContext()
+    n = estimator.GetInputPort("joint_positions").size()
+    estimator.GetInputPort("angular_velocity").FixValue(context, [0.01, 0.0, 0.0])
+    estimator.GetInputPort("linear_acceleration").FixValue(context, [0.0, 0.0, 9.81])
+    estimator.GetInputPort("joint_positions").FixValue(context, np.zeros(n))
+    estimator.GetInputPort("foot_contact").FixValue(context, [1.0, 1.0])
+    for step in range(3):  # step 0 is a level-ground step (E12), the others are not
+        context.SetTime(step * estimator.period)
+        context.SetDiscreteState(estimator.EvalUniquePeriodicDiscreteUpdate(context))
+    assert estimator.GetOutputPort("valid").Eval(context)[0] == 1.0
+    assert [list(kernel.signatures) for kernel in kernels] == loaded
+
+
 @pytest.mark.parametrize("port", ["angular_velocity", "linear_acceleration", "joint_positions", "foot_contact"])
 def test_nan_input_names_the_port(port):
     estimator, context = _standalone_estimator()

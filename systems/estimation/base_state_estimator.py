@@ -558,12 +558,14 @@ class ContactAidedInvariantEkf:
         of ``set_state_vector(x)``, ``correct_kinematics(foot_positions, in_contact)``,
         ``propagate(omega, a, dt)`` (the same arithmetic, bit for bit). This object's own
         state is left as it was."""
+        # Writable contiguous copies: one compiled signature whatever the caller passes (a
+        # Drake state's value is read-only, which numba would compile for anew).
         return steps.correct_and_propagate_state_vector(
-            np.ascontiguousarray(x, dtype=float),
-            np.ascontiguousarray(foot_positions, dtype=float).reshape(self._K, 3),
-            np.ascontiguousarray(in_contact, dtype=bool).reshape(self._K),
-            np.ascontiguousarray(omega, dtype=float).reshape(3),
-            np.ascontiguousarray(a, dtype=float).reshape(3),
+            np.array(x, dtype=float),
+            np.array(foot_positions, dtype=float).reshape(self._K, 3),
+            np.array(in_contact, dtype=bool).reshape(self._K),
+            np.array(omega, dtype=float).reshape(3),
+            np.array(a, dtype=float).reshape(3),
             float(dt), self._var_k, self._g, self._g_skew, self._noise, self._dim, self._b0,
         )  # fmt: skip
 

@@ -466,6 +466,10 @@ def main(argv: list[str] | None = None) -> int:
         if scenario.contacts not in (1, 2):
             raise ValueError(f"contacts must be 1 or 2, got contacts: {scenario.contacts}")
         start = time.perf_counter()
+        # The compiled filter steps, here first: compiled if numba's cache lacks them (~35 s;
+        # `make install` compiles them, or a fresh clone's first study would spend that in
+        # its calibration), then only loaded by the workers.
+        load_compiled_filter_steps()
         # One pool of spawned processes for both passes (one process: here), started first:
         # the workers import and load the compiled filter while the model is calibrated.
         pool = None

@@ -494,7 +494,7 @@ class ContactAidedInvariantEkf:
         R, v, p = self.navigation_state(x)
         self._R, self._v, self._p = R.copy(), v.copy(), p.copy()
         self._d = x[15 : 15 + 3 * K].reshape(K, 3).copy()
-        self._in_contact = x[15 + 3 * K : 15 + 4 * K] > 0.5
+        self._in_contact = self.in_contact_of(x)
         self._b = self.imu_bias_of(x).copy()
         self._P = self.covariance_of(x).copy()
 
@@ -502,6 +502,10 @@ class ContactAidedInvariantEkf:
     def navigation_state(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(R_WI, v_WIo, p_WIo) of a :meth:`state_vector` (views, no copy)."""
         return x[:9].reshape(3, 3), x[9:12], x[12:15]
+
+    def in_contact_of(self, x: np.ndarray) -> np.ndarray:
+        """The feet in the state (K bools) of a :meth:`state_vector`."""
+        return x[15 + 3 * self._K : 15 + 4 * self._K] > 0.5
 
     def imu_bias_of(self, x: np.ndarray) -> np.ndarray:
         """[b_g (rad/s); b_a (m/s²)] of a :meth:`state_vector` (a view; zeros without bias states)."""
@@ -1018,8 +1022,7 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
             x = core.state_vector()
         # The propagation changes neither the feet in the state nor the bias estimate: both
         # are read from the new state, as the correction left them.
-        K = core.num_feet
-        valid = 1.0 if x[15 + 3 * K : 15 + 4 * K].any() else 0.0
+        valid = 1.0 if core.in_contact_of(x).any() else 0.0
         # The gyro sample of the output angular velocity, corrected by the bias this
         # propagation used (E11).
         omega_corrected = omega - core.imu_bias_of(x)[:3] if core.estimates_imu_bias else omega

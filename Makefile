@@ -1,10 +1,21 @@
 # Two commands for a newcomer: `make demo` and `make test`.
 # Each creates .venv when missing and installs what the project needs into it (its
 # dependencies and its metadata only: the code runs from this folder, see pyproject.toml).
-PYTHON ?= python3
-VENV := .venv
+# The interpreter decides the Drake release (pyproject.toml: drake>=1.51.1,<1.59): Python
+# 3.12 and 3.13 get drake 1.58, Python 3.11 drake 1.51.1. `make PYTHON=python3.12 ...` picks
+# it, once: later commands without PYTHON keep the environment's interpreter. A pyenv
+# interpreter (`pyenv versions`) is found even when no pyenv shell selected it.
+# The environment; a second one beside it, e.g. VENV=.venv-py3.11, keeps both releases.
+VENV ?= .venv
+ifeq ($(origin PYTHON),undefined)
+PYTHON := $(if $(wildcard $(VENV)/bin/python),$(VENV)/bin/python,python3)
+endif
+PYTHON_BIN := $(shell $(PYTHON) -c 'import sys; print(sys.executable)' 2>/dev/null || \
+	{ v=$$(echo '$(PYTHON)' | sed -n 's/^python\([0-9][0-9.]*\)$$/\1/p'); [ -n "$$v" ] && command -v pyenv >/dev/null 2>&1 && \
+	  ls -d "$$(pyenv root)"/versions/$$v.*/bin/python$$v 2>/dev/null | sort -V | tail -n 1; })
+PYTHON_VERSION := $(shell '$(PYTHON_BIN)' -c 'import sys; print("%d.%d" % sys.version_info[:2])' 2>/dev/null)
 PY := $(VENV)/bin/python
-STAMP := $(VENV)/.installed-stamp
+STAMP := $(VENV)/.installed-python$(PYTHON_VERSION)
 # Drake's SAP contact solver allocates and frees memory at every time step: with tcmalloc
 # preloaded (Debian's libtcmalloc-minimal4) the simulations take about 14 % less time per
 # step (BENCHMARKS.md). The apps use it when it is installed; `make install` installs it
@@ -17,13 +28,16 @@ export MPLBACKEND
 TEST_WORKERS ?= auto
 RUN = LD_PRELOAD="$(TCMALLOC)$${LD_PRELOAD:+ $$LD_PRELOAD}" $(PY)
 
-.PHONY: demo contact residuals push-and-comply standing residual-comparison contact-localization model-refinement estimate-from-log nao-force-observer nao-walk nao-walk-pulled nao-force-guided-walk nao-compliant-arms benchmark test install clean
+.PHONY: scenarios demo demo-check contact residuals push-and-comply standing residual-comparison contact-localization model-refinement estimate-from-log nao-force-observer nao-walk nao-walk-pulled nao-force-guided-walk nao-compliant-arms benchmark test install clean
 
 install: $(STAMP)
 
 $(STAMP): pyproject.toml
-	@$(PYTHON) -c 'import sys; sys.exit(0 if (3, 10) <= sys.version_info[:2] < (3, 14) else "error: Python 3.10 to 3.13 is required (pyproject.toml), found " + sys.version.split()[0] + ": run make PYTHON=python3.X")'
-	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	@test -n "$(PYTHON_BIN)" || { echo "error: '$(PYTHON)' is not a Python interpreter here (make PYTHON=python3.X; pyenv versions)"; exit 1; }
+	@'$(PYTHON_BIN)' -c 'import sys; sys.exit(0 if (3, 11) <= sys.version_info[:2] < (3, 14) else "error: Python 3.11 to 3.13 is required (pyproject.toml), found " + sys.version.split()[0] + ": run make PYTHON=python3.X")'
+	@if [ -x $(PY) ] && [ "$$($(PY) -c 'import sys; print("%d.%d" % sys.version_info[:2])')" != "$(PYTHON_VERSION)" ]; then \
+		echo "$(VENV) was made with another Python than $(PYTHON) ($(PYTHON_VERSION)): making it anew"; rm -rf $(VENV); fi
+	@test -x $(PY) || '$(PYTHON_BIN)' -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet ".[test]"
 	@echo "compiling the invariant EKF's steps (numba, once: about 35 s; cached beside their source)"
@@ -31,6 +45,7 @@ $(STAMP): pyproject.toml
 	@ls /usr/lib/*-linux-gnu/libtcmalloc_minimal.so.4 >/dev/null 2>&1 || [ "$$(id -u)" != 0 ] || ! command -v apt-get >/dev/null 2>&1 || \
 		{ echo "installing Debian's libtcmalloc-minimal4 (a faster memory allocator for the simulations)"; \
 		  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libtcmalloc-minimal4) >/dev/null 2>&1 || true; }
+	@$(PY) -c 'import importlib.metadata as m, sys; print("installed in $(VENV): Python", sys.version.split()[0], "with drake", m.version("drake"))'
 	@touch $(STAMP)
 
 test: $(STAMP)
@@ -43,6 +58,15 @@ test: $(STAMP)
 
 # The main job (README): the push-and-comply experiment.
 demo: push-and-comply
+
+# A short main-job run (3 s, one push, realistic world with its calibration) that fails on
+# any deprecation message Drake prints: CI runs it on each tested Drake release.
+demo-check: $(STAMP)
+	@echo "a short push-and-comply run on $$($(PY) -c 'import importlib.metadata as m; print("drake", m.version("drake"))')"
+	@$(RUN) -m apps.push_and_comply --headless --out $(VENV)/demo-check \
+		--scenario-text '{duration: 3.0, push_start: 1.0, push_peak_time: 1.5, push_end: 2.5}' > $(VENV)/demo-check.log 2>&1; \
+		status=$$?; cat $(VENV)/demo-check.log; [ $$status = 0 ] || exit $$status; \
+		if grep -i "deprecat" $(VENV)/demo-check.log; then echo "error: the main job printed a deprecation message (above)"; exit 1; fi
 
 # The short names the issues use: the contact study and the residual comparison.
 contact: contact-localization
@@ -85,6 +109,10 @@ nao-compliant-arms: $(STAMP)
 
 benchmark: $(STAMP)
 	$(RUN) -m apps.benchmark $(ARGS)
+
+# The apps' default scenario files (apps/scenarios/*_default.yaml), written from the dataclasses.
+scenarios: $(STAMP)
+	$(PY) -m apps.write_scenarios
 
 clean:
 	rm -rf $(VENV) out .pytest_cache build *.egg-info

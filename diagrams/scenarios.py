@@ -12,10 +12,15 @@ the wrong type is an error that names it.
 from __future__ import annotations
 
 import dataclasses
+import inspect
+import textwrap
 from pathlib import Path
 from typing import Any, TypeVar
 
+import yaml
 from pydrake.common.yaml import yaml_dump_typed, yaml_load, yaml_load_typed
+
+from models.drake_compat import UNSHARED_CONFIG_FIELDS
 
 Scenario = TypeVar("Scenario")
 
@@ -93,11 +98,90 @@ def scenario_as_yaml(scenario: Any) -> str:
     return yaml_dump_typed(scenario)
 
 
+def attribute_docs(schema: type) -> dict[str, str]:
+    """The entries of the "Attributes:" section of ``schema``'s docstring by field name, each
+    as written (``"a, b: text"`` for both ``a`` and ``b``; continuation lines joined)."""
+    lines = inspect.cleandoc(schema.__doc__ or "").splitlines()
+    if "Attributes:" not in lines:
+        return {}
+    entries: list[tuple[list[str], str]] = []
+    for line in lines[lines.index("Attributes:") + 1 :]:
+        if line.strip() and not line.startswith(" "):
+            break  # the next section
+        if line.startswith("    ") and not line.startswith("     ") and ":" in line:
+            names = [name.strip() for name in line.partition(":")[0].split(",")]
+            entries.append((names, line.strip()))
+        elif entries and line.strip():
+            entries[-1] = (entries[-1][0], f"{entries[-1][1]} {line.strip()}")
+    return {name: text for names, text in entries for name in names}
+
+
+def _shared_config_fields(value: Any, data: Any) -> Any:
+    """``data`` (the YAML data of ``value``) without the fields of Drake's config structs that
+    not every supported Drake release has (``models.drake_compat``), recursively through
+    dataclasses.
+
+    Raises:
+        ValueError: such a field away from Drake's default (a file that holds it would not load
+            on every supported release).
+    """
+    unshared = UNSHARED_CONFIG_FIELDS.get(type(value).__name__, ())
+    if unshared and isinstance(data, dict):
+        default = yaml_load(data=yaml_dump_typed(type(value)()))
+        for name in unshared:
+            if name in data and data[name] != default.get(name):
+                raise ValueError(
+                    f"{type(value).__name__}.{name} = {data[name]!r} is not Drake's default, and not every "
+                    "supported Drake release has this field (models/drake_compat.py)"
+                )
+            data.pop(name, None)
+    if dataclasses.is_dataclass(value) and isinstance(data, dict):
+        for field in dataclasses.fields(value):
+            if field.name in data:
+                data[field.name] = _shared_config_fields(getattr(value, field.name), data[field.name])
+    return data
+
+
+class _ScenarioDumper(yaml.SafeDumper):
+    """Block style, but a list of scalars on one line (``push_point: [0.0, 0.0, 0.0]``)."""
+
+
+def _represent_list(dumper: yaml.SafeDumper, data: list) -> yaml.Node:
+    flat = all(not isinstance(item, (list, dict)) for item in data)
+    return dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=flat)
+
+
+_ScenarioDumper.add_representer(list, _represent_list)
+
+
+def _comment(text: str) -> str:
+    return textwrap.fill(text, 100, initial_indent="# ", subsequent_indent="# ", break_on_hyphens=False)
+
+
+def scenario_file_text(scenario: Any, header: str) -> str:
+    """A scenario file of ``scenario``: ``header`` as comment lines, then every field (nested
+    Drake configs included, less the fields only some supported Drake releases have), each
+    below its entry of the docstring's "Attributes:" section. The apps' default files are
+    written with it (``python -m apps.write_scenarios``)."""
+    data = _shared_config_fields(scenario, scenario_as_dict(scenario))
+    docs = attribute_docs(type(scenario))
+    parts = [_comment(paragraph) for paragraph in header.strip().split("\n\n")]
+    described: set[str] = set()
+    for name, value in data.items():
+        if name in docs and docs[name] not in described:
+            described.add(docs[name])
+            parts.append(_comment(docs[name]))
+        parts.append(yaml.dump({name: value}, Dumper=_ScenarioDumper, sort_keys=False, width=100).rstrip())
+    return "\n".join(parts) + "\n"
+
+
 __all__ = [
     "POSITIVE_FIELDS",
     "ScenarioError",
+    "attribute_docs",
     "check_common_fields",
     "load_scenario",
     "scenario_as_dict",
     "scenario_as_yaml",
+    "scenario_file_text",
 ]

@@ -1,14 +1,24 @@
 """No deprecated Drake feature: building and stepping each of the project's diagrams logs no
-``DRAKE_DEPRECATED`` message and raises no ``DrakeDeprecationWarning``.
+deprecation message and raises no ``DrakeDeprecationWarning``, on every tested Drake release.
 
-Drake deprecates in two ways. C++ code logs "DRAKE_DEPRECATED: ..." through spdlog, which
-pydrake forwards to the Python logger named "drake"; Python bindings raise a
+Drake deprecates in two ways. C++ code logs "DRAKE_DEPRECATED: ..." through spdlog (and its
+model parser logs "... is deprecated" for a deprecated SDFormat/URDF element), which pydrake
+forwards to the Python logger named "drake"; Python bindings raise a
 ``DrakeDeprecationWarning``. Drake logs each C++ message only once per process (and pydrake
 shows each warning once by default), so an earlier test of the same session could hide it:
 every case therefore runs in a fresh Python process (this file run as a script, from the
-repository root), which reports what it saw as one JSON line. The two positive controls
-(a TAMSI plant; ``Simulator.set_publish_every_time_step``) check that each channel is seen,
-so that the check cannot pass silently.
+repository root), which reports what it saw as one JSON line.
+
+Positive controls check that each channel is seen, so that the check cannot pass silently.
+They depend on the release (``models.drake_compat``):
+
+* every release: a model with a deprecated SDFormat element (log channel), and a function
+  deprecated with ``pydrake.common.deprecation.deprecated_callable``, the decorator pydrake
+  deprecates its Python API with (warning channel);
+* drake 1.51.1 also: a TAMSI plant (its C++ ``DRAKE_DEPRECATED`` log; TAMSI is removed in
+  1.57) and ``Simulator.set_publish_every_time_step`` (a deprecated binding; removed by 1.58).
+  Drake 1.58.0 deprecates nothing a Python program can reach: the one deprecation it
+  documents, ``SingleOutputVectorSource``, has no Python binding.
 """
 
 from __future__ import annotations
@@ -20,6 +30,8 @@ import sys
 from pathlib import Path
 
 import pytest
+
+from models.drake_compat import drake_version
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Simulated time each diagram is stepped, s (10 steps of the 1 ms plants).
@@ -145,8 +157,29 @@ def _case_force_guided_walking() -> None:
     _simulate(diagram, handles["station"].set_initial_state)
 
 
+def _control_deprecated_model_element() -> None:
+    """Positive control of the log channel on every release: a deprecated SDFormat element
+    (libsdformat's element for testing deprecations) makes Drake's parser log "... is
+    deprecated"."""
+    from pydrake.multibody.parsing import Parser
+    from pydrake.multibody.plant import MultibodyPlant
+
+    model = "<sdf version='1.9'><model name='m'><link name='l'/></model><_drake_deprecation_unit_test_element/></sdf>"
+    plant = MultibodyPlant(1e-3)  # held: the parser keeps only a reference
+    Parser(plant).AddModelsFromString(model, "sdf")
+
+
+def _control_deprecated_callable() -> None:
+    """Positive control of the warning channel on every release: a function deprecated with
+    the decorator pydrake deprecates its Python API with."""
+    from pydrake.common.deprecation import deprecated_callable
+
+    deprecated_callable("use something else", date="2038-01-19")(lambda: None)()
+
+
 def _control_tamsi_plant() -> None:
-    """Positive control of the log channel: Drake 1.51 deprecates TAMSI."""
+    """Positive control of the C++ DRAKE_DEPRECATED log: drake 1.51 deprecates TAMSI (removed
+    in 1.57)."""
     from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
     from pydrake.systems.framework import DiagramBuilder
 
@@ -157,13 +190,18 @@ def _control_tamsi_plant() -> None:
 
 
 def _control_deprecated_binding() -> None:
-    """Positive control of the warning channel: a binding Drake 1.51 deprecates."""
+    """Positive control of the warning channel by a binding drake 1.51 deprecates (gone in
+    1.58)."""
     from pydrake.systems.analysis import Simulator
     from pydrake.systems.primitives import ConstantVectorSource
 
     Simulator(ConstantVectorSource([1.0])).set_publish_every_time_step(False)
 
 
+#: The controls by features some releases deprecate and later ones removed: whether the
+#: installed release still has each (TAMSI is gone in 1.57, set_publish_every_time_step by 1.58).
+_VERSION = drake_version() or (0,)
+RELEASE_CONTROLS = {"tamsi_plant": (1, 51) <= _VERSION < (1, 57), "deprecated_binding": (1, 51) <= _VERSION < (1, 58)}
 CASES = {name[len("_case_") :]: f for name, f in list(globals().items()) if name.startswith("_case_")}
 CONTROLS = {name[len("_control_") :]: f for name, f in list(globals().items()) if name.startswith("_control_")}
 
@@ -196,7 +234,7 @@ def _run_in_this_process(name: str) -> dict:
         except Exception:
             error = traceback.format_exc()
     return {
-        "drake_deprecated": [m for m in logged if "DRAKE_DEPRECATED" in m or "DRAKE DEPRECATED" in m],
+        "drake_deprecated": [m for m in logged if "deprecat" in m.lower()],
         "deprecation_warning": warning,
         "error": error,
     }
@@ -219,7 +257,8 @@ def _start(name: str) -> subprocess.Popen:
 
 def _result(name: str) -> dict:
     if not _results:  # first call: run them all, a few at a time (each loads Drake and a model)
-        pending, running = [*CONTROLS, *CASES], {}
+        controls = [n for n in CONTROLS if RELEASE_CONTROLS.get(n, True)]
+        pending, running = [*controls, *CASES], {}
         limit = max(2, min(4, os.cpu_count() or 2))
         while pending or running:
             while pending and len(running) < limit:
@@ -246,16 +285,36 @@ def _result(name: str) -> dict:
 
 
 def test_log_channel_positive_control():
-    """A TAMSI plant logs DRAKE_DEPRECATED, and this test's handler sees it."""
-    result = _result("tamsi_plant")
+    """A deprecated SDFormat element is logged as deprecated, and this test's handler sees it."""
+    result = _result("deprecated_model_element")
     assert result["error"] is None, result["error"]
-    assert any("TAMSI" in m for m in result["drake_deprecated"]), result
+    assert any("_drake_deprecation_unit_test_element" in m for m in result["drake_deprecated"]), result
 
 
 def test_warning_channel_positive_control():
-    result = _result("deprecated_binding")
+    result = _result("deprecated_callable")
     assert result["error"] is None, result["error"]
     assert result["deprecation_warning"] and "DrakeDeprecationWarning" in result["deprecation_warning"], result
+
+
+@pytest.mark.skipif(
+    not RELEASE_CONTROLS["tamsi_plant"], reason="this Drake has no TAMSI (deprecated in 1.51, removed in 1.57)"
+)
+def test_cpp_deprecation_log_positive_control():
+    """A TAMSI plant logs DRAKE_DEPRECATED on drake 1.51, and this test's handler sees it."""
+    result = _result("tamsi_plant")
+    assert result["error"] is None, result["error"]
+    assert any("DRAKE_DEPRECATED" in m and "TAMSI" in m for m in result["drake_deprecated"]), result
+
+
+@pytest.mark.skipif(
+    not RELEASE_CONTROLS["deprecated_binding"],
+    reason="this Drake has no Simulator.set_publish_every_time_step (deprecated in 1.51, gone by 1.58)",
+)
+def test_deprecated_binding_positive_control():
+    result = _result("deprecated_binding")
+    assert result["error"] is None, result["error"]
+    assert result["deprecation_warning"] and "set_publish_every_time_step" in result["deprecation_warning"], result
 
 
 @pytest.mark.parametrize("case", list(CASES))

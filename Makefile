@@ -11,8 +11,8 @@ ifeq ($(origin PYTHON),undefined)
 PYTHON := $(if $(wildcard $(VENV)/bin/python),$(VENV)/bin/python,python3)
 endif
 PYTHON_BIN := $(shell $(PYTHON) -c 'import sys; print(sys.executable)' 2>/dev/null || \
-	{ v=$$(echo '$(PYTHON)' | sed -n 's/^python\([0-9][0-9.]*\)$$/\1/p'); [ -n "$$v" ] && command -v pyenv >/dev/null 2>&1 && \
-	  ls -d "$$(pyenv root)"/versions/$$v.*/bin/python$$v 2>/dev/null | sort -V | tail -n 1; })
+	{ v=$$(echo '$(PYTHON)' | sed -n 's/^python\([0-9][0-9.]*\)$$/\1/p'); [ -n "$$v" ] && \
+	  ls -d "$${PYENV_ROOT:-$$HOME/.pyenv}"/versions/$$v.*/bin/python$$v 2>/dev/null | sort -V | tail -n 1; })
 PYTHON_VERSION := $(shell '$(PYTHON_BIN)' -c 'import sys; print("%d.%d" % sys.version_info[:2])' 2>/dev/null)
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-python$(PYTHON_VERSION)

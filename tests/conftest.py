@@ -1,6 +1,9 @@
 """Shared test setup: matplotlib draws off screen (the Makefile exports the same for the apps);
-the ``hrp4_moved`` fixture."""
+every test fails when Drake logs a deprecation while it runs (the ``drake_deprecations``
+fixture; ``DrakeDeprecationWarning`` is an error by ``pyproject.toml``'s ``filterwarnings``),
+so each app's smoke test also checks the installed Drake release; the ``hrp4_moved`` fixture."""
 
+import logging
 import os
 
 os.environ.setdefault("MPLBACKEND", "Agg")
@@ -11,6 +14,52 @@ from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig  # n
 from pydrake.systems.framework import DiagramBuilder  # noqa: E402
 
 from models import add_humanoid, set_standing_state  # noqa: E402
+
+
+class DrakeDeprecationLog(logging.Handler):
+    """Keeps every message of Drake's logger (C++ spdlog, forwarded by pydrake) that speaks
+    of a deprecation: C++ "DRAKE_DEPRECATED", a deprecated element of a model file."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.messages: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        text = record.getMessage()
+        if "deprecat" in text.lower():
+            self.messages.append(text)
+
+
+_DRAKE_DEPRECATIONS = DrakeDeprecationLog()
+_drake_logger = logging.getLogger("drake")
+_drake_logger.addHandler(_DRAKE_DEPRECATIONS)
+if _drake_logger.getEffectiveLevel() > logging.WARNING:
+    _drake_logger.setLevel(logging.WARNING)
+
+
+@pytest.fixture(autouse=True)
+def drake_deprecations():
+    """The deprecation messages Drake logs during the test (a list the test may empty); any
+    left at its end fail it. Drake logs each C++ message once per process: the first test to
+    reach a deprecated feature is the one that fails (``tests/test_no_deprecated_drake.py``
+    checks every diagram in a fresh process)."""
+    start = len(_DRAKE_DEPRECATIONS.messages)
+    new = _DRAKE_DEPRECATIONS.messages
+    yield _LogView(new, start)
+    assert len(new) == start, f"Drake logged a deprecation during this test: {new[start:]}"
+
+
+class _LogView:
+    """The messages of one test: ``list(view)``; ``view.clear()`` drops them."""
+
+    def __init__(self, messages: list[str], start: int) -> None:
+        self._messages, self._start = messages, start
+
+    def __iter__(self):
+        return iter(self._messages[self._start :])
+
+    def clear(self) -> None:
+        del self._messages[self._start :]
 
 
 @pytest.fixture(scope="module")

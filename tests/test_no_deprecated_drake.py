@@ -157,6 +157,27 @@ def _case_force_guided_walking() -> None:
     _simulate(diagram, handles["station"].set_initial_state)
 
 
+def _case_model_refinement() -> None:
+    from diagrams.residuals.model_refinement import ModelRefinementScenario, build_refinement_diagram
+
+    for residuals in (True, False):
+        diagram, handles = build_refinement_diagram(ModelRefinementScenario(), None, residuals=residuals)
+        _simulate(diagram, handles.station.set_initial_state)
+
+
+def _case_estimate_from_log() -> None:
+    """The offline path (``apps.estimate_from_log``): a short simulated log, estimated with the
+    base state given and with the invariant EKF."""
+    from dataclasses import replace
+
+    from diagrams.residuals.log_estimation import build_estimator_plant, estimate_from_log, simulate_push_log
+
+    log, _ = simulate_push_log("hrp4_like", duration=0.2, base_state="invariant_ekf")
+    robot = build_estimator_plant("hrp4_like")
+    estimate_from_log(robot, log)
+    estimate_from_log(robot, replace(log, base_pose=None, base_velocity=None))
+
+
 def _control_deprecated_model_element() -> None:
     """Positive control of the log channel on every release: a deprecated SDFormat element
     (libsdformat's element for testing deprecations) makes Drake's parser log "... is

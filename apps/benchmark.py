@@ -40,7 +40,17 @@ from pathlib import Path
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
 
-from apps.runner import add_out_argument, memory_allocator, output_folder, print_written, run_app, write_metrics
+from apps.runner import (
+    add_out_argument,
+    memory_allocator,
+    non_negative_float,
+    output_folder,
+    positive_float,
+    positive_int,
+    print_written,
+    run_app,
+    write_metrics,
+)
 from models import MODEL_NAMES, add_humanoid
 from systems.dynamics.floating_base import FloatingBaseDynamics
 from systems.residuals.momentum_residuals import ClassicalResidual, ExternalResidual, InternalResidual, ResidualModel
@@ -418,20 +428,23 @@ def main(argv: list[str] | None = None) -> int:
         prog=f"python -m apps.{EXPERIMENT}", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--model", choices=(*MODEL_NAMES, "all"), default="all")
-    parser.add_argument("--calls", type=int, default=300, help="calls per batch (fast paths)")
-    parser.add_argument("--batches", type=int, default=7, help="batches; the median is reported")
+    parser.add_argument("--calls", type=positive_int, default=300, help="calls per batch (fast paths)")
+    parser.add_argument("--batches", type=positive_int, default=7, help="batches; the median is reported")
     parser.add_argument(
-        "--loop-seconds", type=float, default=2.0, help="simulated seconds per closed-loop timing (0 skips them)"
+        "--loop-seconds",
+        type=non_negative_float,
+        default=2.0,
+        help="simulated seconds per closed-loop timing (0 skips them)",
     )
     parser.add_argument(
         "--log-seconds",
-        type=float,
+        type=non_negative_float,
         default=2.0,
         help="seconds of the simulated hrp4_like log estimated offline (0 skips it)",
     )
     parser.add_argument(
         "--log-push-seconds",
-        type=float,
+        type=positive_float,
         default=None,
         help="the push's duration in that log, from 0.5 s (default: to the end, the localizer's worst case)",
     )

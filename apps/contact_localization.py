@@ -58,7 +58,11 @@ from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
 
 from apps.runner import (
     experiment_parser,
+    non_negative_float,
+    non_negative_int,
     output_folder,
+    positive_float,
+    positive_int,
     print_written,
     replay_meshcat,
     run_app,
@@ -369,39 +373,47 @@ def plot_position_errors(path: Path, results: list[dict]) -> None:
 
 def _parse(argv):
     parser = experiment_parser("apps.contact_localization", __doc__, replay=False, conditions=True, robot=True)
-    parser.add_argument("--trials", type=int, default=None, help="number of trials (scenario default 1000)")
+    parser.add_argument("--trials", type=positive_int, default=None, help="number of trials (scenario default 1000)")
     parser.add_argument(
         "--contacts", type=int, choices=(1, 2), default=None, help="contacts per trial (default 1; 2: two links)"
     )
-    parser.add_argument("--seed", type=int, default=None, help="first seed of the trials and of the sensor noise")
-    parser.add_argument("--num-seeds", type=int, default=None, help="seeds the trials are drawn from (default 5)")
+    parser.add_argument(
+        "--seed", type=non_negative_int, default=None, help="first seed of the trials and of the sensor noise"
+    )
+    parser.add_argument(
+        "--num-seeds", type=positive_int, default=None, help="seeds the trials are drawn from (default 5)"
+    )
     parser.add_argument(
         "--trials-per-run",
-        type=int,
+        type=positive_int,
         default=None,
         help="trials simulated one after another in one run (default 1: each from the standing start)",
     )
     parser.add_argument("--model", default=None, help="humanoid with foot F/T sensors (hrp4_like)")
     parser.add_argument(
-        "--workers", type=int, default=os.cpu_count() or 1, help="parallel processes (default: all cores)"
+        "--workers", type=positive_int, default=os.cpu_count() or 1, help="parallel processes (default: all cores)"
     )
-    parser.add_argument("--replays", type=int, default=3, help="Meshcat replays of the first N trials (default 3)")
-    parser.add_argument("--push-start", type=float, default=None, help="contact onset, s (scenario default 0.5)")
+    parser.add_argument(
+        "--replays", type=non_negative_int, default=3, help="Meshcat replays of the first N trials (default 3)"
+    )
+    parser.add_argument(
+        "--push-start", type=non_negative_float, default=None, help="contact onset, s (scenario default 0.5)"
+    )
     parser.add_argument(
         "--contact-duration",
-        type=float,
+        type=positive_float,
         default=None,
         help="contact duration, s (the scenario's push_duration, default 0.5)",
     )
     parser.add_argument(
         "--no-contact-duration",
-        type=float,
+        type=non_negative_float,
         default=None,
         help="length of the standing run without contact for false detections, s (scenario default 60; 0 skips)",
     )
     parser.add_argument(
         "--slow-motion-duration",
-        type=float,
+        type=non_negative_float,
         default=None,
         help="length of the slow whole-body motion run without contact, s (scenario default 60; 0 skips)",
     )

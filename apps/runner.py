@@ -14,17 +14,19 @@ import json
 import math
 import os
 import sys
+import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from pydrake.geometry import Meshcat
 from pydrake.systems.analysis import ApplySimulatorConfig, Simulator, SimulatorConfig
 from pydrake.systems.framework import Context, Diagram
 
-from diagrams.scenarios import ScenarioError, load_scenario, scenario_as_dict
+from diagrams.scenarios import ScenarioError, check_finite_and_signs, load_scenario, scenario_as_dict
 from diagrams.station.conditions import set_ideal_conditions
 from models import robot_description
 
@@ -83,13 +85,66 @@ def experiment_parser(
     return parser
 
 
+def _number(text: str, kind: type, lowest: float, inclusive: bool) -> int | float:
+    try:
+        value = kind(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected {'an integer' if kind is int else 'a number'}, got {text!r}"
+        ) from None
+    if not math.isfinite(value) or value < lowest or (value == lowest and not inclusive):
+        raise argparse.ArgumentTypeError(f"must be finite and {'>=' if inclusive else '>'} {lowest:g}, got {text}")
+    return value
+
+
+def positive_int(text: str) -> int:
+    """An option's type: an integer > 0 (``argparse`` names the option in its error)."""
+    return _number(text, int, 0, False)
+
+
+def non_negative_int(text: str) -> int:
+    """An option's type: an integer >= 0."""
+    return _number(text, int, 0, True)
+
+
+def positive_float(text: str) -> float:
+    """An option's type: a finite number > 0."""
+    return _number(text, float, 0.0, False)
+
+
+def non_negative_float(text: str) -> float:
+    """An option's type: a finite number >= 0."""
+    return _number(text, float, 0.0, True)
+
+
+def writable_folder(text: str) -> Path:
+    """``--out``'s type: the folder ``text``, created if missing, into which a file can be
+    written; checked when the command line is read, before any simulation.
+
+    Raises:
+        argparse.ArgumentTypeError: a file, or a folder that cannot be created or written
+            (the reason named).
+    """
+    folder = Path(text)
+    if folder.exists() and not folder.is_dir():
+        raise argparse.ArgumentTypeError(f"'{folder}' is a file, not a folder")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as error:
+        raise argparse.ArgumentTypeError(f"cannot write into '{folder}': {error.strerror or error}") from None
+    return folder
+
+
 def add_out_argument(parser: argparse.ArgumentParser, folder: str = "<experiment>") -> None:
     """``--out OUT`` (default ``out``): the app writes into ``OUT/<folder>/``
-    (``output_folder``); also for the apps without a scenario."""
+    (``output_folder``); also for the apps without a scenario. A folder that cannot be
+    written is refused when the command line is read (``writable_folder``)."""
     parser.add_argument(
         "--out",
-        type=Path,
-        default=DEFAULT_OUT,
+        type=writable_folder,
+        default=str(DEFAULT_OUT),
         help=f"output folder; the app writes into OUT/{folder}/ (default {DEFAULT_OUT})",
     )
 
@@ -103,7 +158,9 @@ def scenario_from_args(schema: type, args: argparse.Namespace, defaults: Any = N
 
     Raises:
         ScenarioError: see ``diagrams.scenarios.load_scenario``; an override of an unknown field.
-        ValueError: a ``--robot`` that is no readable description (naming the field).
+        ValueError: a ``--robot`` that is no readable description (naming the field); a number
+            that is not finite, a negative duration or a period that is not positive
+            (``diagrams.scenarios.check_finite_and_signs``).
     """
     robot = getattr(args, "robot", None)
     if robot is not None:
@@ -121,6 +178,7 @@ def scenario_from_args(schema: type, args: argparse.Namespace, defaults: Any = N
         if not hasattr(scenario, name):
             raise ScenarioError(f"{schema.__name__} has no field '{name}'")
         setattr(scenario, name, value)
+    check_finite_and_signs(scenario)
     return scenario
 
 
@@ -139,9 +197,18 @@ def replace_fields(config: Any, **overrides: Any) -> Any:
 
 
 def output_folder(args: argparse.Namespace, experiment: str) -> Path:
-    """``OUT/<experiment>/``, created."""
+    """``OUT/<experiment>/``, created.
+
+    Raises:
+        ValueError: it exists as a file, or cannot be created (the reason named).
+    """
     folder = Path(args.out) / experiment
-    folder.mkdir(parents=True, exist_ok=True)
+    if folder.exists() and not folder.is_dir():
+        raise ValueError(f"the output folder '{folder}' is a file")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise ValueError(f"cannot create the output folder '{folder}': {error.strerror or error}") from None
     return folder
 
 
@@ -192,8 +259,8 @@ def simulate(
     (camera_in_world, target_in_world). With a ``label`` the progress is printed every
     ``progress_step`` simulated seconds, then the wall time and the real-time factor.
     """
-    if not duration > 0.0:
-        raise ValueError(f"the simulated duration must be positive, got {duration}")
+    if not (duration > 0.0 and math.isfinite(duration)):
+        raise ValueError(f"the simulated duration must be positive and finite, got {duration}")
     if meshcat is not None:
         meshcat.Delete()
         meshcat.DeleteRecording()
@@ -244,6 +311,27 @@ def save_replay(meshcat: Meshcat | None, path: Path) -> Path | None:
     return path
 
 
+def _json_value(value: Any) -> Any:
+    """``json.dumps``'s ``default``: a NumPy scalar as its Python value (a NumPy bool stays a
+    bool), an array as a list, a path as text; anything else float() accepts as a float."""
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, Path):
+        return str(value)
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise TypeError(f"{type(value).__name__} is not JSON serializable: {value!r}") from None
+
+
+def json_text(data: Any) -> str:
+    """``data`` as indented JSON text (NumPy values included; NaN and infinities as JSON's
+    extension, ``NaN``/``Infinity``), ending with a newline."""
+    return json.dumps(data, indent=2, allow_nan=True, default=_json_value) + "\n"
+
+
 def write_metrics(folder: Path, metrics: dict, scenario: Any = None) -> Path:
     """``folder/metrics.json``: ``metrics``, plus the scenario (every field) and the memory
     allocator the run used."""
@@ -252,7 +340,7 @@ def write_metrics(folder: Path, metrics: dict, scenario: Any = None) -> Path:
         payload["scenario"] = scenario_as_dict(scenario)
     payload.setdefault("memory_allocator", memory_allocator())
     path = folder / "metrics.json"
-    path.write_text(json.dumps(payload, indent=2, allow_nan=True, default=float))
+    path.write_text(json_text(payload))
     return path
 
 
@@ -261,12 +349,17 @@ def print_written(folder: Path) -> None:
 
 
 def run_app(name: str, body: Callable[[], int | None]) -> int:
-    """Runs an app's ``body``; a ``ValueError`` (bad scenario, bad option, bad input data)
-    becomes ``<name>: error: <message>`` on stderr and exit code 2, never a traceback."""
+    """Runs an app's ``body``; a ``ValueError`` (bad scenario, bad option, bad input data) or
+    an ``OSError`` (a file that cannot be read or written) becomes ``<name>: error:
+    <message>`` on stderr and exit code 2, never a traceback."""
     try:
         return int(body() or 0)
     except ValueError as error:
         print(f"\n{name}: error: {error}", file=sys.stderr)
+        return 2
+    except OSError as error:
+        where = f" '{error.filename}'" if error.filename else ""
+        print(f"\n{name}: error: {error.strerror or error}{where}", file=sys.stderr)
         return 2
 
 
@@ -275,10 +368,16 @@ __all__ = [
     "ScenarioError",
     "SimulationRun",
     "add_out_argument",
+    "writable_folder",
     "experiment_parser",
+    "json_text",
     "logged_signals",
     "memory_allocator",
+    "non_negative_float",
+    "non_negative_int",
     "output_folder",
+    "positive_float",
+    "positive_int",
     "print_written",
     "replace_fields",
     "replay_meshcat",

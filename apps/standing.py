@@ -16,13 +16,13 @@ self-contained replay ``DIR/standing/<model>.html``. Exits with status 1 if a ro
 
 from __future__ import annotations
 
-import json
 import sys
 
 import numpy as np
 
 from apps.runner import (
     experiment_parser,
+    json_text,
     output_folder,
     replay_meshcat,
     run_app,
@@ -37,7 +37,7 @@ from diagrams.station.standing import (
     set_initial_state,
     standing_run_metrics,
 )
-from models import MODEL_NAMES, set_standing_state
+from models import MODEL_NAMES, robot_description, set_standing_state
 
 
 def _parse(argv):
@@ -96,6 +96,10 @@ def main(argv=None) -> int:
     def body() -> int:
         models = None if args.model is None else (list(MODEL_NAMES) if args.model == "all" else [args.model])
         scenario = scenario_from_args(StandingScenario, args, models=models, duration=args.duration)
+        if not scenario.models:
+            raise ValueError("the scenario's models list is empty: nothing to simulate")
+        for name in scenario.models:
+            robot_description(name)  # every model read and checked before the first is simulated
         print("standing simulation of the humanoids (PD + gravity compensation)")
         out_dir = output_folder(args, "standing")
         meshcat = replay_meshcat(not args.no_replay, args.headless)
@@ -104,7 +108,7 @@ def main(argv=None) -> int:
         for name in scenario.models:
             print(f"simulating {name} for {scenario.duration:g} s ...", flush=True)
             row = run_model(scenario, name, meshcat, live=not args.headless)
-            (out_dir / f"{row['model']}.json").write_text(json.dumps(row, indent=2) + "\n")
+            (out_dir / f"{row['model']}.json").write_text(json_text(row))
             html = save_replay(meshcat, out_dir / f"{row['model']}.html")
             if html is not None:
                 row["replay"] = str(html)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import math
 import textwrap
 from pathlib import Path
 from typing import Any, TypeVar
@@ -82,6 +83,35 @@ def check_common_fields(scenario: Any) -> None:
     for name in POSITIVE_FIELDS:
         if hasattr(scenario, name) and not getattr(scenario, name) > 0:
             raise ValueError(f"{name} must be positive, got {getattr(scenario, name)}")
+
+
+def check_finite_and_signs(scenario: Any) -> None:
+    """The checks every scenario gets when it is read (``apps.runner.scenario_from_args``):
+    every number, nested ones included, is finite (a duration of ``inf`` would simulate for
+    ever); a field whose name ends in ``duration`` is >= 0 and one that ends in ``period``
+    is > 0 (None where a field allows it).
+
+    Raises:
+        ValueError: a bad value, named by its dotted field path.
+    """
+
+    def walk(value: Any, path: str) -> None:
+        if isinstance(value, dict):
+            for key, item in value.items():
+                walk(item, f"{path}.{key}" if path else str(key))
+        elif isinstance(value, list):
+            for i, item in enumerate(value):
+                walk(item, f"{path}[{i}]")
+        elif isinstance(value, (int, float)) and not isinstance(value, bool):
+            name = path.rsplit(".", 1)[-1]
+            if not math.isfinite(value):
+                raise ValueError(f"{path} must be finite, got {value}")
+            if name.endswith("duration") and value < 0:
+                raise ValueError(f"{path} must be >= 0 s, got {value}")
+            if name.endswith("period") and value <= 0:
+                raise ValueError(f"{path} must be positive, got {value}")
+
+    walk(scenario_as_dict(scenario), "")
 
 
 def scenario_as_dict(scenario: Any) -> dict:
@@ -180,6 +210,7 @@ __all__ = [
     "ScenarioError",
     "attribute_docs",
     "check_common_fields",
+    "check_finite_and_signs",
     "load_scenario",
     "scenario_as_dict",
     "scenario_as_yaml",

@@ -30,6 +30,8 @@ Typical use::
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import os
 import re
 from dataclasses import dataclass, field
@@ -232,6 +234,71 @@ def _foot_contact_properties(mass: float) -> ProximityProperties:
     return props
 
 
+@contextlib.contextmanager
+def _drake_warnings():
+    """The warnings Drake logs (its "drake" Python logger) while the block runs, as a list of
+    messages."""
+    messages: list[str] = []
+
+    class _Collect(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            messages.append(record.getMessage())
+
+    logger = logging.getLogger("drake")
+    handler = _Collect(logging.WARNING)
+    level = logger.level
+    logger.addHandler(handler)
+    if logger.getEffectiveLevel() > logging.WARNING:
+        logger.setLevel(logging.WARNING)
+    try:
+        yield messages
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+
+
+def _check_inertias(plant: MultibodyPlant, model_instance: ModelInstanceIndex, where: str) -> None:
+    """Every link of the parsed model has a physical inertia: a finite mass >= 0 and a spatial
+    inertia Drake calls physically valid (finite, positive semi-definite, the triangle
+    inequality of its principal moments); a link on a moving joint carries mass, itself or
+    through the links beyond it (a massless frame welded to a link, or a massless link
+    between two joints of a hip, is fine).
+
+    Raises:
+        RobotDescriptionError: the first link that breaks this, named, with its values.
+    """
+    children: dict[int, list] = {}
+    joint_type = {}
+    for index in plant.GetJointIndices(model_instance):
+        joint = plant.get_joint(index)
+        children.setdefault(int(joint.parent_body().index()), []).append(joint.child_body())
+        joint_type[int(joint.child_body().index())] = joint.type_name()
+    for index in plant.GetBodyIndices(model_instance):
+        body = plant.get_body(index)
+        mass = body.default_mass()
+        if not (np.isfinite(mass) and mass >= 0.0):
+            raise RobotDescriptionError(f"{where}: link {body.name()!r} has mass {mass}: it must be finite and >= 0")
+        inertia = body.default_spatial_inertia()
+        if not (np.all(np.isfinite(inertia.CopyToFullMatrix6())) and inertia.IsPhysicallyValid()):
+            raise RobotDescriptionError(
+                f"{where}: link {body.name()!r} has a non-physical inertia (mass {mass}, centre of mass "
+                f"{inertia.get_com().tolist()}, unit inertia {inertia.get_unit_inertia().get_moments().tolist()}): "
+                "it must be finite, positive semi-definite and meet the triangle inequality"
+            )
+
+    def carried_mass(body) -> float:
+        return body.default_mass() + sum(carried_mass(child) for child in children.get(int(body.index()), ()))
+
+    for index in plant.GetBodyIndices(model_instance):
+        body = plant.get_body(index)
+        moving = joint_type.get(int(index), "weld") != "weld"
+        if moving and carried_mass(body) <= 0.0:
+            raise RobotDescriptionError(
+                f"{where}: link {body.name()!r} is on the moving joint of type {joint_type[int(index)]} but it and "
+                "the links beyond it have no mass: give it its mass (the dynamics would be singular)"
+            )
+
+
 def add_humanoid(
     plant: MultibodyPlant,
     name: str | os.PathLike | RobotDescription,
@@ -282,7 +349,8 @@ def add_humanoid(
     for package, folder in description.packages.items():
         parser.package_map().Add(package, str(folder))
     try:
-        (mi,) = parser.AddModelsFromString(text, kind)
+        with _drake_warnings() as parse_warnings:
+            (mi,) = parser.AddModelsFromString(text, kind)
     except Exception as error:  # Drake's parser raises RuntimeError with its own message
         hint = ""
         if "MakeConvexHull" in str(error) or "unsupported extension" in str(error):
@@ -291,6 +359,26 @@ def add_humanoid(
             f"{where}: model: Drake cannot parse '{description.model_file}': {error}{hint}"
         ) from error
 
+    # Drake's parser replaces an invalid inertia (NaN, a negative mass, a broken triangle
+    # inequality) by a made-up one and only warns: refused here.
+    invalid = [m for m in parse_warnings if "invalid inertia" in m or "inertia matrix" in m or "central inertia" in m]
+    if invalid:
+        links = set(re.findall(r"link named (\S+) has invalid inertia", " ".join(invalid)))
+        lines = text.splitlines()
+        for number in re.findall(r"\.(?:sdf|urdf):(\d+):", " ".join(invalid)):
+            before = "\n".join(lines[: int(number)])
+            links.update(re.findall(r"<link\s+name=[\"']([^\"']+)[\"']", before)[-1:])
+        details = "; ".join(
+            " ".join(re.sub(r"Failure at \S+ in \w+\(\): |\[[^\]]*\]", "", m.split("warning: ", 1)[-1]).split())
+            for m in invalid
+            if "link named" not in m
+        )
+        raise RobotDescriptionError(
+            f"{where}: model: link {', '.join(map(repr, sorted(links))) or '?'} has a non-physical inertia in "
+            f"'{description.model_file}' (Drake: {details or invalid[0].strip()}): a mass must be finite and > 0, "
+            "its inertia finite, positive definite and within the triangle inequality"
+        )
+    _check_inertias(plant, mi, where)
     base = _get_body(plant, description.base_body, mi, f"{where}: base_body")
     for index in plant.GetJointIndices(mi):
         joint = plant.get_joint(index)

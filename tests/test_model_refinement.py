@@ -4,6 +4,7 @@ refined model removes, measured against the simulator's own (exact) model."""
 
 import numpy as np
 import pytest
+import yaml
 
 from diagrams.residuals import model_refinement
 from diagrams.residuals.model_refinement import (
@@ -20,6 +21,8 @@ from diagrams.residuals.model_refinement import (
 from diagrams.residuals.push_and_comply import PushAndComplyScenario
 from diagrams.residuals.residual_comparison import ResidualComparisonScenario
 from diagrams.station.motions import SlowMotion
+from models import description_file, model_file
+from systems.estimation.model_identification import ModelCorrections
 from systems.residuals.momentum_residuals import ResidualModel
 from systems.residuals.offline import replay_residuals, residual_noise_model
 from systems.simulation.imperfections import (
@@ -279,3 +282,43 @@ def test_calibration_log_records_what_the_updates_read_once_per_step(monkeypatch
     np.testing.assert_array_equal(np.hstack((log.q, log.v)), sensed[1:101])
     np.testing.assert_array_equal(log.known_wrenches, logged.loggers["known_wrenches"].FindLog(context).data().T[1:101])
     assert np.abs(sensed[1:101] - sensed[:100]).max() > 1e-6  # a shift would be seen
+
+
+def _tiny_corrections() -> ModelCorrections:
+    """Corrections of no body (what the cache tests store; not a robot's calibration)."""
+    zero = np.zeros(2)
+    return ModelCorrections({}, zero, zero, 0.1, zero, zero)
+
+
+def test_the_calibration_cache_is_keyed_by_content_and_heals_a_corrupt_file(tmp_path, monkeypatch, capsys):
+    """The cache key follows the robot's files by content (an edited model file under the
+    same path calibrates again), a truncated cache file is calibrated again with a message,
+    and a calibration is saved atomically (no partial file left)."""
+    calls = []
+
+    def fake_calibration(scenario):
+        calls.append(scenario)
+        return _tiny_corrections(), None
+
+    monkeypatch.setattr(model_refinement, "calibrate_model", fake_calibration)
+    raw = yaml.safe_load(description_file("hrp4_like").read_text())
+    model = tmp_path / "robot.sdf"
+    model.write_text(model_file("hrp4_like").read_text())
+    raw["model"] = str(model)
+    description = tmp_path / "robot.yaml"
+    description.write_text(yaml.safe_dump(raw))
+    experiment = ResidualComparisonScenario(model=str(description))
+    cache = tmp_path / "cache"
+    first = calibration_file(experiment, cache)
+    refined_model(experiment, cache)
+    assert len(calls) == 1 and first.is_file() and sorted(p.name for p in cache.iterdir()) == [first.name]
+    model.write_text(model.read_text().replace("<mass>0.05</mass>", "<mass>0.06</mass>", 1))  # the URDF edited
+    edited = calibration_file(experiment, cache)
+    assert edited != first
+    refined_model(experiment, cache)
+    assert len(calls) == 2 and edited.is_file()
+    edited.write_bytes(edited.read_bytes()[:40])  # a run stopped while writing (before saves were atomic)
+    refined_model(experiment, cache)
+    assert len(calls) == 3 and "the cached calibration cannot be read" in capsys.readouterr().out
+    ModelCorrections.load(edited)  # written again, whole
+    assert not [p for p in cache.iterdir() if "partial" in p.name]

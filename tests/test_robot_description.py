@@ -258,3 +258,41 @@ def test_talos_stands_on_its_scaled_gains():
     weight = plant.CalcTotalMass(plant.GetMyContextFromRoot(root)) * 9.81
     total = sum(forces.sum() for forces in metrics.sphere_forces_N.values())
     assert total == pytest.approx(weight, rel=0.02)
+
+
+ZERO_INERTIA = "<inertia><ixx>0</ixx><ixy>0</ixy><ixz>0</ixz><iyy>0</iyy><iyz>0</iyz><izz>0</izz></inertia>"
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [
+        ("<mass>0.05</mass>", "<mass>nan</mass>", r"link 'L_HAND_J1_LINK' has a non-physical inertia .*mass > 0"),
+        ("<mass>0.05</mass>", "<mass>-2</mass>", r"link 'L_HAND_J1_LINK' has a non-physical inertia .*mass > 0"),
+        ("<mass>0.05</mass>", "<mass>0</mass>", r"link 'L_HAND_J1_LINK' has a non-physical inertia .*mass > 0"),
+        ("<ixx>1.20833333e-05</ixx>", "<ixx>nan</ixx>", r"link 'L_HAND_J1_LINK' has a non-physical .*Non-finite"),
+        ("<ixx>1.20833333e-05</ixx>", "<ixx>1.0</ixx>", r"link 'L_HAND_J1_LINK' has a non-physical inertia"),
+        (
+            "<mass>0.05</mass>",
+            "<mass>0</mass>" + ZERO_INERTIA,
+            r"link 'L_HAND_J1_LINK' is on the moving joint of type revolute but it and the links beyond it have no",
+        ),
+    ],
+)
+def test_a_model_with_a_non_physical_link_inertia_is_refused_naming_the_link(tmp_path, old, new, message):
+    """A link whose mass or inertia is not physical in the model file of a description is
+    refused when the robot is loaded (Drake's parser would replace it by a made-up inertia
+    and only warn), and so is a massless link at the end of a moving joint."""
+    text = models.model_file("hrp4_like").read_text()
+    link = text.index('<link name="L_HAND_J1_LINK">')
+    start = text.index(old, link)
+    edited = text[:start] + new + text[start + len(old) :]
+    if "<inertia>" in new:  # the zero inertia replaces the link's own
+        first = edited.index("<inertia>", start + len(new))
+        edited = edited[:first] + edited[edited.index("</inertia>", first) + len("</inertia>") :]
+    model = tmp_path / "robot.sdf"
+    model.write_text(edited)
+    raw = _builtin_raw("hrp4_like", tmp_path)
+    raw["model"] = str(model)
+    plant, scene_graph = _plant()
+    with pytest.raises(RobotDescriptionError, match=message):
+        add_humanoid(plant, _write(tmp_path, raw), scene_graph=scene_graph)

@@ -18,6 +18,7 @@ arrays, so the same call calibrates a real robot from its own recording.
 # No ``from __future__ import annotations``: yaml_load_typed reads the scenario's field types.
 
 import hashlib
+import os
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -34,6 +35,7 @@ from diagrams.scenarios import scenario_as_yaml
 from diagrams.station.conditions import check_model_refinement
 from diagrams.station.humanoid_station import HumanoidStation, add_scenario_station, default_plant_config
 from diagrams.station.motions import SlowMotion, slow_whole_body_motion
+from models import robot_description
 from systems.estimation.model_identification import (
     CalibrationLog,
     IdentificationOptions,
@@ -380,15 +382,37 @@ CALIBRATION_REVISION = (
 )
 
 
+#: The code a calibration runs: its sources are part of the cache's key.
+_CALIBRATION_CODE = ("models", "systems", "diagrams")
+
+
+def _content_digest(scenario: Any) -> str:
+    """A digest of what a calibration of ``scenario``'s robot depends on beyond its scenario:
+    the robot description and model file it names (by content, not by path), and the
+    project's sources under ``_CALIBRATION_CODE``."""
+    digest = hashlib.sha1()
+    description = robot_description(scenario.model)
+    for path in (description.source, description.model_file):
+        if path is not None:
+            digest.update(Path(path).read_bytes())
+    root = Path(__file__).resolve().parents[2]
+    for package in _CALIBRATION_CODE:
+        for source in sorted((root / package).rglob("*.py")):
+            digest.update(source.relative_to(root).as_posix().encode() + source.read_bytes())
+    return digest.hexdigest()
+
+
 def calibration_file(scenario: Any, cache_folder: Path) -> Path:
     """Where ``refined_model`` saves the calibration of ``scenario``'s robot in
     ``cache_folder``: named by a hash of ``refinement_scenario_for(scenario)``, the
-    identification's options and ``CALIBRATION_REVISION`` (not of the code itself: delete
-    the folder after an update that changes the calibration without a new revision)."""
+    identification's options, ``CALIBRATION_REVISION``, the robot's description and model
+    file (their content: an edited URDF is calibrated again) and the project's code (any
+    change of it calibrates again)."""
     text = (
         scenario_as_yaml(refinement_scenario_for(scenario))
         + repr((CALIBRATION_OPTIONS, TORQUE_OFFSET_PRIOR_FRACTION, COULOMB_PRIOR_FRACTION))
         + CALIBRATION_REVISION
+        + _content_digest(scenario)
     )
     key = hashlib.sha1(text.encode()).hexdigest()[:16]
     return Path(cache_folder) / f"model_corrections_{key}.npz"
@@ -414,8 +438,13 @@ def refined_model(scenario: Any, cache_folder: Path | None = None) -> ModelCorre
     if cache_folder is not None:
         path = calibration_file(scenario, cache_folder)
         if path.is_file():
-            print(f"model refinement: reusing {path}")
-            return ModelCorrections.load(path)
+            try:
+                corrections = ModelCorrections.load(path)
+            except ValueError as error:
+                print(f"model refinement: the cached calibration cannot be read ({error}): calibrating again")
+            else:
+                print(f"model refinement: reusing {path}")
+                return corrections
     print(
         f"model refinement: {calibration.calibration_duration:g} s calibration motion of the standing robot, "
         "then identification ...",
@@ -426,5 +455,7 @@ def refined_model(scenario: Any, cache_folder: Path | None = None) -> ModelCorre
     print(f"model refinement: done in {time.perf_counter() - start:.0f} s", flush=True)
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
-        corrections.save(path)
+        partial = path.with_name(f".{path.stem}.{os.getpid()}.partial.npz")
+        corrections.save(partial)
+        os.replace(partial, path)  # atomic: a run stopped while saving leaves no truncated file
     return corrections

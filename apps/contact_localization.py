@@ -57,6 +57,7 @@ import numpy as np
 from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
 
 from apps.runner import (
+    calibration_cache_folder,
     experiment_parser,
     non_negative_float,
     non_negative_int,
@@ -518,8 +519,8 @@ def _study(scenario: ContactLocalizationScenario, args, out_dir: Path, start: fl
     specs = sample_study_trials(scenario)
     if scenario.model_refinement == "calibrate":
         # Calibrated once, here; the workers read the saved corrections.
-        refined_model(scenario, Path(args.out) / "model_refinement")
-        scenario.model_refinement = str(calibration_file(scenario, Path(args.out) / "model_refinement"))
+        refined_model(scenario, calibration_cache_folder(args))
+        scenario.model_refinement = str(calibration_file(scenario, calibration_cache_folder(args)))
     phases = {"calibration": time.perf_counter() - start}  # wall time of each phase, s
     scenario_yaml = scenario_as_yaml(scenario)
     scenario.multi_contact = scenario.multi_contact or scenario.contacts == 2

@@ -8,7 +8,7 @@ internal residual (eq. 11: it feels the legs too, and the robot bends as if sitt
 
 By default it runs in the realistic world (``diagrams.station.conditions``: the invariant
 EKF's base state, realistic sensor, friction and model imperfections, the model refined
-from a calibration motion first, cached in ``DIR/model_refinement/``); ``--ideal`` runs it
+from a calibration motion first, cached in ``DIR/calibration_cache/``); ``--ideal`` runs it
 in the ideal world. The admittance keeps both soles and the centre of mass still
 (``closed_chain_projection``, ``hold_center_of_mass``).
 
@@ -29,6 +29,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from apps.runner import (
+    calibration_cache_folder,
     experiment_parser,
     logged_signals,
     memory_allocator,
@@ -180,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
     def body() -> int:
         scenario = scenario_from_args(PushAndComplyScenario, args, seed=args.seed)
         out_dir = output_folder(args, "push_and_comply")
-        corrections = refined_model(scenario, Path(args.out) / "model_refinement")
+        corrections = refined_model(scenario, calibration_cache_folder(args))
         meshcat = replay_meshcat(True, args.headless)
         print(
             f"push and comply: {scenario.model}, {scenario.push_peak_force:g} N"

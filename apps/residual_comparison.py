@@ -27,6 +27,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from apps.runner import (
+    calibration_cache_folder,
     experiment_parser,
     logged_signals,
     output_folder,
@@ -240,7 +241,7 @@ def main(argv: list[str] | None = None) -> int:
         check_metrics_window(scenario)
         build_residual_comparison_diagram(scenario)  # a bad model, body or setting fails here, before calibrating
         out_dir = output_folder(args, "residual_comparison")
-        corrections = refined_model(scenario, Path(args.out) / "model_refinement")
+        corrections = refined_model(scenario, calibration_cache_folder(args))
         # A bad model, body or setting: a ValueError, reported by run_app.
         run = run_once(scenario, model_corrections=corrections)
         _plot(out_dir, run)

@@ -13,6 +13,7 @@ import dataclasses
 import json
 import math
 import os
+import shutil
 import sys
 import tempfile
 import time
@@ -196,20 +197,61 @@ def replace_fields(config: Any, **overrides: Any) -> Any:
     return dataclasses.replace(config, **{name: value for name, value in overrides.items() if value is not None})
 
 
+#: The output folders of the run under way: (folder, the previous output moved aside or None).
+_RUN_OUTPUTS: list[tuple[Path, Path | None]] = []
+
+#: Where the apps keep the model calibrations they reuse (``OUT/<CALIBRATION_CACHE>/``): not
+#: an app's output folder, which a run replaces whole.
+CALIBRATION_CACHE = "calibration_cache"
+
+
 def output_folder(args: argparse.Namespace, experiment: str) -> Path:
-    """``OUT/<experiment>/``, created.
+    """``OUT/<experiment>/``, created empty for this run. An earlier output there is moved
+    aside and comes back unchanged when the run fails (``run_app``: an error, exit code 2,
+    or an interruption); on success it is deleted, so the folder holds this run's files only.
 
     Raises:
         ValueError: it exists as a file, or cannot be created (the reason named).
     """
     folder = Path(args.out) / experiment
+    if any(folder == pending for pending, _ in _RUN_OUTPUTS):
+        return folder
     if folder.exists() and not folder.is_dir():
         raise ValueError(f"the output folder '{folder}' is a file")
+    previous = None
     try:
-        folder.mkdir(parents=True, exist_ok=True)
+        if folder.exists():
+            previous = folder.with_name(f".{folder.name}.previous-{os.getpid()}")
+            if previous.exists():
+                shutil.rmtree(previous)
+            folder.rename(previous)
+        folder.mkdir(parents=True)
     except OSError as error:
+        if previous is not None and previous.exists() and not folder.exists():
+            previous.rename(folder)
         raise ValueError(f"cannot create the output folder '{folder}': {error.strerror or error}") from None
+    _RUN_OUTPUTS.append((folder, previous))
     return folder
+
+
+def calibration_cache_folder(args: argparse.Namespace) -> Path:
+    """``OUT/calibration_cache/``: where ``diagrams.residuals.model_refinement.refined_model``
+    keeps the calibrations the realistic apps reuse."""
+    return Path(args.out) / CALIBRATION_CACHE
+
+
+def finish_outputs(success: bool) -> None:
+    """Ends the run's output folders: kept (the earlier outputs deleted) on ``success``, else
+    removed with the earlier outputs put back as they were. ``run_app`` calls it."""
+    while _RUN_OUTPUTS:
+        folder, previous = _RUN_OUTPUTS.pop()
+        if success:
+            if previous is not None:
+                shutil.rmtree(previous, ignore_errors=True)
+            continue
+        shutil.rmtree(folder, ignore_errors=True)
+        if previous is not None and previous.exists():
+            previous.rename(folder)
 
 
 def replay_meshcat(enabled: bool, headless: bool) -> Meshcat | None:
@@ -351,25 +393,38 @@ def print_written(folder: Path) -> None:
 def run_app(name: str, body: Callable[[], int | None]) -> int:
     """Runs an app's ``body``; a ``ValueError`` (bad scenario, bad option, bad input data) or
     an ``OSError`` (a file that cannot be read or written) becomes ``<name>: error:
-    <message>`` on stderr and exit code 2, never a traceback."""
+    <message>`` on stderr and exit code 2, never a traceback. The run's output folders
+    (``output_folder``) are kept when ``body`` returns 0 or 1 (it ran and reports, e.g. a
+    robot that fell); after an error or an interruption they are removed and the earlier
+    outputs put back unchanged."""
     try:
-        return int(body() or 0)
+        code = int(body() or 0)
     except ValueError as error:
+        finish_outputs(False)
         print(f"\n{name}: error: {error}", file=sys.stderr)
         return 2
     except OSError as error:
+        finish_outputs(False)
         where = f" '{error.filename}'" if error.filename else ""
         print(f"\n{name}: error: {error.strerror or error}{where}", file=sys.stderr)
         return 2
+    except BaseException:
+        finish_outputs(False)
+        raise
+    finish_outputs(code in (0, 1))
+    return code
 
 
 __all__ = [
+    "CALIBRATION_CACHE",
     "DEFAULT_OUT",
     "ScenarioError",
     "SimulationRun",
     "add_out_argument",
+    "calibration_cache_folder",
     "writable_folder",
     "experiment_parser",
+    "finish_outputs",
     "json_text",
     "logged_signals",
     "memory_allocator",

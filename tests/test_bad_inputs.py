@@ -1,9 +1,11 @@
 """Bad inputs to the apps are refused with one line that names them, before anything is
 simulated, and leave an earlier output untouched (issue 34's list): an output folder that is
 a file or cannot be written, non-finite durations, negative durations and periods, an empty
-or partly unknown models list, counts of zero; and a run whose metrics hold NumPy values
-(a robot that fell) writes them."""
+or partly unknown models list, counts of zero; a run whose metrics hold NumPy values (a
+robot that fell) writes them; a run that fails late, or is interrupted, puts the earlier
+output back byte for byte, and one that succeeds replaces it whole."""
 
+import argparse
 import json
 import math
 from pathlib import Path
@@ -12,7 +14,15 @@ import numpy as np
 import pytest
 
 from apps import benchmark, contact_localization, push_and_comply, residual_comparison, standing
-from apps.runner import json_text, non_negative_float, positive_int, run_app, simulate, writable_folder
+from apps.runner import (
+    json_text,
+    non_negative_float,
+    output_folder,
+    positive_int,
+    run_app,
+    simulate,
+    writable_folder,
+)
 
 
 def _refused(main, argv: list[str], capsys) -> str:
@@ -106,3 +116,59 @@ def test_os_errors_and_non_finite_durations_are_one_line_errors(capsys):
     assert "example: error: Permission denied '/read-only/metrics.json'" in capsys.readouterr().err
     with pytest.raises(ValueError, match="positive and finite"):
         simulate(None, math.inf)
+
+
+def _snapshot(folder: Path) -> dict:
+    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.mark.parametrize("failure", [ValueError("bad input found late"), OSError(28, "No space left on device")])
+def test_a_run_that_fails_leaves_the_earlier_output_byte_identical(tmp_path, failure, capsys):
+    args = argparse.Namespace(out=tmp_path)
+    earlier = tmp_path / "example"
+    earlier.mkdir()
+    (earlier / "metrics.json").write_text('{"earlier": 1}')
+    (earlier / "plot.png").write_bytes(b"\x89PNG earlier")
+    before = _snapshot(tmp_path)
+
+    def body():
+        folder = output_folder(args, "example")
+        assert not (folder / "metrics.json").exists()  # a run starts from an empty folder
+        (folder / "metrics.json").write_text('{"half": "written"}')
+        raise failure
+
+    assert run_app("example", body) == 2
+    assert "example: error:" in capsys.readouterr().err
+    assert _snapshot(tmp_path) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["example"]  # nothing left aside
+
+
+def test_an_interrupted_run_puts_the_earlier_output_back(tmp_path):
+    args = argparse.Namespace(out=tmp_path)
+    (tmp_path / "example").mkdir()
+    (tmp_path / "example" / "metrics.json").write_text("earlier")
+
+    def body():
+        (output_folder(args, "example") / "metrics.json").write_text("partial")
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_app("example", body)
+    assert (tmp_path / "example" / "metrics.json").read_text() == "earlier"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["example"]
+
+
+@pytest.mark.parametrize("code", [0, 1])
+def test_a_run_that_reports_replaces_the_earlier_output_whole(tmp_path, code):
+    """Exit 0, or 1 (it ran and reports a failure, e.g. a robot that fell): the folder holds
+    this run's files only."""
+    args = argparse.Namespace(out=tmp_path)
+    (tmp_path / "example").mkdir()
+    (tmp_path / "example" / "stale.json").write_text("from an earlier run")
+
+    def body():
+        (output_folder(args, "example") / "metrics.json").write_text("new")
+        return code
+
+    assert run_app("example", body) == code
+    assert _snapshot(tmp_path) == {"example/metrics.json": b"new"}

@@ -244,7 +244,7 @@ def test_app_calibrates_once_in_the_realistic_world(tmp_path, monkeypatch):
         scenario["base_state"] == "invariant_ekf" and scenario["imperfections"]["model_mismatch"]["mass_percent"] == 5
     )
     saved = Path(scenario["model_refinement"])
-    assert saved.is_file() and saved.parent == tmp_path / "model_refinement"
+    assert saved.is_file() and saved.parent == tmp_path / "calibration_cache"
     assert metrics["trials"] == 1
 
 

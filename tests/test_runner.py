@@ -13,6 +13,7 @@ from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
 from apps.runner import (
     experiment_parser,
+    finish_outputs,
     logged_signals,
     output_folder,
     run_app,
@@ -79,6 +80,7 @@ def test_shorthand_options_override_fields_unless_none(tmp_path):
         scenario_from_args(_Scenario, args, speed=1.0)
     folder = output_folder(args, "example")
     assert folder == tmp_path / "example" and folder.is_dir()
+    finish_outputs(True)  # what run_app does at the end of a run
 
 
 def test_run_app_turns_value_errors_into_a_message_and_exit_code_2(capsys):

@@ -21,7 +21,9 @@ the same with Meshcat recording its replay: microseconds of wall and CPU time pe
 the real-time factor; the Kalman force observer's throughput on a real Nao recording (the
 authors' ``Force_Y_data``, shipped in ``data/hawley2019-nao``; ``HCO_SHARED_DIR`` moves it, see
 ``systems.observer.nao_dataset``: a missing recording stops the run with an error naming the
-path); one update of the contact localizer (Flacco et al. Sec. VI) on ``hrp4_like``; and the
+path); one update of the contact localizer (Flacco et al. Sec. VI) on ``hrp4_like``; the
+one-or-two-contact fit (``MultiContactLocalizer.fit_one`` and ``fit_two``, ``--fit-pairs``
+two-contact trials' exact inputs at the standing pose); and the
 offline estimation from a 1 kHz ``hrp4_like`` log (``--log-seconds``, issue 14: residuals,
 force, detector and localizer on one core), as its real-time factor; and, on the same log,
 the calibration's replay of the three residuals (``replay_residuals`` with the classical
@@ -44,6 +46,7 @@ from apps.runner import (
     add_out_argument,
     memory_allocator,
     non_negative_float,
+    non_negative_int,
     output_folder,
     positive_float,
     positive_int,
@@ -324,6 +327,61 @@ def benchmark_contact_localizer(model: str = "hrp4_like", *, calls: int = 100, b
     }
 
 
+def benchmark_multi_contact_fit(model: str = "hrp4_like", *, pairs: int = 10, seed: int = 51) -> dict:
+    """``MultiContactLocalizer.fit_one`` and ``fit_two`` (the study's one-or-two-contact fit)
+    on the exact inputs of ``pairs`` two-contact trials of the study (``sample_trials``), at
+    the standing pose after its precomputation (a steady posture), in ms: medians, the
+    slowest ``fit_two``, and one ``fit_one`` at a new pose (its precomputation included)."""
+    from diagrams.residuals.contact_localization import (
+        ContactLocalizationScenario,
+        build_contact_localization_diagram,
+        sample_trials,
+    )
+    from systems.residuals.multi_contact import MultiContactLocalizer
+
+    _, handles = build_contact_localization_diagram(ContactLocalizationScenario(model=model, noise=False))
+    plant = handles.plant
+    x0 = handles.station.initial_state
+    nq = plant.num_positions()
+    context = plant.CreateDefaultContext()
+    plant.SetPositionsAndVelocities(context, x0)
+    dynamics = FloatingBaseDynamics(plant)
+    localizer = MultiContactLocalizer(plant, handles.scene_graph, exclude_bodies=handles.excluded_bodies)
+    inputs = []
+    for spec in sample_trials(model, pairs, seed, contacts=2):
+        wrench, tau = np.zeros(6), np.zeros(plant.num_velocities() - 6)
+        for contact in spec["contacts"]:
+            body = plant.GetBodyByName(contact["body"])
+            f, p_B = np.asarray(contact["force_world"]), np.asarray(contact["point_body"])
+            p_W = plant.EvalBodyPoseInWorld(context, body).multiply(p_B)
+            wrench += np.concatenate((np.cross(p_W, f), f))
+            tau += dynamics.floating_jacobian(x0[:nq], body.body_frame(), p_B).T @ f
+        inputs.append((wrench, tau))
+    q = x0[:nq]
+    localizer.fit_two(q, *inputs[0])  # the pose's precomputation
+    one, two = [], []
+    for wrench, tau in inputs:
+        start = time.perf_counter()
+        localizer.fit_one(q, wrench, tau)
+        one.append(time.perf_counter() - start)
+        start = time.perf_counter()
+        localizer.fit_two(q, wrench, tau)
+        two.append(time.perf_counter() - start)
+    moved = q.copy()
+    moved[7:] += 1e-6 * np.random.default_rng(seed).normal(size=nq - 7)
+    start = time.perf_counter()
+    localizer.fit_one(moved, *inputs[0])
+    new_pose = time.perf_counter() - start
+    return {
+        "model": model,
+        "pairs": pairs,
+        "fit_one_median_ms": 1e3 * float(np.median(one)),
+        "fit_two_median_ms": 1e3 * float(np.median(two)),
+        "fit_two_max_ms": 1e3 * float(np.max(two)),
+        "fit_one_new_pose_ms": 1e3 * new_pose,
+    }
+
+
 def benchmark_log_estimation(seconds: float = 2.0, *, repeats: int = 3, push_seconds: float | None = None) -> dict:
     """Offline estimation from a log (issue 14's floor: >= 5x real time on a 1 kHz log of a
     30+ DoF robot, one core): ``hrp4_like`` (34 joints) simulated standing for ``seconds``
@@ -448,6 +506,12 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="the push's duration in that log, from 0.5 s (default: to the end, the localizer's worst case)",
     )
+    parser.add_argument(
+        "--fit-pairs",
+        type=non_negative_int,
+        default=10,
+        help="two-contact trials the one-or-two-contact fit is timed on (0 skips it)",
+    )
     add_out_argument(parser)
     args = parser.parse_args(argv)
     return run_app(EXPERIMENT, lambda: _run(args))
@@ -522,6 +586,22 @@ def _run(args: argparse.Namespace) -> int:
                 f"{r['model']:<10} {r['num_primitives']:>10} {r['calc_mass_matrix_us']:>12.1f} us"
                 f" {r['localizer_update_us']:>11.1f} us ({r['localizer_update_ratio']:>5.1f}x) {'2000 us':>8}"
             )
+    fit_rows = [
+        benchmark_multi_contact_fit(name, pairs=args.fit_pairs)
+        for name in names
+        if name == "hrp4_like" and args.fit_pairs > 0
+    ]
+    if fit_rows and args.fit_pairs > 0:
+        _table_header(
+            f"One-or-two-contact fit (MultiContactLocalizer), {args.fit_pairs} two-contact trials' exact inputs, "
+            "at the standing pose",
+            f"{'model':<10} {'fit_one':>10} {'fit_two':>10} {'fit_two max':>12} {'fit_one, new pose':>18}",
+        )
+        for r in fit_rows:
+            print(
+                f"{r['model']:<10} {r['fit_one_median_ms']:>7.1f} ms {r['fit_two_median_ms']:>7.1f} ms"
+                f" {r['fit_two_max_ms']:>9.1f} ms {r['fit_one_new_pose_ms']:>15.1f} ms"
+            )
     log_rows = []
     if "hrp4_like" in names and args.log_seconds > 0:  # F/T feet: the whole offline pipeline
         log_rows = [benchmark_log_estimation(args.log_seconds, push_seconds=args.log_push_seconds)]
@@ -560,6 +640,7 @@ def _run(args: argparse.Namespace) -> int:
             "force_observer": observer,
             "closed_loop": loop_rows,
             "contact_localizer": localizer_rows,
+            "multi_contact_fit": fit_rows,
         },
     )
     print(f"\nmemory allocator: {memory_allocator()}")

@@ -12,7 +12,6 @@ surface, a force of 5-40 N within 60 deg of the inward normal.
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -450,39 +449,6 @@ def test_log_evidence_is_the_gaussian_marginal_likelihood(hrp4, localizer):
     assert localizer._log_evidence(pose, data, cand, misfit) == pytest.approx(
         density + 0.5 * rows * math.log(2 * math.pi), rel=1e-9
     )
-
-
-def test_timing(hrp4, localizer):
-    """Not an assertion: the median time of fit_one and fit_two on hrp4_like at a known pose
-    (the pose's precomputation excluded, as in a steady posture)."""
-    plant, _, context = hrp4
-    q = plant.GetPositions(context)
-    rng = np.random.default_rng(5)
-    cases = _two_contact_cases(plant, context, localizer, 10, seed=51)
-    localizer.fit_two(q, *_exact_residuals(plant, context, cases[0]))  # precomputation
-    one, two = [], []
-    for contacts in cases:
-        wrench, tau = _exact_residuals(plant, context, contacts)
-        start = time.perf_counter()
-        localizer.fit_one(q, wrench, tau)
-        one.append(time.perf_counter() - start)
-        start = time.perf_counter()
-        localizer.fit_two(q, wrench, tau)
-        two.append(time.perf_counter() - start)
-    q2 = q.copy()
-    q2[7:] += 1e-3 * rng.normal(size=q.size - 7)
-    start = time.perf_counter()
-    localizer.fit_one(q2, *_exact_residuals(plant, context, cases[0]))
-    new_pose = time.perf_counter() - start
-    print(
-        f"\nfit_one median {1e3 * np.median(one):.1f} ms, fit_two median {1e3 * np.median(two):.1f} ms "
-        f"(max {1e3 * np.max(two):.1f}); fit_one at a new pose {1e3 * new_pose:.1f} ms"
-    )
-
-
-# ---------------------------------------------------------------------------------------
-# Bad input.
-# ---------------------------------------------------------------------------------------
 
 
 def test_bad_input(hrp4, localizer):

@@ -33,7 +33,8 @@ def test_app_writes_plot_replay_and_metrics(app_output):
     for key in ("rms_error_N", "steady_state_error_N"):
         assert set(m[key]) == {"x", "y", "z"} and all(np.isfinite(v) for v in m[key].values())
     assert m["floors_N"] == {"steady_state": 0.5, "rms": 1.0}
-    assert isinstance(m["meets_floors"], bool) and metrics["summary"]["seed"] == 2
+    floors_met = max(m["steady_state_error_N"].values()) <= 0.5 and max(m["rms_error_N"].values()) <= 1.0
+    assert m["meets_floors"] is floors_met and metrics["summary"]["seed"] == 2
     assert metrics["scenario"]["seed"] == 2 and metrics["scenario"]["experiments"] == [3]
     assert m["invalid_samples"] == 0 and m["fsr_saturated_samples"] == 0 and m["base_height_drop_m"] < 0.01
 

@@ -103,3 +103,20 @@ def test_scenario_errors_from_the_command_line(tmp_path, capsys):
     assert "nao_force_observer: error:" in capsys.readouterr().err
     assert nao_force_observer.main(["--scenario-text", "experiments: [4]", "--no-replay", "--out", str(tmp_path)]) == 2
     assert "unknown experiment 4" in capsys.readouterr().err
+
+
+def test_experiments_1_and_2_meet_the_papers_floors(tmp_path):
+    """Simulated experiments 1 (2 N through the torso at three angles, eq. 23) and 2 (a 1.13 kg
+    load pulling the right arm sideways), at the paper's durations: the estimate's error
+    against the expected virtual force of eq. (11), which the simulator's applied force
+    determines, meets the floors (steady state <= 0.5 N, RMS <= 1.0 N per component)."""
+    code = nao_force_observer.main(
+        ["--out", str(tmp_path), "--headless", "--no-replay", "--scenario-text", "experiments: [1, 2]", "--seed", "1"]
+    )
+    assert code == 0
+    metrics = json.loads((tmp_path / "nao_force_observer" / "metrics.json").read_text())
+    for experiment in ("experiment_1", "experiment_2"):
+        m = metrics[experiment]
+        assert max(m["steady_state_error_N"].values()) <= 0.5, (experiment, m["steady_state_error_N"])
+        assert max(m["rms_error_N"].values()) <= 1.0, (experiment, m["rms_error_N"])
+        assert m["meets_floors"] is True and m["invalid_samples"] == 0

@@ -27,7 +27,15 @@ from pathlib import Path
 
 import numpy as np
 
-from apps.runner import add_out_argument, output_folder, print_written, replay_meshcat, run_app, write_metrics
+from apps.runner import (
+    add_out_argument,
+    output_folder,
+    positive_float,
+    print_written,
+    replay_meshcat,
+    run_app,
+    write_metrics,
+)
 from diagrams.residuals.log_estimation import (
     LogEstimates,
     LogEstimationSettings,
@@ -61,7 +69,7 @@ def _parse(argv):
     parser.add_argument("--no-replay", action="store_true", help="skip the Meshcat replay")
     parser.add_argument(
         "--calibrate-first",
-        type=float,
+        type=positive_float,
         default=None,
         metavar="S",
         help="measure the detector's noise model on the log's first S seconds (free of contact) instead of "
@@ -69,7 +77,7 @@ def _parse(argv):
     )
     parser.add_argument(
         "--localization-period",
-        type=float,
+        type=positive_float,
         default=LogEstimationSettings.localization_period,
         metavar="S",
         help=f"s between two localizations in contact (default {LogEstimationSettings.localization_period}; the "

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from apps import estimate_from_log as estimate_from_log_app
 from diagrams.residuals.log_estimation import (
     LogEstimationSettings,
     build_estimator_plant,
@@ -182,6 +183,39 @@ def test_log_inputs_errors(simulated, robot):
     wrong_frame = replace(short, wrenches=wrenches)
     with pytest.raises(ValueError, match=r"wrenches \['l_foot'\] are not F/T frames of the robot"):
         log_inputs(robot, wrong_frame)
+
+
+def test_gaps_and_implausible_values_are_refused_naming_them(simulated, robot, tmp_path, capsys):
+    """A gap in the time column is refused with its time (never interpolated across: a 100 s
+    gap once became a 101 s contact on the wrong link), and so is a joint velocity, gyro rate
+    or acceleration beyond physical plausibility (one 1e200 rad/s once turned 800 rows into
+    NaN with exit code 0); the app says so in one line, exit code 2."""
+    log, _ = simulated
+    short = log.select(slice(0, 300))
+    gap = short.select(slice(None))
+    gap.time = short.time + np.where(np.arange(300) >= 150, 100.0, 0.0)
+    with pytest.raises(ValueError, match=r"a gap of 100\.001 s after t = 0\.149 s"):
+        log_inputs(robot, gap)
+    absurd = short.select(slice(None))
+    absurd.joint_velocities = short.joint_velocities.copy()
+    absurd.joint_velocities[200, 3] = 1e200
+    name = short.joint_names[3]
+    with pytest.raises(ValueError, match=rf"joint_velocities \(channel '{name}'\) is 1e\+200 rad/s at t = 0\.2 s"):
+        log_inputs(robot, absurd)
+    spinning = short.select(slice(None))
+    spinning.imu_angular_velocity = short.imu_angular_velocity.copy()
+    spinning.imu_angular_velocity[10, 2] = -60.0
+    with pytest.raises(ValueError, match=r"imu_angular_velocity \(channel 'z'\) is -60 rad/s at t = 0\.01 s"):
+        log_inputs(robot, spinning)
+    path = tmp_path / "gap.csv"
+    write_log(gap, path)
+    code = estimate_from_log_app.main(["--robot", "hrp4_like", "--log", str(path), "--out", str(tmp_path)])
+    err = capsys.readouterr().err
+    assert code == 2 and "a gap of 100.001 s" in err and "Traceback" not in err
+    assert not (tmp_path / "estimate_from_log").exists()
+    with pytest.raises(SystemExit):
+        estimate_from_log_app.main(["--robot", "hrp4_like", "--log", str(path), "--calibrate-first", "-0.2"])
+    assert "--calibrate-first: must be finite and > 0" in capsys.readouterr().err
 
 
 def test_jittered_log_is_resampled(simulated, robot):

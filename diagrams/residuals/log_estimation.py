@@ -217,6 +217,57 @@ def _frame_rotations(plant: MultibodyPlant, frames: Sequence, q: np.ndarray) -> 
     return out
 
 
+#: A step of the log's time longer than this many median periods is a gap: refused, never
+#: interpolated across (the estimators are observers of a fixed period).
+MAX_GAP_PERIODS = 5.0
+#: A joint velocity beyond this multiple of the robot's velocity limit, or beyond
+#: ``MAX_JOINT_SPEED`` where the model has none, is not physical (rad/s or m/s).
+VELOCITY_LIMIT_FACTOR = 10.0
+MAX_JOINT_SPEED = 100.0
+#: An IMU reading beyond these is not physical: 2000 deg/s and 16 g, the widest ranges of
+#: the MEMS IMUs humanoids carry (rad/s, m/s^2).
+MAX_GYRO_RATE = math.radians(2000.0)
+MAX_ACCELERATION = 16.0 * 9.81
+
+
+def _check_no_gap(time: np.ndarray, period: float) -> None:
+    """Raises ValueError naming the first step of ``time`` longer than ``MAX_GAP_PERIODS``
+    median periods."""
+    steps = np.diff(time)
+    gaps = np.flatnonzero(steps > MAX_GAP_PERIODS * period)
+    if gaps.size:
+        k = int(gaps[0])
+        raise ValueError(
+            f"the log has a gap of {steps[k]:.6g} s after t = {time[k]:.6g} s ({gaps.size} gap(s) longer than "
+            f"{MAX_GAP_PERIODS:g} times its median period of {period:.6g} s): the estimators cannot run across it; "
+            "split the log into its segments"
+        )
+
+
+def _check_plausible(robot: EstimatorPlant, log: RobotLog, column_order: list) -> None:
+    """Raises ValueError naming the channel and the first time of a value beyond physical
+    plausibility: a joint velocity beyond ``VELOCITY_LIMIT_FACTOR`` times the joint's limit
+    (``MAX_JOINT_SPEED`` without one), an IMU rate or acceleration beyond its range."""
+    plant = robot.plant
+    upper = plant.GetVelocityUpperLimits()[[j.velocity_start() for j in column_order]]
+    given = np.isfinite(upper) & (upper > 0.0)
+    limits = np.where(given, VELOCITY_LIMIT_FACTOR * np.where(given, upper, 1.0), MAX_JOINT_SPEED)
+    checks = [("joint_velocities", log.joint_velocities, limits, log.joint_names, "rad/s")]
+    if log.imu_angular_velocity is not None:
+        checks.append(("imu_angular_velocity", log.imu_angular_velocity, MAX_GYRO_RATE, "xyz", "rad/s"))
+    if log.imu_linear_acceleration is not None:
+        checks.append(("imu_linear_acceleration", log.imu_linear_acceleration, MAX_ACCELERATION, "xyz", "m/s^2"))
+    for name, values, bound, channels, unit in checks:
+        beyond = np.abs(values) > bound
+        if beyond.any():
+            k, c = (int(i) for i in np.argwhere(beyond)[0])
+            limit = float(np.broadcast_to(bound, values.shape[1:])[c])
+            raise ValueError(
+                f"the log's {name} (channel {channels[c]!r}) is {values[k, c]:.6g} {unit} at t = {log.time[k]:.6g} s, "
+                f"beyond the physically plausible {limit:.6g} {unit}"
+            )
+
+
 def log_inputs(
     robot: EstimatorPlant,
     log: RobotLog,
@@ -233,7 +284,8 @@ def log_inputs(
     Raises:
         ValueError: a joint of the log not on the robot, a robot joint missing from the
             log, no base pose or velocity, an F/T frame that is not the robot's, a robot
-            F/T frame missing from the log.
+            F/T frame missing from the log; a gap in its time (``MAX_GAP_PERIODS``); a joint
+            velocity or IMU reading beyond physical plausibility (the channel and time named).
     """
     settings = settings or LogEstimationSettings()
     plant = robot.plant
@@ -263,6 +315,8 @@ def log_inputs(
         raise ValueError(f"the log has no wrench for the robot's F/T frames {absent}")
     steps = np.diff(log.time)
     period = float(np.median(steps))
+    _check_no_gap(log.time, period)
+    _check_plausible(robot, log, column_order=[joints[name] for name in log.joint_names])
     resampled = bool(np.max(np.abs(steps - period)) > settings.uniform_tolerance * period)
     if resampled:
         log = resample_uniform(log, period)

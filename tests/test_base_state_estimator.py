@@ -847,3 +847,31 @@ def test_contact_flags_from_fsr_and_the_system():
         FootContactFromFsr(50.9, weight_fraction=1.5)
     with pytest.raises(ValueError, match="robot_weight"):
         FootContactFromFsr(0.0)
+
+
+@pytest.mark.parametrize(("period", "every"), [(1e-3, 100), (0.010104, 10), (0.003003, 33), (0.25, 1)])
+def test_level_ground_period_is_rounded_to_the_update_period_not_refused(period, every):
+    """Real logs come at 99, 333 or 4 Hz: the level-ground correction runs every
+    round(0.1 s / period) updates (at least one) instead of refusing a period that does not
+    divide 0.1 s; the filter then runs at that period."""
+    plant = MultibodyPlant(0.0)
+    handles = add_humanoid(plant, "hrp4_like")
+    plant.Finalize()
+    estimator = InvariantEkfBaseStateEstimator(
+        plant,
+        handles.imu_frame,
+        [handles.sole_frames["left"], handles.sole_frames["right"]],
+        period=period,
+        level_ground_tilt_std=LEVEL_GROUND_TILT_STD,
+    )
+    assert estimator.level_ground_period_used == pytest.approx(every * period, rel=1e-12)
+    context = estimator.CreateDefaultContext()
+    n = estimator.GetInputPort("joint_positions").size()
+    estimator.GetInputPort("angular_velocity").FixValue(context, [0.0, 0.0, 0.0])
+    estimator.GetInputPort("linear_acceleration").FixValue(context, [0.0, 0.0, 9.81])
+    estimator.GetInputPort("joint_positions").FixValue(context, np.zeros(n))
+    estimator.GetInputPort("foot_contact").FixValue(context, [1.0, 1.0])
+    for step in range(every + 2):
+        context.SetTime(step * period)
+        context.SetDiscreteState(estimator.EvalUniquePeriodicDiscreteUpdate(context))
+    assert estimator.GetOutputPort("valid").Eval(context)[0] == 1.0

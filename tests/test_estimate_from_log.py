@@ -218,6 +218,18 @@ def test_gaps_and_implausible_values_are_refused_naming_them(simulated, robot, t
     assert "--calibrate-first: must be finite and > 0" in capsys.readouterr().err
 
 
+def test_a_log_at_99_hz_without_base_state_gets_the_ekf(simulated, robot):
+    """A log at 99 Hz (10.104 ms, a period that does not divide the EKF's 0.1 s level-ground
+    period) without base pose and velocity runs the invariant EKF at its own period (it was
+    refused: "level_ground_period must be a multiple of period")."""
+    log, _ = simulated
+    slow = log.select(slice(0, None, 10))
+    slow.time = slow.time * 1.0104
+    inputs = log_inputs(robot, replace(slow, base_pose=None, base_velocity=None))
+    assert inputs.base_estimated and inputs.period == pytest.approx(0.010104)
+    assert np.isfinite(inputs.state).all()
+
+
 def test_jittered_log_is_resampled(simulated, robot):
     log, _ = simulated
     short = log.select(slice(0, 300))

@@ -27,7 +27,13 @@ from pydrake.geometry import Meshcat
 from pydrake.systems.analysis import ApplySimulatorConfig, Simulator, SimulatorConfig
 from pydrake.systems.framework import Context, Diagram
 
-from diagrams.scenarios import ScenarioError, check_finite_and_signs, load_scenario, scenario_as_dict
+from diagrams.scenarios import (
+    ScenarioError,
+    check_finite_and_signs,
+    load_scenario,
+    scenario_as_dict,
+    scenario_file_text,
+)
 from diagrams.station.conditions import set_ideal_conditions
 from models import robot_description
 
@@ -63,6 +69,12 @@ def experiment_parser(
         default=None,
         metavar="YAML",
         help="YAML overrides applied after --scenario, e.g. --scenario-text 'seed: 3'",
+    )
+    parser.add_argument(
+        "--print-scenario",
+        action="store_true",
+        help="print the scenario this command would run (YAML, every field, after --scenario, --scenario-text "
+        "and the other options) and exit: a file to start from",
     )
     add_out_argument(parser)
     parser.add_argument("--headless", action="store_true", help="no live Meshcat URL (the replays are still written)")
@@ -155,7 +167,8 @@ def scenario_from_args(schema: type, args: argparse.Namespace, defaults: Any = N
     ``schema()``); with ``--ideal``, its condition fields set to the ideal world
     (``diagrams.station.conditions``); then each keyword in ``overrides`` whose value is not None replaces that
     field (an app's shorthand options such as ``--seed``); last, ``--robot`` replaces its
-    ``model`` (or its ``models`` list), after the description is read and checked.
+    ``model`` (or its ``models`` list), after the description is read and checked. With
+    ``--print-scenario`` it prints the result as a scenario file and exits (``SystemExit(0)``).
 
     Raises:
         ScenarioError: see ``diagrams.scenarios.load_scenario``; an override of an unknown field.
@@ -180,6 +193,10 @@ def scenario_from_args(schema: type, args: argparse.Namespace, defaults: Any = N
             raise ScenarioError(f"{schema.__name__} has no field '{name}'")
         setattr(scenario, name, value)
     check_finite_and_signs(scenario)
+    if getattr(args, "print_scenario", False):
+        header = f"A scenario of {schema.__module__}.{schema.__qualname__} (SI units)."
+        print(scenario_file_text(scenario, header), end="")
+        raise SystemExit(0)
     return scenario
 
 

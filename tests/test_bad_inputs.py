@@ -172,3 +172,35 @@ def test_a_run_that_reports_replaces_the_earlier_output_whole(tmp_path, code):
 
     assert run_app("example", body) == code
     assert _snapshot(tmp_path) == {"example/metrics.json": b"new"}
+
+
+@pytest.mark.parametrize(
+    ("main", "schema_path", "argv", "field", "value"),
+    [
+        (standing.main, "diagrams.station.standing.StandingScenario", ["--duration", "3"], "duration", 3.0),
+        (
+            push_and_comply.main,
+            "diagrams.residuals.push_and_comply.PushAndComplyScenario",
+            ["--scenario-text", "push_peak_force: 5.0", "--seed", "4"],
+            "push_peak_force",
+            5.0,
+        ),
+    ],
+)
+def test_print_scenario_writes_the_scenario_the_command_would_run(main, schema_path, argv, field, value, capsys):
+    """``--print-scenario`` prints every field after the scenario options and exits 0,
+    without simulating: the text loads back into the same scenario."""
+    import importlib
+
+    from diagrams.scenarios import load_scenario, scenario_as_dict
+
+    module, _, name = schema_path.rpartition(".")
+    schema = getattr(importlib.import_module(module), name)
+    with pytest.raises(SystemExit) as stop:
+        main(["--print-scenario", *argv])
+    assert stop.value.code == 0
+    text = capsys.readouterr().out
+    scenario = load_scenario(schema, text=text)
+    assert getattr(scenario, field) == value
+    assert scenario_as_dict(scenario) != scenario_as_dict(schema())  # the options are in it
+    assert text.startswith(f"# A scenario of {schema_path}")

@@ -13,7 +13,8 @@ Run: ``python -m apps.estimate_from_log --robot hrp4_like --log LOG [--topics FI
 simulated push: ``python -m apps.estimate_from_log [--robot R] --write-demo-log out/demo_push.mcap``
 (simulates the robot under a known push, on hrp4_like 28 N, writes the log, then estimates from it).
 Writes to ``DIR/estimate_from_log/``: ``estimates.csv`` (per sample: detection, test
-statistics, force, external wrench, localized link and point, internal residual),
+statistics, force, external wrench, localized link and point, internal residual, the base
+state used, logged or estimated, and the estimated IMU biases),
 ``contact_forces.png``, ``metrics.json`` (the contacts found, the real-time factor) and
 ``replay.html`` (a self-contained Meshcat replay of the robot with the estimated contact
 force), and prints the contacts and the real-time factor of the estimation.
@@ -99,7 +100,9 @@ def _parse(argv):
 
 def write_estimates_csv(path: Path, estimates: LogEstimates) -> Path:
     """One row per sample: time, contact flag, test statistics, force (eq. 19), external
-    wrench, the localizer's status, link, point and force, and the internal residual."""
+    wrench, the localizer's status, link, point and force, the internal residual, the base
+    state the estimators used (``base_qw`` .. ``base_vz``: logged, or the invariant EKF's)
+    and, when the EKF estimated IMU biases, ``gyro_bias_*`` and ``accel_bias_*``."""
     names = estimates.body_names
     header = ["time", "contact_detected", "statistic_external", "statistic_internal"]
     header += [f"force_{a}" for a in "xyz"]
@@ -107,6 +110,12 @@ def write_estimates_csv(path: Path, estimates: LogEstimates) -> Path:
     header += ["localization_status", "contact_link"] + [f"contact_point_{a}" for a in "xyz"]
     header += [f"localized_force_{a}" for a in "xyz"]
     header += [f"residual_{joint}" for joint in estimates.joint_names]
+    base = [] if estimates.base_pose is None else [estimates.base_pose, estimates.base_velocity]
+    if base:
+        header += [f"base_{a}" for a in ("qw", "qx", "qy", "qz", "x", "y", "z", "wx", "wy", "wz", "vx", "vy", "vz")]
+    if estimates.imu_bias is not None:
+        base.append(estimates.imu_bias)
+        header += [f"gyro_bias_{a}" for a in "xyz"] + [f"accel_bias_{a}" for a in "xyz"]
     loc = estimates.localization
     with open(path, "w", newline="") as stream:
         writer = csv.writer(stream)
@@ -123,6 +132,8 @@ def write_estimates_csv(path: Path, estimates: LogEstimates) -> Path:
                 row += [repr(float(x)) for x in loc["point_world"][k]]
                 row += [repr(float(x)) for x in loc["force_world"][k]]
             row += [repr(float(x)) for x in estimates.internal_residual[k]]
+            for block in base:
+                row += [repr(float(x)) for x in block[k]]
             writer.writerow(row)
     return path
 

@@ -195,7 +195,9 @@ def make_localizer(robot: EstimatorPlant, settings: LogEstimationSettings, perio
 class LogInputs:
     """A log in the estimators' layout: per sample the sensed state [q; v] (plant order),
     the motor torques (v[6:] order, N m) and the F/T wrenches ([moment about the sensor
-    origin; force] per frame of ``EstimatorPlant.ft_frames``, world, N m and N)."""
+    origin; force] per frame of ``EstimatorPlant.ft_frames``, world, N m and N); with the
+    base estimated by the invariant EKF with bias states, its IMU bias estimate per sample
+    (``imu_bias``, (N, 6) [gyro, rad/s; accelerometer, m/s^2], else None)."""
 
     time: np.ndarray
     period: float
@@ -204,6 +206,7 @@ class LogInputs:
     known_wrenches: np.ndarray
     resampled: bool
     base_estimated: bool = False
+    imu_bias: np.ndarray | None = None
 
 
 def _frame_rotations(plant: MultibodyPlant, frames: Sequence, q: np.ndarray) -> np.ndarray:
@@ -328,8 +331,9 @@ def log_inputs(
     state[:, [j.position_start() for j in topology.joints]] = log.joint_positions[:, order]
     state[:, [nq + j.velocity_start() for j in topology.joints]] = log.joint_velocities[:, order]
     base_estimated = log.base_pose is None or log.base_velocity is None
+    imu_bias = None
     if base_estimated:
-        _estimate_base_state(robot, log, state, period, settings, initial_base_pose)
+        imu_bias = _estimate_base_state(robot, log, state, period, settings, initial_base_pose)
     else:
         state[:, q0 : q0 + 7] = log.base_pose
         state[:, nq + v0 : nq + v0 + 6] = log.base_velocity
@@ -347,6 +351,7 @@ def log_inputs(
         known_wrenches=wrenches,
         resampled=resampled,
         base_estimated=base_estimated,
+        imu_bias=imu_bias,
     )
 
 
@@ -376,12 +381,14 @@ def _estimate_base_state(
     period: float,
     settings: LogEstimationSettings,
     initial_base_pose: np.ndarray | None,
-) -> None:
+) -> np.ndarray | None:
     """Fills the base part of ``state`` (whose joint part is filled) with the invariant
     EKF's estimate, replayed as the station runs it: at update k the residuals read the
     filter's output of update k - 1 (the initial state at k = 0), the F/T sensors express
     their wrenches in the world with that sensed state, and the filter then reads sample
-    k's gyro, accelerometer, joint positions and contact flags (F/T normal force)."""
+    k's gyro, accelerometer, joint positions and contact flags (F/T normal force). Returns
+    the filter's IMU bias estimate read with the base state at each sample ((N, 6)), or
+    None without bias states (``settings.estimate_imu_bias``)."""
     plant = robot.plant
     topology = floating_base_topology(plant)
     nq = plant.num_positions()
@@ -407,11 +414,15 @@ def _estimate_base_state(
     ports = [estimator.GetInputPort(name) for name in ("angular_velocity", "linear_acceleration", "joint_positions")]
     contact_port = estimator.GetInputPort("foot_contact")
     pose_port, velocity_port = estimator.GetOutputPort("base_pose"), estimator.GetOutputPort("base_velocity")
+    bias_port = estimator.GetOutputPort("imu_bias")
+    imu_bias = np.zeros((state.shape[0], 6)) if settings.estimate_imu_bias else None
     plant_context = plant.CreateDefaultContext()
     names = [frame.name() for frame in robot.ft_frames]
     for k in range(state.shape[0]):
         state[k, q0 : q0 + 7] = pose_port.Eval(context)
         state[k, nq + v0 : nq + v0 + 6] = velocity_port.Eval(context)
+        if imu_bias is not None:
+            imu_bias[k] = bias_port.Eval(context)
         plant.SetPositions(plant_context, state[k, :nq])
         wrenches_W = [
             frame.CalcPoseInWorld(plant_context).rotation().matrix() @ log.wrenches[name][k].reshape(2, 3).T
@@ -425,6 +436,7 @@ def _estimate_base_state(
         contact_port.FixValue(context, flags)
         context.SetTime(k * period)
         context.SetDiscreteState(estimator.EvalUniquePeriodicDiscreteUpdate(context))
+    return imu_bias
 
 
 # ---------------------------------------------------------------------------------------
@@ -452,6 +464,11 @@ class LogEstimates:
         period: s. resampled: whether the log was resampled to a uniform period.
         noise_model: the detector's (predicted, or calibrated on the log's start).
         base_state: "logged", or the invariant EKF's estimate (a log without base state).
+        base_pose: (N, 7) the base pose the estimators used, Drake's free-joint q [w, x, y,
+            z; x, y, z] (m), logged or estimated. base_velocity: (N, 6) its velocity, world
+            frame [angular, rad/s; linear, m/s].
+        imu_bias: (N, 6) the EKF's IMU bias estimate [gyro, rad/s; accelerometer, m/s^2]
+            when it estimated the base with bias states, else None.
         wall_time_s: the replay's wall time; real_time_factor = log duration / it.
     """
 
@@ -469,6 +486,9 @@ class LogEstimates:
     wall_time_s: float
     noise_model: str = "predicted"
     base_state: str = "logged"
+    base_pose: np.ndarray | None = None
+    base_velocity: np.ndarray | None = None
+    imu_bias: np.ndarray | None = None
 
     @property
     def real_time_factor(self) -> float:
@@ -576,6 +596,8 @@ def _estimates(
     robot: EstimatorPlant, inputs: LogInputs, replay: ReplayedEstimation, wall: float, settings
 ) -> LogEstimates:
     plant = robot.plant
+    free_joint = floating_base_topology(plant).free_joint
+    q0, v0, nq = free_joint.position_start(), free_joint.velocity_start(), plant.num_positions()
     localization = None
     if replay.localization is not None:
         localization = dict(replay.localization)
@@ -600,6 +622,9 @@ def _estimates(
         wall_time_s=wall,
         noise_model="predicted" if settings.noise_calibration_time is None else "calibrated on the log's start",
         base_state="invariant EKF (IMU, joints, F/T contact)" if inputs.base_estimated else "logged",
+        base_pose=inputs.state[:, q0 : q0 + 7].copy(),
+        base_velocity=inputs.state[:, nq + v0 : nq + v0 + 6].copy(),
+        imu_bias=inputs.imu_bias,
     )
 
 

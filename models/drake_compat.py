@@ -31,6 +31,14 @@ UNSHARED_CONFIG_FIELDS: dict[str, tuple[str, ...]] = {
 }
 
 
+#: Features drake 1.51.1 deprecates, with the first release that no longer has them (the
+#: deprecation test uses them as controls on the releases that still have them).
+REMOVED_IN: dict[str, tuple[int, int]] = {
+    "TAMSI discrete contact solver": (1, 57),
+    "Simulator.set_publish_every_time_step": (1, 58),
+}
+
+
 def drake_version() -> tuple[int, ...] | None:
     """The installed Drake's release as a tuple of ints (e.g. ``(1, 58, 0)``), or None when
     Drake is not an installed distribution (a build from source on ``PYTHONPATH``)."""
@@ -47,4 +55,11 @@ def drake_version() -> tuple[int, ...] | None:
     return tuple(parts)
 
 
-__all__ = ["UNSHARED_CONFIG_FIELDS", "drake_version"]
+def still_has(feature: str) -> bool:
+    """Whether the installed release still has ``feature`` of ``REMOVED_IN`` (False for an
+    unknown release: a build from source)."""
+    version = drake_version()
+    return version is not None and (1, 51) <= version[:2] < REMOVED_IN[feature]
+
+
+__all__ = ["REMOVED_IN", "UNSHARED_CONFIG_FIELDS", "drake_version", "still_has"]

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import pytest
 
-from models.drake_compat import drake_version
+from models.drake_compat import still_has
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Simulated time each diagram is stepped, s (10 steps of the 1 ms plants).
@@ -219,10 +219,12 @@ def _control_deprecated_binding() -> None:
     Simulator(ConstantVectorSource([1.0])).set_publish_every_time_step(False)
 
 
-#: The controls by features some releases deprecate and later ones removed: whether the
-#: installed release still has each (TAMSI is gone in 1.57, set_publish_every_time_step by 1.58).
-_VERSION = drake_version() or (0,)
-RELEASE_CONTROLS = {"tamsi_plant": (1, 51) <= _VERSION < (1, 57), "deprecated_binding": (1, 51) <= _VERSION < (1, 58)}
+#: The controls by features drake 1.51 deprecates and later releases removed: whether the
+#: installed release still has each (``models.drake_compat.REMOVED_IN``).
+RELEASE_CONTROLS = {
+    "tamsi_plant": still_has("TAMSI discrete contact solver"),
+    "deprecated_binding": still_has("Simulator.set_publish_every_time_step"),
+}
 CASES = {name[len("_case_") :]: f for name, f in list(globals().items()) if name.startswith("_case_")}
 CONTROLS = {name[len("_control_") :]: f for name, f in list(globals().items()) if name.startswith("_control_")}
 

@@ -211,7 +211,7 @@ def test_force_estimator_external_mode_eq19(hrp4):
 
 def test_force_estimates_recover_a_simulated_push_eqs_19_and_20():
     """Against physics: hrp4_like standing in the ideal noise-free world (exact model, F/T
-    feet), pushed on the right elbow by a 16 N step; the force estimates from the simulated
+    feet), pushed on the right elbow by a 15.5 N step; the force estimates from the simulated
     robot's residuals, eq. (19) from the external residual alone and eq. (20) from both at
     the true point, equal the force the simulator applied (the PushSource's) once the
     residuals have converged (0.5 s after the step, gains 35 /s)."""

@@ -343,13 +343,33 @@ def _standalone_estimator():
     return estimator, context
 
 
+def _standing_hrp4_estimator(angular_velocity, **options):
+    """hrp4_like's estimator with the level-ground correction (``options`` passed on) and a
+    context whose inputs hold it still on both feet, turning at ``angular_velocity``."""
+    plant = MultibodyPlant(0.0)
+    handles = add_humanoid(plant, "hrp4_like")
+    plant.Finalize()
+    estimator = InvariantEkfBaseStateEstimator(
+        plant,
+        handles.imu_frame,
+        [handles.sole_frames["left"], handles.sole_frames["right"]],
+        level_ground_tilt_std=LEVEL_GROUND_TILT_STD,
+        **options,
+    )
+    context = estimator.CreateDefaultContext()
+    n = estimator.GetInputPort("joint_positions").size()
+    estimator.GetInputPort("angular_velocity").FixValue(context, angular_velocity)
+    estimator.GetInputPort("linear_acceleration").FixValue(context, [0.0, 0.0, 9.81])
+    estimator.GetInputPort("joint_positions").FixValue(context, np.zeros(n))
+    estimator.GetInputPort("foot_contact").FixValue(context, [1.0, 1.0])
+    return estimator, context
+
+
 def test_loading_the_compiled_steps_covers_what_the_filter_runs():
     """``load_compiled_filter_steps`` (a worker pool's start-up) loads every compiled step
     with the argument types the Drake filter passes: its updates then add no signature (a
     new one would be compiled, or loaded, in the middle of a simulation)."""
-    from pydrake.multibody.plant import MultibodyPlant
 
-    from models import add_humanoid
     from systems.estimation import invariant_ekf_steps as steps
     from systems.estimation.base_state_estimator import load_compiled_filter_steps
 
@@ -358,22 +378,7 @@ def test_loading_the_compiled_steps_covers_what_the_filter_runs():
                steps.update_step)  # fmt: skip
     loaded = [list(kernel.signatures) for kernel in kernels]
     assert all(loaded)
-    plant = MultibodyPlant(0.0)
-    handles = add_humanoid(plant, "hrp4_like")
-    plant.Finalize()
-    estimator = InvariantEkfBaseStateEstimator(
-        plant,
-        handles.imu_frame,
-        [handles.sole_frames["left"], handles.sole_frames["right"]],
-        estimate_imu_bias=True,
-        level_ground_tilt_std=LEVEL_GROUND_TILT_STD,
-    )
-    context = estimator.CreateDefaultContext()
-    n = estimator.GetInputPort("joint_positions").size()
-    estimator.GetInputPort("angular_velocity").FixValue(context, [0.01, 0.0, 0.0])
-    estimator.GetInputPort("linear_acceleration").FixValue(context, [0.0, 0.0, 9.81])
-    estimator.GetInputPort("joint_positions").FixValue(context, np.zeros(n))
-    estimator.GetInputPort("foot_contact").FixValue(context, [1.0, 1.0])
+    estimator, context = _standing_hrp4_estimator([0.01, 0.0, 0.0], estimate_imu_bias=True)
     for step in range(3):  # step 0 is a level-ground step (E12), the others are not
         context.SetTime(step * estimator.period)
         context.SetDiscreteState(estimator.EvalUniquePeriodicDiscreteUpdate(context))
@@ -854,23 +859,8 @@ def test_level_ground_period_is_rounded_to_the_update_period_not_refused(period,
     """Real logs come at 99, 333 or 4 Hz: the level-ground correction runs every
     round(0.1 s / period) updates (at least one) instead of refusing a period that does not
     divide 0.1 s; the filter then runs at that period."""
-    plant = MultibodyPlant(0.0)
-    handles = add_humanoid(plant, "hrp4_like")
-    plant.Finalize()
-    estimator = InvariantEkfBaseStateEstimator(
-        plant,
-        handles.imu_frame,
-        [handles.sole_frames["left"], handles.sole_frames["right"]],
-        period=period,
-        level_ground_tilt_std=LEVEL_GROUND_TILT_STD,
-    )
+    estimator, context = _standing_hrp4_estimator([0.0, 0.0, 0.0], period=period)
     assert estimator.level_ground_period_used == pytest.approx(every * period, rel=1e-12)
-    context = estimator.CreateDefaultContext()
-    n = estimator.GetInputPort("joint_positions").size()
-    estimator.GetInputPort("angular_velocity").FixValue(context, [0.0, 0.0, 0.0])
-    estimator.GetInputPort("linear_acceleration").FixValue(context, [0.0, 0.0, 9.81])
-    estimator.GetInputPort("joint_positions").FixValue(context, np.zeros(n))
-    estimator.GetInputPort("foot_contact").FixValue(context, [1.0, 1.0])
     for step in range(every + 2):
         context.SetTime(step * period)
         context.SetDiscreteState(estimator.EvalUniquePeriodicDiscreteUpdate(context))

@@ -518,9 +518,12 @@ def _study(scenario: ContactLocalizationScenario, args, out_dir: Path, start: fl
     ``start`` (s, ``time.perf_counter``)."""
     specs = sample_study_trials(scenario)
     if scenario.model_refinement == "calibrate":
-        # Calibrated once, here; the workers read the saved corrections.
+        # Calibrated once, here; the workers read the saved corrections. The file is named
+        # before the calibration, as refined_model names it (its key hashes the code: an
+        # edit of the sources during a long calibration must not change the name read back).
+        saved = calibration_file(scenario, calibration_cache_folder(args))
         refined_model(scenario, calibration_cache_folder(args))
-        scenario.model_refinement = str(calibration_file(scenario, calibration_cache_folder(args)))
+        scenario.model_refinement = str(saved)
     phases = {"calibration": time.perf_counter() - start}  # wall time of each phase, s
     scenario_yaml = scenario_as_yaml(scenario)
     scenario.multi_contact = scenario.multi_contact or scenario.contacts == 2
@@ -549,7 +552,7 @@ def _study(scenario: ContactLocalizationScenario, args, out_dir: Path, start: fl
         # load measured on the other seeds' (cross-fitting).
         _, handles = build_contact_localization_diagram(scenario, model_corrections=refined_model(scenario))
         covariances = no_contact.pop("covariances")
-        multi_jobs = multi_contact_jobs(results, handles.plant, scenario_yaml, covariances)
+        multi_jobs = multi_contact_jobs(results, handles.station.estimator.plant, scenario_yaml, covariances)
         by_trial = {m.pop("trial"): m for m in _run_jobs(multi_jobs, pool)["multi_contact"]}
         for r in results:
             r.update(by_trial[r["trial"]])
@@ -590,7 +593,7 @@ def _study(scenario: ContactLocalizationScenario, args, out_dir: Path, start: fl
     metrics["phase_wall_s"] = phases
     inputs = [r.pop("localizer_inputs") for r in results]
     metrics["per_trial"] = results
-    write_metrics(out_dir, metrics, scenario)
+    write_metrics(out_dir, metrics, scenario, args)
     np.savez_compressed(
         out_dir / "localizer_inputs.npz",
         trial=np.array([r["trial"] for r in results]),

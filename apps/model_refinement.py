@@ -118,7 +118,7 @@ def main(argv: list[str] | None = None) -> int:
             metrics["meets_floor"] = checks["standing"]["external_force_reduction"] >= SPURIOUS_FORCE_REDUCTION_FLOOR
             _plot(out_dir / "spurious_effort.png", traces)
             _print_table(checks)
-        write_metrics(out_dir, metrics, scenario)
+        write_metrics(out_dir, metrics, scenario, args)
         print_written(out_dir)
         return 0
 

@@ -196,7 +196,7 @@ def main(argv: list[str] | None = None) -> int:
             save_replay(meshcat, out_dir / f"{kind}.html")
             metrics[kind] = runs[kind]["metrics"]
         _plot(out_dir, scenario, runs)
-        write_metrics(out_dir, metrics, scenario)
+        write_metrics(out_dir, metrics, scenario, args)
         _print_table(metrics)
         print(f"push peak force on this robot: {next(iter(metrics.values()))['push_peak_force_N']:.1f} N per shoulder")
         print(f"memory allocator: {memory_allocator()} (make preloads tcmalloc when installed; see BENCHMARKS.md)")

@@ -245,7 +245,7 @@ def main(argv: list[str] | None = None) -> int:
         # A bad model, body or setting: a ValueError, reported by run_app.
         run = run_once(scenario, model_corrections=corrections)
         _plot(out_dir, run)
-        write_metrics(out_dir, run["metrics"], scenario)
+        write_metrics(out_dir, run["metrics"], scenario, args)
         _print_summary(run["metrics"])
         print_written(out_dir)
         return 0

@@ -56,7 +56,7 @@ def experiment_parser(
     world, ``diagrams.station.conditions``) the app also takes ``--ideal``; with ``robot``
     (the experiments on any humanoid) ``--robot FILE.yaml``, a robot description
     (``models.description``) that replaces the scenario's model."""
-    parser = argparse.ArgumentParser(prog=f"python -m {module}", description=(doc or "").split("\n\n")[0])
+    parser = _AppParser(module, prog=f"python -m {module}", description=(doc or "").split("\n\n")[0])
     parser.add_argument(
         "--scenario",
         type=Path,
@@ -77,6 +77,13 @@ def experiment_parser(
         "and the other options) and exit: a file to start from",
     )
     add_out_argument(parser)
+    parser.add_argument(
+        "--results",
+        default=None,
+        metavar="NAME",
+        help="also write the metrics to results/NAME.json, with this command (the file the docs' tables are "
+        "generated from: python -m apps.doc_tables)",
+    )
     parser.add_argument("--headless", action="store_true", help="no live Meshcat URL (the replays are still written)")
     if replay:
         parser.add_argument("--no-replay", action="store_true", help="skip the Meshcat replays (faster)")
@@ -85,7 +92,7 @@ def experiment_parser(
             "--robot",
             default=None,
             metavar="FILE.yaml",
-            help="the robot: a robot description YAML beside its URDF/SDF (README, 'Bring your own robot'), "
+            help="the robot: a robot description YAML beside its URDF/SDF (docs/robots.md, 'Bring your own robot'), "
             "or a built-in name (hrp4_like, nao_like); default: the scenario's model",
         )
     if conditions:
@@ -96,6 +103,22 @@ def experiment_parser(
             "(default: realistic; applied after --scenario and --scenario-text)",
         )
     return parser
+
+
+class _AppParser(argparse.ArgumentParser):
+    """An app's parser: the parsed arguments also hold ``command``, the command line that
+    ran the app (``apps.results.app_command``: what a results file records)."""
+
+    def __init__(self, module: str, **kwargs):
+        super().__init__(**kwargs)
+        self.module = module
+
+    def parse_args(self, args=None, namespace=None):
+        from apps.results import app_command
+
+        parsed = super().parse_args(args, namespace)
+        parsed.command = app_command(self.module, None if args is None else list(args))
+        return parsed
 
 
 def _number(text: str, kind: type, lowest: float, inclusive: bool) -> int | float:
@@ -391,15 +414,24 @@ def json_text(data: Any) -> str:
     return json.dumps(data, indent=2, allow_nan=True, default=_json_value) + "\n"
 
 
-def write_metrics(folder: Path, metrics: dict, scenario: Any = None) -> Path:
+def write_metrics(folder: Path, metrics: dict, scenario: Any = None, args: argparse.Namespace | None = None) -> Path:
     """``folder/metrics.json``: ``metrics``, plus the scenario (every field) and the memory
-    allocator the run used."""
+    allocator the run used; with ``args.results`` (``--results NAME``) the same payload but
+    its ``per_trial`` list also goes to ``results/NAME.json`` with the command
+    (``apps.results.write_results``)."""
     payload = dict(metrics)
     if scenario is not None:
         payload["scenario"] = scenario_as_dict(scenario)
     payload.setdefault("memory_allocator", memory_allocator())
     path = folder / "metrics.json"
     path.write_text(json_text(payload))
+    if args is not None and getattr(args, "results", None):
+        from apps.results import write_results
+
+        # Per-trial lists (the contact study's ``per_trial``) stay in metrics.json only.
+        summary = {k: v for k, v in payload.items() if k != "per_trial"}
+        written = write_results(args.results, json.loads(json_text(summary)), command=args.command)
+        print(f"results file: {written}")
     return path
 
 

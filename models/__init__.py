@@ -34,6 +34,7 @@ import contextlib
 import logging
 import os
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -53,7 +54,7 @@ from pydrake.geometry import (
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import CoulombFriction, MultibodyPlant
-from pydrake.multibody.tree import Frame, ModelInstanceIndex, RigidBody
+from pydrake.multibody.tree import Frame, ModelInstanceIndex, RigidBody, SpatialInertia
 
 from models.description import (
     JOINT_GROUPS,
@@ -207,6 +208,53 @@ def _model_text(description: RobotDescription, instance_name: str) -> tuple[str,
     return re.sub(r'(<model\b[^>]*\bname=")[^"]*(")', rf"\g<1>{instance_name}\g<2>", text, count=1), "sdf"
 
 
+def with_link_inertias(text: str, kind: str, link_inertias: Mapping[str, SpatialInertia], where: str = "") -> str:
+    """The URDF or SDFormat ``text`` (``kind`` "urdf" or "sdf") with the ``<inertial>`` of
+    each link of ``link_inertias`` ({link name: M_BBo_B, about the link origin, link frame})
+    replaced: mass, centre of mass (as the inertial frame's origin, not rotated) and the
+    rotational inertia about it, written with full float precision (repr).
+
+    Raises:
+        ValueError: text that is not XML, a link the text does not have, a non-physical
+            inertia.
+    """
+    import xml.etree.ElementTree as ET
+
+    for prefix, uri in re.findall(r'xmlns:(\w+)="([^"]+)"', text):
+        ET.register_namespace(prefix, uri)
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as error:
+        raise ValueError(f"{where}: link_inertias: the model text is not XML: {error}") from error
+    links = {link.get("name"): link for link in root.iter("link")}
+    for name, M in link_inertias.items():
+        if name not in links:
+            raise ValueError(f"{where}: link_inertias: the model has no link named {name!r}")
+        if not isinstance(M, SpatialInertia) or not M.IsPhysicallyValid():
+            raise ValueError(f"{where}: link_inertias: link {name!r} needs a physically valid SpatialInertia")
+        mass, com = M.get_mass(), M.get_com()
+        inertia = M.CalcRotationalInertia().ShiftToCenterOfMass(mass, com).CopyToFullMatrix3()
+        values = {"ixx": inertia[0, 0], "ixy": inertia[0, 1], "ixz": inertia[0, 2], "iyy": inertia[1, 1]}
+        values.update({"iyz": inertia[1, 2], "izz": inertia[2, 2]})
+        link = links[name]
+        for old in link.findall("inertial"):
+            link.remove(old)
+        inertial = ET.Element("inertial")
+        link.insert(0, inertial)
+        xyz = " ".join(repr(float(c)) for c in com)
+        if kind == "urdf":
+            ET.SubElement(inertial, "origin", xyz=xyz, rpy="0 0 0")
+            ET.SubElement(inertial, "mass", value=repr(float(mass)))
+            ET.SubElement(inertial, "inertia", {k: repr(float(v)) for k, v in values.items()})
+        else:
+            ET.SubElement(inertial, "pose").text = f"{xyz} 0 0 0"
+            ET.SubElement(inertial, "mass").text = repr(float(mass))
+            rotational = ET.SubElement(inertial, "inertia")
+            for key, value in values.items():
+                ET.SubElement(rotational, key).text = repr(float(value))
+    return ET.tostring(root, encoding="unicode")
+
+
 def _urdf_effort_limits(text: str) -> dict[str, float]:
     """{joint: its URDF ``<limit effort>``, N m} (Drake gives it only to the joints with a
     ``<transmission>``; the loader gives it to the actuators it adds)."""
@@ -305,6 +353,7 @@ def add_humanoid(
     *,
     model_instance_name: str | None = None,
     scene_graph: SceneGraph | None = None,
+    link_inertias: Mapping[str, SpatialInertia] | None = None,
 ) -> HumanoidHandles:
     """Adds a humanoid to a not yet finalized plant and returns its handles.
 
@@ -330,6 +379,11 @@ def add_humanoid(
         model_instance_name: name of the model instance (default: the description's
             ``name``); lets one plant hold several copies.
         scene_graph: the plant's SceneGraph, optional (see above).
+        link_inertias: {link name: M_BBo_B} (Drake's SpatialInertia about the link's origin,
+            in the link frame) replacing the model file's inertias of those links: they
+            become the plant's *default* parameters, so every context of the plant carries
+            them (an estimators' model that differs from the description, or a simulated
+            robot that differs from its CAD; ``with_link_inertias``).
 
     Returns:
         The HumanoidHandles.
@@ -345,6 +399,8 @@ def add_humanoid(
     where = str(description.source or description.name)
     instance_name = model_instance_name or description.name
     text, kind = _model_text(description, instance_name)
+    if link_inertias:
+        text = with_link_inertias(text, kind, link_inertias, where)
     parser = Parser(plant)
     for package, folder in description.packages.items():
         parser.package_map().Add(package, str(folder))
@@ -379,6 +435,10 @@ def add_humanoid(
             "its inertia finite, positive definite and within the triangle inequality"
         )
     _check_inertias(plant, mi, where)
+    for link, wanted in (link_inertias or {}).items():
+        got = _get_body(plant, link, mi, f"{where}: link_inertias").default_spatial_inertia().CopyToFullMatrix6()
+        if not np.allclose(got, wanted.CopyToFullMatrix6(), rtol=1e-9, atol=1e-12):
+            raise ValueError(f"{where}: link_inertias: link {link!r} was parsed with another inertia than given")
     base = _get_body(plant, description.base_body, mi, f"{where}: base_body")
     for index in plant.GetJointIndices(mi):
         joint = plant.get_joint(index)
@@ -617,4 +677,5 @@ __all__ = [
     "add_ground",
     "set_standing_state",
     "model_file",
+    "with_link_inertias",
 ]

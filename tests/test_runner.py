@@ -116,3 +116,23 @@ def test_simulate_runs_the_diagram_for_the_duration_and_the_logs_are_read_back(t
             "system",
         )
     )
+
+
+def test_results_option_writes_the_metrics_with_the_command_that_ran(tmp_path, monkeypatch):
+    """``--results NAME``: write_metrics also writes results/NAME.json (here redirected with
+    HCO_RESULTS_DIR) with the app's command line, without the per-trial list."""
+    import json
+
+    from apps.runner import experiment_parser, write_metrics
+
+    monkeypatch.setenv("HCO_RESULTS_DIR", str(tmp_path / "results"))
+    args = experiment_parser("apps.example", "An example.").parse_args(["--results", "example", "--out", str(tmp_path)])
+    assert args.command == "python -m apps.example --results example --out " + str(tmp_path)
+    write_metrics(tmp_path, {"rate": np.float64(0.5), "per_trial": [1, 2]}, None, args)
+    payload = json.loads((tmp_path / "results" / "example.json").read_text())
+    assert payload["command"] == args.command and payload["data"]["rate"] == 0.5
+    assert "per_trial" not in payload["data"]
+    assert json.loads((tmp_path / "metrics.json").read_text())["per_trial"] == [1, 2]
+    without = experiment_parser("apps.example", "An example.").parse_args(["--out", str(tmp_path / "b")])
+    write_metrics(tmp_path / "b", {"rate": 1.0}, None, without)
+    assert sorted(p.name for p in (tmp_path / "results").iterdir()) == ["example.json"]

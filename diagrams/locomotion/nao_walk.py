@@ -7,9 +7,11 @@
     loggers ◄──────────────────────────────────────────────  ContactZmp (ZMP from contact forces)
 
 The walking controller plays a precomputed open-loop pattern (ZMP preview control,
-``systems.locomotion.walking_pattern``); the station's PD + gravity compensation tracks it, reading the
-(optionally noisy) sensed state. The measured ZMP is computed from the true contact forces
-(ground truth for the metrics; no estimator reads it).
+``systems.locomotion.walking_pattern``), planned on the robot's model (the station's
+estimators' plant, ``station.estimator``, never the simulated plant); the station's PD +
+gravity compensation tracks it, reading the (optionally noisy) sensed state. The measured
+ZMP is computed from the true contact forces (ground truth for the metrics; no estimator
+reads it).
 """
 
 import dataclasses
@@ -161,14 +163,17 @@ def build_nao_walk_diagram(
         base_state=scenario.base_state,
         imperfections=scenario.imperfections,
     )
+    # The simulated robot (plant, pushes, contact ZMP for the metrics) and the robot's own
+    # model (the estimators' plant: the gains and the walking plan, issue 31).
     plant, humanoid = station.plant, station.humanoid
-    kp, kd = default_gains(plant, humanoid)
+    model, model_humanoid = station.estimator.plant, station.estimator.humanoid
+    kp, kd = default_gains(model, model_humanoid)
     controller = builder.AddSystem(
         NaoWalkingController(
-            plant,
-            humanoid,
+            model,
+            model_humanoid,
             parameters,
-            initial_positions=station.initial_state[: plant.num_positions()],
+            initial_positions=station.estimator.standing_state[: model.num_positions()],
             joint_stiffness=kp if stiffness_compensation else None,
             joint_damping=kd if (stiffness_compensation and velocity_lead) else None,
             zmp_correction_passes=zmp_correction_passes,

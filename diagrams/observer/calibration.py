@@ -40,8 +40,11 @@ def _settled_state(duration: float, posture: tuple, plant_config_yaml: str) -> t
     builder = DiagramBuilder()
     station = add_humanoid_station(builder, "nao_like", plant_config=plant_config, noise=False)
     plant, humanoid = station.plant, station.humanoid
-    angles = full_posture(humanoid, dict(posture))
-    hold = builder.AddSystem(ConstantVectorSource(joint_vector_from_names(plant, angles)))
+    # The posture command is the controller's (the robot's model, issue 31); the simulated
+    # robot is put in the same posture to start.
+    model, model_humanoid = station.estimator.plant, station.estimator.humanoid
+    angles = full_posture(model_humanoid, dict(posture))
+    hold = builder.AddSystem(ConstantVectorSource(joint_vector_from_names(model, angles)))
     builder.Connect(hold.get_output_port(), station.desired_position)
     diagram = builder.Build()
     simulator = Simulator(diagram)
@@ -87,12 +90,13 @@ def identify_motor_constant(
     test: it stands in the nominal posture (wide stance, from ``settle_standing_state``)
     while known forces ``loads`` (N, world; each applied to every hand at ``load_point`` in
     the hand body's frame, m) are applied one after the other, each held ``hold`` s; the
-    mean state over the last ``window`` s of each hold goes to
+    mean sensed state (the station's encoders and base estimate, noise-free: what a
+    calibration log of the robot records) over the last ``window`` s of each hold goes to
     ``systems.observer.arm_compliance.fit_motor_constants`` (K_m e = -J^T F at rest, least
-    squares per joint). The point is offset from the gripper origin so that the wrist yaw
-    carries torque too. In this simulator K_m recovers the PD's proportional gain K_p
-    (5 N m/rad for the arms, 2 for the wrists); on a real Nao it would lump motor, gearbox
-    and servo-loop constants. Simulates ~5 s (~3 s wall).
+    squares per joint) on the robot's model (the station's estimators' plant). The point
+    is offset from the gripper origin so that the wrist yaw carries torque too. In this
+    simulator K_m recovers the PD's proportional gain K_p (5 N m/rad for the arms, 2 for
+    the wrists); on a real Nao it would lump motor, gearbox and servo-loop constants. Simulates ~5 s (~3 s wall).
 
     Raises:
         ValueError: fewer than one load, a non-finite load, bad durations, unknown chains,
@@ -107,12 +111,14 @@ def identify_motor_constant(
         raise ValueError("identify_motor_constant: window must be shorter than hold")
     builder = DiagramBuilder()
     station = add_humanoid_station(builder, "nao_like", noise=False)
-    plant = station.plant
+    # The simulated robot (plant and the known loads; the log is of its sensors) and the
+    # robot's model (the estimators' plant: the posture command and the fit, issue 31).
+    plant, model = station.plant, station.estimator.plant
     for chain in chains:
-        if not plant.HasBodyNamed(chain.hand_body):
+        if not model.HasBodyNamed(chain.hand_body):
             raise ValueError(f"identify_motor_constant: unknown hand body {chain.hand_body!r}")
     posture = wide_stance()
-    q_desired = joint_vector_from_names(plant, full_posture(station.humanoid, posture))
+    q_desired = joint_vector_from_names(model, full_posture(station.estimator.humanoid, posture))
     builder.Connect(builder.AddSystem(ConstantVectorSource(q_desired)).get_output_port(), station.desired_position)
     t0 = 0.2
     pushes = []
@@ -125,7 +131,7 @@ def identify_motor_constant(
     source = builder.AddSystem(PushSource(plant, pushes))
     builder.Connect(source.GetOutputPort("applied_spatial_forces"), plant.get_applied_spatial_force_input_port())
     builder.Connect(plant.get_state_output_port(), source.GetInputPort("state"))
-    logger = LogVectorOutput(plant.get_state_output_port(), builder, 0.01)
+    logger = LogVectorOutput(station.sensed_state, builder, 0.01)
     diagram = builder.Build()
     simulator = Simulator(diagram)
     station.set_initial_state(simulator.get_mutable_context(), settle_standing_state(posture))
@@ -137,7 +143,7 @@ def identify_motor_constant(
         t_end = t0 + (i + 1) * hold
         inside = (t > t_end - window) & (t < t_end - 0.005)
         rest_states.append(X[inside].mean(axis=0))
-    return fit_motor_constants(plant, q_desired, np.array(rest_states), loads, chains=chains, load_point=load_point)
+    return fit_motor_constants(model, q_desired, np.array(rest_states), loads, chains=chains, load_point=load_point)
 
 
 @functools.lru_cache(maxsize=1)

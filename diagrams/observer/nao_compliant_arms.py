@@ -10,7 +10,9 @@
                                                                                      PostureSchedule (stance, lean)
 
 Every estimator reads only sensor outputs (FSRs, IMU, encoders, base estimate) and the
-commanded joint positions; the pushes' truth goes to loggers only. Rates: plant and PD
+commanded joint positions; the pushes' truth goes to loggers only. The postures, the gains,
+the controller and every estimator are built from the robot's model (the station's
+estimators' plant, ``station.estimator``), never from the simulated plant. Rates: plant and PD
 1 kHz, observer 60 Hz (the paper's), joint-level estimator and compliance controller 100 Hz.
 """
 
@@ -166,28 +168,31 @@ def build_nao_compliant_arms_diagram(
         )
     builder = DiagramBuilder()
     station = add_humanoid_station(builder, "nao_like", plant_config=plant_config, noise=noise, seed=seed)
+    # The simulated robot (plant, pushes, ground truth) and the robot's own model (the
+    # estimators' plant: postures, gains, the controller and every estimator, issue 31).
     plant, humanoid = station.plant, station.humanoid
-    if support_foot not in humanoid.sole_frames:
+    model, model_humanoid = station.estimator.plant, station.estimator.humanoid
+    if support_foot not in model_humanoid.sole_frames:
         raise ValueError(f"unknown support foot {support_foot!r}")
     posture = wide_stance() if posture is None else dict(posture)
-    q_nominal = joint_vector_from_names(plant, full_posture(humanoid, posture))
+    q_nominal = joint_vector_from_names(model, full_posture(model_humanoid, posture))
     times, postures = [0.0], [q_nominal]
     for t, overrides in posture_knots:
         if float(t) <= times[-1]:
             raise ValueError("posture_knots: times must be positive and increasing")
         times.append(float(t))
-        postures.append(joint_vector_from_names(plant, full_posture(humanoid, overrides)))
+        postures.append(joint_vector_from_names(model, full_posture(model_humanoid, overrides)))
     schedule = builder.AddSystem(PostureSchedule(times, np.array(postures)))
     schedule.set_name("posture_schedule")
 
     names = [n for c in NAO_ARM_CHAINS for n in c.joint_names]
-    _, kd = default_gains(plant, humanoid)  # the station's PD gains (v[6:] order)
-    kd_by_name = dict(zip(station.joint_names, kd.tolist()))
+    _, kd = default_gains(model, model_humanoid)  # the station's PD gains (v[6:] order)
+    kd_by_name = dict(zip(station.estimator.joint_names, kd.tolist()))
     damping = [kd_by_name[n] for n in names]
 
     controller = builder.AddSystem(
         HandComplianceController(
-            plant,
+            model,
             q_nominal,
             NAO_ARM_CHAINS,
             stiffness=stiffness,
@@ -206,13 +211,13 @@ def build_nao_compliant_arms_diagram(
     builder.Connect(plant.get_state_output_port(), push_source.GetInputPort("state"))
 
     # Joint-level estimate (eqs. 25-27).
-    joint_torque = builder.AddSystem(JointTorqueFromPositionError(plant, motor_constants, NAO_ARM_CHAINS))
+    joint_torque = builder.AddSystem(JointTorqueFromPositionError(model, motor_constants, NAO_ARM_CHAINS))
     joint_torque.set_name("joint_torque_from_position_error")
     builder.Connect(controller.GetOutputPort("desired_position"), joint_torque.GetInputPort("desired_position"))
     builder.Connect(station.sensed_state, joint_torque.GetInputPort("state"))
     estimator = builder.AddSystem(
         ArmExternalForceEstimator(
-            plant, NAO_ARM_CHAINS, damping=damping, period=period, filter_time_constant=filter_time_constant
+            model, NAO_ARM_CHAINS, damping=damping, period=period, filter_time_constant=filter_time_constant
         )
     )
     estimator.set_name("arm_external_force_estimator")
@@ -232,7 +237,10 @@ def build_nao_compliant_arms_diagram(
     observer = pipeline.observer
     hand_force = builder.AddSystem(
         ObserverHandForce(
-            plant, humanoid.sole_frames[support_foot], NAO_ARM_CHAINS, model_instances=[humanoid.model_instance]
+            model,
+            model_humanoid.sole_frames[support_foot],
+            NAO_ARM_CHAINS,
+            model_instances=[model_humanoid.model_instance],
         )
     )
     hand_force.set_name("observer_hand_force")

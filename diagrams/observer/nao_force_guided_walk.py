@@ -10,7 +10,9 @@ whose docstring discusses the trigger sources and the measurements).
               force_estimate ("joint" | "observer" | "blend") ─► ForceGuidedWalkingController
 
 Every estimate reads sensor outputs and the controller's own commands only; the applied
-force reaches the loggers only.
+force reaches the loggers only. The controller and every estimator are built from the robot's
+model (the station's estimators' plant, ``station.estimator``), never from the simulated
+plant; ``ContactZmp`` (true contact forces) feeds the loggers and the metrics only.
 """
 
 import dataclasses
@@ -172,13 +174,16 @@ def build_force_guided_diagram(
     force_rate_variance = scenario.force_rate_variance
     builder = DiagramBuilder()
     station = add_humanoid_station(builder, "nao_like", plant_config=scenario.plant_config, noise=noise, seed=seed)
+    # The simulated robot (plant, pushes, contact forces for the metrics) and the robot's own
+    # model (the estimators' plant: gains, the controller and every estimator, issue 31).
     plant, humanoid = station.plant, station.humanoid
-    kp, _ = default_gains(plant, humanoid)
-    q0 = station.initial_state[: plant.num_positions()]
+    model, model_humanoid = station.estimator.plant, station.estimator.humanoid
+    kp, kd = default_gains(model, model_humanoid)
+    q0 = station.estimator.standing_state[: model.num_positions()]  # the plan starts standing (as the robot does)
     controller = builder.AddSystem(
         ForceGuidedWalkingController(
-            plant,
-            humanoid,
+            model,
+            model_humanoid,
             walking,
             trigger,
             initial_positions=q0,
@@ -197,10 +202,10 @@ def build_force_guided_diagram(
     contact_zmp = builder.AddSystem(ContactZmp(plant, humanoid))
     builder.Connect(plant.get_contact_results_output_port(), contact_zmp.GetInputPort("contact_results"))
 
-    context0 = plant.CreateDefaultContext()
-    plant.SetPositions(context0, q0)
-    origin = humanoid.sole_frames["right"].CalcPoseInWorld(context0).translation()
-    base = nao_observer_parameters(plant, humanoid.model_instance)
+    context0 = model.CreateDefaultContext()
+    model.SetPositions(context0, q0)
+    origin = model_humanoid.sole_frames["right"].CalcPoseInWorld(context0).translation()
+    base = nao_observer_parameters(model, model_humanoid.model_instance)
     chosen = WALKING if preset == "walking" else STANDING
     parameters = dataclasses.replace(chosen, mass=base.mass, gravity=base.gravity, period=base.period)
     if force_rate_variance is not None:
@@ -213,17 +218,16 @@ def build_force_guided_diagram(
     # eq. 27 = the PD's K_p, what ``diagrams.observer.calibration.identify_motor_constant``
     # identifies on this simulator (4.96-5.00 N m/rad shoulders and elbows, 2.00 wrists).
     names = [n for c in NAO_ARM_CHAINS for n in c.joint_names]
-    _, kd = default_gains(plant, humanoid)
-    kp_by_name = dict(zip(station.joint_names, kp.tolist()))
-    kd_by_name = dict(zip(station.joint_names, kd.tolist()))
+    kp_by_name = dict(zip(station.estimator.joint_names, kp.tolist()))
+    kd_by_name = dict(zip(station.estimator.joint_names, kd.tolist()))
     km = {n: kp_by_name[n] for n in names} if motor_constants is None else dict(motor_constants)
-    joint_torque = builder.AddSystem(JointTorqueFromPositionError(plant, km, NAO_ARM_CHAINS))
+    joint_torque = builder.AddSystem(JointTorqueFromPositionError(model, km, NAO_ARM_CHAINS))
     joint_torque.set_name("joint_torque_from_position_error")
     builder.Connect(controller.GetOutputPort("desired_position"), joint_torque.GetInputPort("desired_position"))
     builder.Connect(station.sensed_state, joint_torque.GetInputPort("state"))
     estimator = builder.AddSystem(
         ArmExternalForceEstimator(
-            plant,
+            model,
             NAO_ARM_CHAINS,
             damping=[kd_by_name[n] for n in names],
             filter_time_constant=JOINT_FILTER_TIME_CONSTANT,
@@ -238,7 +242,7 @@ def build_force_guided_diagram(
     # Eq. 28's blend (K1 = K_a / 8) of the observer's estimate read as a force on the hands
     # (eq. 11 inverted; the ground is the world's z = 0 plane) and the joint-level estimate.
     hand_force = builder.AddSystem(
-        ObserverHandForce(plant, plant.world_frame(), NAO_ARM_CHAINS, model_instances=[humanoid.model_instance])
+        ObserverHandForce(model, model.world_frame(), NAO_ARM_CHAINS, model_instances=[model_humanoid.model_instance])
     )
     builder.Connect(observer.GetOutputPort("virtual_force"), hand_force.GetInputPort("virtual_force"))
     builder.Connect(station.sensed_state, hand_force.GetInputPort("state"))

@@ -13,8 +13,10 @@ Hawley, Rahem and Suleiman (2019) fed by its simulated FSRs, IMU and encoders.
 
 The observer reads only sensor outputs (FSRs, IMU, encoders and the base estimate of
 ``systems.simulation.sensors``); the true state and the applied forces reach only the ground-truth
-system and the loggers. The support-foot frame F is world-aligned with its origin at the
-support sole frame (see ``systems.observer.fsr_sensing``).
+system and the loggers. The posture command and every estimator are built from the robot's
+model (the station's estimators' plant, ``station.estimator``), never from the simulated
+plant. The support-foot frame F is world-aligned with its origin at the support sole frame
+(see ``systems.observer.fsr_sensing``).
 
 Timing: the observer updates at t_k = k T and reads the sensors at t_k; a logger publishes
 before the discrete updates of the same time, so the estimate of sample k appears in the
@@ -121,12 +123,15 @@ def build_nao_force_observer_diagram(
     """
     builder = DiagramBuilder()
     station = add_humanoid_station(builder, "nao_like", plant_config=plant_config, noise=noise, seed=seed)
+    # The simulated robot (plant, pushes, ground truth) and the robot's own model (the
+    # estimators' plant: the posture command and every estimator, issue 31).
     plant, humanoid = station.plant, station.humanoid
-    if support_foot not in humanoid.sole_frames:
-        raise ValueError(f"unknown support foot {support_foot!r}; choose one of {sorted(humanoid.sole_frames)}")
+    model, model_humanoid = station.estimator.plant, station.estimator.humanoid
+    if support_foot not in model_humanoid.sole_frames:
+        raise ValueError(f"unknown support foot {support_foot!r}; choose one of {sorted(model_humanoid.sole_frames)}")
 
     # Position control: the PD + gravity compensation holds the standing posture.
-    q_desired = joint_vector_from_names(plant, full_posture(humanoid, posture))
+    q_desired = joint_vector_from_names(model, full_posture(model_humanoid, posture))
     hold = builder.AddSystem(ConstantVectorSource(q_desired))
     hold.set_name("joint_position_command")
     builder.Connect(hold.get_output_port(), station.desired_position)

@@ -96,14 +96,17 @@ def add_nao_measurement_pipeline(
     fsr = builder.AddSystem(FsrArray(plant, humanoid, noise_std=std, seed=SEEDS_PER_CALL * seed + FSR_SEED_OFFSET))
     fsr.set_name("fsr_array")
     builder.Connect(plant.get_contact_results_output_port(), fsr.GetInputPort("contact_results"))
-    cop = builder.AddSystem(CenterOfPressure(plant, humanoid, support_foot=support_foot, origin_W=origin_W))
+    # The FSRs are sensors of the simulated robot; what the observer computes from them and
+    # from the sensed state uses the estimators' plant (the robot's model) only.
+    model, model_humanoid = station.estimator.plant, station.estimator.humanoid
+    cop = builder.AddSystem(CenterOfPressure(model, model_humanoid, support_foot=support_foot, origin_W=origin_W))
     cop.set_name("center_of_pressure")
     builder.Connect(fsr.GetOutputPort("fsr_forces"), cop.GetInputPort("fsr_forces"))
     builder.Connect(station.sensed_state, cop.GetInputPort("state"))
-    com = builder.AddSystem(SupportFootCom(plant, humanoid, support_foot=support_foot, origin_W=origin_W))
+    com = builder.AddSystem(SupportFootCom(model, model_humanoid, support_foot=support_foot, origin_W=origin_W))
     com.set_name("support_foot_com")
     builder.Connect(station.sensed_state, com.GetInputPort("state"))
-    acc = builder.AddSystem(ImuComAcceleration(plant, humanoid.imu_frame))
+    acc = builder.AddSystem(ImuComAcceleration(model, model_humanoid.imu_frame))
     acc.set_name("imu_com_acceleration")
     builder.Connect(station.sensors.imu.linear_acceleration, acc.GetInputPort("linear_acceleration"))
     builder.Connect(station.sensed_state, acc.GetInputPort("state"))
@@ -158,8 +161,8 @@ def add_observer_pipeline(
         station, support_foot, origin_W, noise, seed, fsr_noise_std: as
             ``add_nao_measurement_pipeline``.
         observer_period: T, s (with the default parameters).
-        parameters: the observer's parameters; default eq. (21) with the model's mass at
-            ``observer_period`` (``nao_observer_parameters``).
+        parameters: the observer's parameters; default eq. (21) with the model's mass (the
+            station's estimators' plant) at ``observer_period`` (``nao_observer_parameters``).
     """
     measurements = add_nao_measurement_pipeline(
         builder,
@@ -170,8 +173,9 @@ def add_observer_pipeline(
         seed=seed,
         fsr_noise_std=fsr_noise_std,
     )
-    if parameters is None:
-        parameters = nao_observer_parameters(station.plant, station.humanoid.model_instance, period=observer_period)
+    if parameters is None:  # the robot's mass from its model: the estimators' plant
+        estimator = station.estimator
+        parameters = nao_observer_parameters(estimator.plant, estimator.humanoid.model_instance, period=observer_period)
     observer = add_lip_force_observer(builder, measurements, parameters)
     return ObserverPipeline(
         measurements.fsr_array,

@@ -26,9 +26,11 @@ model (eqs. 2-13) needs. Positions come from forward kinematics of the SENSED st
 stand-in for the leg odometry a real Nao would use to carry F0 from footprint to footprint;
 without slipping the two agree).
 
-The observer never reads the cable: only the sensors. The ground truth reaches only the
-loggers: ``PulleyLoad.force_world`` (the pull at the waist, the paper's "expected force" in
-Fig. 10) and its virtual force at the CoM (eq. 11, ``CableVirtualForceTruth``).
+The observer never reads the cable: only the sensors; it and the walking controller are
+built from the robot's model (the station's estimators' plant, ``station.estimator``), never
+from the simulated plant. The ground truth reaches only the loggers:
+``PulleyLoad.force_world`` (the pull at the waist, the paper's "expected force" in Fig. 10)
+and its virtual force at the CoM (eq. 11, ``CableVirtualForceTruth``).
 
 Cable geometry (``CableSetup``): the line is tied to the back of the torso at the height of
 the walking CoM (so the pull moves the LIP almost as a force at the CoM: eq. 11 adds only
@@ -223,12 +225,16 @@ def build_nao_walk_pulled_diagram(
     )
     builder = DiagramBuilder()
     station = add_humanoid_station(builder, "nao_like", plant_config=scenario.plant_config, noise=noise, seed=seed)
+    # The simulated robot (plant, cable, ground truth) and the robot's own model (the
+    # estimators' plant: the gains, the walking plan and every estimator, issue 31).
     plant, humanoid = station.plant, station.humanoid
-    kp, kd = default_gains(plant, humanoid)
-    q0 = station.initial_state[: plant.num_positions()]
+    estimator = station.estimator
+    model, model_humanoid = estimator.plant, estimator.humanoid
+    kp, kd = default_gains(model, model_humanoid)
+    q0 = estimator.standing_state[: model.num_positions()]  # the plan starts standing (as the robot does)
 
     # The plan first: it fixes the attachment height and the cable's slack.
-    controller = NaoWalkingController(plant, humanoid, parameters, initial_positions=q0, joint_stiffness=kp)
+    controller = NaoWalkingController(model, model_humanoid, parameters, initial_positions=q0, joint_stiffness=kp)
     torso = controller.trajectory.torso_position  # (K, 3) planned torso origin, world
     t_plan = controller.pattern.t
     walk_k = int(np.searchsorted(t_plan, parameters.walk_start))
@@ -293,10 +299,10 @@ def build_nao_walk_pulled_diagram(
     builder.Connect(plant.get_contact_results_output_port(), contact_zmp.GetInputPort("contact_results"))
 
     # Observer pipeline: sensors only.
-    context0 = plant.CreateDefaultContext()
-    plant.SetPositions(context0, q0)
-    origin = humanoid.sole_frames["right"].CalcPoseInWorld(context0).translation()
-    standing = nao_observer_parameters(plant, humanoid.model_instance, period=observer_period)
+    context0 = model.CreateDefaultContext()
+    model.SetPositions(context0, q0)
+    origin = model_humanoid.sole_frames["right"].CalcPoseInWorld(context0).translation()
+    standing = nao_observer_parameters(model, model_humanoid.model_instance, period=observer_period)
     obs_params = dataclasses.replace(WALKING, mass=standing.mass, gravity=standing.gravity, period=standing.period)
     pipeline = add_observer_pipeline(builder, station, origin_W=origin, noise=noise, seed=seed, parameters=obs_params)
     fsr, acc, observer = pipeline.fsr_array, pipeline.imu_com_acceleration, pipeline.observer

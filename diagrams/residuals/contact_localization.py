@@ -65,6 +65,7 @@ from systems.residuals.contact_estimation import (
     GatedEstimate,
     LocalizationResult,
     _SensedConfiguration,
+    candidate_geometry,
 )
 from systems.residuals.geometry_intersection import inward_direction, sample_surface, surface_areas
 from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual, ResidualModel
@@ -373,17 +374,19 @@ def build_contact_localization_diagram(
     builder.Connect(plant.get_state_output_port(), push_source.GetInputPort("state"))
 
     frames = station.known_wrench_frames
+    # Every estimator knows the robot through the estimators' plant alone.
+    estimator = station.estimator
     if online:
         internal, external = add_internal_and_external_residuals(
             builder, station, scenario.internal_gain, scenario.external_gain, scenario.period
         )
     else:
         model = station.dynamics_model
-        internal = InternalResidual(plant, scenario.internal_gain, scenario.period, frames, model=model)
-        external = ExternalResidual(plant, scenario.external_gain, scenario.period, frames, model=model)
+        internal = InternalResidual(estimator.plant, scenario.internal_gain, scenario.period, frames, model=model)
+        external = ExternalResidual(estimator.plant, scenario.external_gain, scenario.period, frames, model=model)
     model = internal.model
 
-    nq = plant.num_positions()
+    nq = estimator.plant.num_positions()
     # The detector's noise model: measured on the calibration log when the model was refined
     # (systems.residuals.offline), else predicted from the white sensor noise.
     noise = model_corrections.residual_noise if model_corrections is not None else None
@@ -395,11 +398,11 @@ def build_contact_localization_diagram(
             "covariance_external_force": noise.covariance_external_force,
         }
     detector = ContactDetector(
-        plant,
+        estimator.plant,
         internal_gain=scenario.internal_gain,
         external_gain=scenario.external_gain,
         known_wrench_frames=frames,
-        nominal_positions=station.initial_state[:nq],
+        nominal_positions=estimator.standing_state[:nq],
         period=scenario.period,
         startup_time=scenario.detector_startup_time,
         release_probability=scenario.detector_release_probability,
@@ -407,8 +410,8 @@ def build_contact_localization_diagram(
     )
     detector.set_name("contact_detector")
     localizer = ContactLocalizer(
-        plant,
-        station.scene_graph,
+        estimator.plant,
+        estimator.scene_graph,
         exclude_bodies=excluded,
         period=scenario.period,
         localization_period=scenario.localization_period,
@@ -533,11 +536,13 @@ def sample_trials(model: str, trials: int, seed: int, contacts: int = 1) -> list
     _, handles = build_contact_localization_diagram(
         set_ideal_conditions(ContactLocalizationScenario(model=model, noise=False))
     )
-    plant, localizer = handles.plant, handles.localizer
+    # The contacts are drawn on the simulated robot's own collision surfaces (the localizer's
+    # candidate links: every link but the soles).
+    plant = handles.plant
+    geo, bodies = candidate_geometry(plant, handles.scene_graph, None, handles.excluded_bodies, "sample_trials")
     context = plant.CreateDefaultContext()
     plant.SetPositionsAndVelocities(context, handles.station.initial_state)
-    geo = localizer.geometry
-    X_WB = np.array([plant.EvalBodyPoseInWorld(context, b).GetAsMatrix34() for b in localizer.candidate_bodies])
+    X_WB = np.array([plant.EvalBodyPoseInWorld(context, b).GetAsMatrix34() for b in bodies])
     R_WG, p_WG = geo.world_poses(X_WB)
     areas = surface_areas(geo.kinds, geo.params)
     links = np.unique(geo.body_indices)
@@ -690,14 +695,15 @@ def multi_contact_localizer(
     covariances: tuple[np.ndarray, np.ndarray],
     load_covariances: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> MultiContactLocalizer:
-    """The study's one-or-two-contact localizer on the plant of ``handles`` (keep them
-    alive with it), the soles excluded, with the averaged inputs' ``covariances``
+    """The study's one-or-two-contact localizer on the estimators' plant of ``handles`` (keep
+    them alive with it), the soles excluded, with the averaged inputs' ``covariances``
     (``averaged_input_covariances``) and, if given, the model error under load
     (``load_model_error``)."""
     load_ext, load_int = (None, None) if load_covariances is None else load_covariances
+    estimator = handles.station.estimator
     return MultiContactLocalizer(
-        handles.plant,
-        handles.scene_graph,
+        estimator.plant,
+        estimator.scene_graph,
         exclude_bodies=handles.excluded_bodies,
         covariance_external=covariances[0],
         covariance_internal=covariances[1],

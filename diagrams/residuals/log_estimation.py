@@ -35,7 +35,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from pydrake.geometry import Meshcat, MeshcatVisualizer, Rgba, SceneGraph
+from pydrake.geometry import Meshcat, MeshcatVisualizer, Rgba
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.analysis import Simulator
@@ -43,8 +43,9 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, ZeroOrderHold
 
 from diagrams.residuals.wiring import add_internal_and_external_residuals
+from diagrams.station.estimator_plant import EstimatorPlant, build_estimator_plant
 from diagrams.station.humanoid_station import add_humanoid_station
-from models import HumanoidHandles, add_ground, add_humanoid, point_contact_scene_graph_config, set_standing_state
+from models import add_ground, add_humanoid, point_contact_scene_graph_config
 from systems.common.topology import floating_base_topology
 from systems.estimation.base_state_estimator import (
     LEVEL_GROUND_TILT_STD,
@@ -110,47 +111,6 @@ class LogEstimationSettings:
     noise_calibration_time: float | None = None
     uniform_tolerance: float = 0.01
     estimate_imu_bias: bool = True
-
-
-@dataclass
-class EstimatorPlant:
-    """The robot's plant for the estimators (no ground, no simulation)."""
-
-    robot: str  # the name or description it was built from (``models.add_humanoid``)
-    plant: MultibodyPlant
-    scene_graph: SceneGraph
-    humanoid: HumanoidHandles
-    ft_frames: tuple  # the F/T sensor frames, sides sorted (left, right) as the station's
-    excluded_bodies: tuple[str, ...]  # the links below the F/T sensors (never localized)
-    standing_state: np.ndarray  # [q; v] standing, the detector's nominal configuration
-
-    @property
-    def joint_names(self) -> tuple[str, ...]:
-        """The 1-DoF joints in the plant's v[6:] order."""
-        return tuple(j.name() for j in floating_base_topology(self.plant).joints)
-
-
-def build_estimator_plant(robot: str, time_step: float = 1e-3) -> EstimatorPlant:
-    """The plant of ``robot`` (passed to ``models.add_humanoid`` unchanged: a built-in name
-    such as ``hrp4_like`` or a robot description) with its SceneGraph, finalized."""
-    builder = DiagramBuilder()
-    plant, scene_graph = AddMultibodyPlant(
-        MultibodyPlantConfig(time_step=time_step), point_contact_scene_graph_config(), builder
-    )
-    humanoid = add_humanoid(plant, robot, scene_graph=scene_graph)
-    plant.Finalize()
-    sides = sorted(humanoid.ft_sensor_joints)
-    context = plant.CreateDefaultContext()
-    set_standing_state(plant, context, humanoid)
-    return EstimatorPlant(
-        robot=robot,
-        plant=plant,
-        scene_graph=scene_graph,
-        humanoid=humanoid,
-        ft_frames=tuple(humanoid.ft_sensor_frames[s] for s in sides),
-        excluded_bodies=tuple(humanoid.ft_sensor_joints[s].child_body().name() for s in sides),
-        standing_state=plant.GetPositionsAndVelocities(context),
-    )
 
 
 def make_detector(
@@ -718,16 +678,7 @@ def simulate_push_log(
     internal, external = add_internal_and_external_residuals(
         builder, station, settings.internal_gain, settings.external_gain, period
     )
-    sides = sorted(station.humanoid.ft_sensor_joints)
-    robot_view = EstimatorPlant(
-        robot=robot,
-        plant=plant,
-        scene_graph=station.scene_graph,
-        humanoid=station.humanoid,
-        ft_frames=tuple(station.known_wrench_frames),
-        excluded_bodies=tuple(station.humanoid.ft_sensor_joints[s].child_body().name() for s in sides),
-        standing_state=station.initial_state,
-    )
+    robot_view = station.estimator  # the estimators know the robot through their own plant
     detector = builder.AddSystem(make_detector(robot_view, settings, period))
     localizer = builder.AddSystem(make_localizer(robot_view, settings, period))
     builder.Connect(external.GetOutputPort("external_wrench_world"), detector.GetInputPort("external_wrench_world"))

@@ -272,20 +272,18 @@ def calibrate_from_log(
     ``calibrate_model``), and their ``residual_noise``: the covariances of the internal and
     external residuals replayed on the log with the refined model (``systems.residuals.
     offline``), after the first ``scenario.skip`` s. ``handles``: a refinement diagram of the
-    robot (its plant, F/T frames and the estimators' model before refinement)."""
+    robot (its station's estimators' plant: the model before refinement, and F/T frames)."""
     station = handles.station
+    # The estimators' plant: its default inertias are the model before refinement.
+    plant = station.estimator.plant
     corrections = identify_model_corrections(
-        handles.plant,
-        log,
-        known_wrench_frames=station.known_wrench_frames,
-        nominal_inertias=station.estimator_inertias,
-        options=calibration_options(handles.plant),
+        plant, log, known_wrench_frames=station.known_wrench_frames, options=calibration_options(plant)
     )
-    model = ResidualModel(handles.plant)
+    model = ResidualModel(plant)
     model.set_spatial_inertias(corrections.spatial_inertias)
     period = float(np.median(np.diff(log.time)))
     replayed = replay_residuals(
-        handles.plant,
+        plant,
         model,
         station.known_wrench_frames,
         np.hstack((log.q, log.v)),

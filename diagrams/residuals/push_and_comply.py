@@ -216,9 +216,13 @@ def build_push_and_comply_diagram(
     plant, humanoid = station.plant, station.humanoid
     if humanoid is None:
         raise ValueError("push-and-comply needs one of the humanoid models (its shoulders and joint groups)")
+    # The residual and the admittance know the robot through the estimators' plant only.
+    model, model_humanoid = station.estimator.plant, station.estimator.humanoid
 
-    # Two downward forces on the shoulders, polynomial profile (the paper's Sec. IV).
-    peak_force, gain_factor, dead_band = robot_scaled_push(plant, humanoid, scenario)
+    # Two downward forces on the shoulders, polynomial profile (the paper's Sec. IV), sized to
+    # the simulated robot; the admittance's gain factor and dead band to the estimators' model.
+    peak_force = robot_scaled_push(plant, humanoid, scenario)[0]
+    _, gain_factor, dead_band = robot_scaled_push(model, model_humanoid, scenario)
     profile = PolynomialRampUpDown(peak_force, scenario.push_start, scenario.push_peak_time, scenario.push_end)
     pushes = [
         Push(body.name(), np.asarray(scenario.push_point, float), np.asarray(scenario.push_direction, float), profile)
@@ -233,7 +237,7 @@ def build_push_and_comply_diagram(
     residual_type = InternalResidual if residual_kind == "internal" else ClassicalResidual
     residual = builder.AddSystem(
         residual_type(
-            plant, scenario.residual_gain, known_wrench_frames=station.known_wrench_frames, model=station.dynamics_model
+            model, scenario.residual_gain, known_wrench_frames=station.known_wrench_frames, model=station.dynamics_model
         )
     )
     residual.set_name(f"{residual_kind}_residual")
@@ -243,26 +247,25 @@ def build_push_and_comply_diagram(
         builder.Connect(station.known_wrenches, residual.GetInputPort("known_wrenches"))
 
     # Joint admittance (eq. 14) on the measured joint positions.
-    gains = gain_factor * admittance_gains_by_group(plant, humanoid, scenario.admittance_gains)
+    gains = gain_factor * admittance_gains_by_group(model, model_humanoid, scenario.admittance_gains)
     admittance = builder.AddSystem(
         JointAdmittanceController(
-            plant,
+            model,
             gains,
             residual_includes_base=(residual_kind == "classical"),
             dead_band=admittance_dead_band(scenario, residual_kind, model_corrections, dead_band),
             max_rate=scenario.max_rate,
             integrate_from=scenario.integrate_from,
             support_frames=(
-                (humanoid.sole_frames["left"], humanoid.sole_frames["right"])
+                (model_humanoid.sole_frames["left"], model_humanoid.sole_frames["right"])
                 if scenario.closed_chain_projection
                 else None
             ),
             hold_center_of_mass=scenario.closed_chain_projection and scenario.hold_center_of_mass,
-            spatial_inertias=station.estimator_spatial_inertias if scenario.closed_chain_projection else None,
         )
     )
     admittance.set_name("joint_admittance_controller")
-    measured_position = builder.AddSystem(joint_position_selector(plant))
+    measured_position = builder.AddSystem(joint_position_selector(model))
     builder.Connect(station.sensed_state, measured_position.get_input_port())
     builder.Connect(residual.GetOutputPort("residual"), admittance.GetInputPort("residual"))
     builder.Connect(measured_position.get_output_port(), admittance.GetInputPort("measured_position"))
@@ -317,8 +320,9 @@ def push_and_comply_metrics(
 ) -> dict:
     """The metrics of one run, from its logged signals ``s`` (``logged_signals``: "t" and
     the loggers of ``handles``): knee flexion and joints moved from the posture at the push's
-    start, CoM and pelvis height drop, foot slip, base tilt, whether it stayed upright, and
-    the real-time factor of a run that took ``wall_time_s`` s."""
+    start, CoM and pelvis height drop, the CoM's largest horizontal travel, foot slip, base
+    tilt, whether it stayed upright, and the real-time factor of a run that took
+    ``wall_time_s`` s."""
     station = handles.station
     plant, humanoid = station.plant, station.humanoid
     t, x = s["t"], s["state"]
@@ -333,16 +337,17 @@ def push_and_comply_metrics(
     flexion = {n: float(np.degrees(displacement[names.index(n), reference:].max())) for n in knees}
 
     context = plant.CreateDefaultContext()
-    com_z, pelvis_z, tilt_deg, soles = [], [], [], {side: [] for side in humanoid.sole_frames}
+    com, pelvis_z, tilt_deg, soles = [], [], [], {side: [] for side in humanoid.sole_frames}
     for k in range(reference, x.shape[1]):
         plant.SetPositionsAndVelocities(context, x[:, k])
-        com_z.append(plant.CalcCenterOfMassPositionInWorld(context)[2])
+        com.append(plant.CalcCenterOfMassPositionInWorld(context))
         X_WB = humanoid.base_body.EvalPoseInWorld(context)
         pelvis_z.append(X_WB.translation()[2])
         tilt_deg.append(np.degrees(np.arccos(np.clip(X_WB.rotation().matrix()[2, 2], -1.0, 1.0))))
         for side, frame in humanoid.sole_frames.items():
             soles[side].append(frame.CalcPoseInWorld(context).translation())
-    com_z, pelvis_z = np.array(com_z), np.array(pelvis_z)
+    com, pelvis_z = np.array(com), np.array(pelvis_z)
+    com_z = com[:, 2]
     slip = {
         side: float(np.linalg.norm(np.array(p)[:, :2] - np.array(p)[0, :2], axis=1).max()) for side, p in soles.items()
     }
@@ -354,6 +359,7 @@ def push_and_comply_metrics(
         "knee_pitch_flexion_per_knee_deg": flexion,
         "joints_moved_over_1deg": int(sum(v > 1.0 for v in max_displacement_deg.values())),
         "com_height_drop_m": float(com_z[0] - com_z.min()),
+        "com_horizontal_travel_m": float(np.linalg.norm(com[:, :2] - com[0, :2], axis=1).max()),
         "pelvis_height_drop_m": float(pelvis_z[0] - pelvis_z.min()),
         "max_foot_slip_m": max(slip.values()),
         "foot_slip_m": slip,

@@ -163,17 +163,18 @@ def build_residual_comparison_diagram(
     sensed_state, measured_torque = station.sensed_state, station.measured_torque
     known_frames, known_wrenches = station.known_wrench_frames, station.known_wrenches
 
-    # The three residuals, sharing one model (one dynamics computation per update).
-    # The station's model: the estimators' inertias, which the PD's gravity also uses.
-    model = station.dynamics_model if station.dynamics_model is not None else ResidualModel(plant)
+    # The three residuals, sharing one model (one dynamics computation per update): the
+    # estimators' plant and inertias, which the PD's gravity also uses.
+    estimator_plant = station.estimator.plant
+    model = station.dynamics_model if station.dynamics_model is not None else ResidualModel(estimator_plant)
     classical = builder.AddSystem(
-        ClassicalResidual(plant, scenario.classical_gain, scenario.period, known_frames, model=model)
+        ClassicalResidual(estimator_plant, scenario.classical_gain, scenario.period, known_frames, model=model)
     )
     internal = builder.AddSystem(
-        InternalResidual(plant, scenario.internal_gain, scenario.period, known_frames, model=model)
+        InternalResidual(estimator_plant, scenario.internal_gain, scenario.period, known_frames, model=model)
     )
     external = builder.AddSystem(
-        ExternalResidual(plant, scenario.external_gain, scenario.period, known_frames, model=model)
+        ExternalResidual(estimator_plant, scenario.external_gain, scenario.period, known_frames, model=model)
     )
     for name, residual in (
         ("classical_residual", classical),

@@ -14,9 +14,9 @@ def add_internal_and_external_residuals(
 ) -> tuple[InternalResidual, ExternalResidual]:
     """The ``InternalResidual`` (eq. 11) and ``ExternalResidual`` (eq. 16), gains K in 1/s,
     update period in s, on the station's sensed state, F/T wrenches (as known wrenches) and
-    motor torques, sharing the station's dynamics model (the estimators' inertias, which the
-    PD's gravity also uses)."""
-    plant, frames = station.plant, station.known_wrench_frames
+    motor torques, built on the estimators' plant and sharing the station's dynamics model
+    (the estimators' inertias, which the PD's gravity also uses)."""
+    plant, frames = station.estimator.plant, station.known_wrench_frames
     model = station.dynamics_model if station.dynamics_model is not None else ResidualModel(plant)
     internal = builder.AddSystem(InternalResidual(plant, internal_gain, period, frames, model=model))
     external = builder.AddSystem(ExternalResidual(plant, external_gain, period, frames, model=model))

@@ -19,6 +19,13 @@ with IMU bias states when the simulated IMU has a bias random walk.
 model_identification``) replace the estimators' link inertias and correct the motor torques
 they read (``HumanoidStation.measured_torque``; the sensor's own output stays available as
 ``raw_measured_torque``).
+
+The estimators never see the simulated plant: the station parses the robot's description a
+second time into the estimators' own plant (``HumanoidStation.estimator``, carrying the
+mismatched or refined inertias as its defaults), and builds the PD's gravity compensation,
+the base-state EKF and the torque correction from it; the experiment diagrams build their
+residuals, detectors, localizers and admittance from it too. The simulated ``plant`` serves
+the simulator, the sensors and the ground-truth systems.
 """
 
 from __future__ import annotations
@@ -34,6 +41,7 @@ from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, Multibody
 from pydrake.systems.framework import Context, DiagramBuilder, InputPort, OutputPort
 from pydrake.systems.primitives import MatrixGain, ZeroOrderHold
 
+from diagrams.station.estimator_plant import EstimatorPlant, build_estimator_plant, set_posture_inside_limits
 from diagrams.station.plant_config import check_plant_config, default_plant_config
 from diagrams.station.standing import default_gains
 from models import (
@@ -74,26 +82,32 @@ class HumanoidStation:
     """What ``add_humanoid_station`` added.
 
     Attributes:
-        plant, scene_graph: the finalized plant and its SceneGraph.
-        humanoid: the robot's handles, or None for a model loaded from a file.
-        topology: the plant's floating-base topology (joints in v[6:] order).
-        controller: the PdGravityController; its ``desired_position`` input is NOT connected.
+        plant, scene_graph: the finalized simulated plant and its SceneGraph: for the
+            simulator, the sensors, disturbances and ground truth only.
+        humanoid: the simulated robot's handles, or None for a model loaded from a file.
+        estimator: the estimators' own plant (``diagrams.station.estimator_plant``), parsed
+            from the same description with the estimators' inertias: build every estimator,
+            controller and localizer from it (its ``humanoid`` has the frames they need).
+        topology: the simulated plant's floating-base topology (joints in v[6:] order; the
+            estimators' plant has the same indices: ``estimator.topology``).
+        controller: the PdGravityController (built on ``estimator.plant``); its
+            ``desired_position`` input is NOT connected.
         desired_position: that input port.
         sensors: the sensor suite, or None (model from a file).
         sensed_state: output port of the sensed [q; v] (the true state without sensors).
         measured_torque: output port of the motor torques, v[6:] order.
-        known_wrench_frames: the F/T sensor frames (empty without F/T sensors).
+        known_wrench_frames: the F/T sensor frames of ``estimator.plant`` (empty without F/T
+            sensors), in the order of ``known_wrenches``.
         known_wrenches: output port of their wrenches, or None.
         initial_state: the plant's initial [q; v] (standing, or the posture held in space).
         q_hold: the initial joint positions, v[6:] order, rad.
         sensed_state_hold: the ZeroOrderHold between the sensors and the PD (humanoids), or
             None. Its held sample is set by ``set_initial_state``: call it before
             ``Simulator.Initialize``.
-        dynamics_model: the ``ResidualModel`` whose gravity the PD uses (humanoids), or
-            None. Give it to the diagram's residuals (``model=``): the PD reads the
-            sample they evaluated one step earlier, so the dynamics at each sensed state
-            are computed once for the PD and all residuals. With a model mismatch its
-            links' inertias are the perturbed ones (the plant stays nominal).
+        dynamics_model: the ``ResidualModel`` of ``estimator.plant`` whose gravity the PD
+            uses (humanoids), or None. Give it to the diagram's residuals (``model=``): the
+            PD reads the sample they evaluated one step earlier, so the dynamics at each
+            sensed state are computed once for the PD and all residuals.
         imperfections: the Imperfections the station was built with (ideal by default).
         friction: the JointFriction system feeding the plant's applied generalized force,
             or None.
@@ -102,12 +116,12 @@ class HumanoidStation:
             "invariant_ekf"), or None. ``set_initial_state`` starts it at the initial state.
         foot_contact: the FootContactFromForceTorque (or, without F/T sensors,
             FootContactFromFsr) feeding it its contact flags, or None.
-        model_corrections: the ``ModelCorrections`` applied to ``dynamics_model`` and to
-            ``measured_torque`` (see ``add_humanoid_station``), or None.
+        model_corrections: the ``ModelCorrections`` whose inertias ``estimator`` carries and
+            which correct ``measured_torque`` (see ``add_humanoid_station``), or None.
         raw_measured_torque: the torque sensor's own output (before the corrections; the
             same port as ``measured_torque`` without them): what a calibration log records.
         estimator_inertias: {body index: SpatialInertia} of the estimators' model before any
-            refinement: the model mismatch's perturbed links, or None (the plant's own).
+            refinement: the model mismatch's perturbed links, or None (the description's).
     """
 
     plant: MultibodyPlant
@@ -133,18 +147,11 @@ class HumanoidStation:
     model_corrections: ModelCorrections | None = None
     raw_measured_torque: OutputPort | None = None
     estimator_inertias: dict | None = None
+    estimator: EstimatorPlant | None = None
 
     @property
     def joint_names(self) -> tuple[str, ...]:
         return tuple(j.name() for j in self.topology.joints)
-
-    @property
-    def estimator_spatial_inertias(self) -> dict | None:
-        """{body index: SpatialInertia} (M_BBo_B) of the estimators' model where it differs
-        from the plant: the refined model's, else the mismatched one's; None: the plant's."""
-        if self.model_corrections is not None:
-            return dict(self.model_corrections.spatial_inertias)
-        return self.estimator_inertias
 
     def set_initial_state(self, root_context: Context, state: np.ndarray | None = None) -> None:
         """Puts the robot in ``state`` ([q; v], default ``initial_state``) in the diagram's
@@ -236,30 +243,39 @@ def add_humanoid_station(
     context = plant.CreateDefaultContext()
     if humanoid is not None:
         set_standing_state(plant, context, humanoid)
-        kp, kd = default_gains(plant, humanoid)
     else:
-        _set_posture_inside_limits(plant, context, topology)
-        kp, kd = _generic_gains(plant, context, time_step)
+        set_posture_inside_limits(plant, context, topology)
     initial_state = plant.GetPositionsAndVelocities(context)
     q_hold = np.array([initial_state[j.position_start()] for j in topology.joints])
 
-    # Humanoids: gravity from the dynamics model the estimators share (see HumanoidStation).
-    dynamics_model = ResidualModel(plant) if humanoid is not None else None
+    # The estimators' own plant (diagrams.station.estimator_plant), parsed from the same
+    # description with the estimators' inertias as its defaults: the controller, the
+    # base-state EKF and every estimator a diagram adds are built from it, never from `plant`.
+    estimator = build_estimator_plant(model, time_step)
     mismatch = imperfections.model_mismatch
     estimator_inertias = None
+    link_inertias = {}
     if mismatch.mass_percent or mismatch.com_percent or mismatch.inertia_percent:
-        if dynamics_model is None:
+        if humanoid is None:
             raise ValueError(
                 "imperfections.model_mismatch needs a humanoid station (hrp4_like, nao_like): run with --ideal"
             )
-        estimator_inertias = perturbed_spatial_inertias(plant, mismatch, imperfections.seed)
-        dynamics_model.set_spatial_inertias(estimator_inertias)
+        estimator_inertias = perturbed_spatial_inertias(estimator.plant, mismatch, imperfections.seed)
+        link_inertias.update(estimator.link_inertias_by_name(estimator_inertias))
     if model_corrections is not None:
-        if dynamics_model is None:
+        if humanoid is None:
             raise ValueError("model_corrections need a humanoid station (hrp4_like, nao_like)")
         if not isinstance(model_corrections, ModelCorrections):
             raise ValueError(f"model_corrections must be ModelCorrections, got {type(model_corrections).__name__}")
-        dynamics_model.set_spatial_inertias(model_corrections.spatial_inertias)
+        link_inertias.update(estimator.link_inertias_by_name(model_corrections.spatial_inertias))
+    if link_inertias:
+        estimator = build_estimator_plant(model, time_step, link_inertias=link_inertias)
+    if humanoid is not None:
+        kp, kd = default_gains(estimator.plant, estimator.humanoid)
+    else:
+        kp, kd = _generic_gains(estimator.plant, estimator.standing_state, time_step)
+    # Humanoids: gravity from the dynamics model the estimators share (see HumanoidStation).
+    dynamics_model = ResidualModel(estimator.plant) if humanoid is not None else None
     friction = None
     if imperfections.friction.coulomb_percent or imperfections.friction.viscous_percent:
         rated = rated_joint_torques(plant)
@@ -274,7 +290,7 @@ def add_humanoid_station(
         friction.set_name("joint_friction")
         builder.Connect(plant.get_state_output_port(), friction.get_input_port())
         builder.Connect(friction.get_output_port(), plant.get_applied_generalized_force_input_port())
-    controller = builder.AddSystem(PdGravityController(plant, kp, kd, gravity_model=dynamics_model))
+    controller = builder.AddSystem(PdGravityController(estimator.plant, kp, kd, gravity_model=dynamics_model))
     controller.set_name("pd_gravity_controller")
     base_state_estimator = foot_contact = None
     builder.Connect(controller.GetOutputPort("actuation"), plant.get_actuation_input_port())
@@ -298,17 +314,17 @@ def add_humanoid_station(
             base_estimator=(base_state == "truth_plus_noise"),
         )
         if base_state == "invariant_ekf":
-            base_state_estimator, foot_contact = _add_invariant_ekf(
-                builder, plant, humanoid, topology, sensors, initial_state
-            )
+            base_state_estimator, foot_contact = _add_invariant_ekf(builder, plant, humanoid, estimator, sensors)
         sensed_state, measured_torque = sensors.state, sensors.measured_torque
         if model_corrections is not None:
-            corrected = builder.AddSystem(CorrectedJointTorque(plant, model_corrections))
+            corrected = builder.AddSystem(CorrectedJointTorque(estimator.plant, model_corrections))
             corrected.set_name("corrected_joint_torque")
             builder.Connect(sensors.measured_torque, corrected.GetInputPort("measured_torque"))
             builder.Connect(sensors.state, corrected.GetInputPort("state"))
             measured_torque = corrected.GetOutputPort("joint_torque")
-        known_frames, known_wrenches = tuple(sensors.ft_frames), sensors.ft_wrenches
+        if len(estimator.ft_frames) != len(sensors.ft_frames):
+            raise ValueError("the estimators' plant and the simulated robot have different F/T sensors")
+        known_frames, known_wrenches = estimator.ft_frames, sensors.ft_wrenches
     else:
         sensors = None
         sensed_state = plant.get_state_output_port()
@@ -367,6 +383,7 @@ def add_humanoid_station(
         foot_contact=foot_contact,
         model_corrections=model_corrections,
         estimator_inertias=estimator_inertias,
+        estimator=estimator,
         raw_measured_torque=sensors.measured_torque if sensors is not None else measured_torque,
     )
 
@@ -393,9 +410,8 @@ def _add_invariant_ekf(
     builder: DiagramBuilder,
     plant: MultibodyPlant,
     humanoid: HumanoidHandles,
-    topology: FloatingBaseTopology,
+    estimator: EstimatorPlant,
     sensors: SensorHandles,
-    initial_state: np.ndarray,
 ) -> tuple[InvariantEkfBaseStateEstimator, FootContactFromForceTorque | FootContactFromFsr]:
     """The contact-aided invariant EKF as the source of the assembler's base pose and velocity:
     gyro and accelerometer from the IMU, joint positions from the encoders, one contact flag
@@ -411,7 +427,9 @@ def _add_invariant_ekf(
     model absorbs during the calibration and the internal residual then shows as gravity
     torque on every pitch joint. The station's robot starts standing still on level ground,
     so the filter starts with that prior (``STANDING_START_ORIENTATION_STD``,
-    ``STANDING_START_VELOCITY_STD``) rather than the generic one."""
+    ``STANDING_START_VELOCITY_STD``) rather than the generic one. The FSRs are sensors of
+    the simulated ``plant`` (``humanoid``: its handles); the filter, the contact flags' weight
+    threshold and the filter's start are the estimators' (``estimator``)."""
     from systems.observer.fsr_sensing import FSR_NOISE_STD, FSR_SIDES, FsrArray
     from systems.simulation.sensors import SEEDS_PER_CALL
 
@@ -427,19 +445,21 @@ def _add_invariant_ekf(
         fsr = builder.AddSystem(FsrArray(plant, humanoid, noise_std=noise_std, seed=SEEDS_PER_CALL * seed + 5))
         fsr.set_name("invariant_ekf_fsr_array")
         builder.Connect(plant.get_contact_results_output_port(), fsr.GetInputPort("contact_results"))
-        mass = plant.CalcTotalMass(plant.CreateDefaultContext(), [humanoid.model_instance])
-        weight = mass * float(np.linalg.norm(plant.gravity_field().gravity_vector()))
+        model = estimator.plant
+        mass = model.CalcTotalMass(model.CreateDefaultContext(), [estimator.humanoid.model_instance])
+        weight = mass * float(np.linalg.norm(model.gravity_field().gravity_vector()))
         contact = builder.AddSystem(FootContactFromFsr(weight, num_feet=len(sides)))
         contact.set_name("foot_contact_from_fsr")
         builder.Connect(fsr.GetOutputPort("fsr_forces"), contact.GetInputPort("fsr_forces"))
+    topology, initial_state = estimator.topology, estimator.standing_state
     q0 = topology.free_joint.position_start()
-    v0 = plant.num_positions() + topology.free_joint.velocity_start()
+    v0 = estimator.plant.num_positions() + topology.free_joint.velocity_start()
     estimate_bias = sensors.imu.gyro_bias is not None or sensors.imu.accel_bias is not None
     estimator = builder.AddSystem(
         InvariantEkfBaseStateEstimator(
-            plant,
-            humanoid.imu_frame,
-            [humanoid.sole_frames[side] for side in sides],
+            estimator.plant,
+            estimator.humanoid.imu_frame,
+            [estimator.humanoid.sole_frames[side] for side in sides],
             initial_base_pose=initial_state[q0 : q0 + 7],
             initial_base_velocity=initial_state[v0 : v0 + 6],
             initial_orientation_std=STANDING_START_ORIENTATION_STD,
@@ -477,25 +497,11 @@ def _load(plant: MultibodyPlant, scene_graph: SceneGraph, model: str) -> Humanoi
     return None
 
 
-def _set_posture_inside_limits(plant: MultibodyPlant, context: Context, topology) -> None:
-    """Default joint positions, moved to the middle of the range where 0 is within 0.05 of a
-    joint limit (a limit's constraint force would be an unmodelled external effort)."""
-    for joint in topology.joints:
-        lower, upper = joint.position_lower_limits()[0], joint.position_upper_limits()[0]
-        value = plant.GetPositions(context)[joint.position_start()]
-        if not (lower + 0.05 <= value <= upper - 0.05):
-            middle = 0.5 * (lower + upper) if np.isfinite(lower) and np.isfinite(upper) else value
-            q = plant.GetPositions(context)
-            q[joint.position_start()] = middle
-            plant.SetPositions(context, q)
-
-
-def _generic_gains(plant: MultibodyPlant, context: Context, period: float) -> tuple[np.ndarray, np.ndarray]:
+def _generic_gains(plant: MultibodyPlant, x: np.ndarray, period: float) -> tuple[np.ndarray, np.ndarray]:
     """PD gains for any robot, from its joint-space inertia H_fb at the posture: kd = 0.2 H/T
     and kp = 10 kd keep the explicit 1 kHz PD stable (kd T / H well below 2)."""
     from systems.dynamics.floating_base import FloatingBaseDynamics
 
-    x = plant.GetPositionsAndVelocities(context)
     nq = plant.num_positions()
     inertia = np.diag(FloatingBaseDynamics(plant).compute(x[:nq], x[nq:]).H_fb)
     kd = 0.2 * inertia / period

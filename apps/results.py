@@ -1,0 +1,83 @@
+"""Results files: the figures the documentation quotes, as the apps measured them (issue 31).
+
+An app that measures a quoted figure writes ``results/<name>.json`` (committed) with
+``write_results``: the measured data, the command that produced it, when, and on which Python
+and Drake. The tables of README.md, BENCHMARKS.md and docs/*.md between ``<!-- results: NAME -->``
+and ``<!-- /results: NAME -->`` are generated from those files by ``python -m apps.doc_tables``
+(``make docs``), and ``tests/test_doc_tables.py`` fails when a table and its file disagree: no
+quoted figure is typed by hand.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import os
+import platform
+import shlex
+import sys
+from pathlib import Path
+from typing import Any
+
+from apps.runner import json_text
+
+#: The committed results files.
+RESULTS_DIR = Path(__file__).resolve().parent.parent / "results"
+#: An environment variable that sends the results files elsewhere (a trial run, a test).
+RESULTS_DIR_VARIABLE = "HCO_RESULTS_DIR"
+
+
+def results_path(name: str, folder: Path | None = None) -> Path:
+    """``<folder>/<name>.json``; default folder: ``$HCO_RESULTS_DIR`` when set, else
+    ``RESULTS_DIR``."""
+    if not name or "/" in name or name.startswith("."):
+        raise ValueError(f"a results name is a plain file stem, got {name!r}")
+    if folder is None:
+        folder = Path(os.environ.get(RESULTS_DIR_VARIABLE) or RESULTS_DIR)
+    return Path(folder) / f"{name}.json"
+
+
+def app_command(module: str, argv: list[str] | None) -> str:
+    """The command line that ran the app ``module`` with ``argv`` (None: this process's)."""
+    return shlex.join(["python", "-m", module, *(sys.argv[1:] if argv is None else argv)])
+
+
+def write_results(name: str, data: dict, *, command: str, folder: Path | None = None) -> Path:
+    """Writes ``data`` (JSON-able; NumPy values are converted) to ``results/<name>.json`` with
+    the ``command`` that measured it (``app_command``), the date, Python's and Drake's
+    versions."""
+    from models.drake_compat import drake_version
+
+    payload = {
+        "name": name,
+        "command": command,
+        "written": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+        "python": platform.python_version(),
+        "drake": drake_version(),
+        "data": data,
+    }
+    path = results_path(name, folder)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temporary = path.with_suffix(".json.tmp")
+    temporary.write_text(json_text(payload) + "\n")
+    temporary.replace(path)
+    return path
+
+
+def load_results(name: str, folder: Path | None = None) -> dict[str, Any]:
+    """The results file ``name`` (all of it: ``data`` and its provenance).
+
+    Raises:
+        ValueError: a missing or unreadable file, naming it and the command that writes it.
+    """
+    path = results_path(name, folder)
+    try:
+        payload = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as error:
+        raise ValueError(f"results file '{path}' cannot be read ({error}): run the app that writes it") from error
+    if not isinstance(payload, dict) or "data" not in payload or "command" not in payload:
+        raise ValueError(f"results file '{path}' has no 'data' and 'command': not written by write_results")
+    return payload
+
+
+__all__ = ["RESULTS_DIR", "RESULTS_DIR_VARIABLE", "app_command", "load_results", "results_path", "write_results"]

@@ -1,0 +1,175 @@
+"""The robot as the estimators know it: a MultibodyPlant of their own, separate from the
+simulated robot by construction (issue 31).
+
+On a real robot the estimators have a model (the description's CAD values, or a model
+refined from a calibration log) and the robot's sensors; they never have the robot itself.
+The simulator mirrors this: ``build_estimator_plant`` parses the robot's description into a
+plant that is never simulated (no ground, not in the simulation's diagram), with the
+estimators' link inertias (a model mismatch, a refined model) written into the model text so
+that they are the plant's *default* parameters: every context an estimator creates from it,
+and every value it computes, is the estimators' model. The residuals, force estimation, the
+detector, both localizers, the base-state EKF, the PD's gravity compensation and the
+admittance are all built from it (``diagrams.station.humanoid_station``); the simulated plant
+serves the simulator, the sensors and the ground-truth systems only.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from pydrake.geometry import SceneGraph
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
+from pydrake.multibody.tree import BodyIndex, SpatialInertia
+from pydrake.systems.framework import DiagramBuilder
+
+from models import (
+    MODEL_NAMES,
+    HumanoidHandles,
+    add_humanoid,
+    is_humanoid,
+    point_contact_scene_graph_config,
+    set_standing_state,
+    with_link_inertias,
+)
+from systems.common.topology import FloatingBaseTopology, floating_base_topology
+
+
+@dataclass
+class EstimatorPlant:
+    """The estimators' plant of one robot (no ground, never simulated).
+
+    Attributes:
+        robot: the name, description or model file it was built from.
+        plant, scene_graph: its finalized plant and SceneGraph (the collision shapes the
+            localizers intersect with the line of action).
+        humanoid: its handles (frames, joint groups) for a humanoid; None for a model file.
+        topology: its floating-base topology (joints in v[6:] order).
+        ft_frames: the foot F/T sensor frames, sides sorted (left, right) as the station's.
+        excluded_bodies: the links below the F/T sensors (never localized).
+        standing_state: [q; v] standing (a humanoid) or at the posture held in space (a
+            model file): the detector's nominal configuration.
+        link_inertias: {link name: M_BBo_B} where this model differs from the description
+            (empty: the description's own values).
+    """
+
+    robot: str
+    plant: MultibodyPlant
+    scene_graph: SceneGraph
+    humanoid: HumanoidHandles | None
+    topology: FloatingBaseTopology
+    ft_frames: tuple
+    excluded_bodies: tuple[str, ...]
+    standing_state: np.ndarray
+    link_inertias: dict = field(default_factory=dict)
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """The 1-DoF joints in the plant's v[6:] order."""
+        return tuple(j.name() for j in self.topology.joints)
+
+    def link_inertias_by_name(self, inertias: Mapping[int, SpatialInertia]) -> dict[str, SpatialInertia]:
+        """{body index: M} of this plant's bodies -> {link name: M}."""
+        return {self.plant.get_body(BodyIndex(int(i))).name(): M for i, M in inertias.items()}
+
+    def spatial_inertias(self) -> dict[int, SpatialInertia]:
+        """{body index: M_BBo_B} of every body with mass: this model's default inertias."""
+        return {
+            i: self.plant.get_body(BodyIndex(i)).default_spatial_inertia()
+            for i in range(1, self.plant.num_bodies())
+            if self.plant.get_body(BodyIndex(i)).default_mass() > 0.0
+        }
+
+
+def build_estimator_plant(
+    robot: str,
+    time_step: float = 1e-3,
+    *,
+    link_inertias: Mapping[str, SpatialInertia] | None = None,
+) -> EstimatorPlant:
+    """The estimators' plant of ``robot``: a built-in name (``hrp4_like``), a robot
+    description (``models.add_humanoid``), or a floating-base SDFormat/URDF file (a robot
+    floating in zero gravity, as the station simulates it).
+
+    Args:
+        time_step: the plant's discrete step, s (only its kind matters to the estimators).
+        link_inertias: {link name: M_BBo_B} replacing the description's inertias of those
+            links (``models.with_link_inertias``): the plant's default parameters.
+
+    Raises:
+        ValueError: an unknown or unreadable model, a model without a floating base, a link
+            the model does not have.
+    """
+    link_inertias = dict(link_inertias or {})
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(
+        MultibodyPlantConfig(time_step=time_step), point_contact_scene_graph_config(), builder
+    )
+    humanoid = None
+    if is_humanoid(robot):
+        humanoid = add_humanoid(plant, robot, scene_graph=scene_graph, link_inertias=link_inertias)
+    else:
+        _add_model_file(plant, robot, link_inertias)
+    plant.Finalize()
+    topology = floating_base_topology(plant)  # clear ValueError for a model without a floating base
+    context = plant.CreateDefaultContext()
+    ft_frames, excluded = (), ()
+    if humanoid is not None:
+        set_standing_state(plant, context, humanoid)
+        sides = sorted(humanoid.ft_sensor_joints)
+        ft_frames = tuple(humanoid.ft_sensor_frames[s] for s in sides)
+        excluded = tuple(humanoid.ft_sensor_joints[s].child_body().name() for s in sides)
+    else:
+        set_posture_inside_limits(plant, context, topology)
+    return EstimatorPlant(
+        robot=str(robot),
+        plant=plant,
+        scene_graph=scene_graph,
+        humanoid=humanoid,
+        topology=topology,
+        ft_frames=ft_frames,
+        excluded_bodies=excluded,
+        standing_state=plant.GetPositionsAndVelocities(context),
+        link_inertias=link_inertias,
+    )
+
+
+def _add_model_file(plant: MultibodyPlant, model: str, link_inertias: Mapping[str, SpatialInertia]) -> None:
+    """Parses a model file (not a humanoid) into ``plant``, gravity off (it floats in space)."""
+    path = Path(model)
+    if not path.is_file():
+        raise ValueError(
+            f"--model: '{model}' is neither one of {MODEL_NAMES}, nor a robot description (.yaml), nor a "
+            "readable model file"
+        )
+    kind = path.suffix.lower().lstrip(".")
+    try:
+        parser = Parser(plant)
+        if link_inertias:
+            parser.AddModelsFromString(with_link_inertias(path.read_text(), kind, link_inertias, str(path)), kind)
+        else:
+            parser.AddModels(str(path))
+    except ValueError:
+        raise
+    except Exception as error:  # Drake's parser raises RuntimeError with its own message
+        raise ValueError(f"could not parse the model file '{path}': {error}") from error
+    plant.mutable_gravity_field().set_gravity_vector([0.0, 0.0, 0.0])
+
+
+def set_posture_inside_limits(plant: MultibodyPlant, context, topology: FloatingBaseTopology) -> None:
+    """Default joint positions, moved to the middle of the range where 0 is within 0.05 of a
+    joint limit (a limit's constraint force would be an unmodelled external effort)."""
+    for joint in topology.joints:
+        lower, upper = joint.position_lower_limits()[0], joint.position_upper_limits()[0]
+        value = plant.GetPositions(context)[joint.position_start()]
+        if not (lower + 0.05 <= value <= upper - 0.05):
+            middle = 0.5 * (lower + upper) if np.isfinite(lower) and np.isfinite(upper) else value
+            q = plant.GetPositions(context)
+            q[joint.position_start()] = middle
+            plant.SetPositions(context, q)
+
+
+__all__ = ["EstimatorPlant", "build_estimator_plant", "set_posture_inside_limits"]

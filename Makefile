@@ -28,7 +28,7 @@ export MPLBACKEND
 TEST_WORKERS ?= auto
 RUN = LD_PRELOAD="$(TCMALLOC)$${LD_PRELOAD:+ $$LD_PRELOAD}" $(PY)
 
-.PHONY: scenarios demo demo-check contact residuals push-and-comply standing residual-comparison contact-localization model-refinement estimate-from-log nao-force-observer nao-walk nao-walk-pulled nao-force-guided-walk nao-compliant-arms benchmark test install clean
+.PHONY: docs paper-settings paper-speed robots scenarios demo demo-check contact residuals push-and-comply standing residual-comparison contact-localization model-refinement estimate-from-log nao-force-observer nao-walk nao-walk-pulled nao-force-guided-walk nao-compliant-arms benchmark test install clean
 
 install: $(STAMP)
 
@@ -109,6 +109,22 @@ nao-compliant-arms: $(STAMP)
 
 benchmark: $(STAMP)
 	$(RUN) -m apps.benchmark $(ARGS)
+
+# Flacco et al. Sec. IV as published, then each of the project's changes (issue 31), and the
+# realistic push-and-comply on several robots: both write results/*.json (about 10 and 20 min).
+paper-settings: $(STAMP)
+	$(RUN) -m apps.push_and_comply_study --study ablation $(ARGS)
+
+robots: $(STAMP)
+	$(RUN) -m apps.push_and_comply_study --study robots $(ARGS)
+
+# The paper's speed claim (Sec. III): classical residual with an explicit C against the internal one.
+paper-speed: $(STAMP)
+	$(RUN) -m apps.paper_speed $(ARGS)
+
+# The generated tables of README.md, docs/*.md and BENCHMARKS.md, from results/*.json.
+docs: $(STAMP)
+	$(PY) -m apps.doc_tables
 
 # The apps' default scenario files (apps/scenarios/*_default.yaml), written from the dataclasses.
 scenarios: $(STAMP)

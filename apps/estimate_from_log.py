@@ -58,7 +58,7 @@ def _parse(argv):
         "--robot",
         default="hrp4_like",
         metavar="FILE.yaml",
-        help="the robot: a robot description YAML (README, 'Bring your own robot') or a built-in name "
+        help="the robot: a robot description YAML (docs/robots.md, 'Bring your own robot') or a built-in name "
         "(hrp4_like, nao_like; default hrp4_like)",
     )
     parser.add_argument(

@@ -214,7 +214,7 @@ def main(argv: list[str] | None = None) -> int:
             plot_scenario(out_dir / f"{key}.png", case, m)
             m.pop("_series")
             metrics[key] = m
-        write_metrics(out_dir, {**metrics, "summary": arms_summary(scenario, metrics, km)}, scenario)
+        write_metrics(out_dir, {**metrics, "summary": arms_summary(scenario, metrics, km)}, scenario, args)
         _print_table(metrics)
         print_written(out_dir)
         return 0

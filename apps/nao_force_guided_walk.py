@@ -206,7 +206,7 @@ def main(argv: list[str] | None = None) -> int:
         m = run_scenario(scenario, meshcat, live=not args.headless)
         save_replay(meshcat, out / "guided.html")
         plot(out / "guided.png", m, scenario.trigger.threshold)
-        write_metrics(out, {k: v for k, v in m.items() if k != "signals"}, scenario)
+        write_metrics(out, {k: v for k, v in m.items() if k != "signals"}, scenario, args)
         checks = m["floors"]
 
         def seconds(value) -> str:

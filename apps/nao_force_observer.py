@@ -194,7 +194,7 @@ def main(argv: list[str] | None = None) -> int:
                 f"  {m['wall_time_s']:.1f} s wall (real-time factor {m['real_time_factor']:.2f}); floors "
                 f"{'met' if m['meets_floors'] else 'MISSED'}"
             )
-        write_metrics(out_dir, {**metrics, "summary": experiments_summary(scenario, metrics)}, scenario)
+        write_metrics(out_dir, {**metrics, "summary": experiments_summary(scenario, metrics)}, scenario, args)
         _print_table(metrics)
         print_written(out_dir)
         return 0

@@ -144,7 +144,7 @@ def main(argv: list[str] | None = None) -> int:
         save_replay(meshcat, out / "walk.html")
         plot_top(out / "walk_top.png", run)
         plot_walking_time(out / "walk_time.png", run)
-        write_metrics(out, {k: v for k, v in m.items() if k != "signals"}, scenario)
+        write_metrics(out, {k: v for k, v in m.items() if k != "signals"}, scenario, args)
         checks = m["floors"]
         print(
             f"  distance {m['distance_m']:.3f} m, mean speed {m['mean_speed_mps']:.3f} m/s, steps "

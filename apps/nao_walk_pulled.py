@@ -200,7 +200,7 @@ def main(argv: list[str] | None = None) -> int:
         summary = {k: v for k, v in run.items() if k != "handles"}
         w = summary["walking"] = {k: v for k, v in run["walking"].items() if k != "signals"}
         o = summary["observer"] = {k: v for k, v in run["observer"].items() if k not in ("signals", "window_mask")}
-        write_metrics(out, summary, scenario)
+        write_metrics(out, summary, scenario, args)
         checks = summary["floors"]
         print(
             f"  walk: {w['steps_detected']}/{w['steps_planned']} steps, {w['distance_m']:.3f} m, mean speed "

@@ -53,7 +53,7 @@ def write_results(name: str, data: dict, *, command: str, folder: Path | None = 
         "command": command,
         "written": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
         "python": platform.python_version(),
-        "drake": drake_version(),
+        "drake": ".".join(map(str, drake_version() or ())) or "unknown",
         "data": data,
     }
     path = results_path(name, folder)

@@ -113,7 +113,7 @@ def main(argv=None) -> int:
             if html is not None:
                 row["replay"] = str(html)
             rows.append(row)
-        write_metrics(out_dir, {row["model"]: row for row in rows}, scenario)
+        write_metrics(out_dir, {row["model"]: row for row in rows}, scenario, args)
 
         header = (
             f"{'model':<10} {'drift cm':>9} {'drift deg':>9} {'min F N':>8} {'feet flat':>9} {'RTF':>6} {'fell':>5}"

@@ -170,7 +170,7 @@ def robot_description(robot: str | os.PathLike | RobotDescription) -> RobotDescr
         return load_robot_description(text)
     raise ValueError(
         f"unknown humanoid model {text!r}: give one of {', '.join(MODEL_NAMES)} or a robot description "
-        "YAML file (.yaml, see models/description.py and the README's 'Bring your own robot')"
+        "YAML file (.yaml, see models/description.py and docs/robots.md, 'Bring your own robot')"
     )
 
 

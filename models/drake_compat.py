@@ -1,6 +1,6 @@
 """Where the supported Drake releases differ: the one place that knows.
 
-``pyproject.toml`` admits ``drake>=1.51.1,<1.59``. Two releases are tested (README, "Tested
+``pyproject.toml`` admits ``drake>=1.51.1,<1.59``. Two releases are tested (docs/installation.md, "Tested
 versions"): drake 1.51.1, the last release with wheels for Python 3.11, and drake 1.58.0 on
 Python 3.12 and 3.13. Everything else in the project uses API the two share:
 

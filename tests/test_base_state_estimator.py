@@ -249,9 +249,9 @@ def _station_with_estimator(push: Push | None = None):
     q0 = station.topology.free_joint.position_start()
     estimator = builder.AddSystem(
         InvariantEkfBaseStateEstimator(
-            station.plant,
-            station.humanoid.imu_frame,
-            [station.humanoid.sole_frames[side] for side in sensors.ft_sides],
+            station.estimator.plant,  # the estimators' own plant, never the simulated one
+            station.estimator.humanoid.imu_frame,
+            [station.estimator.humanoid.sole_frames[side] for side in sensors.ft_sides],
             initial_base_pose=station.initial_state[q0 : q0 + 7],
         )
     )
@@ -715,8 +715,8 @@ def _realistic_imu_run(push: Push | None, duration: float, log_period: float = 0
     v0 = station.plant.num_positions() + station.topology.free_joint.velocity_start()
     without = builder.AddSystem(
         InvariantEkfBaseStateEstimator(
-            station.plant,
-            station.humanoid.imu_frame,
+            station.estimator.plant,  # the estimators' own plant, as the station's filter
+            station.estimator.humanoid.imu_frame,
             with_bias.foot_frames,
             initial_base_pose=station.initial_state[q0 : q0 + 7],
         )

@@ -270,10 +270,12 @@ def test_mismatched_model_is_physically_valid_and_the_plant_stays_nominal(model)
     np.testing.assert_allclose(np.abs(ratios - 1.0), 0.05, rtol=1e-12)  # each link +-5 %
     assert 0 < np.sum(ratios > 1.0) < len(ratios)
     expected_mass = sum(M.get_mass() for M in inertias.values())
-    model_context = station.dynamics_model.dynamics.context_F0
+    # The estimators' own plant carries the perturbed inertias as its defaults.
+    model = station.estimator.plant
+    assert station.dynamics_model.plant is model and model is not plant
     nominal_context = plant.CreateDefaultContext()
     total = plant.CalcTotalMass(nominal_context)
-    assert plant.CalcTotalMass(model_context) == pytest.approx(expected_mass, rel=1e-12)
+    assert model.CalcTotalMass(model.CreateDefaultContext()) == pytest.approx(expected_mass, rel=1e-12)
     assert abs(expected_mass - total) <= 0.05 * total and expected_mass != pytest.approx(total, rel=1e-6)
     for M in inertias.values():
         assert M.IsPhysicallyValid()
@@ -285,12 +287,11 @@ def test_mismatched_model_is_physically_valid_and_the_plant_stays_nominal(model)
     # the plant's.
     x = station.initial_state
     terms = station.dynamics_model.evaluate(x)
-    nq = plant.num_positions()
     plant.SetPositionsAndVelocities(nominal_context, x)
     M_plant = plant.CalcMassMatrix(nominal_context)
-    model_plant_context = station.dynamics_model.dynamics._impl._context_W
-    plant.SetPositions(model_plant_context, x[:nq])
-    M_model = plant.CalcMassMatrix(model_plant_context)
+    model_context = model.CreateDefaultContext()
+    model.SetPositionsAndVelocities(model_context, x)
+    M_model = model.CalcMassMatrix(model_context)
     np.testing.assert_allclose(M_model, M_model.T, atol=1e-12 * np.abs(M_model).max())
     assert np.linalg.eigvalsh(M_model).min() > 0.0
     assert np.abs(M_model - M_plant).max() > 1e-3 * np.abs(M_plant).max()

@@ -7,7 +7,7 @@
 
 The plant is discrete (default 1 ms) with Drake's SAP solver and point contact
 (``diagrams.station.plant_config.default_plant_config``); the feet touch the ground through
-four small spheres each. ``make standing`` measures base drift and foot forces (README).
+four small spheres each. ``make standing`` measures base drift and foot forces (docs/scenarios-and-worlds.md).
 
 Scenarios are YAML files loaded into ``StandingScenario`` with
 ``pydrake.common.yaml.yaml_load_typed`` (``diagrams.scenarios``); ``standing_run_metrics``

@@ -46,7 +46,6 @@ SIMULATION_SIDE = frozenset(
         "FsrArray",
         # disturbances and their ground truth
         "PushSource",
-        "Cable",
         # the cable of the Nao's pulled walk (systems.simulation.cable): physics on the true
         # state, its force into the plant and its ground truth to the loggers
         "PulleyLoad",

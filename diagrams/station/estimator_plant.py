@@ -75,14 +75,6 @@ class EstimatorPlant:
         """{body index: M} of this plant's bodies -> {link name: M}."""
         return {self.plant.get_body(BodyIndex(int(i))).name(): M for i, M in inertias.items()}
 
-    def spatial_inertias(self) -> dict[int, SpatialInertia]:
-        """{body index: M_BBo_B} of every body with mass: this model's default inertias."""
-        return {
-            i: self.plant.get_body(BodyIndex(i)).default_spatial_inertia()
-            for i in range(1, self.plant.num_bodies())
-            if self.plant.get_body(BodyIndex(i)).default_mass() > 0.0
-        }
-
 
 def build_estimator_plant(
     robot: str,
@@ -112,7 +104,7 @@ def build_estimator_plant(
     if is_humanoid(robot):
         humanoid = add_humanoid(plant, robot, scene_graph=scene_graph, link_inertias=link_inertias)
     else:
-        _add_model_file(plant, robot, link_inertias)
+        add_model_file(plant, robot, link_inertias)
     plant.Finalize()
     topology = floating_base_topology(plant)  # clear ValueError for a model without a floating base
     context = plant.CreateDefaultContext()
@@ -137,8 +129,16 @@ def build_estimator_plant(
     )
 
 
-def _add_model_file(plant: MultibodyPlant, model: str, link_inertias: Mapping[str, SpatialInertia]) -> None:
-    """Parses a model file (not a humanoid) into ``plant``, gravity off (it floats in space)."""
+def add_model_file(
+    plant: MultibodyPlant, model: str, link_inertias: Mapping[str, SpatialInertia] | None = None
+) -> None:
+    """Parses a floating-base model file (not a humanoid) into ``plant``, gravity off (it
+    floats in space, as the station simulates it); the simulated and the estimators' plants
+    of such a robot are both parsed here.
+
+    Raises:
+        ValueError: a missing or unparsable file, naming it.
+    """
     path = Path(model)
     if not path.is_file():
         raise ValueError(
@@ -172,4 +172,4 @@ def set_posture_inside_limits(plant: MultibodyPlant, context, topology: Floating
             plant.SetPositions(context, q)
 
 
-__all__ = ["EstimatorPlant", "build_estimator_plant", "set_posture_inside_limits"]
+__all__ = ["EstimatorPlant", "add_model_file", "build_estimator_plant", "set_posture_inside_limits"]

@@ -31,21 +31,23 @@ the simulator, the sensors and the ground-truth systems.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from pydrake.geometry import SceneGraph
-from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.framework import Context, DiagramBuilder, InputPort, OutputPort
 from pydrake.systems.primitives import MatrixGain, ZeroOrderHold
 
-from diagrams.station.estimator_plant import EstimatorPlant, build_estimator_plant, set_posture_inside_limits
+from diagrams.station.estimator_plant import (
+    EstimatorPlant,
+    add_model_file,
+    build_estimator_plant,
+    set_posture_inside_limits,
+)
 from diagrams.station.plant_config import check_plant_config, default_plant_config
 from diagrams.station.standing import default_gains
 from models import (
-    MODEL_NAMES,
     HumanoidHandles,
     add_ground,
     add_humanoid,
@@ -483,17 +485,7 @@ def _load(plant: MultibodyPlant, scene_graph: SceneGraph, model: str) -> Humanoi
         handles = add_humanoid(plant, model, scene_graph=scene_graph)
         add_ground(plant)
         return handles
-    path = Path(model)
-    if not path.is_file():
-        raise ValueError(
-            f"--model: '{model}' is neither one of {MODEL_NAMES}, nor a robot description (.yaml), nor a "
-            "readable model file"
-        )
-    try:
-        Parser(plant).AddModels(str(path))
-    except Exception as error:  # Drake's parser raises RuntimeError with its own message
-        raise ValueError(f"could not parse the model file '{path}': {error}") from error
-    plant.mutable_gravity_field().set_gravity_vector([0.0, 0.0, 0.0])
+    add_model_file(plant, model)
     return None
 
 

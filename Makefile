@@ -28,7 +28,7 @@ export MPLBACKEND
 TEST_WORKERS ?= auto
 RUN = LD_PRELOAD="$(TCMALLOC)$${LD_PRELOAD:+ $$LD_PRELOAD}" $(PY)
 
-.PHONY: docs paper-settings paper-speed robots scenarios demo demo-check contact residuals push-and-comply standing residual-comparison contact-localization model-refinement estimate-from-log nao-force-observer nao-walk nao-walk-pulled nao-force-guided-walk nao-compliant-arms benchmark test install clean
+.PHONY: docs hawley-settings paper-settings paper-speed robots scenarios demo demo-check contact residuals push-and-comply standing residual-comparison contact-localization model-refinement estimate-from-log nao-force-observer nao-walk nao-walk-pulled nao-force-guided-walk nao-compliant-arms benchmark test install clean
 
 install: $(STAMP)
 
@@ -117,6 +117,13 @@ paper-settings: $(STAMP)
 
 robots: $(STAMP)
 	$(RUN) -m apps.push_and_comply_study --study robots $(ARGS)
+
+# Hawley et al.'s experiments 1-3 three ways, each writing its results file: the paper's
+# setting (step loads, nominal stance), steps in the wider stance, the default (5 s ramps, wider stance).
+hawley-settings: $(STAMP)
+	$(RUN) -m apps.nao_force_observer --headless --no-replay --scenario apps/scenarios/hawley_paper.yaml --results nao_force_observer_paper $(ARGS)
+	$(RUN) -m apps.nao_force_observer --headless --no-replay --scenario apps/scenarios/hawley_steps_wide.yaml --results nao_force_observer_steps_wide $(ARGS)
+	$(RUN) -m apps.nao_force_observer --headless --no-replay --results nao_force_observer $(ARGS)
 
 # The paper's speed claim (Sec. III): classical residual with an explicit C against the internal one.
 paper-speed: $(STAMP)

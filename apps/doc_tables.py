@@ -168,14 +168,29 @@ def _nao_force_observer(data: dict) -> list[str]:
         + " | ".join(f"RMS {c}" for c in components)
         + " | "
         + " | ".join(f"steady {c}" for c in components)
-        + " | floors met |",
-        "| --- " * 8 + "|",
+        + " | overshoot | settling | floors met |",
+        "| --- " * 10 + "|",
     ]
+
+    def response(summary: dict) -> str:
+        if not summary.get("steps"):
+            return "- | -"
+        settling = summary.get("mean_settling_time_s")
+        settled = "not settled" if settling is None else f"{settling:.2f} s"
+        return f"{summary['mean_overshoot_percent']:.1f} % | {settled}"
+
     for key in sorted(k for k in data if k.startswith("experiment_")):
         m = data[key]
+        if m.get("fell"):
+            lines.append(f"| experiment {key.split('_')[1]} | fell | | | | | | | | no |")
+            continue
         rms = " | ".join(f"{m['rms_error_N'][c]:.3f} N" for c in components)
         steady = " | ".join(f"{m['steady_state_error_N'][c]:.3f} N" for c in components)
-        lines.append(f"| experiment {key.split('_')[1]} | {rms} | {steady} | {_yes(m['meets_floors'])} |")
+        step = response(m["step_response"]) if "step_response" in m else "- | -"
+        lines.append(f"| experiment {key.split('_')[1]} | {rms} | {steady} | {step} | {_yes(m['meets_floors'])} |")
+    if "recordings_step_response" in data:
+        real = data["recordings_step_response"]["summary"]
+        lines.append(f"| real recordings (authors' observer) | | | | | | | {response(real)} | |")
     return lines
 
 
@@ -189,6 +204,8 @@ RENDERERS: dict[str, Callable[[dict], list[str]]] = {
     "contact_study_single": _contact_study,
     "contact_study_two": _contact_study,
     "nao_force_observer": _nao_force_observer,
+    "nao_force_observer_paper": _nao_force_observer,
+    "nao_force_observer_steps_wide": _nao_force_observer,
 }
 
 

@@ -1,8 +1,9 @@
 """Generates the SDFormat humanoid models from compact Python specs.
 
-Run ``python -m models.generate_sdf`` to (re)write ``models/hrp4_like.sdf`` and
-``models/nao_like.sdf``. ``tests/test_models.py`` checks that the committed files equal
-this generator's output, so edit the specs here, never the .sdf files.
+Run ``python -m models.generate_sdf`` to (re)write ``models/hrp4_like.sdf``,
+``models/nao_like.sdf`` and its variant ``models/nao_like_recorded.sdf``.
+``tests/test_models.py`` checks that the committed files equal this generator's output,
+so edit the specs here, never the .sdf files.
 
 Conventions shared by both models:
 
@@ -23,6 +24,7 @@ Conventions shared by both models:
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -55,6 +57,7 @@ class Link:
     shapes: list
     mass_shape: int = 0  # index into shapes of the primitive giving the inertia
     color: tuple = (0.7, 0.7, 0.75, 1.0)
+    com_offset: tuple = (0.0, 0.0, 0.0)  # CoM minus the mass shape's centre, link frame, m
 
 
 @dataclass
@@ -386,7 +389,8 @@ def hrp4_like_spec() -> ModelSpec:
 # --------------------------------------------------------------------------------------
 # Nao-like (Nao H25 V3.3/V4 documentation, Aldebaran "NAO - Links" / "Masses" pages):
 # dimensions in m, link masses in kg. The torso mass is scaled so that the total is the
-# 5.19 kg used by Hawley et al. 2019. The gripper finger (0.01 kg) is taken out of the
+# 5.19 kg used by Hawley et al. 2019 (the variant nao_like_recorded: see
+# NAO_RECORDED_LEG_MASS_SCALE). The gripper finger (0.01 kg) is taken out of the
 # documented Hand mass. On the real Nao LHipYawPitch and RHipYawPitch share one motor;
 # here they are two independent joints (26 joints instead of 25 DoF).
 # Effort limits are approximate stall torques; rotor inertia is of the order of Nao's
@@ -434,27 +438,26 @@ _NAO_SPHERE_R = 0.005
 _NAO_FOOT_CONTACT = _contact(1e5, 20.0, 1.0)
 
 
-def _nao_torso_mass() -> float:
+#: ``nao_like_recorded``: the same robot with the standing CoM height of Hawley et al.'s
+#: recordings (``data/hawley2019-nao``, ``CoM_Pos.mat``: 0.314 m above the support sole; the
+#: paper's eq. 24 implies the same). The documented link masses put it at 0.268 m in the
+#: nominal standing posture (``nao_like``): the documented legs are heavy and the documented
+#: torso light for the recordings. The variant moves mass from the legs to the torso (each
+#: leg link keeps ``NAO_RECORDED_LEG_MASS_SCALE`` of its documented mass) and raises the
+#: torso's CoM by ``NAO_RECORDED_TORSO_COM_RAISE`` within its box, keeping the 5.19 kg total;
+#: ``tests/test_models.py`` checks its standing CoM against the recordings (issue 31: fix
+#: the model's mass distribution, not the observer). The walking experiments stay on
+#: ``nao_like``: their pattern and gains are tuned to its mass distribution.
+NAO_RECORDED_LEG_MASS_SCALE = 0.685
+NAO_RECORDED_TORSO_COM_RAISE = 0.043  # m, along the torso's z
+_NAO_LEG_LINKS = ("Pelvis", "Hip", "Thigh", "Tibia", "Ankle", "Foot")
+
+
+def _nao_torso_mass(leg_scale: float) -> float:
     m = NAO_MASSES
-    rest = (
-        m["Neck"]
-        + m["Head"]
-        + 2
-        * (
-            m["Shoulder"]
-            + m["Biceps"]
-            + m["Elbow"]
-            + m["ForeArm"]
-            + m["Hand"]
-            + m["Pelvis"]
-            + m["Hip"]
-            + m["Thigh"]
-            + m["Tibia"]
-            + m["Ankle"]
-            + m["Foot"]
-        )
-    )
-    return NAO_TOTAL_MASS - rest
+    arm = m["Shoulder"] + m["Biceps"] + m["Elbow"] + m["ForeArm"] + m["Hand"]
+    leg = leg_scale * sum(m[link] for link in _NAO_LEG_LINKS)
+    return NAO_TOTAL_MASS - (m["Neck"] + m["Head"] + 2 * (arm + leg))
 
 
 def _nao_arm(side: str) -> tuple[list, list]:
@@ -523,7 +526,7 @@ def _nao_arm(side: str) -> tuple[list, list]:
     return links, joints
 
 
-def _nao_leg(side: str) -> tuple[list, list]:
+def _nao_leg(side: str, leg_scale: float) -> tuple[list, list]:
     s = 1.0 if side == "L" else -1.0
     lo = side.lower()
     m, d = NAO_MASSES, NAO_DIMS
@@ -544,12 +547,12 @@ def _nao_leg(side: str) -> tuple[list, list]:
         )
     )
     links = [
-        Link(f"{side}Pelvis", m["Pelvis"], [Shape("sphere", (0.02,))]),
-        Link(f"{side}Hip", m["Hip"], [Shape("sphere", (0.025,))]),
-        Link(f"{side}Thigh", m["Thigh"], [Shape("capsule", (0.035, 0.04), (0, 0, -0.05))]),
-        Link(f"{side}Tibia", m["Tibia"], [Shape("capsule", (0.03, 0.04), (0, 0, -0.05))]),
-        Link(f"{side}Ankle", m["Ankle"], [Shape("sphere", (0.02,))]),
-        Link(f"{lo}_ankle", m["Foot"], shapes, mass_shape=4, color=(0.3, 0.3, 0.35, 1)),
+        Link(f"{side}Pelvis", leg_scale * m["Pelvis"], [Shape("sphere", (0.02,))]),
+        Link(f"{side}Hip", leg_scale * m["Hip"], [Shape("sphere", (0.025,))]),
+        Link(f"{side}Thigh", leg_scale * m["Thigh"], [Shape("capsule", (0.035, 0.04), (0, 0, -0.05))]),
+        Link(f"{side}Tibia", leg_scale * m["Tibia"], [Shape("capsule", (0.03, 0.04), (0, 0, -0.05))]),
+        Link(f"{side}Ankle", leg_scale * m["Ankle"], [Shape("sphere", (0.02,))]),
+        Link(f"{lo}_ankle", leg_scale * m["Foot"], shapes, mass_shape=4, color=(0.3, 0.3, 0.35, 1)),
     ]
     r2 = 1.0 / math.sqrt(2.0)
     hyp_axis = (0, r2, -r2) if side == "L" else (0, r2, r2)
@@ -596,12 +599,19 @@ def _nao_leg(side: str) -> tuple[list, list]:
     return links, joints
 
 
-def nao_like_spec() -> ModelSpec:
+def nao_like_spec(recorded_com: bool = False) -> ModelSpec:
+    """``nao_like``, or with ``recorded_com`` its variant ``nao_like_recorded`` (above)."""
     d = NAO_DIMS
+    leg_scale = NAO_RECORDED_LEG_MASS_SCALE if recorded_com else 1.0
+    torso_raise = NAO_RECORDED_TORSO_COM_RAISE if recorded_com else 0.0
     act = dict(damping=0.01, rotor_inertia=1.0e-7, gear_ratio=140.0)
     links = [
         Link(
-            "torso", _nao_torso_mass(), [Shape("box", (0.09, 0.13, 0.17), (-0.005, 0, 0.035))], color=(0.9, 0.9, 0.9, 1)
+            "torso",
+            _nao_torso_mass(leg_scale),
+            [Shape("box", (0.09, 0.13, 0.17), (-0.005, 0, 0.035))],
+            color=(0.9, 0.9, 0.9, 1),
+            com_offset=(0.0, 0.0, torso_raise),
         ),
         Link("Neck", NAO_MASSES["Neck"], [Shape("cylinder", (0.015, 0.03), (0, 0, -0.015))]),
         Link("Head", NAO_MASSES["Head"], [Shape("sphere", (0.059,), (0, 0, 0.055))], color=(0.9, 0.9, 0.9, 1)),
@@ -615,7 +625,7 @@ def nao_like_spec() -> ModelSpec:
         links += lk
         joints += jt
     for side in ("L", "R"):
-        lk, jt = _nao_leg(side)
+        lk, jt = _nao_leg(side, leg_scale)
         links += lk
         joints += jt
     frames = [
@@ -626,17 +636,22 @@ def nao_like_spec() -> ModelSpec:
     ]
     base_height = d["HipOffsetZ"] + d["ThighLength"] + d["TibiaLength"] + d["FootHeight"]
     return ModelSpec(
-        "nao_like",
+        "nao_like_recorded" if recorded_com else "nao_like",
         "torso",
         base_height,
         links,
         joints,
         frames,
-        comment="Nao-H25-like humanoid, 26 revolute joints (Aldebaran docs)",
+        comment="Nao-H25-like humanoid, 26 revolute joints (Aldebaran docs)"
+        + (", mass moved from the legs to the torso: standing CoM at the recorded 0.314 m" if recorded_com else ""),
     )
 
 
-SPECS = {"hrp4_like": hrp4_like_spec, "nao_like": nao_like_spec}
+SPECS = {
+    "hrp4_like": hrp4_like_spec,
+    "nao_like": nao_like_spec,
+    "nao_like_recorded": functools.partial(nao_like_spec, recorded_com=True),
+}
 
 
 # --------------------------------------------------------------------------------------
@@ -684,7 +699,8 @@ def _inertia(link: Link) -> tuple[tuple, np.ndarray]:
         M = SpatialInertia.SolidCapsuleWithMass(m, shape.size[0], shape.size[1], _AXIS_VEC[shape.axis])
     else:
         raise ValueError(shape.kind)
-    return shape.xyz, M.CalcRotationalInertia().CopyToFullMatrix3()
+    com = tuple(float(a + b) for a, b in zip(shape.xyz, link.com_offset))
+    return com, M.CalcRotationalInertia().CopyToFullMatrix3()
 
 
 def _link_xml(link: Link, pose_xml: str) -> str:

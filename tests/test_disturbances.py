@@ -613,4 +613,19 @@ def test_smooth_piecewise_profile_through_its_knots():
     assert abs(slope[np.searchsorted(t, 2.0)]) < 0.05  # flat at the knot (the ramp peaks at 4.5 N/s)
     assert profile.plateaus(1.0) == [(2.0, 4.0)]
     with pytest.raises(ValueError, match="times must increase"):
-        SmoothPiecewise((0.0, 0.0), (1.0, 2.0))
+        SmoothPiecewise((0.0, 1.0, 0.5), (1.0, 2.0, 3.0))
+    with pytest.raises(ValueError, match="times must increase"):
+        SmoothPiecewise((0.0, 1.0, 1.0, 1.0), (1.0, 2.0, 3.0, 4.0))  # a time thrice
+
+
+def test_smooth_piecewise_steps_at_a_repeated_knot():
+    """A knot time given twice is a step (Hawley et al.'s loads, issue 31): the value jumps
+    there, both evaluation paths agree, and the plateaus on either side are found."""
+    from systems.simulation.disturbances import SmoothPiecewise
+
+    profile = SmoothPiecewise((0.0, 1.0, 1.0, 3.0, 3.0), (0.0, 0.0, 11.0, 11.0, 0.0))
+    t = np.array([0.5, 0.999999, 1.0, 2.0, 2.999999, 3.0, 4.0])
+    expected = [0.0, 0.0, 11.0, 11.0, 11.0, 0.0, 0.0]
+    np.testing.assert_array_equal(profile.value(t), expected)
+    assert [profile.value(float(s)) for s in t] == expected
+    assert profile.plateaus(1.0) == [(0.0, 1.0), (1.0, 3.0)]

@@ -28,7 +28,7 @@ def app_output(tmp_path_factory):
 def test_app_writes_plot_replay_and_metrics(app_output):
     assert (app_output / "experiment_3.png").stat().st_size > 20_000
     metrics = json.loads((app_output / "metrics.json").read_text())
-    assert set(metrics) == {"experiment_3", "summary", "scenario", "memory_allocator"}
+    assert set(metrics) == {"experiment_3", "summary", "scenario", "memory_allocator", "recordings_step_response"}
     m = metrics["experiment_3"]
     for key in ("rms_error_N", "steady_state_error_N"):
         assert set(m[key]) == {"x", "y", "z"} and all(np.isfinite(v) for v in m[key].values())
@@ -41,7 +41,8 @@ def test_app_writes_plot_replay_and_metrics(app_output):
 
 def test_estimate_tracks_the_expected_virtual_force(app_output):
     m = json.loads((app_output / "metrics.json").read_text())["experiment_3"]
-    loaded, unloaded = m["steady_state_windows"]
+    quiet, loaded, unloaded = m["steady_state_windows"]  # before, with and after the load
+    assert np.abs(quiet["expected_N"]).max() == 0.0
     weight = LOAD_MASS * 9.81
     # Expected (eq. 11): the load's weight, plus the moment of a hand beside and ahead of
     # the CoM (the paper's eq. 24: [2.22, -4.16, -11.12] N on the real Nao).
@@ -71,8 +72,10 @@ def test_bad_arguments_and_schedules(capsys):
         nao_force_observer.main(["--experiment", "4"])
     with pytest.raises(ValueError, match="unknown experiment"):
         make_experiment(5)
+    with pytest.raises(ValueError, match="ramp must be >= 0"):
+        make_experiment(2, ramp=-1.0)
     with pytest.raises(ValueError, match="must increase"):
-        SmoothPiecewise((0.0, 0.0), (1.0, 2.0))
+        SmoothPiecewise((1.0, 0.0), (1.0, 2.0))
     # The schedules: steady-state windows lie in plateaus of the applied force; scalar and
     # vector evaluations of a profile agree.
     for number in (1, 2, 3):
@@ -120,3 +123,42 @@ def test_experiments_1_and_2_meet_the_papers_floors(tmp_path):
         assert max(m["steady_state_error_N"].values()) <= 0.5, (experiment, m["steady_state_error_N"])
         assert max(m["rms_error_N"].values()) <= 1.0, (experiment, m["rms_error_N"])
         assert m["meets_floors"] is True and m["invalid_samples"] == 0
+
+
+def test_step_loads_overshoot_like_the_real_robot(tmp_path):
+    """The paper's setting (``apps/scenarios/hawley_paper.yaml``: step loads, nominal stance)
+    for experiment 1 on the Nao whose standing CoM matches the recordings: steady-state
+    error <= 0.5 N per component, and the mean overshoot of the estimate's step responses
+    within 10 percentage points of the authors' observer on the real recordings (issue 31's
+    floor; measured: 21.8 % against 21.9 %). The recordings' responses come from their own
+    ZMP-detected load times, the simulation's from the schedule."""
+    code = nao_force_observer.main(
+        [
+            "--out",
+            str(tmp_path),
+            "--headless",
+            "--no-replay",
+            "--scenario",
+            str(SCENARIOS / "hawley_paper.yaml"),
+            "--experiment",
+            "1",
+            "--seed",
+            "3",
+        ]
+    )
+    assert code == 0
+    metrics = json.loads((tmp_path / "nao_force_observer" / "metrics.json").read_text())
+    m, real = metrics["experiment_1"], metrics["recordings_step_response"]["summary"]
+    assert m["step_loads"] and metrics["scenario"]["ramp"] == 0.0 and metrics["scenario"]["wide_stance"] is False
+    assert max(m["steady_state_error_N"].values()) <= 0.5, m["steady_state_error_N"]
+    # Four steps (on at 0 deg, turns to 45 and 90 deg, off), each measured on the components
+    # that change by >= 1 N: x (0 -> 2 N), z (0 -> 1.41 N), x (1.41 -> 0 N), z (2 -> 0 N).
+    assert [(r["component"], r["step_time_s"]) for r in m["step_responses"]] == [
+        ("x", 2.0),
+        ("z", 6.0),
+        ("x", 10.0),
+        ("z", 14.0),
+    ]
+    assert real["steps"] == 8 and 15.0 < real["mean_overshoot_percent"] < 30.0
+    assert abs(m["step_response"]["mean_overshoot_percent"] - real["mean_overshoot_percent"]) <= 10.0
+    assert m["meets_floors"] is True and not m["fell"] and m["invalid_samples"] == 0

@@ -25,7 +25,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
-from diagrams.observer.nao_force_observer import full_posture, wide_stance
+from diagrams.observer.nao_force_observer import full_posture, nao_model, wide_stance
 from diagrams.station.humanoid_station import add_humanoid_station, default_plant_config
 from models import set_standing_state
 from systems.common.checks import positive_number
@@ -35,10 +35,10 @@ from systems.simulation.pd_gravity import joint_vector_from_names
 
 
 @functools.lru_cache(maxsize=8)
-def _settled_state(duration: float, posture: tuple, plant_config_yaml: str) -> tuple[float, ...]:
+def _settled_state(duration: float, posture: tuple, plant_config_yaml: str, robot: str) -> tuple[float, ...]:
     plant_config = yaml_load_typed(schema=MultibodyPlantConfig, data=plant_config_yaml)
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, "nao_like", plant_config=plant_config, noise=False)
+    station = add_humanoid_station(builder, nao_model(robot), plant_config=plant_config, noise=False)
     plant, humanoid = station.plant, station.humanoid
     # The posture command is the controller's (the robot's model, issue 31); the simulated
     # robot is put in the same posture to start.
@@ -61,8 +61,9 @@ def settle_standing_state(
     duration: float = 1.0,
     *,
     plant_config: MultibodyPlantConfig | None = None,
+    robot: str = "nao_like",
 ) -> np.ndarray:
-    """[q; v] of nao_like after standing still for ``duration`` s in ``posture`` (overrides
+    """[q; v] of ``robot`` (one of ``NAO_ROBOTS``) after standing still for ``duration`` s in ``posture`` (overrides
     of the nominal posture) under position control, without pushes or noise: a state at
     static equilibrium on the ground (contact forces balanced, velocities ~0), so that an
     experiment and its observer start without the touch-down transient. ``plant_config``:
@@ -75,7 +76,7 @@ def settle_standing_state(
     if not (math.isfinite(duration) and duration > 0):
         raise ValueError(f"duration must be positive, got {duration}")
     config_yaml = yaml_dump_typed(default_plant_config() if plant_config is None else plant_config)
-    return np.array(_settled_state(float(duration), tuple(sorted((posture or {}).items())), config_yaml))
+    return np.array(_settled_state(float(duration), tuple(sorted((posture or {}).items())), config_yaml, robot))
 
 
 def identify_motor_constant(

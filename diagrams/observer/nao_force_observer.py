@@ -38,9 +38,12 @@ from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, Ve
 
 from diagrams.observer.nao_sensing import OBSERVER_PERIOD, add_observer_pipeline, add_virtual_force_arrows
 from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station, default_plant_config
-from models import HumanoidHandles
-from systems.observer.force_observer import LipForceObserverSystem, LipObserverParameters
+from models import MODELS_DIR, HumanoidHandles
+from systems.observer.force_observer import STANDING, LipForceObserverSystem, LipObserverParameters
 from systems.observer.fsr_sensing import CenterOfPressure, FsrArray, ImuComAcceleration, SupportFootCom
+from systems.observer.nao_dataset import RECORDINGS, load_recording, published_dataset_dir, replay
+from systems.observer.step_response import StepResponse, load_steps_from_zmp, step_responses
+from systems.observer.step_response import summary as step_summary
 from systems.simulation.disturbances import Push, PushSource, SmoothPiecewise
 from systems.simulation.ground_truth import VirtualForceTruth
 from systems.simulation.pd_gravity import joint_vector_from_names
@@ -101,6 +104,7 @@ def build_nao_force_observer_diagram(
     observer_period: float = OBSERVER_PERIOD,
     plant_config: MultibodyPlantConfig | None = None,
     meshcat: Meshcat | None = None,
+    robot: str = "nao_like",
 ) -> tuple[Diagram, NaoForceObserverHandles]:
     """Builds the diagram of the module docstring.
 
@@ -117,12 +121,14 @@ def build_nao_force_observer_diagram(
             ``diagrams.station.humanoid_station.default_plant_config()``).
         meshcat: if given, a MeshcatVisualizer and arrows for the applied forces (red) and
             the estimated virtual force at the CoM (blue) are added (32 Hz).
+        robot: one of ``NAO_ROBOTS``: ``nao_like`` (the documented link masses) or
+            ``nao_like_recorded`` (its standing CoM at the recordings' height).
 
     Raises:
-        ValueError: unknown support foot, bad pushes (unknown body), bad noise settings.
+        ValueError: unknown support foot or robot, bad pushes (unknown body), bad noise settings.
     """
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, "nao_like", plant_config=plant_config, noise=noise, seed=seed)
+    station = add_humanoid_station(builder, nao_model(robot), plant_config=plant_config, noise=noise, seed=seed)
     # The simulated robot (plant, pushes, ground truth) and the robot's own model (the
     # estimators' plant: the posture command and every estimator, issue 31).
     plant, humanoid = station.plant, station.humanoid
@@ -217,6 +223,23 @@ def build_nao_force_observer_diagram(
     )
 
 
+#: The Nao models: ``nao_like`` (documented link masses) and ``nao_like_recorded`` (the same
+#: robot with its standing CoM at the height of the authors' recordings, 0.314 m:
+#: ``models.generate_sdf``), name -> what ``add_humanoid_station`` takes.
+NAO_ROBOTS = {"nao_like": "nao_like", "nao_like_recorded": str(MODELS_DIR / "nao_like_recorded.yaml")}
+
+
+def nao_model(robot: str) -> str:
+    """The model argument of ``add_humanoid_station`` for Nao ``robot`` (a key of NAO_ROBOTS).
+
+    Raises:
+        ValueError: an unknown robot.
+    """
+    if robot not in NAO_ROBOTS:
+        raise ValueError(f"unknown Nao model {robot!r}; choose one of {', '.join(NAO_ROBOTS)}")
+    return NAO_ROBOTS[robot]
+
+
 def wide_stance(hip_roll: float = 0.1) -> dict[str, float]:
     """Posture overrides that widen the stance: each hip rolls outwards by ``hip_roll`` rad
     and its ankle rolls back, so the soles stay flat (0.1 rad moves each foot out by
@@ -246,9 +269,14 @@ GRAVITY = 9.81
 TORSO_FORCE = 2.0
 TORSO_ANGLES_DEG = (0.0, 45.0, 90.0)
 #: Points where the forces act (body, point in the body frame, m).
-TORSO_POINT = ("torso", (0.05, 0.0, -0.05))  # front of the torso, about the CoM height
-ELBOW_POINT = ("RForeArm", (0.0, 0.0, 0.0))  # cable of experiment 2 (at the elbow)
-HAND_POINT = ("r_gripper", (0.0, 0.0, 0.0))  # hanging load of experiment 3
+#: Experiment 1: the front of the torso at the CoM height (the model stands with its CoM
+#: 1 cm below the torso frame; the paper: "practically equivalent to applying it to its CoM").
+TORSO_POINT = ("torso", (0.05, 0.0, -0.01))
+#: Experiment 2: the cable on the right forearm at the CoM height, where the paper's acts
+#: (eq. 24: W_2's moment -0.05 N m about x puts it 4.5 mm below the CoM).
+CABLE_POINT = ("RForeArm", (0.0165, 0.0, 0.0))
+#: Experiment 3: the load hanging from the right hand.
+HAND_POINT = ("r_gripper", (0.0, 0.0, 0.0))
 #: Floors, N.
 STEADY_STATE_FLOOR = 0.5
 RMS_FLOOR = 1.0
@@ -256,8 +284,16 @@ RMS_FLOOR = 1.0
 STEADY_WINDOW = 1.0
 #: Default load ramp duration of experiments 2-3, s (with the paper's eq. 21 parameters the
 #: x/y filters settle in ~4 s, so a load applied as a step gives an RMS error above 1 N over
-#: a ~20 s run, even on exact LIP data).
+#: a ~20 s run, even on exact LIP data). 0: every load is a step, as in the paper.
 DEFAULT_RAMP = 5.0
+#: Time before the first load, s (before scaling): the settled level before it is measured
+#: over ``STEADY_WINDOW``, after the filters absorb their first samples (~0.3 s).
+QUIET_START = 2.0
+#: The step-response floor (issue 31): with step loads, experiment 1's mean overshoot is
+#: within this many percentage points of the real recordings' (``recordings_step_response``).
+OVERSHOOT_TOLERANCE_PP = 10.0
+#: The robot fell if its base dropped by more than this during a run, m.
+FALL_DROP = 0.05
 COMPONENTS = ("x", "y", "z")
 EXPERIMENT_NUMBERS = (1, 2, 3)
 
@@ -269,8 +305,12 @@ class NaoForceObserverScenario:
 
     Attributes:
         experiments: which experiments run, in order (1, 2 and/or 3).
+        robot: the Nao model, one of ``NAO_ROBOTS``: ``nao_like_recorded`` (default: it stands
+            with its CoM at the height of the authors' recordings, 0.314 m) or ``nao_like``
+            (the documented link masses: 0.268 m).
         time_scale: multiplies every duration of the schedules (< 1 for quick runs).
-        ramp: the load ramp duration of experiments 2-3 before scaling, s.
+        ramp: the load ramp duration of experiments 2-3 before scaling, s; 0: every load of
+            every experiment is a step, as in the paper (``apps/scenarios/hawley_paper.yaml``).
         load_mass: the load of experiments 2-3, kg (the paper's 1.13 kg).
         torso_force: experiment 1's force magnitude, N.
         torso_angles_deg: experiment 1's force angles theta, deg (eq. 23).
@@ -287,6 +327,7 @@ class NaoForceObserverScenario:
     """
 
     experiments: list[int] = field(default_factory=lambda: list(EXPERIMENT_NUMBERS))
+    robot: str = "nao_like_recorded"
     time_scale: float = 1.0
     ramp: float = DEFAULT_RAMP
     load_mass: float = LOAD_MASS
@@ -323,7 +364,9 @@ class _Component:
 
 @dataclass
 class Experiment:
-    """One simulated experiment: its pushes, duration and steady-state windows."""
+    """One simulated experiment: its pushes, duration and steady-state windows, and the
+    load's changes as (time the load starts to change, end of the plateau that follows), s
+    (the steps of ``systems.observer.step_response``)."""
 
     number: int
     title: str
@@ -331,6 +374,8 @@ class Experiment:
     duration: float
     windows: list[tuple[float, float]] = field(default_factory=list)
     description: str = ""
+    changes: list[tuple[float, float]] = field(default_factory=list)
+    step_loads: bool = False
 
 
 def make_experiment(
@@ -343,24 +388,28 @@ def make_experiment(
     torso_angles_deg: Sequence[float] = TORSO_ANGLES_DEG,
 ) -> Experiment:
     """The schedule of experiment ``number`` (1, 2 or 3); ``time_scale`` multiplies every
-    duration (< 1 for quick runs), ``ramp`` is the load ramp duration, s (before scaling).
+    duration (< 1 for quick runs), ``ramp`` is the load ramp duration, s (before scaling);
+    ``ramp = 0`` makes every change of every experiment a step, as in the paper (experiment
+    1's force then also comes on, turns and goes off at once). The first load comes after
+    ``QUIET_START`` s.
 
     * experiment 1 (Fig. 6): ``torso_force`` N through the torso in the x-z plane at the
       angles ``torso_angles_deg`` (eq. 23: F_x = |F| cos theta, F_z = |F| sin theta); the
       direction turns from one angle to the next at constant magnitude;
     * experiment 2 (Fig. 7): a ``load_mass`` kg load pulling the right arm along -y by a
-      cable at the elbow;
+      cable on the forearm at the CoM height (``CABLE_POINT``);
     * experiment 3 (Fig. 8): the same load hanging from the right hand (-z).
 
     Raises:
-        ValueError: an unknown experiment, a non-positive time scale, ramp, force or mass.
+        ValueError: an unknown experiment, a non-positive time scale, force or mass, a
+            negative ramp.
     """
     if number not in EXPERIMENT_NUMBERS:
         raise ValueError(f"unknown experiment {number}; choose 1, 2 or 3")
     if not (time_scale > 0 and math.isfinite(time_scale)):
         raise ValueError(f"time_scale must be positive, got {time_scale}")
-    if not (ramp > 0 and math.isfinite(ramp)):
-        raise ValueError(f"ramp must be positive, got {ramp}")
+    if not (ramp >= 0 and math.isfinite(ramp)):
+        raise ValueError(f"ramp must be >= 0 (0: step loads), got {ramp}")
     if not (load_mass > 0 and math.isfinite(load_mass)):
         raise ValueError(f"load_mass must be positive, got {load_mass}")
     if not (torso_force > 0 and math.isfinite(torso_force)):
@@ -368,20 +417,25 @@ def make_experiment(
     if len(torso_angles_deg) < 1 or not all(math.isfinite(a) for a in torso_angles_deg):
         raise ValueError(f"torso_angles_deg must be one or more finite angles, got {list(torso_angles_deg)}")
     s = time_scale
-    start = 0.5 * s
+    start = QUIET_START * s
+    steps = ramp == 0
     if number == 1:
-        up = 1.5 * s
-        hold, turn, tail = 4.0 * s, 1.0 * s, 4.0 * s
+        up = 0.0 if steps else 1.5 * s
+        turn = 0.0 if steps else 1.0 * s
+        hold, tail = 4.0 * s, 4.0 * s
         times, magnitudes, angles = [0.0, start], [0.0, 0.0], [0.0, 0.0]
+        change_starts = [start]
         t = start + up
         times.append(t), magnitudes.append(torso_force), angles.append(math.radians(torso_angles_deg[0]))
         for angle in torso_angles_deg[1:]:
             t += hold
             times.append(t), magnitudes.append(torso_force), angles.append(angles[-1])
+            change_starts.append(t)
             t += turn
             times.append(t), magnitudes.append(torso_force), angles.append(math.radians(angle))
         t += hold
         times.append(t), magnitudes.append(torso_force), angles.append(angles[-1])
+        change_starts.append(t)
         t += up
         times.append(t), magnitudes.append(0.0), angles.append(angles[-1])
         duration = t + tail
@@ -396,13 +450,16 @@ def make_experiment(
         windows = [(a, b) for (a, b) in magnitude.plateaus(STEADY_WINDOW) if (a, b) in angle.plateaus(STEADY_WINDOW)]
         windows.append((t, duration))
         angles_text = ", ".join(f"{a:g}" for a in torso_angles_deg)
+        how = "steps" if steps else f"ramps of {up:g} s, turns of {turn:g} s"
         return Experiment(
             1,
             f"Experiment 1: {torso_force:g} N through the torso at theta = {angles_text} deg (eq. 23)",
             pushes,
             duration,
             [w for w in windows if w[1] - w[0] >= STEADY_WINDOW],
-            "torso point (0.05, 0, -0.05) m in the torso frame; F = |F| (cos theta, 0, sin theta)",
+            f"torso point {TORSO_POINT[1]} m in the torso frame; F = |F| (cos theta, 0, sin theta); {how}",
+            list(zip(change_starts, [*change_starts[1:], duration], strict=True)),
+            steps,
         )
     weight = load_mass * GRAVITY
     r, hold, tail = ramp * s, 6.0 * s, 5.0 * s
@@ -410,8 +467,9 @@ def make_experiment(
     duration = t_off + r + tail
     profile = SmoothPiecewise((0.0, start, t_loaded, t_off, t_off + r), (0.0, 0.0, weight, weight, 0.0))
     if number == 2:
-        body, point = ELBOW_POINT
-        direction, title = (0.0, -1.0, 0.0), f"Experiment 2: {load_mass:g} kg load pulling the right arm along -y"
+        body, point = CABLE_POINT
+        direction = (0.0, -1.0, 0.0)
+        title = f"Experiment 2: {load_mass:g} kg load pulling the right arm along -y"
     else:
         body, point = HAND_POINT
         direction, title = (0.0, 0.0, -1.0), f"Experiment 3: {load_mass:g} kg load hanging from the right hand"
@@ -422,7 +480,9 @@ def make_experiment(
         [Push(body, point, direction, profile)],
         duration,
         [w for w in windows if w[1] - w[0] >= STEADY_WINDOW],
-        f"{weight:.2f} N at {body} {point}, ramps of {r:g} s",
+        f"{weight:.2f} N at {body} {point}, " + ("steps" if steps else f"ramps of {r:g} s"),
+        [(start, t_off), (t_off, duration)],
+        steps,
     )
 
 
@@ -439,6 +499,7 @@ def scenario_experiments(scenario: NaoForceObserverScenario) -> list[Experiment]
         raise ValueError(f"seed must be a non-negative integer, got {scenario.seed}")
     if scenario.support_foot not in ("left", "right"):
         raise ValueError(f"unknown support foot {scenario.support_foot!r}; choose left or right")
+    nao_model(scenario.robot)
     return [
         make_experiment(
             number,
@@ -457,8 +518,8 @@ def build_experiment_diagram(
 ) -> tuple[Diagram, NaoForceObserverHandles]:
     """``build_nao_force_observer_diagram`` with ``experiment``'s pushes and the scenario's
     stance, sensors and plant. Its initial state is the caller's explicit calibration run:
-    ``settle_standing_state(scenario.posture(), plant_config=scenario.plant_config)``
-    (``diagrams.observer.calibration``)."""
+    ``settle_standing_state(scenario.posture(), plant_config=scenario.plant_config,
+    robot=scenario.robot)`` (``diagrams.observer.calibration``)."""
     return build_nao_force_observer_diagram(
         experiment.pushes,
         posture=scenario.posture(),
@@ -467,6 +528,7 @@ def build_experiment_diagram(
         seed=scenario.seed,
         plant_config=scenario.plant_config,
         meshcat=meshcat,
+        robot=scenario.robot,
     )
 
 
@@ -483,23 +545,53 @@ def aligned(signals: dict) -> dict:
     }
 
 
-def experiment_metrics(experiment: Experiment, run: dict) -> dict:
-    """RMS and steady-state error per component, the floors, and sanity figures, of a run
-    {"signals": logged signals (``logged_signals`` of the handles' loggers, times of
-    "virtual_force"), "handles": NaoForceObserverHandles, "wall": wall-clock s}.
+def recordings_step_response() -> dict:
+    """The step response of the authors' observer on their real-Nao recordings
+    (``systems.observer.nao_dataset``: ``replay`` reproduces the authors' output), the loads'
+    times taken from the measured ZMP (``step_response.load_steps_from_zmp``): every
+    response of both recordings and their summary (mean overshoot, settling time)."""
+    responses = []
+    for name in RECORDINGS:
+        directory = published_dataset_dir() / name
+        zmp = load_recording(directory)["ZMP"]
+        estimate = replay(directory)
+        t = np.arange(len(estimate)) * STANDING.period
+        starts, ends = load_steps_from_zmp(t, zmp)
+        responses += [{"recording": name, **r.as_dict()} for r in step_responses(t, estimate, starts, ends)]
+    return {"responses": responses, "summary": step_summary([_from_dict(r) for r in responses])}
 
-    Floors (issue 6): per component, steady-state error <= 0.5 N and RMS error over the run
-    <= 1 N. Steady-state error: |mean(estimate - expected)| over the last second of every
+
+def _from_dict(response: dict) -> StepResponse:
+    fields = {k: (math.nan if v is None else v) for k, v in response.items() if k != "recording"}
+    return StepResponse(**fields)
+
+
+def experiment_metrics(experiment: Experiment, run: dict, recordings: dict | None = None) -> dict:
+    """RMS and steady-state error per component, the step responses, the floors, and sanity
+    figures, of a run {"signals": logged signals (``logged_signals`` of the handles'
+    loggers, times of "virtual_force"), "handles": NaoForceObserverHandles, "wall":
+    wall-clock s}; ``recordings``: ``recordings_step_response()`` (needed for the floor of
+    experiment 1 with step loads).
+
+    Floors. Ramped loads (issue 6): per component, steady-state error <= 0.5 N and RMS error
+    over the run <= 1 N. Step loads (issue 31): steady-state error <= 0.5 N and, for
+    experiment 1, a mean overshoot within ``OVERSHOOT_TOLERANCE_PP`` percentage points of the
+    real recordings'; a step makes the filters ring for ~4 s, so RMS is reported, not a
+    floor. Steady-state error: |mean(estimate - expected)| over the last second of every
     plateau of the applied force (loaded and unloaded), the largest over plateaus. RMS: over
     every observer sample of the run. The estimate of sample k is compared with the expected
-    value at the same sample (``aligned``)."""
+    value at the same sample (``aligned``). Step responses (``systems.observer.step_response``):
+    for each change of the load and each component that changes by >= 1 N, measured from
+    the time the load starts to change."""
     s = run["signals"]
     a = aligned(s)
     t, error = a["t"], a["estimate"] - a["expected"]
     rms = np.sqrt(np.mean(error**2, axis=0))
     windows = []
     for _t0, t1 in experiment.windows:
-        inside = (t > t1 - STEADY_WINDOW - 1e-9) & (t <= t1 + 1e-9)
+        # The samples of the window's last second, up to but excluding t1: with a step load
+        # the sample at t1 already belongs to the next plateau.
+        inside = (t > t1 - STEADY_WINDOW - 1e-9) & (t < t1 - 1e-9)
         windows.append(
             {
                 "window_s": [float(t1 - STEADY_WINDOW), float(t1)],
@@ -509,6 +601,26 @@ def experiment_metrics(experiment: Experiment, run: dict) -> dict:
             }
         )
     steady = np.max(np.abs([w["error_N"] for w in windows]), axis=0)
+    responses = step_responses(
+        t,
+        a["estimate"],
+        [start for start, _ in experiment.changes],
+        [end for _, end in experiment.changes],
+        settled_window=min(STEADY_WINDOW, experiment.changes[0][0] / 2),
+    )
+    response_summary = step_summary(responses)
+    if experiment.step_loads:
+        floors = {"steady_state": STEADY_STATE_FLOOR}
+        meets = bool(np.all(steady <= STEADY_STATE_FLOOR))
+        if experiment.number == 1:
+            if recordings is None:
+                raise ValueError("experiment 1 with step loads needs the recordings' step response for its floor")
+            reference = recordings["summary"]["mean_overshoot_percent"]
+            floors["overshoot_percent"] = [reference - OVERSHOOT_TOLERANCE_PP, reference + OVERSHOOT_TOLERANCE_PP]
+            meets = meets and abs(response_summary["mean_overshoot_percent"] - reference) <= OVERSHOOT_TOLERANCE_PP
+    else:
+        floors = {"steady_state": STEADY_STATE_FLOOR, "rms": RMS_FLOOR}
+        meets = bool(np.all(steady <= STEADY_STATE_FLOOR) and np.all(rms <= RMS_FLOOR))
     handles = run["handles"]
     plant = handles.station.plant
     base = handles.station.humanoid.base_body
@@ -516,15 +628,20 @@ def experiment_metrics(experiment: Experiment, run: dict) -> dict:
     z_base = x[base.floating_positions_start() + 6]
     fsr = s["fsr_forces"]
     loaded = [w for w in windows if np.abs(w["expected_N"]).max() > 0.5]
+    fell = bool(z_base[0] - z_base.min() > FALL_DROP)
     return {
         "title": experiment.title,
         "description": experiment.description,
+        "step_loads": experiment.step_loads,
         "duration_s": experiment.duration,
         "samples": int(len(t)),
         "rms_error_N": dict(zip(COMPONENTS, rms.tolist(), strict=True)),
         "steady_state_error_N": dict(zip(COMPONENTS, steady.tolist(), strict=True)),
-        "floors_N": {"steady_state": STEADY_STATE_FLOOR, "rms": RMS_FLOOR},
-        "meets_floors": bool(np.all(steady <= STEADY_STATE_FLOOR) and np.all(rms <= RMS_FLOOR)),
+        "step_response": response_summary,
+        "step_responses": [r.as_dict() for r in responses],
+        "floors_N": floors,
+        "meets_floors": bool(meets and not fell),
+        "fell": fell,
         "steady_state_windows": windows,
         "expected_while_loaded_N": [w["expected_N"] for w in loaded],
         "invalid_samples": int(np.sum(~a["valid"])),
@@ -544,6 +661,9 @@ def experiments_summary(scenario: NaoForceObserverScenario, metrics: dict) -> di
         "seed": scenario.seed,
         "time_scale": scenario.time_scale,
         "ramp_s": scenario.ramp,
+        "step_loads": scenario.ramp == 0,
+        "robot": scenario.robot,
+        "wide_stance": scenario.wide_stance,
         "observer": "LipForceObserverSystem, paper eq. 21 parameters, T = 1/60 s",
     }
 
@@ -551,7 +671,9 @@ def experiments_summary(scenario: NaoForceObserverScenario, metrics: dict) -> di
 __all__ = [
     "COMPONENTS",
     "DEFAULT_RAMP",
+    "OVERSHOOT_TOLERANCE_PP",
     "LOAD_MASS",
+    "NAO_ROBOTS",
     "RMS_FLOOR",
     "STEADY_STATE_FLOOR",
     "STEADY_WINDOW",
@@ -565,6 +687,8 @@ __all__ = [
     "experiments_summary",
     "full_posture",
     "make_experiment",
+    "nao_model",
+    "recordings_step_response",
     "scenario_experiments",
     "wide_stance",
 ]

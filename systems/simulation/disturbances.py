@@ -212,10 +212,12 @@ class Step:
 @dataclass(frozen=True)
 class SmoothPiecewise:
     """A force profile through knots (t_i, v_i): constant before the first and after the
-    last knot, a quintic smoothstep (C2) from each knot's value to the next's.
+    last knot, a quintic smoothstep (C2) from each knot's value to the next's. A knot time
+    given twice is a step: the value jumps there from the first knot's value to the second's
+    (the value at that time is the second's).
 
     Attributes:
-        times: increasing knot times, s.
+        times: non-decreasing knot times (no time more than twice), s.
         values: the values at the knots (N, or rad for an angle).
     """
 
@@ -225,8 +227,10 @@ class SmoothPiecewise:
     def __post_init__(self):
         if len(self.times) != len(self.values) or len(self.times) < 1:
             raise ValueError("SmoothPiecewise needs as many values as times (>= 1)")
-        if any(b <= a for a, b in zip(self.times, self.times[1:])):
-            raise ValueError(f"SmoothPiecewise times must increase, got {self.times}")
+        if any(b < a for a, b in zip(self.times, self.times[1:])) or any(
+            a == c for a, c in zip(self.times, self.times[2:])
+        ):
+            raise ValueError(f"SmoothPiecewise times must increase (a time given twice is a step), got {self.times}")
 
     def value(self, t):
         if np.ndim(t) == 0:  # scalar path: called by the plant's force input every step
@@ -243,6 +247,8 @@ class SmoothPiecewise:
         t_arr = np.asarray(t, dtype=float)
         out = np.full(t_arr.shape, values[0])
         for (t0, v0), (t1, v1) in zip(zip(times, values), zip(times[1:], values[1:])):
+            if t1 == t0:  # a step: the next segment (or the last value) starts at t0
+                continue
             out = np.where(t_arr >= t0, v0 + (v1 - v0) * smoothstep5((t_arr - t0) / (t1 - t0)), out)
         out = np.where(t_arr >= times[-1], values[-1], out)
         return float(out) if np.ndim(t) == 0 else out

@@ -42,7 +42,7 @@ from models import MODELS_DIR, HumanoidHandles
 from systems.observer.force_observer import STANDING, LipForceObserverSystem, LipObserverParameters
 from systems.observer.fsr_sensing import CenterOfPressure, FsrArray, ImuComAcceleration, SupportFootCom
 from systems.observer.nao_dataset import RECORDINGS, load_recording, published_dataset_dir, replay
-from systems.observer.step_response import StepResponse, load_steps_from_zmp, step_responses
+from systems.observer.step_response import load_steps_from_zmp, step_responses
 from systems.observer.step_response import summary as step_summary
 from systems.simulation.disturbances import Push, PushSource, SmoothPiecewise
 from systems.simulation.ground_truth import VirtualForceTruth
@@ -550,20 +550,17 @@ def recordings_step_response() -> dict:
     (``systems.observer.nao_dataset``: ``replay`` reproduces the authors' output), the loads'
     times taken from the measured ZMP (``step_response.load_steps_from_zmp``): every
     response of both recordings and their summary (mean overshoot, settling time)."""
-    responses = []
+    rows, responses = [], []
     for name in RECORDINGS:
         directory = published_dataset_dir() / name
         zmp = load_recording(directory)["ZMP"]
         estimate = replay(directory)
         t = np.arange(len(estimate)) * STANDING.period
         starts, ends = load_steps_from_zmp(t, zmp)
-        responses += [{"recording": name, **r.as_dict()} for r in step_responses(t, estimate, starts, ends)]
-    return {"responses": responses, "summary": step_summary([_from_dict(r) for r in responses])}
-
-
-def _from_dict(response: dict) -> StepResponse:
-    fields = {k: (math.nan if v is None else v) for k, v in response.items() if k != "recording"}
-    return StepResponse(**fields)
+        found = step_responses(t, estimate, starts, ends)
+        responses += found
+        rows += [{"recording": name, **r.as_dict()} for r in found]
+    return {"responses": rows, "summary": step_summary(responses)}
 
 
 def experiment_metrics(experiment: Experiment, run: dict, recordings: dict | None = None) -> dict:

@@ -17,9 +17,10 @@ PYTHON_VERSION := $(shell '$(PYTHON_BIN)' -c 'import sys; print("%d.%d" % sys.ve
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-python$(PYTHON_VERSION)
 # Drake's SAP contact solver allocates and frees memory at every time step: with tcmalloc
-# preloaded (Debian's libtcmalloc-minimal4) the simulations take about 14 % less time per
-# step (BENCHMARKS.md). The apps use it when it is installed; `make install` installs it
-# when run as root with apt-get. The tests run on the system allocator.
+# preloaded (Debian's libtcmalloc-minimal4) the simulations take less time per step
+# (BENCHMARKS.md's closed-loop block says which allocator its run used: "Memory allocator of
+# this run"). The apps use it when it is installed; `make install` installs it when run as
+# root with apt-get. The tests run on the system allocator.
 TCMALLOC = $$(ls /usr/lib/*-linux-gnu/libtcmalloc_minimal.so.4 /usr/lib64/libtcmalloc_minimal.so.4 2>/dev/null | head -n 1)
 # The apps write their plots to files: matplotlib's file backend unless the caller chose one.
 MPLBACKEND ?= Agg
@@ -40,7 +41,7 @@ $(STAMP): pyproject.toml
 	@test -x $(PY) || '$(PYTHON_BIN)' -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet ".[test]"
-	@echo "compiling the invariant EKF's steps (numba, once: about 35 s; cached beside their source)"
+	@echo "compiling the invariant EKF's steps (numba, once; cached beside their source)"
 	@$(PY) -c 'from systems.estimation.base_state_estimator import load_compiled_filter_steps; load_compiled_filter_steps()'
 	@ls /usr/lib/*-linux-gnu/libtcmalloc_minimal.so.4 >/dev/null 2>&1 || [ "$$(id -u)" != 0 ] || ! command -v apt-get >/dev/null 2>&1 || \
 		{ echo "installing Debian's libtcmalloc-minimal4 (a faster memory allocator for the simulations)"; \
@@ -107,8 +108,9 @@ nao-force-guided-walk: $(STAMP)
 nao-compliant-arms: $(STAMP)
 	$(RUN) -m apps.nao_compliant_arms $(ARGS)
 
+# The timings of BENCHMARKS.md: prints them and writes results/benchmark.json (then `make docs`).
 benchmark: $(STAMP)
-	$(RUN) -m apps.benchmark $(ARGS)
+	$(RUN) -m apps.benchmark --results benchmark $(ARGS)
 
 # Flacco et al. Sec. IV as published, then each of the project's changes (issue 31), and the
 # realistic push-and-comply on several robots: both write results/*.json (about 10 and 20 min).

@@ -1,6 +1,9 @@
 """The documentation's generated tables (issue 31): each block of README.md, BENCHMARKS.md or a
 page of docs/ between ``<!-- results: NAME -->`` and ``<!-- /results: NAME -->`` is the table ``RENDERERS[NAME]``
-makes from ``results/<NAME>.json`` (``apps.results``), followed by the command that wrote it.
+makes from ``results/<NAME>.json`` (``apps.results``), followed by the command that wrote it. A
+block may read another file or several (``SOURCES``): BENCHMARKS.md's tables each read part of
+``results/benchmark.json``, and its table of wall times and real-time factors reads the files of
+every experiment that records them.
 
 Run: ``python -m apps.doc_tables`` (``make docs``) rewrites the blocks; ``--check`` only reports
 the stale ones (exit 1), as ``tests/test_doc_tables.py`` does.
@@ -194,7 +197,251 @@ def _nao_force_observer(data: dict) -> list[str]:
     return lines
 
 
-#: NAME -> the table's lines from the results file's ``data``.
+def _met(ok: bool) -> str:
+    return "met" if ok else "**not met**"
+
+
+def _ratio(value: float) -> str:
+    return f"{value:.1f}x" if value < 100 else f"{value:.0f}x"
+
+
+def _not_measured(what: str, option: str) -> list[str]:
+    return [f"Not measured in this run ({what}: {option})."]
+
+
+def _benchmark_floating_base(data: dict) -> list[str]:
+    floors, rows = data["floors"], data["floating_base"]
+    lines = [
+        "| model | joints | CalcMassMatrix, new state (the unit) | CalcMassMatrix, cached kinematics "
+        "| `fast` compute | `reference` compute | `fast` J^fb (a point) | reference / fast |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['model']} | {r['num_joints']} | {r['calc_mass_matrix_us']:.1f} us "
+            f"| {r['calc_mass_matrix_cached_kinematics_us']:.1f} us "
+            f"| {r['fast_compute_us']:.1f} us ({_ratio(r['fast_compute_ratio'])}) "
+            f"| {r['reference_compute_us']:.0f} us ({_ratio(r['reference_compute_ratio'])}) "
+            f"| {r['fast_floating_jacobian_us']:.1f} us ({_ratio(r['fast_floating_jacobian_ratio'])}) "
+            f"| {_ratio(r['reference_over_fast'])} |"
+        )
+    lines += ["", "Floors of the foundation issue:", ""]
+    ratio = floors["fast_compute_max_ratio"]
+    for r in rows:
+        cached = r["fast_compute_us"] / r["calc_mass_matrix_cached_kinematics_us"]
+        lines.append(
+            f"- `fast` compute <= {ratio:g}x one CalcMassMatrix on {r['model']}: "
+            f"{_met(r['fast_compute_ratio'] <= ratio)} ({_ratio(r['fast_compute_ratio'])}; "
+            f"{_ratio(cached)} one CalcMassMatrix with cached kinematics)"
+        )
+    model, limit = floors["fast_compute_floor_model"], floors["fast_compute_max_us"]
+    measured = [r for r in rows if r["model"] == model]
+    lines.append(
+        f"- `fast` compute <= {limit:g} us on {model}: "
+        + (
+            f"{_met(measured[0]['fast_compute_us'] <= limit)} ({measured[0]['fast_compute_us']:.1f} us)"
+            if measured
+            else f"not measured in this run (`--model {model}` or `all`)"
+        )
+    )
+    return lines
+
+
+def _benchmark_residual_update(data: dict) -> list[str]:
+    limit = data["floors"]["three_residuals_update_max_us"]
+    lines = [
+        "| model | F/T sensors (known wrenches) | CalcMassMatrix | three residuals, one update "
+        f"| floor <= {limit:g} us |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    for r in data["residual_update"]:
+        lines.append(
+            f"| {r['model']} | {r['known_wrench_frames']} | {r['calc_mass_matrix_us']:.1f} us "
+            f"| {r['three_residuals_update_us']:.1f} us ({_ratio(r['three_residuals_update_ratio'])}) "
+            f"| {_met(r['three_residuals_update_us'] <= limit)} |"
+        )
+    return lines
+
+
+def _benchmark_force_observer(data: dict) -> list[str]:
+    r, floor = data["force_observer"], data["floors"]["observer_min_samples_per_s"]
+    return [
+        f"| recording | samples | samples per second | times real time (60 Hz) | floor >= {floor:,.0f} samples/s |",
+        "| --- | --- | --- | --- | --- |",
+        f"| {r['recording']} | {r['samples']} | {r['samples_per_s']:,.0f} | {r['samples_per_s'] / 60.0:,.0f} "
+        f"| {_met(r['samples_per_s'] >= floor)} |",
+    ]
+
+
+def _benchmark_closed_loop(data: dict) -> list[str]:
+    rows, seconds = data["closed_loop"], data["settings"]["loop_seconds"]
+    if not rows:
+        return _not_measured("the closed loop", "`--loop-seconds 0`")
+    lines = [
+        f"| loop (hrp4_like, {seconds:g} s simulated, 1 ms steps) | wall per step | CPU per step "
+        "| real-time factor | faster than real time |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    labels = {"Meshcat recording": "the same, with Meshcat recording the replay"}
+    for r in rows:
+        lines.append(
+            f"| {labels.get(r['loop'], r['loop'])} | {r['wall_us_per_step']:.0f} us | {r['cpu_us_per_step']:.0f} us "
+            f"| {r['real_time_factor']:.2f} | {_yes(r['real_time_factor'] >= 1.0)} |"
+        )
+    return [*lines, "", f"Memory allocator of this run: {data.get('memory_allocator', 'not recorded')}."]
+
+
+def _benchmark_contact_localizer(data: dict) -> list[str]:
+    rows, limit = data["contact_localizer"], data["floors"]["localizer_update_max_us"]
+    if not rows:
+        return _not_measured("the contact localizer", "it runs with `--model hrp4_like` or `all`")
+    lines = [
+        f"| model | collision primitives | CalcMassMatrix | one update | floor <= {limit / 1000:g} ms |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['model']} | {r['num_primitives']} | {r['calc_mass_matrix_us']:.1f} us "
+            f"| {r['localizer_update_us']:.0f} us ({_ratio(r['localizer_update_ratio'])}) "
+            f"| {_met(r['localizer_update_us'] <= limit)} |"
+        )
+    return lines
+
+
+def _benchmark_multi_contact_fit(data: dict) -> list[str]:
+    rows = data["multi_contact_fit"]
+    if not rows:
+        return _not_measured("the one-or-two-contact fit", "`--fit-pairs 0`, or a model other than hrp4_like")
+    lines = [
+        "| model | two-contact trials | `fit_one`, median | `fit_two`, median | `fit_two`, slowest "
+        "| `fit_one` at a new pose |",
+        "| --- | --- | --- | --- | --- | --- |",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['model']} | {r['pairs']} | {r['fit_one_median_ms']:.1f} ms | {r['fit_two_median_ms']:.1f} ms "
+            f"| {r['fit_two_max_ms']:.1f} ms | {r['fit_one_new_pose_ms']:.1f} ms |"
+        )
+    return lines
+
+
+def _benchmark_log_estimation(data: dict) -> list[str]:
+    rows, floor = data["log_estimation"], data["floors"]["log_estimation_min_real_time_factor"]
+    if not rows:
+        return _not_measured("the offline estimation", "`--log-seconds 0`, or a model other than hrp4_like")
+    lines = [
+        f"| model | joints | log | in contact | per sample | real-time factor | floor >= {floor:g}x real time |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['model']} | {r['num_joints']} | {r['log_seconds']:.1f} s at {r['log_rate_hz']:.0f} Hz "
+            f"| {100 * r['contact_fraction']:.0f} % | {r['us_per_sample']:.0f} us | {r['real_time_factor']:.2f} "
+            f"| {_met(r['real_time_factor'] >= floor)} |"
+        )
+    units = {r["model"]: r["calc_mass_matrix_us"] for r in data["floating_base"]}
+    for r in rows:
+        if r["model"] in units:
+            lines += [
+                "",
+                f"A log sample costs {r['us_per_sample'] / units[r['model']]:.1f} CalcMassMatrix at a new state "
+                f"of the same run ({units[r['model']]:.1f} us), so {floor:g}x real time at "
+                f"{r['log_rate_hz']:.0f} Hz needs a CalcMassMatrix of "
+                f"{units[r['model']] * 1e6 / (floor * r['log_rate_hz'] * r['us_per_sample']):.1f} us or less "
+                "on this machine.",
+            ]
+    return lines
+
+
+def _benchmark_residual_replay(data: dict) -> list[str]:
+    rows = data["residual_replay"]
+    if not rows:
+        return _not_measured("the residual replay", "`--log-seconds 0`, or a model other than hrp4_like")
+    lines = [
+        "| model | samples | sample by sample | stacked | speed-up | largest difference |",
+        "| --- | --- | --- | --- | --- | --- |",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['model']} | {r['samples']} | {r['per_sample_us']:.0f} us | {r['stacked_us']:.0f} us "
+            f"| {r['speedup']:.1f}x | {r['largest_difference']:.1e} N m |"
+        )
+    return lines
+
+
+def _seconds(value) -> str:
+    return "n/a" if value is None else f"{value:.1f} s"
+
+
+def _factor_range(values: list) -> str:
+    values = [v for v in values if v is not None]
+    if not values:
+        return "n/a"
+    low, high = min(values), max(values)
+    return f"{low:.2f}" if f"{low:.2f}" == f"{high:.2f}" else f"{low:.2f}-{high:.2f}"
+
+
+def _run_row(label: str, name: str, data: dict) -> str:
+    """A single simulation's row: ``duration_s``, ``wall_time_s``, ``real_time_factor``."""
+    return (
+        f"| {label} (`{name}`) | {_seconds(data.get('duration_s'))} | {_seconds(data.get('wall_time_s'))} "
+        f"| {_factor_range([data.get('real_time_factor')])} |"
+    )
+
+
+def _experiments_row(label: str, name: str, data: dict) -> str:
+    """Several simulations in one process (``experiment_<k>``): their sums, and the range of
+    their real-time factors."""
+    runs = [data[k] for k in sorted(data) if k.startswith("experiment_")]
+    simulated = sum(r.get("duration_s", 0.0) for r in runs)
+    wall = sum(r.get("wall_time_s", 0.0) for r in runs)
+    return (
+        f"| {label} (`{name}`): {len(runs)} experiments | {simulated:.1f} s | {wall:.1f} s "
+        f"| {_factor_range([r.get('real_time_factor') for r in runs])} per experiment |"
+    )
+
+
+def _study_row(label: str, name: str, data: dict) -> str:
+    """A study run in parallel processes: its wall time on its workers; the real-time factor
+    of each of its simulations when it records them."""
+    rows = data.get("rows", [])
+    factors = [row[kind].get("real_time_factor") for row in rows for kind in ("internal", "classical") if kind in row]
+    runs = f"{len(factors)} runs" if rows else f"{data.get('trials')} trials"
+    phases = data.get("phase_wall_s")
+    wall = _seconds(data.get("wall_time_s"))
+    if phases:
+        named = {k: k.replace("one_or_two_contact", "one-or-two-contact").replace("_", " ") for k in phases}
+        wall += " (" + ", ".join(f"{named[k]}: {v:.0f} s" for k, v in phases.items() if v >= 0.5) + ")"
+    factor = f"{_factor_range(factors)} per run" if factors else "not recorded"
+    return f"| {label} (`{name}`): {runs} on {data.get('workers')} workers | - | {wall} | {factor} |"
+
+
+#: The experiments whose results files record their wall time: (results file, label, row).
+EXPERIMENT_RUNS = (
+    ("residual_comparison_realistic", "`make residual-comparison`, realistic world", _run_row),
+    ("residual_comparison_ideal", "`make residual-comparison ARGS=--ideal`", _run_row),
+    ("nao_force_observer_paper", "`make hawley-settings`, the paper's setting", _experiments_row),
+    ("nao_force_observer_steps_wide", "`make hawley-settings`, steps in the wider stance", _experiments_row),
+    ("nao_force_observer", "`make nao-force-observer`, the default setting", _experiments_row),
+    ("push_and_comply_ablation", "`make paper-settings`", _study_row),
+    ("push_and_comply_robots", "`make robots`", _study_row),
+    ("contact_study_single", "`make contact`, one contact", _study_row),
+    ("contact_study_two", "`make contact ARGS='--contacts 2'`", _study_row),
+)
+
+
+def _experiments_wall_time(sources: dict[str, dict]) -> list[str]:
+    lines = [
+        "| experiment (results file) | simulated | wall time | real-time factor |",
+        "| --- | --- | --- | --- |",
+    ]
+    for name, label, row in EXPERIMENT_RUNS:
+        lines.append(row(label, name, sources[name]))
+    return lines
+
+
+#: NAME -> the table's lines from the results file's ``data`` (or, for a block with several
+#: ``SOURCES``, from {results file name: its ``data``}).
 RENDERERS: dict[str, Callable[[dict], list[str]]] = {
     "push_and_comply_ablation": _push_and_comply_ablation,
     "push_and_comply_robots": _push_and_comply_robots,
@@ -206,7 +453,28 @@ RENDERERS: dict[str, Callable[[dict], list[str]]] = {
     "nao_force_observer": _nao_force_observer,
     "nao_force_observer_paper": _nao_force_observer,
     "nao_force_observer_steps_wide": _nao_force_observer,
+    "benchmark_floating_base": _benchmark_floating_base,
+    "benchmark_residual_update": _benchmark_residual_update,
+    "benchmark_force_observer": _benchmark_force_observer,
+    "benchmark_closed_loop": _benchmark_closed_loop,
+    "benchmark_contact_localizer": _benchmark_contact_localizer,
+    "benchmark_multi_contact_fit": _benchmark_multi_contact_fit,
+    "benchmark_log_estimation": _benchmark_log_estimation,
+    "benchmark_residual_replay": _benchmark_residual_replay,
+    "experiments_wall_time": _experiments_wall_time,
 }
+
+#: The results files of the blocks that do not read ``results/<NAME>.json``: one file (the
+#: renderer gets its ``data``) or several (the renderer gets {file name: its ``data``}).
+SOURCES: dict[str, tuple[str, ...]] = {
+    **{name: ("benchmark",) for name in RENDERERS if name.startswith("benchmark_")},
+    "experiments_wall_time": tuple(name for name, _, _ in EXPERIMENT_RUNS),
+}
+
+
+def sources(name: str) -> tuple[str, ...]:
+    """The results files the block ``name`` is generated from."""
+    return SOURCES.get(name, (name,))
 
 
 def _release(drake) -> str:
@@ -222,14 +490,23 @@ def render(name: str, folder: Path | None = None) -> str:
     """
     if name not in RENDERERS:
         raise ValueError(f"no table is generated under the name {name!r}; known: {sorted(RENDERERS)}")
-    payload = load_results(name, folder)
-    lines = RENDERERS[name](payload["data"])
-    lines += [
-        "",
-        f"Measured by `{payload['command']}` on {payload['written']} (Python {payload['python']}, "
-        f"Drake {_release(payload['drake'])}; `results/{name}.json`).",
-    ]
+    payloads = {source: load_results(source, folder) for source in sources(name)}
+    if len(payloads) == 1:
+        ((source, payload),) = payloads.items()
+        lines = RENDERERS[name](payload["data"])
+        lines += ["", _provenance("Measured by", source, payload) + "."]
+    else:
+        lines = RENDERERS[name]({source: payload["data"] for source, payload in payloads.items()})
+        lines += ["", "Measured by:", ""]
+        lines += [_provenance("-", source, payload) for source, payload in payloads.items()]
     return "\n".join(lines) + "\n"
+
+
+def _provenance(prefix: str, source: str, payload: dict) -> str:
+    return (
+        f"{prefix} `{payload['command']}` on {payload['written']} (Python {payload['python']}, "
+        f"Drake {_release(payload['drake'])}; `results/{source}.json`)"
+    )
 
 
 def updated(text: str, folder: Path | None = None) -> tuple[str, list[str]]:

@@ -13,7 +13,8 @@ estimate from the arm's position errors (eqs. 25-27, K_m identified in simulatio
   FSRs lose contact, so K1 = K_a / K_t < 1 and the joint-level estimate takes part of the
   weight. A larger lean saturates an FSR and degrades the observer's estimate (the paper's
   "unreliable data from the FSR"); ``--saturation-guard`` (an extension of eq. 28) then
-  sets K1 = 0. The measured K1 and FSR counts are in BENCHMARKS.md.
+  sets K1 = 0. The app prints each case's steady K1; ``metrics.json`` also holds the FSR
+  forces and saturated samples.
 
 Floor (issue 7): hand displacement (true, torso frame) within 10 % of F / k in steady state,
 against the true force and against the estimate

@@ -36,8 +36,10 @@ touch-down is reported. Also checked: no false start (a start decision outside e
 episode's window [force on, force off + 0.5 s)); ``--force 0`` runs the same 12.7 s without
 any force (the false-start check alone).
 
-Measured start latencies, stops and false starts per trigger source, force and seed:
-BENCHMARKS.md, "Force-guided walking" (why the default force is 3 N, not 4 N).
+The app prints each episode's start latency and stop and the false starts, and writes them
+to ``metrics.json``. Why the default force is 3 N, not 4 N: ``NaoForceGuidedWalkScenario``
+(measured per trigger source, force and seed when it was chosen; see the git history of
+BENCHMARKS.md).
 
 Run: ``python -m apps.nao_force_guided_walk [--scenario FILE] [--scenario-text YAML] [--force N]
 [--threshold N] [--trigger-source joint|observer|blend] [--preset walking|standing]

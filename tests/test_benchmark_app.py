@@ -1,17 +1,16 @@
 """Smoke test of `python -m apps.benchmark` (the timings themselves are never asserted)."""
 
 import json
+import shlex
 
-from apps import benchmark
+from apps import benchmark, doc_tables
+from apps.results import RESULTS_DIR_VARIABLE, load_results
 
 
-def test_benchmark_runs_and_reports_every_figure(tmp_path, capsys):
-    assert (
-        benchmark.main(
-            ["--model", "nao_like", "--calls", "3", "--batches", "1", "--loop-seconds", "0.08", "--out", str(tmp_path)]
-        )
-        == 0
-    )
+def test_benchmark_runs_and_reports_every_figure(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv(RESULTS_DIR_VARIABLE, str(tmp_path / "results"))  # never the committed file
+    argv = ["--model", "nao_like", "--calls", "3", "--batches", "1", "--loop-seconds", "0.08", "--out", str(tmp_path)]
+    assert benchmark.main([*argv, "--results", "benchmark"]) == 0
     results = json.loads((tmp_path / "benchmark" / "metrics.json").read_text())
     rows = results["floating_base"]
     assert [r["model"] for r in rows] == ["nao_like"]
@@ -30,6 +29,26 @@ def test_benchmark_runs_and_reports_every_figure(tmp_path, capsys):
     ]
     assert all(r["wall_us_per_step"] > 0 and r["cpu_us_per_step"] > 0 for r in loops)
     assert "nao_like" in capsys.readouterr().out
+
+    # The results file: the same figures, the floors they are checked against, the command.
+    payload = load_results("benchmark", tmp_path / "results")
+    assert payload["command"] == shlex.join(["python", "-m", "apps.benchmark", *argv, "--results", "benchmark"])
+    assert payload["data"]["floors"] == benchmark.FLOORS
+    assert payload["data"]["floating_base"] == results["floating_base"]
+    assert payload["data"]["settings"]["models"] == ["nao_like"]
+    # Every table of BENCHMARKS.md renders from it; what this run skipped says so.
+    for name in [n for n, files in doc_tables.SOURCES.items() if files == ("benchmark",)]:
+        body = doc_tables.render(name, tmp_path / "results")
+        assert "`results/benchmark.json`" in body
+    assert doc_tables.render("benchmark_log_estimation", tmp_path / "results").startswith("Not measured in this run")
+
+
+def test_without_results_the_benchmark_writes_no_results_file(tmp_path, monkeypatch):
+    monkeypatch.setenv(RESULTS_DIR_VARIABLE, str(tmp_path / "results"))
+    argv = ["--model", "nao_like", "--calls", "1", "--batches", "1", "--loop-seconds", "0", "--out", str(tmp_path)]
+    assert benchmark.main(argv) == 0
+    assert (tmp_path / "benchmark" / "metrics.json").is_file()
+    assert not (tmp_path / "results").exists()
 
 
 def test_benchmark_stops_with_a_clear_error_when_the_nao_recording_is_missing(tmp_path, monkeypatch, capsys):

@@ -584,7 +584,7 @@ def test_localizer_update_at_new_states_hrp4(hrp4):
     """50 full localizer updates (line, all primitives, scores) on hrp4_like, each at a new
     sensed q (no pose or mass matrix reused): each finds the pushed link. Their median
     time is printed, not asserted (a shared machine's timings are noise): ``make
-    benchmark`` measures it against the issue's 2 ms (BENCHMARKS.md)."""
+    benchmark`` measures it against the issue's 2 ms (BENCHMARKS.md, "Contact localizer update")."""
     import time
 
     plant, scene_graph, _, context = hrp4

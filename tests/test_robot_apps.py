@@ -60,7 +60,7 @@ def test_contact_study_on_talos(tmp_path):
 
 
 def test_model_refinement_on_talos_says_which_joints_a_short_calibration_leaves_undetermined(tmp_path, capsys):
-    # The full run (8 s of calibration, 90 s of wall time) is in BENCHMARKS.md; a 3 s motion
+    # The full run (its default calibration motion) is too long for a test; a 3 s motion
     # does not excite every joint of this robot, and the app says which, instead of a
     # silent wrong model.
     text = (

@@ -99,12 +99,14 @@ class NaoWalkScenario:
             with the station's PD gains ``diagrams.station.standing.default_gains``).
         velocity_lead: with ``stiffness_compensation``, also lead the targets by
             K_p^-1 K_d q_dot_ref (eq. W-3), since the PD damps towards zero velocity. Off by
-            default (it does not help: BENCHMARKS.md, "Walking: variants tried").
+            default (measured not to help when this was chosen; see the git history of
+            BENCHMARKS.md).
         noise, seed: the station's sensor noise (the PD reads the sensed state) and its seed.
         base_state: the source of the sensed base state (``diagrams.station.humanoid_station``):
             "truth_plus_noise" (default) or "invariant_ekf" (the contact-aided invariant EKF,
             foot contact from the FSRs). The walking controller is open loop and does not
-            read it; the EKF's walking drift is measured on it (BENCHMARKS.md).
+            read it; the EKF's walking drift is measured on it
+            (``tests/test_station_base_state.py``, which prints it with ``pytest -s``).
         imperfections: the station's ``Imperfections`` (default none), e.g. the realistic IMU.
         log_period: period of every logger, s.
         plant_config: Drake's ``MultibodyPlantConfig`` (default: 1 ms steps, point contact, SAP).

@@ -56,7 +56,7 @@ def lean_posture(delta: float, posture: dict[str, float] | None = None) -> dict[
     (rad), on top of ``posture`` (default ``wide_stance()``). Kinematically a parallelogram
     that shifts the pelvis (negative delta: towards -y, the right foot); on nao_like, whose
     ankle PD is soft (40 N m/rad), the feet also roll onto their edges, so FSRs lose
-    contact (measured in BENCHMARKS.md, "Compliant arms")."""
+    contact (``apps.nao_compliant_arms`` prints the resulting K1 of case b)."""
     out = dict(wide_stance() if posture is None else posture)
     for name in ("LHipRoll", "RHipRoll"):
         out[name] = out.get(name, 0.0) + delta

@@ -65,8 +65,10 @@ HAND_BODIES = ("l_gripper", "r_gripper")
 @dataclass
 class NaoForceGuidedWalkScenario:
     """The force-guided walk's settings (SI units; ``diagrams.scenarios``). Defaults: the
-    app's (BENCHMARKS.md: 3 N on the hands moves the ZMP ~1.3 cm; 4 N pushing backwards for
-    3 s while the robot walks backwards breaks its gait up).
+    app's. The force is 3 N, not 4 N: the ZMP shift it causes grows with it (z_c F / (m g),
+    ``systems.observer.force_guided_walking``), and 4 N pushing backwards for 3 s while the
+    robot walked backwards broke its gait up (measured when this was chosen; see the git
+    history of BENCHMARKS.md).
 
     Attributes:
         force: total guidance force on the hands, N (0: no force, the false-start check).

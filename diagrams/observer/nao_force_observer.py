@@ -22,7 +22,8 @@ Timing: the observer updates at t_k = k T and reads the sensors at t_k; a logger
 before the discrete updates of the same time, so the estimate of sample k appears in the
 ``virtual_force`` log at t_{k+1}. Drake's discrete plant reports contact results only after
 its first step: the observer's first sample (t = 0) reads zero FSR forces; the filters
-absorb it within ~0.3 s (measured: BENCHMARKS.md, "Standing Nao").
+absorb it before the settled level ahead of the first load is measured (``QUIET_START``,
+``STEADY_WINDOW``; measured when this was chosen, see the git history of BENCHMARKS.md).
 """
 
 import math
@@ -245,7 +246,7 @@ def wide_stance(hip_roll: float = 0.1) -> dict[str, float]:
     and its ankle rolls back, so the soles stay flat (0.1 rad moves each foot out by
     ~2 cm). Nao's FSR polygon is only ~16 cm wide in the nominal stance: an 11 N sideways
     load near the CoM height moves the CoP ~7 cm (eq. 10), to its edge (experiment 2 in the
-    nominal stance: BENCHMARKS.md, "Standing Nao")."""
+    nominal stance: the table of the paper's setting in docs/nao-force-observer.md)."""
     return {"LHipRoll": hip_roll, "LAnkleRoll": -hip_roll, "RHipRoll": -hip_roll, "RAnkleRoll": hip_roll}
 
 

@@ -43,8 +43,8 @@ waist (0.55 m vs 0.26 m; the line rises ~7 deg at the start, ~5 deg at the end) 
 line tightens late enough that the load stays ``min_clearance`` below it
 (checked at construction from the plan).
 
-No feed-forward lean for the expected pull (tried, measured worse, removed: BENCHMARKS.md,
-"Walking: variants tried").
+No feed-forward lean for the expected pull (tried, measured worse, removed; see the git
+history of BENCHMARKS.md).
 """
 
 import dataclasses

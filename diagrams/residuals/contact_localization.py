@@ -170,8 +170,9 @@ class ContactLocalizationScenario:
             (``run_schedule``), ``trial_gap`` apart, the robot and the residuals coming
             back to rest in between; 1 (default): each trial from the standing start, as
             in the paper. Runs of several trials test a robot that has been pushed
-            before (BENCHMARKS.md: its feet slip, and the realistic world's detector
-            does not always release within the gap).
+            before (when this was measured its feet slipped, and the realistic world's
+            detector did not always release within the gap; see the git history of
+            BENCHMARKS.md).
         shared_standing_start: with ``trials_per_run`` 1, the study simulates the standing
             start (the first ``push_start`` seconds) once per job of trials and restores its
             state before each trial's push (``apps.contact_localization.run_trials``): the

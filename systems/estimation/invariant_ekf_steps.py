@@ -2,10 +2,10 @@
 
 ``ContactAidedInvariantEkf`` (``base_state_estimator``) runs at the IMU rate, 1 kHz in the
 simulations, with a 21 x 21 covariance (two feet and the IMU bias states). In numpy its
-small-matrix operations cost mostly call overhead: 275 us per propagation and kinematic
-correction; compiled, 64 us (BENCHMARKS.md, "0.5 s pushes and the compiled EKF"). The
-equations and their labels (E1)-(E11) are those of ``base_state_estimator``'s docstring;
-the filter's state is passed as arrays:
+small-matrix operations cost mostly call overhead, which compiling them removes from each
+propagation and kinematic correction (measured when this was chosen; see the git history of
+BENCHMARKS.md). The equations and their labels (E1)-(E11) are those of
+``base_state_estimator``'s docstring; the filter's state is passed as arrays:
 
     R (3 x 3), v (3), p (3): R_WI, v_WIo (m/s), p_WIo (m);
     d (K x 3): the foot points in contact, world, m; in_contact (K, bool);

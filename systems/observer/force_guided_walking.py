@@ -34,9 +34,10 @@ between them at run time:
 
   with F_0 the estimate at the start decision, so that the pushed robot's ZMP stays at
   zmp_offset_x,0 (the preview controller moves the CoM accordingly, keeping the pattern
-  dynamically consistent); ``max_lean = 0`` (the default) disables it (measured worse:
-  BENCHMARKS.md, "Walking: variants tried"); the default instead puts the ZMP reference at
-  the centre of the FSR polygon (``GUIDED_WALKING``), which leaves ~5 cm of margin both ways;
+  dynamically consistent); ``max_lean = 0`` (the default) disables it (measured worse when
+  it was tried; see the git history of BENCHMARKS.md); the default instead puts the ZMP
+  reference at the centre of the FSR polygon (``GUIDED_WALKING``), which leaves ~5 cm of
+  margin both ways;
 * stopping -> standing: at the end of the variant (ZMP back between the feet, then
   ``final_wait``) the last targets are held; a new segment can start from there;
 * a segment that runs out of steps while the force persists ends like a stop, and a new

@@ -81,6 +81,7 @@ from diagrams.observer.nao_force_observer import (
     aligned,
     build_experiment_diagram,
     experiment_metrics,
+    experiment_posture,
     experiments_summary,
     recordings_step_response,
     scenario_experiments,
@@ -184,13 +185,13 @@ def main(argv: list[str] | None = None) -> int:
         schedules = scenario_experiments(scenario)  # every schedule checked before the first run
         out_dir = output_folder(args, EXPERIMENT)
         meshcat = replay_meshcat(not args.no_replay, args.headless)
-        initial_state = settle_standing_state(
-            scenario.posture(), plant_config=scenario.plant_config, robot=scenario.robot
-        )
         recordings = recordings_step_response()
         metrics = {}
         for experiment in schedules:
             print(f"{experiment.title}: {experiment.duration:.1f} s simulated ...", flush=True)
+            initial_state = settle_standing_state(
+                experiment_posture(scenario, experiment), plant_config=scenario.plant_config, robot=scenario.robot
+            )
             diagram, handles = build_experiment_diagram(scenario, experiment, meshcat)
             run = simulate(
                 diagram,

@@ -278,6 +278,15 @@ TORSO_POINT = ("torso", (0.05, 0.0, -0.01))
 CABLE_POINT = ("RForeArm", (0.0165, 0.0, 0.0))
 #: Experiment 3: the load hanging from the right hand.
 HAND_POINT = ("r_gripper", (0.0, 0.0, 0.0))
+#: Experiment 3's arm: the right arm reaches forward so that, once the load hangs from it,
+#: the hand stands where eq. (24)'s W_3 puts the load relative to the CoM: r_x = tau_y / |F| =
+#: 0.70 / 11.12 = 6.3 cm ahead and r_y = tau_x / F_z = -1.31 / 11.12 = 11.8 cm to the right,
+#: hence the expected virtual force (2.22, -4.16, -11.12) N. These are the commanded angles:
+#: the position-controlled arm yields to the load by its PD's stiffness, so they were solved
+#: (scipy's fsolve on the simulated loaded robot, ``nao_like_recorded``) for the loaded
+#: posture, not the unloaded one (in the nominal posture the hand is only 3 cm ahead);
+#: ``tests/test_nao_force_observer_app.py`` checks the expected force against eq. (24).
+HAND_LOAD_ARM_POSTURE = {"RShoulderPitch": 1.0594, "RShoulderRoll": -0.2607}
 #: Floors, N.
 STEADY_STATE_FLOOR = 0.5
 RMS_FLOOR = 1.0
@@ -365,9 +374,10 @@ class _Component:
 
 @dataclass
 class Experiment:
-    """One simulated experiment: its pushes, duration and steady-state windows, and the
+    """One simulated experiment: its pushes, duration and steady-state windows, the
     load's changes as (time the load starts to change, end of the plateau that follows), s
-    (the steps of ``systems.observer.step_response``)."""
+    (the steps of ``systems.observer.step_response``), and the posture overrides it adds to
+    the scenario's stance (``experiment_posture``)."""
 
     number: int
     title: str
@@ -377,6 +387,7 @@ class Experiment:
     description: str = ""
     changes: list[tuple[float, float]] = field(default_factory=list)
     step_loads: bool = False
+    posture: dict[str, float] = field(default_factory=dict)
 
 
 def make_experiment(
@@ -399,7 +410,8 @@ def make_experiment(
       direction turns from one angle to the next at constant magnitude;
     * experiment 2 (Fig. 7): a ``load_mass`` kg load pulling the right arm along -y by a
       cable on the forearm at the CoM height (``CABLE_POINT``);
-    * experiment 3 (Fig. 8): the same load hanging from the right hand (-z).
+    * experiment 3 (Fig. 8): the same load hanging from the right hand (-z), the arm
+      reaching forward to eq. (24)'s point (``HAND_LOAD_ARM_POSTURE``).
 
     Raises:
         ValueError: an unknown experiment, a non-positive time scale, force or mass, a
@@ -484,7 +496,15 @@ def make_experiment(
         f"{weight:.2f} N at {body} {point}, " + ("steps" if steps else f"ramps of {r:g} s"),
         [(start, t_off), (t_off, duration)],
         steps,
+        dict(HAND_LOAD_ARM_POSTURE) if number == 3 else {},
     )
+
+
+def experiment_posture(scenario: NaoForceObserverScenario, experiment: Experiment) -> dict[str, float] | None:
+    """The posture overrides ``experiment`` runs in: the scenario's stance and the
+    experiment's own (its arm; they name different joints). None: the nominal posture."""
+    posture = {**(scenario.posture() or {}), **experiment.posture}
+    return posture or None
 
 
 def scenario_experiments(scenario: NaoForceObserverScenario) -> list[Experiment]:
@@ -517,13 +537,14 @@ def scenario_experiments(scenario: NaoForceObserverScenario) -> list[Experiment]
 def build_experiment_diagram(
     scenario: NaoForceObserverScenario, experiment: Experiment, meshcat: Meshcat | None = None
 ) -> tuple[Diagram, NaoForceObserverHandles]:
-    """``build_nao_force_observer_diagram`` with ``experiment``'s pushes and the scenario's
-    stance, sensors and plant. Its initial state is the caller's explicit calibration run:
-    ``settle_standing_state(scenario.posture(), plant_config=scenario.plant_config,
-    robot=scenario.robot)`` (``diagrams.observer.calibration``)."""
+    """``build_nao_force_observer_diagram`` with ``experiment``'s pushes and posture, and the
+    scenario's stance, sensors and plant. Its initial state is the caller's explicit
+    calibration run: ``settle_standing_state(experiment_posture(scenario, experiment),
+    plant_config=scenario.plant_config, robot=scenario.robot)``
+    (``diagrams.observer.calibration``)."""
     return build_nao_force_observer_diagram(
         experiment.pushes,
-        posture=scenario.posture(),
+        posture=experiment_posture(scenario, experiment),
         support_foot=scenario.support_foot,
         noise=scenario.noise,
         seed=scenario.seed,
@@ -680,6 +701,7 @@ __all__ = [
     "NaoForceObserverScenario",
     "aligned",
     "build_experiment_diagram",
+    "experiment_posture",
     "build_nao_force_observer_diagram",
     "experiment_metrics",
     "experiments_summary",

@@ -14,8 +14,12 @@ simulated push: ``python -m apps.estimate_from_log [--robot R] --write-demo-log 
 (simulates the robot under a known push, on hrp4_like 28 N, writes the log, then estimates from it).
 Writes to ``DIR/estimate_from_log/``: ``estimates.csv`` (per sample: detection, test
 statistics, force, external wrench, localized link and point, internal residual, the base
-state used, logged or estimated, and the estimated IMU biases),
-``contact_forces.png``, ``metrics.json`` (the contacts found, the real-time factor) and
+state used, logged or estimated, and the estimated IMU biases) and ``estimates.parquet``
+(the same columns; with pyarrow, a dependency),
+``contact_forces.png``, ``metrics.json`` (the contacts found, the real-time factor, how the
+stamps were spaced: uniform, stamp noise or uneven, with the fitted period and jitter, and
+``not_estimated``: the estimates not made and why, e.g. no localization on a model without
+collision geometry) and
 ``replay.html`` (a self-contained Meshcat replay of the robot with the estimated contact
 force), and prints the contacts and the real-time factor of the estimation.
 """
@@ -98,44 +102,131 @@ def _parse(argv):
     return args
 
 
-def write_estimates_csv(path: Path, estimates: LogEstimates) -> Path:
-    """One row per sample: time, contact flag, test statistics, force (eq. 19), external
-    wrench, the localizer's status, link, point and force, the internal residual, the base
-    state the estimators used (``base_qw`` .. ``base_vz``: logged, or the invariant EKF's)
-    and, when the EKF estimated IMU biases, ``gyro_bias_*`` and ``accel_bias_*``."""
-    names = estimates.body_names
-    header = ["time", "contact_detected", "statistic_external", "statistic_internal"]
-    header += [f"force_{a}" for a in "xyz"]
-    header += [f"external_wrench_{a}" for a in ("mx", "my", "mz", "fx", "fy", "fz")]
-    header += ["localization_status", "contact_link"] + [f"contact_point_{a}" for a in "xyz"]
-    header += [f"localized_force_{a}" for a in "xyz"]
-    header += [f"residual_{joint}" for joint in estimates.joint_names]
-    base = [] if estimates.base_pose is None else [estimates.base_pose, estimates.base_velocity]
-    if base:
-        header += [f"base_{a}" for a in ("qw", "qx", "qy", "qz", "x", "y", "z", "wx", "wy", "wz", "vx", "vy", "vz")]
-    if estimates.imu_bias is not None:
-        base.append(estimates.imu_bias)
-        header += [f"gyro_bias_{a}" for a in "xyz"] + [f"accel_bias_{a}" for a in "xyz"]
+def estimate_columns(estimates: LogEstimates) -> dict[str, np.ndarray | None]:
+    """The columns of ``estimates.csv`` in order, one value per sample: ``time`` (s),
+    ``contact_detected`` (0/1), ``statistic_external``, ``statistic_internal``, ``force_*``
+    (eq. 19, N), ``external_wrench_*`` (world, N m and N), ``localization_status``,
+    ``contact_link`` (str), ``contact_point_*`` (m), ``localized_force_*`` (N) (these four
+    None without a localizer), ``residual_<joint>`` (N m), the base state the estimators
+    used (``base_qw`` .. ``base_vz``: logged, or the invariant EKF's; m, rad/s, m/s) and,
+    when the EKF estimated IMU biases, ``gyro_bias_*`` (rad/s) and ``accel_bias_*``
+    (m/s^2)."""
+    columns: dict[str, np.ndarray | None] = {
+        "time": np.asarray(estimates.time, dtype=float),
+        "contact_detected": np.asarray(estimates.contact_detected, dtype=np.int64),
+        "statistic_external": estimates.test_statistics[:, 0],
+        "statistic_internal": estimates.test_statistics[:, 1],
+    }
+    columns |= {f"force_{a}": estimates.force_world[:, i] for i, a in enumerate("xyz")}
+    axes = ("mx", "my", "mz", "fx", "fy", "fz")
+    columns |= {f"external_wrench_{a}": estimates.external_wrench_world[:, i] for i, a in enumerate(axes)}
     loc = estimates.localization
+    columns["localization_status"] = None if loc is None else np.asarray(loc["status"], dtype=np.int64)
+    columns["contact_link"] = (
+        None
+        if loc is None
+        else np.array([estimates.body_names.get(int(b), "") for b in loc["body_index"]], dtype=object)
+    )
+    columns |= {f"contact_point_{a}": None if loc is None else loc["point_world"][:, i] for i, a in enumerate("xyz")}
+    columns |= {f"localized_force_{a}": None if loc is None else loc["force_world"][:, i] for i, a in enumerate("xyz")}
+    columns |= {f"residual_{j}": estimates.internal_residual[:, i] for i, j in enumerate(estimates.joint_names)}
+    if estimates.base_pose is not None:
+        names = ("qw", "qx", "qy", "qz", "x", "y", "z", "wx", "wy", "wz", "vx", "vy", "vz")
+        base = np.hstack((estimates.base_pose, estimates.base_velocity))
+        columns |= {f"base_{a}": base[:, i] for i, a in enumerate(names)}
+    if estimates.imu_bias is not None:
+        names = [f"gyro_bias_{a}" for a in "xyz"] + [f"accel_bias_{a}" for a in "xyz"]
+        columns |= {name: estimates.imu_bias[:, i] for i, name in enumerate(names)}
+    return columns
+
+
+def check_finite(estimates: LogEstimates) -> None:
+    """Raises ValueError naming the first (in time, then in column order) estimate column
+    that is NaN or inf and its time: a non-finite estimate is never written as a result."""
+    columns = estimate_columns(estimates)
+    first = None
+    for name, values in columns.items():
+        if values is None or values.dtype == object:
+            continue
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size and (first is None or bad[0] < first[1]):
+            first = (name, int(bad[0]))
+    if first is not None:
+        name, k = first
+        raise ValueError(
+            f"the estimate {name!r} is {columns[name][k]} at t = {estimates.time[k]:.6g} s (from the log's start): "
+            "the log holds values the estimators cannot digest there; nothing was written"
+        )
+
+
+def write_estimates_csv(path: Path, estimates: LogEstimates) -> Path:
+    """One row per sample, the columns of ``estimate_columns`` (empty cells for a column
+    that is None: no localizer)."""
+    columns = estimate_columns(estimates)
+    N = len(estimates.time)
+    cells = []
+    for values in columns.values():
+        if values is None:
+            cells.append([""] * N)
+        elif values.dtype == object:
+            cells.append(list(values))
+        elif values.dtype.kind in "iub":
+            cells.append([int(x) for x in values])
+        else:
+            cells.append([repr(float(x)) for x in values])
     with open(path, "w", newline="") as stream:
         writer = csv.writer(stream)
-        writer.writerow(header)
-        for k, t in enumerate(estimates.time):
-            row = [repr(float(t)), int(estimates.contact_detected[k])]
-            row += [repr(float(x)) for x in estimates.test_statistics[k]]
-            row += [repr(float(x)) for x in estimates.force_world[k]]
-            row += [repr(float(x)) for x in estimates.external_wrench_world[k]]
-            if loc is None:
-                row += ["", ""] + [""] * 6
-            else:
-                row += [int(loc["status"][k]), names.get(int(loc["body_index"][k]), "")]
-                row += [repr(float(x)) for x in loc["point_world"][k]]
-                row += [repr(float(x)) for x in loc["force_world"][k]]
-            row += [repr(float(x)) for x in estimates.internal_residual[k]]
-            for block in base:
-                row += [repr(float(x)) for x in block[k]]
-            writer.writerow(row)
+        writer.writerow(list(columns))
+        writer.writerows(zip(*cells))
     return path
+
+
+def write_estimates_parquet(path: Path, estimates: LogEstimates) -> Path | None:
+    """The columns of ``estimates.csv`` (``estimate_columns``, same names, order and values)
+    as a Parquet table: float64, ``contact_detected`` and ``localization_status`` int64,
+    ``contact_link`` string; a column that is None (no localizer) all null. None (nothing
+    written) when pyarrow is not installed."""
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        return None
+    kinds = {"contact_detected": pa.int64(), "localization_status": pa.int64(), "contact_link": pa.string()}
+    N = len(estimates.time)
+    arrays, names = [], []
+    for name, values in estimate_columns(estimates).items():
+        kind = kinds.get(name, pa.float64())
+        arrays.append(
+            pa.nulls(N, kind) if values is None else pa.array(list(values) if kind == pa.string() else values, kind)
+        )
+        names.append(name)
+    pq.write_table(pa.table(arrays, names=names), path)
+    return path
+
+
+def timing_metrics(estimates: LogEstimates) -> dict:
+    """metrics.json's ``stamps``: ``case`` ("uniform", "stamp noise": the fitted uniform
+    stamps used, the data not interpolated, or "uneven": resampled), ``period_s`` (the
+    estimators' period), ``fitted_period_s`` (the line fitted to stamp vs row) and
+    ``jitter_rms_s`` (the stamps' RMS deviation from it), s."""
+    timing = estimates.timing
+    return {
+        "case": timing.case,
+        "period_s": timing.period,
+        "fitted_period_s": timing.fitted_period,
+        "jitter_rms_s": timing.jitter_rms,
+    }
+
+
+def describe_timing(estimates: LogEstimates) -> str:
+    """The printout's line on the stamps (``timing_metrics``)."""
+    timing = estimates.timing
+    fit = f"fitted period {timing.fitted_period:.6g} s, jitter {timing.jitter_rms:.3g} s RMS"
+    if timing.case == "stamp noise":
+        return f"evenly spaced rows with noisy stamps ({fit}): run on the fitted uniform stamps, data not interpolated"
+    if timing.case == "uneven":
+        return f"unevenly sampled ({fit}): resampled to its median period {timing.period:.6g} s"
+    return f"uniform ({fit})"
 
 
 def plot_contact_forces(path: Path, estimates: LogEstimates) -> Path:
@@ -196,14 +287,17 @@ def _run(args: argparse.Namespace) -> int:
     log = read_log(log_path, args.topics)
     robot = build_estimator_plant(args.robot)
     estimates = estimate_from_log(robot, log, settings)
+    check_finite(estimates)
     contacts = estimates.contacts()
     duration = estimates.period * len(estimates.time)
     print(
         f"{log_path}: {log.num_samples} samples over {duration:.3f} s at {1.0 / estimates.period:.0f} Hz, "
         f"{len(estimates.joint_names)} joints, F/T frames {sorted(log.wrenches)}"
-        + (" (resampled to a uniform period)" if estimates.resampled else "")
         + f"; base state: {estimates.base_state}"
     )
+    print(f"stamps: {describe_timing(estimates)}")
+    for estimate, reason in estimates.not_estimated.items():
+        print(f"not estimated: {estimate}: {reason}")
     print(
         f"estimation: {estimates.wall_time_s:.2f} s wall for {duration:.2f} s of log: real-time factor "
         f"{estimates.real_time_factor:.2f} (one thread)"
@@ -220,6 +314,7 @@ def _run(args: argparse.Namespace) -> int:
             f"{np.round(force, 2).tolist()} {where}".rstrip()
         )
     write_estimates_csv(folder / "estimates.csv", estimates)
+    write_estimates_parquet(folder / "estimates.parquet", estimates)
     plot_contact_forces(folder / "contact_forces.png", estimates)
     last_status = None if estimates.localization is None else int(estimates.localization["status"][-1])
     metrics = {
@@ -229,12 +324,14 @@ def _run(args: argparse.Namespace) -> int:
         "duration_s": duration,
         "period_s": estimates.period,
         "resampled": estimates.resampled,
+        "stamps": timing_metrics(estimates),
         "noise_model": estimates.noise_model,
         "base_state": estimates.base_state,
         "wall_time_s": estimates.wall_time_s,
         "real_time_factor": estimates.real_time_factor,
         "contacts": contacts,
-        "localization": "none (no foot F/T sensors)" if last_status is None else status_reason(last_status),
+        "localization": "none (see not_estimated)" if last_status is None else status_reason(last_status),
+        "not_estimated": [{"estimate": e, "reason": r} for e, r in estimates.not_estimated.items()],
         "settings": vars(settings),
     }
     write_metrics(folder, metrics)

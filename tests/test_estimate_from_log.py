@@ -5,6 +5,7 @@ same estimators reported in the simulation; the app end to end."""
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -218,6 +219,145 @@ def test_gaps_and_implausible_values_are_refused_naming_them(simulated, robot, t
     assert "--calibrate-first: must be finite and > 0" in capsys.readouterr().err
 
 
+def _corrupted(log, field, channel, value, row=200):
+    """A copy of ``log`` with ``field``'s ``channel`` (a column index, or (frame, index) for a
+    wrench) set to ``value`` at ``row``."""
+    bad = log.select(slice(None))
+    if field == "wrenches":
+        frame, c = channel
+        bad.wrenches = {name: w.copy() for name, w in log.wrenches.items()}
+        bad.wrenches[frame][row, c] = value
+    else:
+        values = getattr(log, field).copy()
+        values[row, channel] = value
+        setattr(bad, field, values)
+    return bad
+
+
+@pytest.mark.parametrize(
+    "field, channel, value, message",
+    [
+        (
+            "joint_torques",
+            5,
+            1e200,
+            r"joint_torques \(channel '{joint}'\) is 1e\+200 N m at t = 0\.2 s, beyond the "
+            r"physically plausible \+-\d",
+        ),
+        (
+            "joint_positions",
+            5,
+            1e5,
+            r"joint_positions \(channel '{joint}'\) is 100000 rad at t = 0\.2 s, beyond the "
+            r"physically plausible \[-\d",
+        ),
+        (
+            "wrenches",
+            ("L_FT_SENSOR_child", 5),
+            1e200,
+            r"wrenches\['L_FT_SENSOR_child'\] \(channel 'fz'\) is 1e\+200 N "
+            r"at t = 0\.2 s",
+        ),
+        (
+            "wrenches",
+            ("R_FT_SENSOR_child", 0),
+            -1e200,
+            r"wrenches\['R_FT_SENSOR_child'\] \(channel 'tx'\) is -1e\+200 N m",
+        ),
+        (
+            "base_velocity",
+            3,
+            300.0,
+            r"base_velocity \(channel 'vx'\) is 300 m/s at t = 0\.2 s, beyond the physically "
+            r"plausible \+-20 m/s",
+        ),
+    ],
+)
+def test_implausible_torques_positions_wrenches_and_base_velocity_are_refused(
+    simulated, robot, tmp_path, capsys, field, channel, value, message
+):
+    """One joint torque or wrench entry of 1e200 once gave half the estimate rows NaN with
+    exit code 0, a joint position of 1e5 rad was accepted: each is refused naming the
+    channel, the time and the bound, by ``log_inputs`` and by the app (exit code 2)."""
+    log, _ = simulated
+    short = log.select(slice(0, 300))
+    message = message.format(joint=short.joint_names[5])
+    bad = _corrupted(short, field, channel, value)
+    with pytest.raises(ValueError, match=message):
+        log_inputs(robot, bad)
+    path = write_log(bad, tmp_path / "bad.csv")
+    code = estimate_from_log_app.main(
+        ["--robot", "hrp4_like", "--log", str(path), "--out", str(tmp_path), "--no-replay"]
+    )
+    err = capsys.readouterr().err
+    assert code == 2 and re.search(message, err) and "Traceback" not in err, err
+    assert not (tmp_path / "estimate_from_log").exists()
+
+
+def test_plausibility_bounds_come_from_the_model_and_pass_a_normal_log(simulated, robot):
+    """The bounds are the model's limits widened (positions), times 10 (velocities,
+    torques), 10 m g (forces) and 10 m g L (moments, joints without effort limit); the
+    simulated push log (a normal log) is within them and passes, a value just beyond one
+    is refused."""
+    from diagrams.residuals.log_estimation import (
+        POSITION_LIMIT_MARGIN,
+        TORQUE_LIMIT_FACTOR,
+        WRENCH_WEIGHT_FACTOR,
+        plausibility_bounds,
+    )
+    from systems.common.topology import floating_base_topology
+
+    log, _ = simulated
+    joints = {j.name(): j for j in floating_base_topology(robot.plant).joints}
+    order = [joints[name] for name in log.joint_names]
+    bounds = plausibility_bounds(robot, order)
+    j = order[5]
+    assert bounds.position_upper[5] == j.position_upper_limits()[0] + POSITION_LIMIT_MARGIN
+    actuator = next(
+        robot.plant.get_joint_actuator(i)
+        for i in robot.plant.GetJointActuatorIndices()
+        if robot.plant.get_joint_actuator(i).joint().index() == j.index()
+    )
+    assert bounds.torque[5] == TORQUE_LIMIT_FACTOR * actuator.effort_limit()
+    mass = robot.plant.CalcTotalMass(robot.plant.CreateDefaultContext())
+    assert bounds.wrench[5] == pytest.approx(WRENCH_WEIGHT_FACTOR * 9.81 * mass)
+    assert 1.0 < bounds.size < 2.0  # hrp4_like is about 1.5 m tall
+    inputs = log_inputs(robot, log)  # the normal log passes
+    assert np.isfinite(inputs.state).all()
+    just_beyond = _corrupted(log.select(slice(0, 300)), "joint_torques", 5, 1.01 * bounds.torque[5])
+    with pytest.raises(ValueError, match="joint_torques"):
+        log_inputs(robot, just_beyond)
+
+
+def test_a_non_finite_estimate_fails_the_app_naming_column_and_time(simulated, robot, tmp_path, capsys, monkeypatch):
+    """The last guard: should an estimate come out NaN or inf anyway, the app fails (exit
+    code 2) naming the first non-finite column and its time, and writes nothing."""
+    log, _ = simulated
+    short = log.select(slice(0, 300))
+    path = write_log(short, tmp_path / "short.csv")
+    real = estimate_from_log_app.estimate_from_log
+
+    def poisoned(*args, **kwargs):
+        estimates = real(*args, **kwargs)
+        estimates.internal_residual[150:, 2] = np.nan
+        estimates.force_world[170, 0] = np.inf
+        return estimates
+
+    monkeypatch.setattr(estimate_from_log_app, "estimate_from_log", poisoned)
+    code = estimate_from_log_app.main(
+        ["--robot", "hrp4_like", "--log", str(path), "--out", str(tmp_path), "--no-replay"]
+    )
+    err = capsys.readouterr().err
+    column = f"residual_{robot.joint_names[2]}"
+    assert code == 2 and f"the estimate '{column}' is nan at t = 0.15 s" in err, err
+    assert not (tmp_path / "estimate_from_log").exists()
+    monkeypatch.undo()
+    assert (
+        estimate_from_log_app.main(["--robot", "hrp4_like", "--log", str(path), "--out", str(tmp_path), "--no-replay"])
+        == 0
+    )
+
+
 def test_a_log_at_99_hz_without_base_state_gets_the_ekf(simulated, robot):
     """A log at 99 Hz (10.104 ms, a period that does not divide the EKF's 0.1 s level-ground
     period) without base pose and velocity runs the invariant EKF at its own period (it was
@@ -253,14 +393,51 @@ def test_the_estimated_base_state_and_imu_biases_are_written_out(robot, tmp_path
     np.testing.assert_array_equal(rows[:, 13:], estimates.imu_bias)
 
 
-def test_jittered_log_is_resampled(simulated, robot):
+def test_noisy_stamps_of_evenly_spaced_rows_are_fitted_not_interpolated(simulated, robot, tmp_path, capsys):
+    """Rows every 1 ms whose stamps alternate +-0.2 ms: stamp noise. The estimators run on
+    the fitted uniform stamps (period 1 ms, jitter 0.2 ms RMS) with the logged data as they
+    are (no interpolation); the printout and metrics.json say so."""
     log, _ = simulated
     short = log.select(slice(0, 300))
     jittered = short.select(slice(None))
-    jittered.time = short.time + np.where(np.arange(300) % 3 == 1, 3e-4, 0.0)
+    jittered.time = short.time + 2e-4 * np.where(np.arange(300) % 2, 1.0, -1.0)
     inputs = log_inputs(robot, jittered)
-    assert inputs.resampled and inputs.period == pytest.approx(1e-3)
-    assert not log_inputs(robot, short).resampled
+    timing = inputs.timing
+    assert timing.case == "stamp noise" and not inputs.resampled
+    assert inputs.period == timing.fitted_period == pytest.approx(1e-3, rel=1e-4)
+    assert timing.jitter_rms == pytest.approx(2e-4, rel=1e-3)
+    np.testing.assert_allclose(inputs.time, short.time, rtol=0, atol=1e-5)  # 5 % of the jitter
+    np.testing.assert_array_equal(inputs.state, log_inputs(robot, short).state)  # the data untouched
+    assert log_inputs(robot, short).timing.case == "uniform"
+    path = write_log(jittered, tmp_path / "jittered.csv")
+    code = estimate_from_log_app.main(
+        ["--robot", "hrp4_like", "--log", str(path), "--out", str(tmp_path), "--no-replay"]
+    )
+    assert code == 0
+    assert "stamps: evenly spaced rows with noisy stamps (fitted period 0.001" in capsys.readouterr().out
+    stamps = json.loads((tmp_path / "estimate_from_log" / "metrics.json").read_text())["stamps"]
+    assert stamps["case"] == "stamp noise" and stamps["fitted_period_s"] == pytest.approx(1e-3, rel=1e-4)
+    assert stamps["jitter_rms_s"] == pytest.approx(2e-4, rel=1e-3)
+
+
+def test_unevenly_sampled_log_is_resampled(simulated, robot):
+    """160 rows 1 ms apart, then 140 rows 1.25 ms apart: genuinely uneven sampling (its
+    stamps stray far from any straight line), resampled to the median period 1 ms by
+    linear interpolation."""
+    log, _ = simulated
+    short = log.select(slice(0, 300))
+    uneven = short.select(slice(None))
+    uneven.time = np.concatenate(([0.0], np.cumsum(np.where(np.arange(299) < 159, 1e-3, 1.25e-3))))
+    inputs = log_inputs(robot, uneven)
+    timing = inputs.timing
+    assert timing.case == "uneven" and inputs.resampled and inputs.period == pytest.approx(1e-3)
+    assert timing.max_deviation > 0.25 * timing.fitted_period
+    count = int(np.floor(uneven.duration / 1e-3 + 1e-9)) + 1
+    np.testing.assert_allclose(inputs.time, 1e-3 * np.arange(count), rtol=0, atol=1e-12)
+    name = short.joint_names[7]
+    column = robot.plant.GetJointByName(name).position_start()
+    expected = np.interp(inputs.time, uneven.time, uneven.joint_positions[:, 7])
+    np.testing.assert_allclose(inputs.state[:, column], expected, rtol=0, atol=1e-12)
 
 
 def test_noise_calibrated_on_the_log_start(simulated, robot):
@@ -300,6 +477,91 @@ def test_robot_without_ft_feet_has_no_localization():
     assert estimates.contact_detected[-1]
 
 
+def _hrp4_like_without_collision_geometry(folder: Path) -> Path:
+    """hrp4_like's description on a copy of its SDF whose links have no collision geometry
+    but the soles' contact spheres (the feet below the F/T sensors, never localized)."""
+    models = Path(__file__).resolve().parents[1] / "models"
+    removed = 0
+
+    def strip(link: re.Match) -> str:
+        nonlocal removed
+        if link.group(2) in ("l_sole", "r_sole"):
+            return link.group(0)
+        body, count = re.subn(r"<collision .*?</collision>\s*", "", link.group(3), flags=re.DOTALL)
+        removed += count
+        return link.group(1) + body + link.group(4)
+
+    text = re.sub(
+        r'(<link name="([^"]+)">)(.*?)(</link>)', strip, (models / "hrp4_like.sdf").read_text(), flags=re.DOTALL
+    )
+    assert removed > 20
+    (folder / "hrp4_like.sdf").write_text(text)
+    description = folder / "no_collision.yaml"
+    description.write_text((models / "hrp4_like.yaml").read_text().replace("name: hrp4_like", "name: no_collision"))
+    return description
+
+
+def test_a_model_without_collision_geometry_runs_all_but_localization(simulated, robot, tmp_path, capsys):
+    """A model whose links have no collision geometry made the localizer refuse the whole
+    estimation ("no candidate link left"): the residuals, the force and the detector run
+    (as on the full model, the geometry aside), the localization is not made, and the
+    printout and metrics.json say so and why."""
+    from diagrams.residuals.log_estimation import LOCALIZATION, localization_unavailable
+
+    log, online = simulated
+    part = log.select(slice(0, 800))
+    bare = build_estimator_plant(str(_hrp4_like_without_collision_geometry(tmp_path)))
+    assert "no collision geometry" in localization_unavailable(bare) and localization_unavailable(robot) is None
+    estimates = estimate_from_log(bare, part)
+    assert estimates.localization is None
+    assert "no collision geometry" in estimates.not_estimated[LOCALIZATION]
+    full = estimate_from_log(robot, part)
+    assert full.not_estimated == {}
+    np.testing.assert_array_equal(estimates.internal_residual, full.internal_residual)
+    np.testing.assert_array_equal(estimates.contact_detected, full.contact_detected)
+    assert estimates.contact_detected[-1]  # the push from 0.5 s is detected
+    path = write_log(part, tmp_path / "part.csv")
+    args = ["--robot", str(tmp_path / "no_collision.yaml"), "--log", str(path), "--out", str(tmp_path), "--no-replay"]
+    assert estimate_from_log_app.main(args) == 0
+    assert f"not estimated: {LOCALIZATION}: the model's links have no collision geometry" in capsys.readouterr().out
+    metrics = json.loads((tmp_path / "estimate_from_log" / "metrics.json").read_text())
+    (entry,) = metrics["not_estimated"]
+    assert entry["estimate"] == LOCALIZATION and "no collision geometry" in entry["reason"]
+    (contact,) = metrics["contacts"]
+    assert contact["link"] is None and np.linalg.norm(contact["mean_force_world_N"]) > 10.0
+    assert_estimate_files_agree(tmp_path / "estimate_from_log")  # the localization's columns empty, null
+
+
+def pq_column(folder: Path, name: str) -> list:
+    import pyarrow.parquet as pq
+
+    return pq.read_table(folder / "estimates.parquet").column(name).to_pylist()
+
+
+def assert_estimate_files_agree(folder: Path) -> None:
+    """estimates.parquet holds estimates.csv's columns, in its order, with its values (bit
+    for bit: the CSV writes repr), empty CSV cells as nulls."""
+    import csv
+
+    import pyarrow.parquet as pq
+
+    with open(folder / "estimates.csv", newline="") as stream:
+        header, *rows = list(csv.reader(stream))
+    table = pq.read_table(folder / "estimates.parquet")
+    assert table.column_names == header and table.num_rows == len(rows) > 0
+    for i, name in enumerate(header):
+        cells = [row[i] for row in rows]
+        values = table.column(name).to_pylist()
+        if all(v is None for v in values):
+            assert cells == [""] * len(rows), name
+        elif name == "contact_link":
+            assert values == cells
+        elif name in ("contact_detected", "localization_status"):
+            assert values == [int(c) for c in cells], name
+        else:
+            np.testing.assert_array_equal(np.array(values), np.array([float(c) for c in cells]), err_msg=name)
+
+
 def test_app_end_to_end(simulated, tmp_path: Path):
     from apps.estimate_from_log import main
 
@@ -315,6 +577,9 @@ def test_app_end_to_end(simulated, tmp_path: Path):
     assert contact["link"] == online.push.body_name
     header = (folder / "estimates.csv").read_text().splitlines()[0].split(",")
     assert header[:2] == ["time", "contact_detected"] and "residual_R_KNEE_P" in header
+    assert_estimate_files_agree(folder)
+    assert "R_SHOULDER_Y_LINK" in pq_column(folder, "contact_link")  # not vacuous: a localized link
+    assert metrics["stamps"]["case"] == "uniform" and metrics["not_estimated"] == []
     scene = read_static_html((folder / "replay.html").read_text())
     assert any(path.startswith("/drake/estimated_force") for path in scene.objects), sorted(scene.objects)[:5]
     assert any("R_SHOULDER_Y_LINK" in path for path in scene.tracks)  # the robot moves in the recording

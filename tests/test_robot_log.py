@@ -209,6 +209,88 @@ def test_topics_of_other_rates_are_aligned_to_the_joint_states(tmp_path: Path):
     np.testing.assert_allclose(log.imu_linear_acceleration[:, 2], 9.81 + log.time, atol=1e-9)
 
 
+def _streams(imu_stamps, wrench_stamps, joint_stamps):
+    """The streams ``_streams_to_log`` merges: one joint "a" (q = t), an IMU (gyro x = t) and
+    one F/T wrench (fz = t), each at its own stamps."""
+    from systems.io.robot_log import _Stream
+
+    streams = {"joint_states": _Stream("/joint_states"), "imu": _Stream("/imu/data")}
+    streams[("wrench", None, "/ft/left")] = _Stream("/ft/left")
+    streams["joint_states"].names = ("a",)
+    streams[("wrench", None, "/ft/left")].names = ("l_ft",)
+    for key, stamps, row in (
+        ("joint_states", joint_stamps, lambda t: [t, 1.0, 0.0]),
+        ("imu", imu_stamps, lambda t: [t, 0.0, 0.0, 0.0, 0.0, 9.81]),
+        (("wrench", None, "/ft/left"), wrench_stamps, lambda t: [0.0, 0.0, 0.0, 0.0, 0.0, t]),
+    ):
+        streams[key].stamps = list(stamps)
+        streams[key].rows = [np.array(row(t)) for t in stamps]
+    return streams
+
+
+def test_a_gap_inside_a_topic_is_refused_naming_it():
+    """A gap longer than 5 median periods in the IMU or a wrench topic, inside the joint
+    states' span, was silently interpolated across: it is refused naming the topic and the
+    time; gaps of up to 5 periods are interpolated, and a topic's gap outside the joint
+    states' span (its samples dropped) is not an error."""
+    from systems.io.robot_log import MAX_TOPIC_GAP_PERIODS, _streams_to_log
+
+    roles = load_topics(None)
+    joints = 1.0 + 0.001 * np.arange(200)
+    imu = 1.0 + 0.0025 * np.arange(81)
+    wrench = 1.0 + 0.001 * np.arange(200)
+    log = _streams_to_log(_streams(imu, wrench, joints), roles, Path("x.mcap"))
+    np.testing.assert_allclose(log.imu_angular_velocity[:, 0], log.time, atol=1e-12)
+    # IMU messages missing from 1.1 s to 1.12 s: 0.0225 s = 9 periods of 2.5 ms.
+    holed = imu[(imu <= 1.1 + 1e-9) | (imu >= 1.1225 - 1e-9)]
+    with pytest.raises(
+        ValueError,
+        match=r"topic /imu/data has a gap of 0\.0225 s after t = 1\.1 s \(1 gap\(s\) longer than 5 "
+        r"times its median period of 0\.0025 s\) inside the joint states' time span",
+    ):
+        _streams_to_log(_streams(holed, wrench, joints), roles, Path("x.mcap"))
+    # A wrench topic: 7 ms without a message after 1.05 s.
+    holed = wrench[(wrench <= 1.05 + 1e-9) | (wrench >= 1.057 - 1e-9)]
+    with pytest.raises(ValueError, match=r"topic /ft/left has a gap of 0\.007 s after t = 1\.05 s"):
+        _streams_to_log(_streams(imu, holed, joints), roles, Path("x.mcap"))
+    # Exactly 5 periods: interpolated (linear data: exactly).
+    short = wrench[(wrench <= 1.05 + 1e-9) | (wrench >= 1.055 - 1e-9)]
+    assert MAX_TOPIC_GAP_PERIODS == 5.0
+    log = _streams_to_log(_streams(imu, short, joints), roles, Path("x.mcap"))
+    np.testing.assert_allclose(log.wrenches["l_ft"][:, 5], log.time, atol=1e-9)
+    # A gap in the IMU before the joint states start is outside their span: not an error.
+    early = np.concatenate(([0.5], imu))
+    log = _streams_to_log(_streams(early, wrench, joints), roles, Path("x.mcap"))
+    assert log.num_samples == 200
+
+
+def test_a_gap_inside_a_topic_of_a_bag_is_refused(tmp_path: Path):
+    """The same through a file: an MCAP whose IMU topic lacks 20 ms of messages."""
+    log = make_log(samples=120)
+    path = write_log(log, tmp_path / "log.mcap")
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    holed = tmp_path / "holed.mcap"
+    with open(path, "rb") as source, open(holed, "wb") as target:
+        reader = make_reader(source)
+        summary = reader.get_summary()
+        writer = Writer(target)
+        writer.start(profile="ros2", library="test")
+        schemas = {i: writer.register_schema(s.name, s.encoding, s.data) for i, s in summary.schemas.items()}
+        channels = {
+            i: writer.register_channel(c.topic, c.message_encoding, schemas[c.schema_id])
+            for i, c in summary.channels.items()
+        }
+        for _, channel, message in reader.iter_messages():
+            if channel.topic == "/imu/data" and 12_540_000_000 < message.log_time < 12_560_000_000:
+                continue
+            writer.add_message(channels[channel.id], message.log_time, message.data, message.publish_time)
+        writer.finish()
+    with pytest.raises(ValueError, match=r"topic /imu/data has a gap of 0\.02 s after t = 12\.54 s"):
+        read_log(holed)
+
+
 def test_resample_uniform():
     log = make_log(samples=50)
     jittered = log.select(slice(None))
@@ -219,6 +301,31 @@ def test_resample_uniform():
     np.testing.assert_allclose(np.linalg.norm(uniform.base_pose[:, :4], axis=1), 1.0)
     with pytest.raises(ValueError, match="period must be a positive number"):
         resample_uniform(log, 0.0)
+
+
+def test_stamp_timing_tells_stamp_noise_from_uneven_sampling():
+    """Known answers: uniform stamps; rows evenly spaced every 1 ms with stamps +-0.1 ms off
+    (stamp noise: fitted period 1 ms, jitter 0.1 ms RMS); one row missing (uneven: the
+    stamps after it are a whole period off the line); a rate drifting by 0.1 % along 1000
+    rows with the same stamp noise (uneven: the deviations are not zero-mean block by
+    block) though each stamp stays within a quarter period of the line."""
+    from systems.io.robot_log import stamp_timing
+
+    rows = np.arange(400)
+    uniform = stamp_timing(3.0 + 1e-3 * rows)
+    assert uniform.case == "uniform" and uniform.period == pytest.approx(1e-3) and uniform.jitter_rms < 1e-12
+    noisy = stamp_timing(3.0 + 1e-3 * rows + 1e-4 * np.where(rows % 2, 1.0, -1.0))
+    assert noisy.case == "stamp noise"
+    assert noisy.period == noisy.fitted_period == pytest.approx(1e-3, rel=1e-5)
+    assert noisy.jitter_rms == pytest.approx(1e-4, rel=1e-3)
+    np.testing.assert_allclose(noisy.fitted_stamps(400), 3.0 + 1e-3 * rows, rtol=0, atol=2e-6)
+    dropped = stamp_timing(3.0 + 1e-3 * np.delete(np.arange(401), 200))
+    assert dropped.case == "uneven" and dropped.period == pytest.approx(1e-3)
+    rows = np.arange(1000)
+    drifting = 3.0 + np.concatenate(([0.0], np.cumsum(1e-3 * (1.0 + 1e-3 * np.linspace(-0.5, 0.5, 999)))))
+    timing = stamp_timing(drifting + 1e-4 * np.where(rows % 2, 1.0, -1.0))
+    assert timing.max_deviation < 0.25 * timing.fitted_period and timing.case == "uneven"
+    assert stamp_timing(3.0 + 1e-3 * rows + 1e-4 * np.where(rows % 2, 1.0, -1.0)).case == "stamp noise"
 
 
 # -- errors -------------------------------------------------------------------------------

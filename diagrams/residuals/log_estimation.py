@@ -32,12 +32,13 @@ from __future__ import annotations
 import math
 import time as _time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, Rgba
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
+from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, ZeroOrderHold
@@ -54,7 +55,7 @@ from systems.estimation.base_state_estimator import (
     InvariantEkfBaseStateEstimator,
     contact_flags_from_wrenches,
 )
-from systems.io.robot_log import RobotLog, resample_uniform
+from systems.io.robot_log import RobotLog, StampTiming, resample_uniform, stamp_timing
 from systems.residuals.contact_estimation import STATUS_REASONS, ContactDetector, ContactLocalizer
 from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual, ResidualModel
 from systems.residuals.offline import ReplayedEstimation, replay_contact_estimation, residual_noise_model
@@ -70,6 +71,8 @@ __all__ = [
     "estimate_from_log",
     "log_from_signals",
     "log_inputs",
+    "plausibility_bounds",
+    "robot_size",
     "simulate_push_log",
 ]
 
@@ -95,8 +98,10 @@ class LogEstimationSettings:
             which must then be free of contact (``residual_noise_model``), as for a real
             robot whose noise exceeds the white-noise prediction.
         uniform_tolerance: the largest relative deviation of a time step from the median
-            one that is used as is; a log whose steps deviate more is resampled to the
-            median period first (``resample_uniform``).
+            one that is used as is; a log whose steps deviate more is either evenly spaced
+            rows with noisy stamps, run on the stamps of the line fitted to stamp vs row
+            (its data not interpolated), or unevenly sampled, resampled to the median period
+            first (``systems.io.robot_log.stamp_timing``, ``resample_uniform``).
         estimate_imu_bias: for a log without base state, the invariant EKF estimates the
             IMU biases (with the level-ground correction), as on a real robot (the
             station's realistic world); False: the bias-free filter (an ideal IMU).
@@ -131,10 +136,31 @@ def make_detector(
     )
 
 
-def make_localizer(robot: EstimatorPlant, settings: LogEstimationSettings, period: float) -> ContactLocalizer | None:
-    """The ContactLocalizer of ``settings``, the soles excluded; None without foot F/T
-    sensors (the ground reaction is then an unknown force: no single contact to isolate)."""
+#: The estimate ``LogEstimates.not_estimated`` names when the localizer cannot run.
+LOCALIZATION = "contact localization (link, point, localized force)"
+
+
+def localization_unavailable(robot: EstimatorPlant) -> str | None:
+    """Why the localizer cannot run on ``robot``, or None when it can: no foot F/T sensors
+    (the ground reaction is then an unknown force: no single contact to isolate), or no
+    collision geometry on any link above them (no surface to localize a contact on)."""
     if not robot.ft_frames:
+        return "no foot F/T sensors: the ground reaction is an unknown force, no single contact to isolate"
+    plant = robot.plant
+    excluded = set(robot.excluded_bodies)
+    bodies = [plant.get_body(BodyIndex(i)) for i in range(1, plant.num_bodies())]
+    if not any(plant.GetCollisionGeometriesForBody(b) for b in bodies if b.name() not in excluded):
+        return (
+            "the model's links have no collision geometry (the feet below the F/T sensors aside): no surface to "
+            "localize a contact on"
+        )
+    return None
+
+
+def make_localizer(robot: EstimatorPlant, settings: LogEstimationSettings, period: float) -> ContactLocalizer | None:
+    """The ContactLocalizer of ``settings``, the soles excluded; None when it cannot run
+    (``localization_unavailable``: no foot F/T sensors, no collision geometry)."""
+    if localization_unavailable(robot) is not None:
         return None
     return ContactLocalizer(
         robot.plant,
@@ -157,7 +183,9 @@ class LogInputs:
     the motor torques (v[6:] order, N m) and the F/T wrenches ([moment about the sensor
     origin; force] per frame of ``EstimatorPlant.ft_frames``, world, N m and N); with the
     base estimated by the invariant EKF with bias states, its IMU bias estimate per sample
-    (``imu_bias``, (N, 6) [gyro, rad/s; accelerometer, m/s^2], else None)."""
+    (``imu_bias``, (N, 6) [gyro, rad/s; accelerometer, m/s^2], else None). ``timing``: how
+    the log's stamps were spaced (``StampTiming``: uniform, stamp noise, whose fitted
+    stamps are ``time``, or uneven, ``resampled`` to ``period``)."""
 
     time: np.ndarray
     period: float
@@ -165,6 +193,7 @@ class LogInputs:
     joint_torque: np.ndarray
     known_wrenches: np.ndarray
     resampled: bool
+    timing: StampTiming | None = None
     base_estimated: bool = False
     imu_bias: np.ndarray | None = None
 
@@ -191,6 +220,103 @@ MAX_JOINT_SPEED = 100.0
 #: the MEMS IMUs humanoids carry (rad/s, m/s^2).
 MAX_GYRO_RATE = math.radians(2000.0)
 MAX_ACCELERATION = 16.0 * 9.81
+#: A joint position outside the model's limits widened by this margin (rad, or m for a
+#: prismatic joint), or beyond +-``MAX_UNLIMITED_JOINT_POSITION`` (two turns) for a joint
+#: without limits, is not physical: an encoder overflow or a unit mistake.
+POSITION_LIMIT_MARGIN = 0.5
+MAX_UNLIMITED_JOINT_POSITION = 4.0 * math.pi
+#: A joint torque beyond this multiple of the joint's effort limit is not physical; for a
+#: joint without one the bound is ``TORQUE_LIMIT_FACTOR`` times the robot's weight times
+#: its size (m g L, N m: the torque of holding the whole robot at arm's length, with L the
+#: extent of its links' origins standing, ``robot_size``).
+TORQUE_LIMIT_FACTOR = 10.0
+#: An F/T force component beyond this multiple of the robot's weight m g (N), or a moment
+#: component beyond it times m g L (N m), is not physical (a landing from a jump loads a
+#: foot with a few times the weight).
+WRENCH_WEIGHT_FACTOR = 10.0
+#: A logged base speed beyond this (m/s; the fastest humans run 12 m/s) is not physical;
+#: the base's angular velocity is bounded as the gyro (``MAX_GYRO_RATE``).
+MAX_BASE_SPEED = 20.0
+STANDARD_GRAVITY = 9.81
+
+
+def robot_size(robot: EstimatorPlant) -> float:
+    """L, m: the diagonal of the box around the robot's link origins at its standing state
+    (about its height for a humanoid); at least 0.1 m."""
+    plant = robot.plant
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, robot.standing_state[: plant.num_positions()])
+    points = np.array(
+        [
+            plant.EvalBodyPoseInWorld(context, plant.get_body(BodyIndex(i))).translation()
+            for i in range(1, plant.num_bodies())
+        ]
+    )
+    return max(0.1, float(np.linalg.norm(points.max(axis=0) - points.min(axis=0))))
+
+
+@dataclass
+class PlausibilityBounds:
+    """The bounds beyond which a logged value is refused (``_check_plausible``), per
+    channel of the log's joint columns (its order) or per axis. SI units.
+
+    Attributes:
+        position_lower, position_upper: (n,) rad or m (``POSITION_LIMIT_MARGIN``,
+            ``MAX_UNLIMITED_JOINT_POSITION``).
+        velocity: (n,) rad/s or m/s (``VELOCITY_LIMIT_FACTOR``, ``MAX_JOINT_SPEED``).
+        torque: (n,) N m or N (``TORQUE_LIMIT_FACTOR``).
+        wrench: (6,) [moment, N m; force, N] per component (``WRENCH_WEIGHT_FACTOR``).
+        base_velocity: (6,) [angular, rad/s; linear, m/s] per component.
+        gyro: rad/s. acceleration: m/s^2. weight: m g, N. size: L, m (``robot_size``).
+    """
+
+    position_lower: np.ndarray
+    position_upper: np.ndarray
+    velocity: np.ndarray
+    torque: np.ndarray
+    wrench: np.ndarray
+    base_velocity: np.ndarray
+    gyro: float
+    acceleration: float
+    weight: float
+    size: float
+
+
+def plausibility_bounds(robot: EstimatorPlant, column_order: Sequence) -> PlausibilityBounds:
+    """The ``PlausibilityBounds`` of ``robot`` for the log's joints ``column_order``
+    (the plant's 1-DoF joints, in the log's column order), from the model's position,
+    velocity and effort limits, its mass and its size (see the constants above)."""
+    plant = robot.plant
+    lower = np.array([j.position_lower_limits()[0] for j in column_order])
+    upper = np.array([j.position_upper_limits()[0] for j in column_order])
+    limited = np.isfinite(lower) & np.isfinite(upper)
+    position_lower = np.where(limited, lower - POSITION_LIMIT_MARGIN, -MAX_UNLIMITED_JOINT_POSITION)
+    position_upper = np.where(limited, upper + POSITION_LIMIT_MARGIN, MAX_UNLIMITED_JOINT_POSITION)
+    speed = np.array([j.velocity_upper_limits()[0] for j in column_order])
+    given = np.isfinite(speed) & (speed > 0.0)
+    velocity = np.where(given, VELOCITY_LIMIT_FACTOR * np.where(given, speed, 1.0), MAX_JOINT_SPEED)
+    weight = float(plant.CalcTotalMass(plant.CreateDefaultContext())) * STANDARD_GRAVITY
+    size = robot_size(robot)
+    effort = {}
+    for index in plant.GetJointActuatorIndices():
+        actuator = plant.get_joint_actuator(index)
+        effort[actuator.joint().index()] = actuator.effort_limit()
+    limit = np.array([effort.get(j.index(), math.inf) for j in column_order])
+    given = np.isfinite(limit) & (limit > 0.0)
+    torque = TORQUE_LIMIT_FACTOR * np.where(given, limit, weight * size)
+    force = WRENCH_WEIGHT_FACTOR * weight
+    return PlausibilityBounds(
+        position_lower=position_lower,
+        position_upper=position_upper,
+        velocity=velocity,
+        torque=torque,
+        wrench=np.array([force * size] * 3 + [force] * 3),
+        base_velocity=np.array([MAX_GYRO_RATE] * 3 + [MAX_BASE_SPEED] * 3),
+        gyro=MAX_GYRO_RATE,
+        acceleration=MAX_ACCELERATION,
+        weight=weight,
+        size=size,
+    )
 
 
 def _check_no_gap(time: np.ndarray, period: float) -> None:
@@ -208,26 +334,71 @@ def _check_no_gap(time: np.ndarray, period: float) -> None:
 
 
 def _check_plausible(robot: EstimatorPlant, log: RobotLog, column_order: list) -> None:
-    """Raises ValueError naming the channel and the first time of a value beyond physical
-    plausibility: a joint velocity beyond ``VELOCITY_LIMIT_FACTOR`` times the joint's limit
-    (``MAX_JOINT_SPEED`` without one), an IMU rate or acceleration beyond its range."""
-    plant = robot.plant
-    upper = plant.GetVelocityUpperLimits()[[j.velocity_start() for j in column_order]]
-    given = np.isfinite(upper) & (upper > 0.0)
-    limits = np.where(given, VELOCITY_LIMIT_FACTOR * np.where(given, upper, 1.0), MAX_JOINT_SPEED)
-    checks = [("joint_velocities", log.joint_velocities, limits, log.joint_names, "rad/s")]
+    """Raises ValueError naming the channel, the first time and the bound of a value beyond
+    physical plausibility (``plausibility_bounds``): a joint position outside the model's
+    limits widened by ``POSITION_LIMIT_MARGIN`` (+-``MAX_UNLIMITED_JOINT_POSITION``
+    without limits), a joint velocity beyond ``VELOCITY_LIMIT_FACTOR`` times the joint's
+    limit (``MAX_JOINT_SPEED`` without one), a joint torque beyond ``TORQUE_LIMIT_FACTOR``
+    times its effort limit (times m g L without one), an F/T force or moment beyond
+    ``WRENCH_WEIGHT_FACTOR`` times the weight (times L for moments), a logged base velocity
+    beyond ``MAX_GYRO_RATE`` / ``MAX_BASE_SPEED``, an IMU rate or acceleration beyond its
+    range."""
+    bounds = plausibility_bounds(robot, column_order)
+    joints = log.joint_names
+    prismatic = [j.type_name() == "prismatic" for j in column_order]
+    position_units = ["m" if p else "rad" for p in prismatic]
+    checks = [
+        ("joint_positions", log.joint_positions, bounds.position_lower, bounds.position_upper, joints, position_units),
+        (
+            "joint_velocities",
+            log.joint_velocities,
+            -bounds.velocity,
+            bounds.velocity,
+            joints,
+            [u + "/s" for u in position_units],
+        ),
+        (
+            "joint_torques",
+            log.joint_torques,
+            -bounds.torque,
+            bounds.torque,
+            joints,
+            ["N" if p else "N m" for p in prismatic],
+        ),
+    ]
+    wrench_units = ["N m"] * 3 + ["N"] * 3
+    for frame, wrench in log.wrenches.items():
+        checks.append(
+            (
+                f"wrenches[{frame!r}]",
+                wrench,
+                -bounds.wrench,
+                bounds.wrench,
+                ("tx", "ty", "tz", "fx", "fy", "fz"),
+                wrench_units,
+            )
+        )
+    if log.base_velocity is not None:
+        axes, units = ("wx", "wy", "wz", "vx", "vy", "vz"), ["rad/s"] * 3 + ["m/s"] * 3
+        checks.append(("base_velocity", log.base_velocity, -bounds.base_velocity, bounds.base_velocity, axes, units))
     if log.imu_angular_velocity is not None:
-        checks.append(("imu_angular_velocity", log.imu_angular_velocity, MAX_GYRO_RATE, "xyz", "rad/s"))
+        checks.append(
+            ("imu_angular_velocity", log.imu_angular_velocity, -bounds.gyro, bounds.gyro, "xyz", ["rad/s"] * 3)
+        )
     if log.imu_linear_acceleration is not None:
-        checks.append(("imu_linear_acceleration", log.imu_linear_acceleration, MAX_ACCELERATION, "xyz", "m/s^2"))
-    for name, values, bound, channels, unit in checks:
-        beyond = np.abs(values) > bound
+        accel = bounds.acceleration
+        checks.append(("imu_linear_acceleration", log.imu_linear_acceleration, -accel, accel, "xyz", ["m/s^2"] * 3))
+    for name, values, low, high, channels, units in checks:
+        beyond = (values < low) | (values > high)
         if beyond.any():
             k, c = (int(i) for i in np.argwhere(beyond)[0])
-            limit = float(np.broadcast_to(bound, values.shape[1:])[c])
+            lo = float(np.broadcast_to(low, values.shape[1:])[c])
+            hi = float(np.broadcast_to(high, values.shape[1:])[c])
+            unit = units[c]
+            plausible = f"+-{hi:.6g} {unit}" if lo == -hi else f"[{lo:.6g}, {hi:.6g}] {unit}"
             raise ValueError(
                 f"the log's {name} (channel {channels[c]!r}) is {values[k, c]:.6g} {unit} at t = {log.time[k]:.6g} s, "
-                f"beyond the physically plausible {limit:.6g} {unit}"
+                f"beyond the physically plausible {plausible}"
             )
 
 
@@ -241,14 +412,17 @@ def log_inputs(
     one, the invariant EKF's estimate: module docstring; ``initial_base_pose`` (7, Drake's
     free-joint q) its start, default standing on level ground with the log's first joint
     positions), and its F/T wrenches rotated from their sensor frames to the world with the
-    logged configuration. Resampled to its median period when its steps are not uniform
-    (``settings``).
+    logged configuration. With steps that are not uniform (``settings``): on the fitted
+    uniform stamps when only the stamps are noisy, else resampled to its median period
+    (``stamp_timing``).
 
     Raises:
         ValueError: a joint of the log not on the robot, a robot joint missing from the
             log, no base pose or velocity, an F/T frame that is not the robot's, a robot
             F/T frame missing from the log; a gap in its time (``MAX_GAP_PERIODS``); a joint
-            velocity or IMU reading beyond physical plausibility (the channel and time named).
+            position, velocity or torque, an F/T wrench, a logged base velocity or an IMU
+            reading beyond physical plausibility (``plausibility_bounds``; the channel,
+            time and bound named).
     """
     settings = settings or LogEstimationSettings()
     plant = robot.plant
@@ -280,9 +454,13 @@ def log_inputs(
     period = float(np.median(steps))
     _check_no_gap(log.time, period)
     _check_plausible(robot, log, column_order=[joints[name] for name in log.joint_names])
-    resampled = bool(np.max(np.abs(steps - period)) > settings.uniform_tolerance * period)
+    timing = stamp_timing(log.time, settings.uniform_tolerance)
+    resampled = timing.case == "uneven"
     if resampled:
         log = resample_uniform(log, period)
+    elif timing.case == "stamp noise":
+        period = timing.period
+        log = replace(log, time=timing.fitted_stamps(log.num_samples))
     N, nq, nv = log.num_samples, plant.num_positions(), plant.num_velocities()
     state = np.zeros((N, nq + nv))
     q0, v0 = topology.free_joint.position_start(), topology.free_joint.velocity_start()
@@ -310,6 +488,7 @@ def log_inputs(
         joint_torque=log.joint_torques[:, order],
         known_wrenches=wrenches,
         resampled=resampled,
+        timing=timing,
         base_estimated=base_estimated,
         imu_bias=imu_bias,
     )
@@ -417,11 +596,13 @@ class LogEstimates:
         force_world: (N, 3) the single contact's force, eq. (19), N (the external
             residual's force).
         contact_detected: (N,) bool. test_statistics: (N, 2) [s_ext, s_int].
-        localization: the localizer's outputs, or None (a robot without F/T feet):
+        localization: the localizer's outputs, or None (``not_estimated`` says why):
             ``status`` (N,) int (``STATUS_REASONS``), ``body_index`` (N,), ``point_world``
             (N, 3) m, ``force_world`` (N, 3) N, the averaged estimate (eq. 19).
         body_names: {body index: name} of the plant.
         period: s. resampled: whether the log was resampled to a uniform period.
+        timing: how the log's stamps were spaced (``StampTiming``: its case, the fitted
+            period and the stamps' RMS deviation from the fitted line, s).
         noise_model: the detector's (predicted, or calibrated on the log's start).
         base_state: "logged", or the invariant EKF's estimate (a log without base state).
         base_pose: (N, 7) the base pose the estimators used, Drake's free-joint q [w, x, y,
@@ -429,6 +610,8 @@ class LogEstimates:
             frame [angular, rad/s; linear, m/s].
         imu_bias: (N, 6) the EKF's IMU bias estimate [gyro, rad/s; accelerometer, m/s^2]
             when it estimated the base with bias states, else None.
+        not_estimated: {estimate: why it was not made}: ``LOCALIZATION`` when the
+            localizer cannot run (``localization_unavailable``), else empty.
         wall_time_s: the replay's wall time; real_time_factor = log duration / it.
     """
 
@@ -444,11 +627,13 @@ class LogEstimates:
     period: float
     resampled: bool
     wall_time_s: float
+    timing: StampTiming | None = None
     noise_model: str = "predicted"
     base_state: str = "logged"
     base_pose: np.ndarray | None = None
     base_velocity: np.ndarray | None = None
     imu_bias: np.ndarray | None = None
+    not_estimated: dict = field(default_factory=dict)
 
     @property
     def real_time_factor(self) -> float:
@@ -502,7 +687,8 @@ def estimate_from_log(
     initial_base_pose: np.ndarray | None = None,
 ) -> LogEstimates:
     """Runs the residuals, the force estimate (eq. 19), the detector and (with foot F/T
-    sensors) the localizer on ``log`` (see the module docstring).
+    sensors and collision geometry on the links above them) the localizer on ``log`` (see
+    the module docstring); what cannot run is listed in ``LogEstimates.not_estimated``.
 
     Raises:
         ValueError: see ``log_inputs``; a noise calibration window with fewer than 100
@@ -558,6 +744,7 @@ def _estimates(
     plant = robot.plant
     free_joint = floating_base_topology(plant).free_joint
     q0, v0, nq = free_joint.position_start(), free_joint.velocity_start(), plant.num_positions()
+    unavailable = localization_unavailable(robot)
     localization = None
     if replay.localization is not None:
         localization = dict(replay.localization)
@@ -579,12 +766,14 @@ def _estimates(
         | {-1: ""},
         period=inputs.period,
         resampled=inputs.resampled,
+        timing=inputs.timing,
         wall_time_s=wall,
         noise_model="predicted" if settings.noise_calibration_time is None else "calibrated on the log's start",
         base_state="invariant EKF (IMU, joints, F/T contact)" if inputs.base_estimated else "logged",
         base_pose=inputs.state[:, q0 : q0 + 7].copy(),
         base_velocity=inputs.state[:, nq + v0 : nq + v0 + 6].copy(),
         imu_bias=inputs.imu_bias,
+        not_estimated={} if unavailable is None else {LOCALIZATION: unavailable},
     )
 
 
@@ -654,7 +843,8 @@ def simulate_push_log(
     holds on their inputs), so the log replays them exactly.
 
     Raises:
-        ValueError: a zero force or a bad body (see ``Push``); a robot without F/T feet.
+        ValueError: a zero force or a bad body (see ``Push``); a robot without F/T feet or
+            without collision geometry (``localization_unavailable``).
     """
     settings = settings or LogEstimationSettings()
     force = np.asarray(push_force, dtype=float)
@@ -668,6 +858,9 @@ def simulate_push_log(
     station = add_humanoid_station(builder, robot, noise=noise, seed=seed, base_state=base_state)
     if not station.known_wrench_frames:
         raise ValueError(f"simulate_push_log: {robot!r} has no foot F/T sensors")
+    unavailable = localization_unavailable(station.estimator)
+    if unavailable is not None:
+        raise ValueError(f"simulate_push_log: {robot!r} cannot be localized on: {unavailable}")
     plant = station.plant
     period = plant.time_step()
     posture = builder.AddSystem(ConstantVectorSource(station.q_hold))
@@ -862,4 +1055,11 @@ def status_reason(status: int) -> str:
     return STATUS_REASONS.get(int(status), f"unknown status {status}")
 
 
-__all__ += ["DEMO_PUSH_BODY", "demo_push", "record_replay", "status_reason"]
+__all__ += [
+    "DEMO_PUSH_BODY",
+    "LOCALIZATION",
+    "demo_push",
+    "localization_unavailable",
+    "record_replay",
+    "status_reason",
+]

@@ -48,7 +48,9 @@ mapping or a YAML file with the keys of ``DEFAULT_TOPICS``; missing keys keep th
 Stamps are the messages' header stamps. Topics of other rates (or phases) are linearly
 interpolated to the joint-state stamps (quaternions: normalised linear interpolation along
 the shorter arc); joint-state samples outside another topic's time span are dropped, not
-extrapolated. FSR forces have no standard ROS message and are read from tables only.
+extrapolated, and a gap inside it (a step longer than ``MAX_TOPIC_GAP_PERIODS`` = 5 of
+that topic's median periods) is refused naming the topic and the time, not interpolated
+across. FSR forces have no standard ROS message and are read from tables only.
 
 Reading needs ``pyarrow`` (tables), ``rosbags`` (bags; its typestores also serialise the
 messages written to MCAP) and ``mcap`` + ``mcap-ros2-support`` (MCAP).
@@ -67,11 +69,14 @@ __all__ = [
     "DEFAULT_TOPICS",
     "LogFormatError",
     "LOG_FORMATS",
+    "MAX_TOPIC_GAP_PERIODS",
     "RobotLog",
+    "StampTiming",
     "load_topics",
     "log_format",
     "read_log",
     "resample_uniform",
+    "stamp_timing",
     "write_log",
 ]
 
@@ -96,6 +101,11 @@ _BASE_VELOCITY_COLUMNS = ("base_wx", "base_wy", "base_wz", "base_vx", "base_vy",
 _WRENCH_AXES = ("tx", "ty", "tz", "fx", "fy", "fz")
 _IMU_GYRO_COLUMNS = ("imu_wx", "imu_wy", "imu_wz")
 _IMU_ACCEL_COLUMNS = ("imu_ax", "imu_ay", "imu_az")
+#: A step between two messages of a topic other than the joint states longer than this
+#: many of that topic's median periods, inside the joint states' time span, is a gap:
+#: refused, never interpolated across (as the joint states' own gaps,
+#: ``diagrams.residuals.log_estimation.MAX_GAP_PERIODS``).
+MAX_TOPIC_GAP_PERIODS = 5.0
 
 
 class LogFormatError(ValueError):
@@ -233,10 +243,85 @@ def _check_channels(name: str, array: np.ndarray, channels: Sequence[str], time:
         )
 
 
+#: Stamp noise (rows evenly spaced, stamps noisy) when the deviations of the stamps from
+#: the straight line fitted to stamp vs row index are small: each within this fraction of
+#: the fitted period ...
+STAMP_NOISE_MAX_DEVIATION = 0.25
+#: ... zero-mean along the log: on each block of ``STAMP_BLOCK_ROWS`` consecutive rows
+#: their mean within this many standard errors (RMS / sqrt(rows)) of zero (a drifting rate
+#: bends the stamps away from the line over many rows) ...
+STAMP_MEAN_STANDARD_ERRORS = 5.0
+#: ... and the period fitted on each block within this relative deviation of the whole
+#: log's (a steady period).
+STAMP_PERIOD_STEADINESS = 0.01
+STAMP_BLOCK_ROWS = 100
+
+
+@dataclass(frozen=True)
+class StampTiming:
+    """How a log's stamps are spaced (``stamp_timing``).
+
+    Attributes:
+        case: "uniform" (every step within the tolerance of the median step: used as is),
+            "stamp noise" (evenly spaced rows with noisy stamps: the fitted uniform stamps
+            are used, the data are not interpolated) or "uneven" (genuinely uneven
+            sampling: resampled to the median step, ``resample_uniform``).
+        period: s, the period the estimators run at: the median step ("uniform",
+            "uneven") or the fitted one ("stamp noise").
+        fitted_period: s, the slope of the least-squares line of stamp vs row index.
+        jitter_rms: s, the RMS of the stamps' deviations from that line.
+        max_deviation: s, the largest such deviation.
+    """
+
+    case: str
+    period: float
+    fitted_period: float
+    jitter_rms: float
+    max_deviation: float
+    offset: float = 0.0
+
+    def fitted_stamps(self, count: int) -> np.ndarray:
+        """The fitted line's stamps of rows 0 .. count - 1, s."""
+        return self.offset + self.fitted_period * np.arange(count)
+
+
+def stamp_timing(time: np.ndarray, uniform_tolerance: float = 0.01) -> StampTiming:
+    """Classifies the stamps ``time`` (s, strictly increasing): "uniform" when every step
+    is within ``uniform_tolerance`` (relative) of the median step; else "stamp noise" when
+    the rows are evenly spaced and only their stamps noisy (every stamp within
+    ``STAMP_NOISE_MAX_DEVIATION`` periods of the straight line fitted to stamp vs row
+    index; on blocks of ``STAMP_BLOCK_ROWS`` rows, the deviations' mean within
+    ``STAMP_MEAN_STANDARD_ERRORS`` standard errors of zero and the fitted period within
+    ``STAMP_PERIOD_STEADINESS`` of the whole log's); else "uneven"."""
+    time = np.asarray(time, dtype=float)
+    steps = np.diff(time)
+    median = float(np.median(steps))
+    rows = np.arange(time.size, dtype=float)
+    centred = rows - rows.mean()
+    fitted = float(centred @ (time - time.mean()) / (centred @ centred))
+    offset = float(time.mean() - fitted * rows.mean())
+    residuals = time - (offset + fitted * rows)
+    rms, largest = float(np.sqrt(np.mean(residuals**2))), float(np.max(np.abs(residuals)))
+    common = {"fitted_period": fitted, "jitter_rms": rms, "max_deviation": largest, "offset": offset}
+    if np.max(np.abs(steps - median)) <= uniform_tolerance * median:
+        return StampTiming("uniform", median, **common)
+    steady = largest <= STAMP_NOISE_MAX_DEVIATION * fitted
+    mean_bound = STAMP_MEAN_STANDARD_ERRORS * rms / math.sqrt(STAMP_BLOCK_ROWS)
+    for start in range(0, time.size - STAMP_BLOCK_ROWS + 1, STAMP_BLOCK_ROWS):
+        block = slice(start, start + STAMP_BLOCK_ROWS)
+        slope = np.polyfit(rows[block], time[block], 1)[0]
+        steady = steady and abs(slope - fitted) <= STAMP_PERIOD_STEADINESS * fitted
+        steady = steady and abs(float(np.mean(residuals[block]))) <= mean_bound
+    if steady:
+        return StampTiming("stamp noise", fitted, **common)
+    return StampTiming("uneven", median, **common)
+
+
 def resample_uniform(log: RobotLog, period: float) -> RobotLog:
     """``log`` linearly interpolated to the times t_0 + k ``period`` within its span (the
-    base quaternion by normalised linear interpolation). For a log whose stamps jitter: the
-    residuals are discrete-time observers of a fixed period (eqs. 11, 16)."""
+    base quaternion by normalised linear interpolation). For an unevenly sampled log
+    (``stamp_timing``): the residuals are discrete-time observers of a fixed period
+    (eqs. 11, 16)."""
     period = float(period)
     if not (math.isfinite(period) and period > 0.0):
         raise ValueError(f"resample_uniform: period must be a positive number of seconds, got {period}")
@@ -332,7 +417,8 @@ def read_log(path: str | Path, topics: Mapping | str | Path | None = None) -> Ro
 
     Raises:
         ValueError: a missing or unreadable file, an unknown extension, a missing column or
-            topic, NaN in a sensor, non-increasing time (each message names the problem).
+            topic, NaN in a sensor, non-increasing time, a gap inside a ROS topic other than the
+            joint states (``MAX_TOPIC_GAP_PERIODS``; each message names the problem).
     """
     path = Path(path)
     kind = log_format(path)
@@ -706,6 +792,24 @@ def _read_mcap(path: Path, roles: dict) -> dict:
     return streams
 
 
+def _check_topic_gaps(topic: str, stamps: np.ndarray, t: np.ndarray, path: Path) -> None:
+    """Raises LogFormatError naming ``topic`` and the time of its first step between two
+    messages (``stamps``, s) longer than ``MAX_TOPIC_GAP_PERIODS`` of its median periods
+    across which a joint-state stamp of ``t`` would be interpolated."""
+    steps = np.diff(stamps)
+    period = float(np.median(steps))
+    inside = np.searchsorted(t, stamps[1:], side="left") - np.searchsorted(t, stamps[:-1], side="right")
+    gaps = np.flatnonzero((steps > MAX_TOPIC_GAP_PERIODS * period) & (inside > 0))
+    if gaps.size:
+        k = int(gaps[0])
+        raise LogFormatError(
+            f"log '{path}': topic {topic} has a gap of {steps[k]:.6g} s after t = {stamps[k]:.6g} s "
+            f"({gaps.size} gap(s) longer than {MAX_TOPIC_GAP_PERIODS:g} times its median period of {period:.6g} s) "
+            "inside the joint states' time span: its values cannot be interpolated across it; split the log into "
+            "its segments"
+        )
+
+
 def _streams_to_log(streams: dict, roles: dict, path: Path) -> RobotLog:
     joints = streams["joint_states"]
     if not joints.stamps:
@@ -726,6 +830,8 @@ def _streams_to_log(streams: dict, roles: dict, path: Path) -> RobotLog:
     if keep.sum() < 2:
         raise LogFormatError(f"log '{path}': the topics' time spans do not overlap")
     t, rows = t[keep], rows[keep]
+    for key, (stamps, _) in others.items():
+        _check_topic_gaps(streams[key].topic, stamps, t, path)
 
     def aligned(key, columns=slice(None)):
         stamps, values = others[key]

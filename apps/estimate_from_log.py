@@ -6,7 +6,8 @@ The log's layout (columns, ROS topics and message types, frames and units) is in
 ``systems/io/robot_log.py``; ROS topic names can be mapped with ``--topics FILE.yaml``
 (keys ``joint_states``, ``odometry``, ``imu``, ``wrenches: {FRAME: TOPIC}``). A log without
 the base's pose and velocity gets them from the contact-aided invariant EKF replayed on its
-IMU, joint positions and foot F/T forces (``diagrams.residuals.log_estimation``).
+IMU, joint positions and each foot's F/T wrench, normal force or FSRs
+(``diagrams.residuals.log_estimation``).
 
 Run: ``python -m apps.estimate_from_log --robot hrp4_like --log LOG [--topics FILE.yaml]
 [--out DIR] [--headless] [--no-replay] [--calibrate-first S] [--localization-period S]``, or try it end to end on a
@@ -16,10 +17,13 @@ Writes to ``DIR/estimate_from_log/``: ``estimates.csv`` (per sample: detection, 
 statistics, force, external wrench, localized link and point, internal residual, the base
 state used, logged or estimated, and the estimated IMU biases) and ``estimates.parquet``
 (the same columns; with pyarrow, a dependency),
-``contact_forces.png``, ``metrics.json`` (the contacts found, the real-time factor, how the
-stamps were spaced: uniform, stamp noise or uneven, with the fitted period and jitter, and
-``not_estimated``: the estimates not made and why, e.g. no localization on a model without
-collision geometry) and
+``contact_forces.png`` (not written when neither residual ran), ``metrics.json`` (the
+contacts found, None without a detector, the real-time factor, how the stamps were spaced:
+uniform, stamp noise or uneven, with the fitted period and jitter, and ``not_estimated``:
+the estimates not made and why, e.g. no localization on a model without collision
+geometry, no internal residual, detection or localization on a log without joint torques,
+no residual at all on a log whose feet log only their normal forces; their columns are
+then empty) and
 ``replay.html`` (a self-contained Meshcat replay of the robot with the estimated contact
 force), and prints the contacts and the real-time factor of the estimation.
 """
@@ -107,19 +111,22 @@ def estimate_columns(estimates: LogEstimates) -> dict[str, np.ndarray | None]:
     ``contact_detected`` (0/1), ``statistic_external``, ``statistic_internal``, ``force_*``
     (eq. 19, N), ``external_wrench_*`` (world, N m and N), ``localization_status``,
     ``contact_link`` (str), ``contact_point_*`` (m), ``localized_force_*`` (N) (these four
-    None without a localizer), ``residual_<joint>`` (N m), the base state the estimators
+    None without a localizer), ``residual_<joint>`` (N m); each of them None (empty) when
+    its estimate was not made (``LogEstimates.not_estimated``), the base state the estimators
     used (``base_qw`` .. ``base_vz``: logged, or the invariant EKF's; m, rad/s, m/s) and,
     when the EKF estimated IMU biases, ``gyro_bias_*`` (rad/s) and ``accel_bias_*``
     (m/s^2)."""
+    detected, statistics = estimates.contact_detected, estimates.test_statistics
+    force, wrench, residual = estimates.force_world, estimates.external_wrench_world, estimates.internal_residual
     columns: dict[str, np.ndarray | None] = {
         "time": np.asarray(estimates.time, dtype=float),
-        "contact_detected": np.asarray(estimates.contact_detected, dtype=np.int64),
-        "statistic_external": estimates.test_statistics[:, 0],
-        "statistic_internal": estimates.test_statistics[:, 1],
+        "contact_detected": None if detected is None else np.asarray(detected, dtype=np.int64),
+        "statistic_external": None if statistics is None else statistics[:, 0],
+        "statistic_internal": None if statistics is None else statistics[:, 1],
     }
-    columns |= {f"force_{a}": estimates.force_world[:, i] for i, a in enumerate("xyz")}
+    columns |= {f"force_{a}": None if force is None else force[:, i] for i, a in enumerate("xyz")}
     axes = ("mx", "my", "mz", "fx", "fy", "fz")
-    columns |= {f"external_wrench_{a}": estimates.external_wrench_world[:, i] for i, a in enumerate(axes)}
+    columns |= {f"external_wrench_{a}": None if wrench is None else wrench[:, i] for i, a in enumerate(axes)}
     loc = estimates.localization
     columns["localization_status"] = None if loc is None else np.asarray(loc["status"], dtype=np.int64)
     columns["contact_link"] = (
@@ -129,7 +136,8 @@ def estimate_columns(estimates: LogEstimates) -> dict[str, np.ndarray | None]:
     )
     columns |= {f"contact_point_{a}": None if loc is None else loc["point_world"][:, i] for i, a in enumerate("xyz")}
     columns |= {f"localized_force_{a}": None if loc is None else loc["force_world"][:, i] for i, a in enumerate("xyz")}
-    columns |= {f"residual_{j}": estimates.internal_residual[:, i] for i, j in enumerate(estimates.joint_names)}
+    for i, joint in enumerate(estimates.joint_names):
+        columns[f"residual_{joint}"] = None if residual is None else residual[:, i]
     if estimates.base_pose is not None:
         names = ("qw", "qx", "qy", "qz", "x", "y", "z", "wx", "wy", "wz", "vx", "vy", "vz")
         base = np.hstack((estimates.base_pose, estimates.base_velocity))
@@ -229,11 +237,14 @@ def describe_timing(estimates: LogEstimates) -> str:
     return f"uniform ({fit})"
 
 
-def plot_contact_forces(path: Path, estimates: LogEstimates) -> Path:
+def plot_contact_forces(path: Path, estimates: LogEstimates) -> Path | None:
     """The estimated contact force (eq. 19) per axis and its norm, the detected contact
-    shaded; below, the detector's test statistics."""
+    shaded; below, the detector's test statistics (empty without a detector). None
+    (nothing written) when the force was not estimated (``LogEstimates.not_estimated``)."""
     import matplotlib.pyplot as plt
 
+    if estimates.force_world is None:
+        return None
     t, f = estimates.time, estimates.force_world
     fig, axes = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True)
     ax = axes[0]
@@ -241,19 +252,22 @@ def plot_contact_forces(path: Path, estimates: LogEstimates) -> Path:
         ax.plot(t, f[:, i], color=color, lw=0.8, label=f"f_{axis}")
     ax.plot(t, np.linalg.norm(f, axis=1), color="k", lw=1.0, label="|f|")
     top = max(1.0, float(np.linalg.norm(f, axis=1).max()))
-    ax.fill_between(t, -top, top, where=estimates.contact_detected, color="tab:orange", alpha=0.12, step="mid")
+    if estimates.contact_detected is not None:
+        ax.fill_between(t, -top, top, where=estimates.contact_detected, color="tab:orange", alpha=0.12, step="mid")
     ax.set_ylabel("estimated force, eq. (19) [N]")
     ax.set_title("contact force estimated from the log (shaded: contact detected)")
     ax.legend(fontsize=8, ncol=4)
     ax.grid(True, alpha=0.3)
     ax = axes[1]
-    ax.semilogy(t, np.maximum(estimates.test_statistics[:, 0], 1e-3), lw=0.8, label="s_ext (3 dof)")
-    ax.semilogy(
-        t, np.maximum(estimates.test_statistics[:, 1], 1e-3), lw=0.8, label=f"s_int ({len(estimates.joint_names)} dof)"
-    )
+    if estimates.test_statistics is not None:
+        statistics = estimates.test_statistics
+        ax.semilogy(t, np.maximum(statistics[:, 0], 1e-3), lw=0.8, label="s_ext (3 dof)")
+        ax.semilogy(t, np.maximum(statistics[:, 1], 1e-3), lw=0.8, label=f"s_int ({len(estimates.joint_names)} dof)")
+        ax.legend(fontsize=8)
+    else:
+        ax.set_title("no contact detection (see not_estimated)")
     ax.set_ylabel("test statistic")
     ax.set_xlabel("time [s]")
-    ax.legend(fontsize=8)
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -293,6 +307,8 @@ def _run(args: argparse.Namespace) -> int:
     print(
         f"{log_path}: {log.num_samples} samples over {duration:.3f} s at {1.0 / estimates.period:.0f} Hz, "
         f"{len(estimates.joint_names)} joints, F/T frames {sorted(log.wrenches)}"
+        + (f", normal-force frames {sorted(log.normal_forces)}" if log.normal_forces else "")
+        + ("" if log.joint_torques is not None else ", no joint torques")
         + f"; base state: {estimates.base_state}"
     )
     print(f"stamps: {describe_timing(estimates)}")
@@ -302,7 +318,7 @@ def _run(args: argparse.Namespace) -> int:
         f"estimation: {estimates.wall_time_s:.2f} s wall for {duration:.2f} s of log: real-time factor "
         f"{estimates.real_time_factor:.2f} (one thread)"
     )
-    if not contacts:
+    if not contacts and estimates.contact_detected is not None:
         print("no contact detected")
     for i, contact in enumerate(contacts):
         force = np.asarray(contact["mean_force_world_N"])
@@ -329,7 +345,7 @@ def _run(args: argparse.Namespace) -> int:
         "base_state": estimates.base_state,
         "wall_time_s": estimates.wall_time_s,
         "real_time_factor": estimates.real_time_factor,
-        "contacts": contacts,
+        "contacts": None if estimates.contact_detected is None else contacts,
         "localization": "none (see not_estimated)" if last_status is None else status_reason(last_status),
         "not_estimated": [{"estimate": e, "reason": r} for e, r in estimates.not_estimated.items()],
         "settings": vars(settings),

@@ -22,17 +22,21 @@ from models import add_humanoid, set_standing_state
 from systems.dynamics.base_state import quaternion_to_rotation
 from systems.estimation.base_state_estimator import (
     ACCEL_NOISE_DENSITY,
+    CONTACT_OFF_WEIGHT_FRACTION,
+    CONTACT_ON_WEIGHT_FRACTION,
     GYRO_NOISE_DENSITY,
     INITIAL_GYRO_BIAS_STD,
     KINEMATICS_NOISE_STD,
     LEVEL_GROUND_TILT_STD,
     ContactAidedInvariantEkf,
+    ContactHysteresis,
     FootContactFromForceTorque,
     FootContactFromFsr,
     InvariantEkfBaseStateEstimator,
     base_to_imu,
     contact_flags_from_fsr,
     contact_flags_from_wrenches,
+    contact_flags_with_hysteresis,
     imu_to_base,
     rotation_to_quaternion,
     so3_exp,
@@ -231,6 +235,33 @@ def test_one_call_step_equals_correction_then_propagation_bit_for_bit(bias):
 def test_contact_flags_from_wrenches():
     w = np.array([0, 0, 0, 0, 0, 150.0, 1, 2, 3, 5, 5, 10.0])
     np.testing.assert_array_equal(contact_flags_from_wrenches(w, 20.0), [1.0, 0.0])
+
+
+def test_contact_hysteresis_switches_on_above_the_upper_and_off_below_the_lower_threshold():
+    """A known force profile through the hysteresis of a 400 N robot (on above 40 N, off
+    below 20 N): a foot's force rising through 30 N stays off until it passes 40 N, falling
+    back through 30 N stays on until it drops below 20 N; a second foot hovering between the
+    two thresholds from the start never comes on; the flags without hysteresis (a single
+    threshold of 30 N) toggle at every crossing instead."""
+    hysteresis = ContactHysteresis.from_weight(2, 400.0)
+    assert (hysteresis.on_threshold, hysteresis.off_threshold) == (
+        CONTACT_ON_WEIGHT_FRACTION * 400.0,
+        CONTACT_OFF_WEIGHT_FRACTION * 400.0,
+    )
+    assert CONTACT_OFF_WEIGHT_FRACTION < CONTACT_ON_WEIGHT_FRACTION
+    left = np.array([0.0, 30.0, 39.0, 41.0, 30.0, 25.0, 31.0, 20.0, 19.0, 30.0, 39.9, 40.1])
+    right = np.array([30.0, 35.0, 25.0, 39.0, 21.0, 30.0, 35.0, 25.0, 38.0, 22.0, 30.0, 30.0])
+    forces = np.stack((left, right), axis=1)
+    flags = contact_flags_with_hysteresis(forces, 40.0, 20.0)
+    np.testing.assert_array_equal(flags[:, 0], [0, 0, 0, 1, 1, 1, 1, 1, 0, 0, 0, 1])
+    np.testing.assert_array_equal(flags[:, 1], np.zeros(12))
+    np.testing.assert_array_equal([hysteresis.update(f) for f in forces], flags)
+    single = (left > 30.0).astype(float)
+    assert np.count_nonzero(np.diff(single)) > np.count_nonzero(np.diff(flags[:, 0]))
+    with pytest.raises(ValueError, match="off_threshold 50.0 N is above on_threshold 40.0 N"):
+        ContactHysteresis(2, 40.0, 50.0)
+    with pytest.raises(ValueError, match="3 normal forces for 2 feet"):
+        hysteresis.update([1.0, 2.0, 3.0])
 
 
 # ---------------------------------------------------------------------------------------
@@ -790,6 +821,7 @@ def _print_metrics(title: str, metrics: dict) -> None:
         print(f"  {key}: {value}")
 
 
+@pytest.mark.slow
 def test_hrp4_realistic_imu_standing_60_s_with_and_without_bias_states():
     """60 s standing on the hrp4_like station with the realistic IMU (its biases start at 0
     and random-walk: after 60 s ~1.5e-4 rad/s and ~0.023 m/s², 1σ). The issue's floors (base

@@ -706,3 +706,164 @@ def test_a_replay_continued_from_where_it_left_off_equals_the_whole(simulated, r
     np.testing.assert_array_equal(rest.end.detector[:4], whole.end.detector[:4])
     for a, b in zip(rest.end.localizer, whole.end.localizer):
         np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9)
+
+
+# ---------------------------------------------------------------------------------------
+# Logs without joint torques, or whose feet log only their normal forces (issue 32).
+# ---------------------------------------------------------------------------------------
+
+
+def _first_second_without_base(simulated) -> RobotLog:
+    log, _ = simulated
+    return replace(log.select(slice(0, 1000)), base_pose=None, base_velocity=None)
+
+
+def test_a_log_without_torques_estimates_the_base_state_and_the_external_residual(simulated, robot, tmp_path, capsys):
+    """The log of the push without its tau_ columns and without base state: the invariant
+    EKF's base state and IMU biases are those of the same log with torques (bit for bit:
+    the filter never reads torques), and close to the simulator's base (the log's own before
+    it was removed: the truth plus the stand-in estimator's white noise; measured 4.0 mm,
+    0.11 deg, 8 mm/s); the external residual (eq. 16, no torques in it) is the one of the log
+    with torques; the internal residual, the detection and the localization are not
+    estimated, and the app says so (printout, metrics.json, empty columns)."""
+    from diagrams.residuals.log_estimation import DETECTION, EXTERNAL_RESIDUAL, INTERNAL_RESIDUAL, LOCALIZATION
+
+    log, _ = simulated
+    part = _first_second_without_base(simulated)
+    with_torques = estimate_from_log(robot, part)
+    assert with_torques.not_estimated == {} and with_torques.base_state.startswith("invariant EKF")
+    no_torques = replace(part, joint_torques=None)
+    estimates = estimate_from_log(robot, no_torques)
+    np.testing.assert_array_equal(estimates.base_pose, with_torques.base_pose)
+    np.testing.assert_array_equal(estimates.base_velocity, with_torques.base_velocity)
+    np.testing.assert_array_equal(estimates.imu_bias, with_torques.imu_bias)
+    np.testing.assert_allclose(estimates.external_wrench_world, with_torques.external_wrench_world, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(estimates.force_world, estimates.external_wrench_world[:, 3:])
+    assert np.linalg.norm(estimates.force_world[-1]) > 10.0  # the push from 0.5 s, not vacuous
+    truth_pose, truth_velocity = log.base_pose[:1000], log.base_velocity[:1000]
+    assert np.abs(estimates.base_pose[:, 4:] - truth_pose[:, 4:]).max() < 0.01
+    cos_half = np.abs(np.einsum("ij,ij->i", estimates.base_pose[:, :4], truth_pose[:, :4]))
+    assert np.degrees(2.0 * np.arccos(np.minimum(cos_half, 1.0))).max() < 0.25
+    assert np.abs(estimates.base_velocity[:, 3:] - truth_velocity[:, 3:]).max() < 0.02
+    assert estimates.internal_residual is None and estimates.contact_detected is None
+    assert estimates.test_statistics is None and estimates.localization is None and estimates.contacts() == []
+    assert list(estimates.not_estimated) == [INTERNAL_RESIDUAL, DETECTION, LOCALIZATION]
+    assert "no joint torques" in estimates.not_estimated[INTERNAL_RESIDUAL]
+    assert EXTERNAL_RESIDUAL not in estimates.not_estimated
+    # The app on the CSV without tau_ columns.
+    path = write_log(no_torques, tmp_path / "no_torques.csv")
+    assert not [c for c in path.read_text().splitlines()[0].split(",") if "tau_" in c]
+    assert read_log(path).joint_torques is None
+    assert estimate_from_log_app.main(["--log", str(path), "--out", str(tmp_path), "--headless"]) == 0
+    out = capsys.readouterr().out
+    assert f"not estimated: {INTERNAL_RESIDUAL}: the log has no joint torques" in out
+    assert f"not estimated: {DETECTION}" in out and "no contact detected" not in out
+    folder = tmp_path / "estimate_from_log"
+    metrics = json.loads((folder / "metrics.json").read_text())
+    assert [e["estimate"] for e in metrics["not_estimated"]] == [INTERNAL_RESIDUAL, DETECTION, LOCALIZATION]
+    assert metrics["contacts"] is None and metrics["base_state"].startswith("invariant EKF")
+    for name in ("contact_forces.png", "replay.html"):
+        assert (folder / name).stat().st_size > 0, name
+    assert_estimate_files_agree(folder)
+    header = (folder / "estimates.csv").read_text().splitlines()[0].split(",")
+    base = np.loadtxt(folder / "estimates.csv", delimiter=",", skiprows=1, usecols=[header.index("base_z")])
+    np.testing.assert_allclose(base, estimates.base_pose[:, 6], rtol=0, atol=1e-12)
+    force = np.loadtxt(folder / "estimates.csv", delimiter=",", skiprows=1, usecols=[header.index("force_x")])
+    np.testing.assert_allclose(force, estimates.force_world[:, 0], rtol=0, atol=1e-12)
+    assert all(v is None for v in pq_column(folder, "residual_R_KNEE_P"))
+    assert all(v is None for v in pq_column(folder, "contact_detected"))
+
+
+def test_a_log_with_only_the_feet_normal_forces_estimates_the_base_state(simulated, robot, tmp_path, capsys):
+    """The feet log only their normal forces (wrench_<frame>_fz alone), no torques, no base
+    state: the EKF's contact flags come from the normal forces, the same as from the full
+    wrenches on this standing log, so the base state is that of the full log, bit for bit;
+    neither residual runs (both subtract the feet's full wrenches), nor the detection and
+    localization, each named with its reason; with torques, the internal residual is still
+    not estimated, for want of the wrenches. The app writes the base state and no force plot."""
+    from diagrams.residuals.log_estimation import DETECTION, EXTERNAL_RESIDUAL, INTERNAL_RESIDUAL, LOCALIZATION
+
+    part = _first_second_without_base(simulated)
+    reference = estimate_from_log(robot, replace(part, joint_torques=None))
+    normal = replace(
+        part, joint_torques=None, wrenches={}, normal_forces={frame: w[:, 5] for frame, w in part.wrenches.items()}
+    )
+    estimates = estimate_from_log(robot, normal)
+    assert "left normal force, right normal force" in estimates.base_state
+    np.testing.assert_array_equal(estimates.base_pose, reference.base_pose)
+    np.testing.assert_array_equal(estimates.base_velocity, reference.base_velocity)
+    assert estimates.external_wrench_world is None and estimates.force_world is None
+    assert list(estimates.not_estimated) == [INTERNAL_RESIDUAL, EXTERNAL_RESIDUAL, DETECTION, LOCALIZATION]
+    assert "no 6-axis F/T wrench" in estimates.not_estimated[EXTERNAL_RESIDUAL]
+    with_torques = estimate_from_log(robot, replace(normal, joint_torques=part.joint_torques))
+    assert "no 6-axis F/T wrench" in with_torques.not_estimated[INTERNAL_RESIDUAL]
+    np.testing.assert_array_equal(with_torques.base_pose, reference.base_pose)
+    path = write_log(normal, tmp_path / "normal.parquet")
+    back = read_log(path)
+    assert back.wrenches == {} and sorted(back.normal_forces) == sorted(part.wrenches)
+    assert estimate_from_log_app.main(["--log", str(path), "--out", str(tmp_path), "--no-replay"]) == 0
+    out = capsys.readouterr().out
+    assert f"not estimated: {EXTERNAL_RESIDUAL}: the feet" in out and "normal-force frames" in out
+    folder = tmp_path / "estimate_from_log"
+    assert not (folder / "contact_forces.png").exists()
+    metrics = json.loads((folder / "metrics.json").read_text())
+    assert len(metrics["not_estimated"]) == 4
+    assert_estimate_files_agree(folder)
+    header = (folder / "estimates.csv").read_text().splitlines()[0].split(",")
+    base = np.loadtxt(folder / "estimates.csv", delimiter=",", skiprows=1, usecols=[header.index("base_x")])
+    np.testing.assert_allclose(base, estimates.base_pose[:, 4], rtol=0, atol=1e-12)
+    wrong = replace(normal, normal_forces={"l_foot": part.wrenches["L_FT_SENSOR_child"][:, 5]})
+    with pytest.raises(ValueError, match=r"normal forces \['l_foot'\] are not at F/T or sole frames"):
+        log_inputs(robot, wrong)
+    one_foot = replace(normal, normal_forces={"L_FT_SENSOR_child": part.wrenches["L_FT_SENSOR_child"][:, 5]})
+    with pytest.raises(ValueError, match=r"no base pose and velocity .* \(no force for the feet \['right'\]\)"):
+        log_inputs(robot, one_foot)
+
+
+def test_a_nao_log_with_fsr_feet_and_no_torques_estimates_the_base_state(tmp_path, capsys):
+    """nao_like standing still (no F/T sensors): joint positions, an IMU reading gravity and
+    each foot's four FSRs (fsr_<side>_<corner> columns) carrying half the weight, no torques,
+    no base state. The EKF runs on the FSR sums' contact flags and keeps the base where it
+    started, standing on level ground (within 1 mm and 0.05 deg over 0.5 s); the internal
+    residual, the detection and the localization are not estimated."""
+    from diagrams.residuals.log_estimation import INTERNAL_RESIDUAL, LOCALIZATION, standing_base_pose
+    from systems.common.topology import floating_base_topology
+    from systems.observer.fsr_sensing import FSR_NAMES
+
+    nao = build_estimator_plant("nao_like")
+    plant, samples = nao.plant, 500
+    joints = floating_base_topology(plant).joints
+    nq = plant.num_positions()
+    q = nao.standing_state[:nq]
+    start = standing_base_pose(nao, q)
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, np.concatenate((start, q[7:])))
+    R_WI = nao.humanoid.imu_frame.CalcPoseInWorld(context).rotation().matrix()
+    weight = plant.CalcTotalMass(context) * 9.81
+    positions = np.tile([q[j.position_start()] for j in joints], (samples, 1))
+    log = RobotLog(
+        time=1e-3 * np.arange(samples),
+        joint_names=tuple(j.name() for j in joints),
+        joint_positions=positions,
+        joint_velocities=np.zeros_like(positions),
+        fsr_names=FSR_NAMES,
+        fsr_forces=np.full((samples, len(FSR_NAMES)), weight / len(FSR_NAMES)),
+        imu_angular_velocity=np.zeros((samples, 3)),
+        imu_linear_acceleration=np.tile(R_WI.T @ [0.0, 0.0, 9.81], (samples, 1)),
+    )
+    estimates = estimate_from_log(nao, log)
+    assert "left FSR sum, right FSR sum" in estimates.base_state
+    assert np.abs(estimates.base_pose[:, 4:] - start[4:]).max() < 1e-3
+    cos_half = np.abs(estimates.base_pose[:, :4] @ start[:4])
+    assert np.degrees(2.0 * np.arccos(np.minimum(cos_half, 1.0))).max() < 0.05
+    assert INTERNAL_RESIDUAL in estimates.not_estimated and LOCALIZATION in estimates.not_estimated
+    assert estimates.external_wrench_world is not None  # no F/T frame: the ground's reaction is all external
+    path = write_log(log, tmp_path / "nao.csv")
+    args = ["--robot", "nao_like", "--log", str(path), "--out", str(tmp_path), "--no-replay"]
+    assert estimate_from_log_app.main(args) == 0
+    assert "foot contact from: left FSR sum, right FSR sum" in capsys.readouterr().out
+    unloaded = replace(log, fsr_forces=np.zeros_like(log.fsr_forces), fsr_names=FSR_NAMES)
+    assert estimate_from_log(nao, unloaded).base_pose.shape == (samples, 7)  # runs, on the IMU alone
+    left_only = replace(log, fsr_names=FSR_NAMES[:4], fsr_forces=log.fsr_forces[:, :4])
+    with pytest.raises(ValueError, match=r"no force for the feet \['right'\]"):
+        log_inputs(nao, left_only)

@@ -4,6 +4,7 @@ errors that name the problem."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -48,8 +49,10 @@ def assert_logs_equal(a: RobotLog, b: RobotLog, atol: float = 0.0) -> None:
     assert a.joint_names == b.joint_names
     assert sorted(a.wrenches) == sorted(b.wrenches)
     np.testing.assert_allclose(a.time, b.time, rtol=0, atol=max(atol, 1e-9))
+    assert (a.joint_torques is None) == (b.joint_torques is None)
     for name in ("joint_positions", "joint_velocities", "joint_torques", "base_pose", "base_velocity"):
-        np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=0, atol=atol, err_msg=name)
+        if getattr(a, name) is not None:
+            np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=0, atol=atol, err_msg=name)
     for name in ("imu_angular_velocity", "imu_linear_acceleration"):
         np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=0, atol=atol, err_msg=name)
     for frame in a.wrenches:
@@ -417,22 +420,98 @@ def test_constructor_checks():
         )
 
 
-def test_missing_joint_state_fields_in_a_bag(tmp_path: Path):
+def _write_joint_states_bag(path: Path, efforts: list, velocity: bool = True) -> None:
+    """A ROS 1 bag of JointState messages of one joint "a", one per entry of ``efforts``
+    (each an effort array: [] for none), 1 ms apart."""
     from rosbags.rosbag1 import Writer
     from rosbags.typesys import Stores, get_typestore
 
     store = get_typestore(Stores.ROS1_NOETIC)
     T = store.types
-    path = tmp_path / "no_effort.bag"
     with Writer(path) as writer:
         connection = writer.add_connection("/joint_states", "sensor_msgs/msg/JointState", typestore=store)
-        for k in range(3):
+        for k, effort in enumerate(efforts):
             header = T["std_msgs/msg/Header"](
                 seq=k, stamp=T["builtin_interfaces/msg/Time"](sec=0, nanosec=1000000 * k), frame_id=""
             )
             msg = T["sensor_msgs/msg/JointState"](
-                header=header, name=["a"], position=np.array([0.0]), velocity=np.array([0.0]), effort=np.array([])
+                header=header,
+                name=["a"],
+                position=np.array([0.1 * k]),
+                velocity=np.array([0.2 * k] if velocity else []),
+                effort=np.array(effort, dtype=float),
             )
             writer.write(connection, k * 1000000, store.serialize_ros1(msg, msg.__msgtype__))
-    with pytest.raises(ValueError, match="has 0 effort values for 1 joints"):
-        read_log(path)
+
+
+def test_joint_states_without_effort_are_read_without_torques(tmp_path: Path):
+    """A JointState without effort (a robot that logs no joint torques) is read with
+    ``joint_torques`` None and its positions and velocities; effort in some messages only,
+    or no velocity, is refused naming the problem."""
+    path = tmp_path / "no_effort.bag"
+    _write_joint_states_bag(path, [[], [], []])
+    log = read_log(path)
+    assert log.joint_torques is None and log.joint_names == ("a",)
+    np.testing.assert_allclose(log.joint_positions[:, 0], [0.0, 0.1, 0.2])
+    np.testing.assert_allclose(log.joint_velocities[:, 0], [0.0, 0.2, 0.4])
+    np.testing.assert_allclose(log.time, [0.0, 0.001, 0.002])
+    with_effort = tmp_path / "effort.bag"
+    _write_joint_states_bag(with_effort, [[1.0], [2.0], [3.0]])
+    np.testing.assert_array_equal(read_log(with_effort).joint_torques[:, 0], [1.0, 2.0, 3.0])
+    mixed = tmp_path / "mixed.bag"
+    _write_joint_states_bag(mixed, [[1.0], [], [3.0]])
+    with pytest.raises(ValueError, match="effort in some messages and none in others"):
+        read_log(mixed)
+    no_velocity = tmp_path / "no_velocity.bag"
+    _write_joint_states_bag(no_velocity, [[], [], []], velocity=False)
+    with pytest.raises(ValueError, match="has 0 velocity values for 1 joints"):
+        read_log(no_velocity)
+
+
+@pytest.mark.parametrize("kind", LOG_FORMATS)
+def test_a_log_without_torques_round_trips(tmp_path: Path, kind: str):
+    """Without joint torques: no tau_ columns in a table, JointState effort empty in ROS;
+    read back with ``joint_torques`` None. A table with some tau_ columns only is refused."""
+    log = replace(make_log(), joint_torques=None)
+    path = write_log(log, tmp_path / FORMATS[kind])
+    if kind == "csv":
+        assert not [c for c in path.read_text().splitlines()[0].split(",") if c.startswith("tau_")]
+    back = read_log(path)
+    assert_logs_equal(log, back, atol=1e-9)
+    assert log.select(slice(0, 10)).joint_torques is None
+    assert resample_uniform(log, 0.0015).joint_torques is None
+    if kind == "csv":
+        partial = tmp_path / "partial.csv"
+        write_log(replace(make_log(), joint_torques=make_log().joint_torques), partial)
+        lines = partial.read_text().splitlines()
+        header = lines[0].split(",")
+        drop = header.index('"tau_KNEE_P"') if '"tau_KNEE_P"' in header else header.index("tau_KNEE_P")
+        partial.write_text("\n".join(",".join(c for i, c in enumerate(line.split(",")) if i != drop) for line in lines))
+        with pytest.raises(ValueError, match="missing column.*tau_KNEE_P"):
+            read_log(partial)
+
+
+@pytest.mark.parametrize("kind", ("csv", "parquet"))
+def test_normal_force_only_feet_round_trip_in_tables(tmp_path: Path, kind: str):
+    """A foot that logs only its normal force: its ``wrench_<frame>_fz`` column alone, read
+    back as ``normal_forces``; another frame with a partial wrench is still refused; ROS
+    formats refuse normal-force-only feet (no standard message)."""
+    full = make_log()
+    log = replace(
+        full,
+        wrenches={"r_ft": full.wrenches["r_ft"]},
+        normal_forces={"L_FT_SENSOR_child": full.wrenches["L_FT_SENSOR_child"][:, 5]},
+    )
+    path = write_log(log, tmp_path / f"log.{kind}")
+    back = read_log(path)
+    assert sorted(back.wrenches) == ["r_ft"] and sorted(back.normal_forces) == ["L_FT_SENSOR_child"]
+    np.testing.assert_array_equal(back.normal_forces["L_FT_SENSOR_child"], log.normal_forces["L_FT_SENSOR_child"])
+    np.testing.assert_array_equal(
+        back.select(slice(2, 5)).normal_forces["L_FT_SENSOR_child"], log.normal_forces["L_FT_SENSOR_child"][2:5]
+    )
+    with pytest.raises(ValueError, match="normal-force-only feet .* have no standard ROS message"):
+        write_log(log, tmp_path / "log.mcap")
+    with pytest.raises(ValueError, match="both a wrench and a normal force"):
+        replace(full, normal_forces={"r_ft": full.wrenches["r_ft"][:, 5]})
+    with pytest.raises(ValueError, match=r"NaN in normal_forces\['L_FT_SENSOR_child'\]"):
+        replace(log, normal_forces={"L_FT_SENSOR_child": np.full(full.num_samples, np.nan)})

@@ -20,11 +20,21 @@ returns its log (what the estimators read, sample by sample) and what the same e
 reported online: the data of the tests and of ``apps.estimate_from_log --write-demo-log``.
 
 The log's base pose and velocity are the estimators' base state. A log without them (no
-base_* columns, no nav_msgs/Odometry) but with the IMU and the foot F/T wrenches gets them
-from the contact-aided invariant EKF (``systems.estimation.base_state_estimator``, Hartley
-et al. 2020) replayed on the log as the station runs it online (``base_state``
-"invariant_ekf"): gyro, accelerometer, joint positions and contact flags from the F/T
-normal forces, starting at rest, standing on level ground.
+base_* columns, no nav_msgs/Odometry) but with the IMU and a force per foot gets them from
+the contact-aided invariant EKF (``systems.estimation.base_state_estimator``, Hartley et
+al. 2020) replayed on the log as the station runs it online (``base_state``
+"invariant_ekf"): gyro, accelerometer, joint positions and contact flags from each foot's
+normal force (a 6-axis F/T wrench's, a normal-force-only sensor's, or the sum of the foot's
+FSRs; ``foot_force_sources``) with hysteresis (``ContactHysteresis``: on above 10 % of the
+robot's weight, off below 5 %; the station's online flags use a single threshold), starting
+at rest, standing on level ground.
+
+What the log lacks, the estimation goes without, and ``LogEstimates.not_estimated`` says
+which estimates it could not make and why: without joint torques the internal residual
+(eq. 11), hence the detector and the localizer, are not computed, while the external
+residual (eq. 16) and its force (eq. 19) need none; without every F/T foot's full 6-axis
+wrench (a foot logging only its normal force, or nothing) neither residual runs (both
+subtract the feet's wrenches as known wrenches); the base-state EKF runs on any of them.
 """
 
 from __future__ import annotations
@@ -52,13 +62,18 @@ from systems.estimation.base_state_estimator import (
     LEVEL_GROUND_TILT_STD,
     STANDING_START_ORIENTATION_STD,
     STANDING_START_VELOCITY_STD,
+    ContactHysteresis,
     InvariantEkfBaseStateEstimator,
-    contact_flags_from_wrenches,
 )
 from systems.io.robot_log import RobotLog, StampTiming, resample_uniform, stamp_timing
 from systems.residuals.contact_estimation import STATUS_REASONS, ContactDetector, ContactLocalizer
 from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual, ResidualModel
-from systems.residuals.offline import ReplayedEstimation, replay_contact_estimation, residual_noise_model
+from systems.residuals.offline import (
+    ReplayedEstimation,
+    replay_contact_estimation,
+    replay_residuals,
+    residual_noise_model,
+)
 from systems.simulation.disturbances import Push, PushSource, Step
 from systems.simulation.visualization import ForceArrows
 
@@ -136,8 +151,11 @@ def make_detector(
     )
 
 
-#: The estimate ``LogEstimates.not_estimated`` names when the localizer cannot run.
+#: The estimates ``LogEstimates.not_estimated`` names when they cannot run.
 LOCALIZATION = "contact localization (link, point, localized force)"
+INTERNAL_RESIDUAL = "internal residual (eq. 11)"
+EXTERNAL_RESIDUAL = "external residual (eq. 16) and its contact force (eq. 19)"
+DETECTION = "contact detection"
 
 
 def localization_unavailable(robot: EstimatorPlant) -> str | None:
@@ -180,22 +198,27 @@ def make_localizer(robot: EstimatorPlant, settings: LogEstimationSettings, perio
 @dataclass
 class LogInputs:
     """A log in the estimators' layout: per sample the sensed state [q; v] (plant order),
-    the motor torques (v[6:] order, N m) and the F/T wrenches ([moment about the sensor
-    origin; force] per frame of ``EstimatorPlant.ft_frames``, world, N m and N); with the
+    the motor torques (v[6:] order, N m; None: not logged) and the F/T wrenches ([moment
+    about the sensor origin; force] per frame of ``EstimatorPlant.ft_frames``, world, N m
+    and N; None unless every F/T frame logged its full wrench: ``missing_wrenches`` then
+    names the frames without one); with the
     base estimated by the invariant EKF with bias states, its IMU bias estimate per sample
     (``imu_bias``, (N, 6) [gyro, rad/s; accelerometer, m/s^2], else None). ``timing``: how
     the log's stamps were spaced (``StampTiming``: uniform, stamp noise, whose fitted
-    stamps are ``time``, or uneven, ``resampled`` to ``period``)."""
+    stamps are ``time``, or uneven, ``resampled`` to ``period``). ``contact_sources``:
+    with the base estimated, {foot side: what its contact flags came from}."""
 
     time: np.ndarray
     period: float
     state: np.ndarray
-    joint_torque: np.ndarray
-    known_wrenches: np.ndarray
+    joint_torque: np.ndarray | None
+    known_wrenches: np.ndarray | None
     resampled: bool
     timing: StampTiming | None = None
     base_estimated: bool = False
     imu_bias: np.ndarray | None = None
+    missing_wrenches: tuple[str, ...] = ()
+    contact_sources: dict = field(default_factory=dict)
 
 
 def _frame_rotations(plant: MultibodyPlant, frames: Sequence, q: np.ndarray) -> np.ndarray:
@@ -339,8 +362,9 @@ def _check_plausible(robot: EstimatorPlant, log: RobotLog, column_order: list) -
     limits widened by ``POSITION_LIMIT_MARGIN`` (+-``MAX_UNLIMITED_JOINT_POSITION``
     without limits), a joint velocity beyond ``VELOCITY_LIMIT_FACTOR`` times the joint's
     limit (``MAX_JOINT_SPEED`` without one), a joint torque beyond ``TORQUE_LIMIT_FACTOR``
-    times its effort limit (times m g L without one), an F/T force or moment beyond
-    ``WRENCH_WEIGHT_FACTOR`` times the weight (times L for moments), a logged base velocity
+    times its effort limit (times m g L without one; when the log has torques), an F/T
+    force or moment, a normal force or an FSR reading beyond ``WRENCH_WEIGHT_FACTOR`` times
+    the weight (times L for moments), a logged base velocity
     beyond ``MAX_GYRO_RATE`` / ``MAX_BASE_SPEED``, an IMU rate or acceleration beyond its
     range."""
     bounds = plausibility_bounds(robot, column_order)
@@ -357,15 +381,10 @@ def _check_plausible(robot: EstimatorPlant, log: RobotLog, column_order: list) -
             joints,
             [u + "/s" for u in position_units],
         ),
-        (
-            "joint_torques",
-            log.joint_torques,
-            -bounds.torque,
-            bounds.torque,
-            joints,
-            ["N" if p else "N m" for p in prismatic],
-        ),
     ]
+    if log.joint_torques is not None:
+        torque_units = ["N" if p else "N m" for p in prismatic]
+        checks.append(("joint_torques", log.joint_torques, -bounds.torque, bounds.torque, joints, torque_units))
     wrench_units = ["N m"] * 3 + ["N"] * 3
     for frame, wrench in log.wrenches.items():
         checks.append(
@@ -378,6 +397,12 @@ def _check_plausible(robot: EstimatorPlant, log: RobotLog, column_order: list) -
                 wrench_units,
             )
         )
+    for frame, force in log.normal_forces.items():
+        limit = bounds.wrench[5]
+        checks.append((f"normal_forces[{frame!r}]", force[:, None], -limit, limit, ("fz",), ["N"]))
+    if log.fsr_forces is not None:
+        limit = bounds.wrench[5]
+        checks.append(("fsr_forces", log.fsr_forces, -limit, limit, log.fsr_names, ["N"] * len(log.fsr_names)))
     if log.base_velocity is not None:
         axes, units = ("wx", "wy", "wz", "vx", "vy", "vz"), ["rad/s"] * 3 + ["m/s"] * 3
         checks.append(("base_velocity", log.base_velocity, -bounds.base_velocity, bounds.base_velocity, axes, units))
@@ -402,6 +427,32 @@ def _check_plausible(robot: EstimatorPlant, log: RobotLog, column_order: list) -
             )
 
 
+def foot_force_sources(robot: EstimatorPlant, log: RobotLog) -> dict[str, tuple[str, tuple[str, ...]]]:
+    """{foot side: (kind, names)} of what gives each foot's normal force for the EKF's
+    contact flags, the first the log has of: "wrench" (the side's F/T frame's 6-axis
+    wrench, (name,)), "normal force" (a normal-force-only sensor, ``RobotLog.
+    normal_forces``, at the side's F/T frame or its sole frame, (name,)) or "fsr" (the sum
+    of the FSRs named ``<side>_*``, their names). A foot with none of them is left out:
+    the EKF needs every foot (``log_inputs`` refuses the log). Empty for a model that is not
+    a humanoid description (no feet)."""
+    humanoid = robot.humanoid
+    if humanoid is None:
+        return {}
+    sources = {}
+    for side in sorted(humanoid.sole_frames):
+        ft = humanoid.ft_sensor_frames.get(side)
+        ft_name = None if ft is None else ft.name()
+        normal = [n for n in (ft_name, humanoid.sole_frames[side].name()) if n is not None and n in log.normal_forces]
+        fsr = tuple(name for name in log.fsr_names if name.startswith(f"{side}_"))
+        if ft_name is not None and ft_name in log.wrenches:
+            sources[side] = ("wrench", (ft_name,))
+        elif normal:
+            sources[side] = ("normal force", (normal[0],))
+        elif fsr:
+            sources[side] = ("fsr", fsr)
+    return sources
+
+
 def log_inputs(
     robot: EstimatorPlant,
     log: RobotLog,
@@ -412,14 +463,17 @@ def log_inputs(
     one, the invariant EKF's estimate: module docstring; ``initial_base_pose`` (7, Drake's
     free-joint q) its start, default standing on level ground with the log's first joint
     positions), and its F/T wrenches rotated from their sensor frames to the world with the
-    logged configuration. With steps that are not uniform (``settings``): on the fitted
+    logged configuration (None, with the frames named in ``missing_wrenches``, unless every
+    F/T frame logged its full wrench); the joint torques None when the log has none. With
+    steps that are not uniform (``settings``): on the fitted
     uniform stamps when only the stamps are noisy, else resampled to its median period
     (``stamp_timing``).
 
     Raises:
         ValueError: a joint of the log not on the robot, a robot joint missing from the
-            log, no base pose or velocity, an F/T frame that is not the robot's, a robot
-            F/T frame missing from the log; a gap in its time (``MAX_GAP_PERIODS``); a joint
+            log, no base pose or velocity nor the IMU and a normal force for every foot
+            (``foot_force_sources``), an F/T or normal-force frame that is not the robot's;
+            a gap in its time (``MAX_GAP_PERIODS``); a joint
             position, velocity or torque, an F/T wrench, a logged base velocity or an IMU
             reading beyond physical plausibility (``plausibility_bounds``; the channel,
             time and bound named).
@@ -437,19 +491,30 @@ def log_inputs(
     missing = [name for name in joints if name not in log.joint_names]
     if missing:
         raise ValueError(f"the log has no data for the robot's joints {missing}")
-    has_imu = log.imu_angular_velocity is not None and log.imu_linear_acceleration is not None
-    if (log.base_pose is None or log.base_velocity is None) and not (has_imu and robot.ft_frames):
-        raise ValueError(
-            "the log has no base pose and velocity (columns base_*, or a nav_msgs/Odometry topic), nor the IMU and "
-            "foot F/T wrenches to estimate them: the residuals need the floating base's state"
-        )
     ft_names = [f.name() for f in robot.ft_frames]
+    feet = sorted(robot.humanoid.sole_frames) if robot.humanoid is not None else []
     foreign = [name for name in log.wrenches if name not in ft_names]
     if foreign:
         raise ValueError(f"the log's wrenches {foreign} are not F/T frames of the robot (its F/T frames: {ft_names})")
-    absent = [name for name in ft_names if name not in log.wrenches]
-    if absent:
-        raise ValueError(f"the log has no wrench for the robot's F/T frames {absent}")
+    normal_frames = ft_names + ([robot.humanoid.sole_frames[s].name() for s in feet] if feet else [])
+    foreign = [name for name in log.normal_forces if name not in normal_frames]
+    if foreign:
+        raise ValueError(
+            f"the log's normal forces {foreign} are not at F/T or sole frames of the robot "
+            f"(its frames: {normal_frames})"
+        )
+    has_imu = log.imu_angular_velocity is not None and log.imu_linear_acceleration is not None
+    sources = foot_force_sources(robot, log)
+    if (log.base_pose is None or log.base_velocity is None) and not (has_imu and feet and len(sources) == len(feet)):
+        without = [side for side in feet if side not in sources]
+        raise ValueError(
+            "the log has no base pose and velocity (columns base_*, or a nav_msgs/Odometry topic), nor the IMU and "
+            "foot F/T wrenches (or each foot's normal force or FSRs) to estimate them"
+            + (" (no IMU)" if not has_imu else "")
+            + (f" (no force for the feet {without})" if without else "")
+            + ": the estimators need the floating base's state"
+        )
+    missing_wrenches = tuple(name for name in ft_names if name not in log.wrenches)
     steps = np.diff(log.time)
     period = float(np.median(steps))
     _check_no_gap(log.time, period)
@@ -475,8 +540,8 @@ def log_inputs(
     else:
         state[:, q0 : q0 + 7] = log.base_pose
         state[:, nq + v0 : nq + v0 + 6] = log.base_velocity
-    wrenches = np.zeros((N, 6 * len(ft_names)))
-    if ft_names:
+    wrenches = None if missing_wrenches else np.zeros((N, 6 * len(ft_names)))
+    if ft_names and not missing_wrenches:
         R_WS = _frame_rotations(plant, robot.ft_frames, state[:, :nq])
         for j, name in enumerate(ft_names):
             w = log.wrenches[name].reshape(N, 2, 3)
@@ -485,12 +550,14 @@ def log_inputs(
         time=log.time,
         period=period,
         state=state,
-        joint_torque=log.joint_torques[:, order],
+        joint_torque=None if log.joint_torques is None else log.joint_torques[:, order],
         known_wrenches=wrenches,
         resampled=resampled,
         timing=timing,
         base_estimated=base_estimated,
         imu_bias=imu_bias,
+        missing_wrenches=missing_wrenches,
+        contact_sources={side: kind for side, (kind, _) in sources.items()} if base_estimated else {},
     )
 
 
@@ -525,7 +592,11 @@ def _estimate_base_state(
     EKF's estimate, replayed as the station runs it: at update k the residuals read the
     filter's output of update k - 1 (the initial state at k = 0), the F/T sensors express
     their wrenches in the world with that sensed state, and the filter then reads sample
-    k's gyro, accelerometer, joint positions and contact flags (F/T normal force). Returns
+    k's gyro, accelerometer, joint positions and contact flags: each foot's normal force
+    (``foot_force_sources``: the world z force of its F/T wrench, expressed in the world
+    with that sensed state; of a normal-force-only sensor, its fz along the sensor's z
+    axis, whose world z component it contributes; or its FSRs' sum) through a
+    ``ContactHysteresis`` scaled to the robot's weight. Returns
     the filter's IMU bias estimate read with the base state at each sample ((N, 6)), or
     None without bias states (``settings.estimate_imu_bias``)."""
     plant = robot.plant
@@ -533,7 +604,8 @@ def _estimate_base_state(
     nq = plant.num_positions()
     q0, v0 = topology.free_joint.position_start(), topology.free_joint.velocity_start()
     joints_q = [j.position_start() for j in topology.joints]
-    sides = sorted(robot.humanoid.ft_sensor_joints)
+    sources = foot_force_sources(robot, log)
+    sides = sorted(sources)
     if initial_base_pose is None:
         initial_base_pose = standing_base_pose(robot, np.concatenate(([1.0, 0, 0, 0, 0, 0, 0], state[0, 7:nq])))
     estimator = InvariantEkfBaseStateEstimator(
@@ -556,18 +628,29 @@ def _estimate_base_state(
     bias_port = estimator.GetOutputPort("imu_bias")
     imu_bias = np.zeros((state.shape[0], 6)) if settings.estimate_imu_bias else None
     plant_context = plant.CreateDefaultContext()
-    names = [frame.name() for frame in robot.ft_frames]
+    weight = float(plant.CalcTotalMass(plant_context)) * STANDARD_GRAVITY
+    hysteresis = ContactHysteresis.from_weight(len(sides), weight)
+    frames = {f.name(): f for f in robot.ft_frames}
+    frames |= {robot.humanoid.sole_frames[side].name(): robot.humanoid.sole_frames[side] for side in sides}
+    fsr_column = {name: i for i, name in enumerate(log.fsr_names)}
+
+    def normal_force(side: str, k: int) -> float:
+        """N, the ground's force on the foot along the world z at sample k."""
+        kind, names = sources[side]
+        if kind == "fsr":
+            return float(sum(log.fsr_forces[k, fsr_column[name]] for name in names))
+        R_WS = frames[names[0]].CalcPoseInWorld(plant_context).rotation().matrix()
+        if kind == "wrench":
+            return float(R_WS[2] @ log.wrenches[names[0]][k, 3:])
+        return float(R_WS[2, 2] * log.normal_forces[names[0]][k])
+
     for k in range(state.shape[0]):
         state[k, q0 : q0 + 7] = pose_port.Eval(context)
         state[k, nq + v0 : nq + v0 + 6] = velocity_port.Eval(context)
         if imu_bias is not None:
             imu_bias[k] = bias_port.Eval(context)
         plant.SetPositions(plant_context, state[k, :nq])
-        wrenches_W = [
-            frame.CalcPoseInWorld(plant_context).rotation().matrix() @ log.wrenches[name][k].reshape(2, 3).T
-            for frame, name in zip(robot.ft_frames, names)
-        ]
-        flags = contact_flags_from_wrenches(np.concatenate([w.T.reshape(6) for w in wrenches_W]))
+        flags = hysteresis.update([normal_force(side, k) for side in sides])
         for port, value in zip(
             ports, (log.imu_angular_velocity[k], log.imu_linear_acceleration[k], state[k, joints_q])
         ):
@@ -590,12 +673,14 @@ class LogEstimates:
     Attributes:
         time: s, from the log's first sample.
         joint_names: the plant's joints in v[6:] order (the residual's columns).
-        internal_residual: (N, n) eq. (11), N m.
+        internal_residual: (N, n) eq. (11), N m; None when not estimated (no joint
+            torques, or not every F/T foot's full wrench: ``not_estimated`` says).
         external_wrench_world: (N, 6) eq. (16) in world, [moment about the world origin;
-            force], N m and N.
+            force], N m and N; None when not estimated (not every F/T foot's full wrench).
         force_world: (N, 3) the single contact's force, eq. (19), N (the external
-            residual's force).
-        contact_detected: (N,) bool. test_statistics: (N, 2) [s_ext, s_int].
+            residual's force); None with it.
+        contact_detected: (N,) bool. test_statistics: (N, 2) [s_ext, s_int]. Both None
+            when the detector did not run (it needs both residuals).
         localization: the localizer's outputs, or None (``not_estimated`` says why):
             ``status`` (N,) int (``STATUS_REASONS``), ``body_index`` (N,), ``point_world``
             (N, 3) m, ``force_world`` (N, 3) N, the averaged estimate (eq. 19).
@@ -604,24 +689,28 @@ class LogEstimates:
         timing: how the log's stamps were spaced (``StampTiming``: its case, the fitted
             period and the stamps' RMS deviation from the fitted line, s).
         noise_model: the detector's (predicted, or calibrated on the log's start).
-        base_state: "logged", or the invariant EKF's estimate (a log without base state).
+        base_state: "logged", or the invariant EKF's estimate (a log without base state),
+            naming what its contact flags came from per foot.
         base_pose: (N, 7) the base pose the estimators used, Drake's free-joint q [w, x, y,
             z; x, y, z] (m), logged or estimated. base_velocity: (N, 6) its velocity, world
             frame [angular, rad/s; linear, m/s].
         imu_bias: (N, 6) the EKF's IMU bias estimate [gyro, rad/s; accelerometer, m/s^2]
             when it estimated the base with bias states, else None.
-        not_estimated: {estimate: why it was not made}: ``LOCALIZATION`` when the
-            localizer cannot run (``localization_unavailable``), else empty.
+        not_estimated: {estimate: why it was not made}, in the order ``INTERNAL_RESIDUAL``
+            (no joint torques, or not every F/T foot's full wrench), ``EXTERNAL_RESIDUAL``
+            (not every F/T foot's full wrench), ``DETECTION`` (a residual missing),
+            ``LOCALIZATION`` (no detection, or ``localization_unavailable``); empty when
+            everything ran.
         wall_time_s: the replay's wall time; real_time_factor = log duration / it.
     """
 
     time: np.ndarray
     joint_names: tuple[str, ...]
-    internal_residual: np.ndarray
-    external_wrench_world: np.ndarray
-    force_world: np.ndarray
-    contact_detected: np.ndarray
-    test_statistics: np.ndarray
+    internal_residual: np.ndarray | None
+    external_wrench_world: np.ndarray | None
+    force_world: np.ndarray | None
+    contact_detected: np.ndarray | None
+    test_statistics: np.ndarray | None
     localization: dict | None
     body_names: dict
     period: float
@@ -643,8 +732,10 @@ class LogEstimates:
     def contacts(self) -> list[dict]:
         """One dict per detected contact interval: ``start``, ``end`` (s), the mean force
         (eq. 19) over its second half (N), and the last valid localization in it (link,
-        point), if any."""
+        point), if any. Empty when the detector did not run (``not_estimated``)."""
         out = []
+        if self.contact_detected is None:
+            return out
         flags = np.concatenate(([False], self.contact_detected, [False]))
         starts = np.flatnonzero(~flags[:-1] & flags[1:])
         ends = np.flatnonzero(flags[:-1] & ~flags[1:])
@@ -688,7 +779,9 @@ def estimate_from_log(
 ) -> LogEstimates:
     """Runs the residuals, the force estimate (eq. 19), the detector and (with foot F/T
     sensors and collision geometry on the links above them) the localizer on ``log`` (see
-    the module docstring); what cannot run is listed in ``LogEstimates.not_estimated``.
+    the module docstring); what cannot run for want of data (joint torques, the feet's
+    full wrenches) or of model (``localization_unavailable``) is left out and listed in
+    ``LogEstimates.not_estimated`` (``skipped_estimates``).
 
     Raises:
         ValueError: see ``log_inputs``; a noise calibration window with fewer than 100
@@ -699,7 +792,26 @@ def estimate_from_log(
     start = _time.perf_counter()
     inputs = log_inputs(robot, log, settings, initial_base_pose)
     period = inputs.period
-    _, internal, external = build_offline_estimators(robot, settings, period)
+    model, internal, external = build_offline_estimators(robot, settings, period)
+    skipped = skipped_estimates(robot, inputs)
+    if INTERNAL_RESIDUAL in skipped:
+        external_wrench = None
+        if EXTERNAL_RESIDUAL not in skipped:
+            # Eq. (16) reads no joint torque: zeros stand in for them, the internal residual is dropped.
+            external_wrench = replay_residuals(
+                robot.plant,
+                model,
+                robot.ft_frames,
+                inputs.state,
+                np.zeros((inputs.state.shape[0], robot.plant.num_velocities() - 6)),
+                inputs.known_wrenches,
+                internal_gain=settings.internal_gain,
+                external_gain=settings.external_gain,
+                period=period,
+                stacked=True,
+            ).external_wrench_world
+        replay = ReplayedEstimation(None, external_wrench, None, None, None)
+        return _estimates(robot, inputs, replay, _time.perf_counter() - start, settings, skipped)
 
     def detector_for(internal_residual: np.ndarray, external_wrench: np.ndarray) -> ContactDetector:
         covariances = None
@@ -735,16 +847,48 @@ def estimate_from_log(
         inputs.known_wrenches,
     )
     wall = _time.perf_counter() - start
-    return _estimates(robot, inputs, replay, wall, settings)
+    return _estimates(robot, inputs, replay, wall, settings, skipped)
+
+
+def skipped_estimates(robot: EstimatorPlant, inputs: LogInputs) -> dict[str, str]:
+    """{estimate: why it cannot be made} on the log ``inputs`` (``LogEstimates.
+    not_estimated``): the internal residual without joint torques or without every F/T
+    foot's full wrench, the external residual without the latter, the detector without
+    both residuals, the localizer without the detector or on a model it cannot run on
+    (``localization_unavailable``)."""
+    skipped = {}
+    wrenches = None
+    if inputs.known_wrenches is None:
+        wrenches = (
+            f"the feet {list(inputs.missing_wrenches)} have no 6-axis F/T wrench in the log (a normal force at most): "
+            "the residuals subtract the feet's full wrenches as known wrenches"
+        )
+    if inputs.joint_torque is None:
+        skipped[INTERNAL_RESIDUAL] = (
+            "the log has no joint torques (tau_<joint> columns, JointState effort): eq. 11 needs the motor torques"
+        )
+    elif wrenches is not None:
+        skipped[INTERNAL_RESIDUAL] = wrenches
+    if wrenches is not None:
+        skipped[EXTERNAL_RESIDUAL] = wrenches
+    if skipped:
+        missing = [e for e in (INTERNAL_RESIDUAL, EXTERNAL_RESIDUAL) if e in skipped]
+        verb = "is" if len(missing) == 1 else "are"
+        skipped[DETECTION] = f"it tests both residuals, and the {' and the '.join(missing)} {verb} not estimated"
+        skipped[LOCALIZATION] = "it runs on a detected contact, and the contact detection is not estimated"
+    else:
+        unavailable = localization_unavailable(robot)
+        if unavailable is not None:
+            skipped[LOCALIZATION] = unavailable
+    return skipped
 
 
 def _estimates(
-    robot: EstimatorPlant, inputs: LogInputs, replay: ReplayedEstimation, wall: float, settings
+    robot: EstimatorPlant, inputs: LogInputs, replay: ReplayedEstimation, wall: float, settings, skipped: dict
 ) -> LogEstimates:
     plant = robot.plant
     free_joint = floating_base_topology(plant).free_joint
     q0, v0, nq = free_joint.position_start(), free_joint.velocity_start(), plant.num_positions()
-    unavailable = localization_unavailable(robot)
     localization = None
     if replay.localization is not None:
         localization = dict(replay.localization)
@@ -755,7 +899,7 @@ def _estimates(
         joint_names=robot.joint_names,
         internal_residual=replay.internal,
         external_wrench_world=replay.external_wrench_world,
-        force_world=replay.external_wrench_world[:, 3:].copy(),
+        force_world=None if replay.external_wrench_world is None else replay.external_wrench_world[:, 3:].copy(),
         contact_detected=replay.contact_detected,
         test_statistics=replay.test_statistics,
         localization=localization,
@@ -769,12 +913,21 @@ def _estimates(
         timing=inputs.timing,
         wall_time_s=wall,
         noise_model="predicted" if settings.noise_calibration_time is None else "calibrated on the log's start",
-        base_state="invariant EKF (IMU, joints, F/T contact)" if inputs.base_estimated else "logged",
+        base_state=_base_state_source(inputs),
         base_pose=inputs.state[:, q0 : q0 + 7].copy(),
         base_velocity=inputs.state[:, nq + v0 : nq + v0 + 6].copy(),
         imu_bias=inputs.imu_bias,
-        not_estimated={} if unavailable is None else {LOCALIZATION: unavailable},
+        not_estimated=dict(skipped),
     )
+
+
+def _base_state_source(inputs: LogInputs) -> str:
+    """``LogEstimates.base_state``: "logged", or the EKF naming each foot's contact source."""
+    if not inputs.base_estimated:
+        return "logged"
+    words = {"wrench": "F/T wrench", "normal force": "normal force", "fsr": "FSR sum"}
+    feet = ", ".join(f"{side} {words[kind]}" for side, kind in sorted(inputs.contact_sources.items()))
+    return f"invariant EKF (IMU, joints, foot contact from: {feet})"
 
 
 # ---------------------------------------------------------------------------------------
@@ -1029,7 +1182,7 @@ def record_replay(
     for t in frame_times:
         k = min(int(np.searchsorted(times, t - 1e-9)), len(times) - 1)
         force, point = np.zeros(3), np.zeros(3)
-        if estimates.contact_detected[k]:
+        if estimates.contact_detected is not None and estimates.contact_detected[k]:
             force = estimates.force_world[k]
             valid = estimates.localization is not None and estimates.localization["status"][k] == 0
             if valid:
@@ -1057,7 +1210,12 @@ def status_reason(status: int) -> str:
 
 __all__ += [
     "DEMO_PUSH_BODY",
+    "DETECTION",
+    "EXTERNAL_RESIDUAL",
+    "INTERNAL_RESIDUAL",
     "LOCALIZATION",
+    "foot_force_sources",
+    "skipped_estimates",
     "demo_push",
     "localization_unavailable",
     "record_replay",

@@ -126,6 +126,13 @@ F/T sensor but four FSRs per foot (``systems.observer.fsr_sensing.FsrArray``):
 of a foot's four FSR forces, with the threshold a fraction of the robot's weight
 (``CONTACT_WEIGHT_FRACTION``, 5 %).
 
+Offline, on a recorded log (``diagrams.residuals.log_estimation``), the flags come from
+whatever the log holds per foot (a 6-axis wrench's normal force, a normal-force-only
+sensor, or the sum of the foot's FSRs) through :class:`ContactHysteresis`: on above
+``CONTACT_ON_WEIGHT_FRACTION`` (10 %) of the robot's weight, off below
+``CONTACT_OFF_WEIGHT_FRACTION`` (5 %), so that a foot's force hovering about one threshold
+during a step's loading or unloading does not toggle the filter's contact on and off.
+
 Without any foot in contact the filter propagates on the IMU alone (E1-E5) and the
 ``valid`` output is 0: the velocity then drifts by g · (tilt error) · t plus the
 accelerometer's random walk σ_a √t, and the position by one power of t more.
@@ -197,6 +204,16 @@ CONTACT_FORCE_THRESHOLD = 20.0
 #: weight (the F/T default 20 N is 5 % of HRP-4's ~390 N): 2.5 N on a 5.19 kg Nao, 12 times
 #: the std (0.2 N) of the sum of a foot's four FSR noises.
 CONTACT_WEIGHT_FRACTION = 0.05
+#: :class:`ContactHysteresis`'s thresholds as fractions of the robot's weight m g: a foot
+#: comes into contact when its normal force exceeds 10 % of the weight and leaves it when
+#: the force falls below 5 %. A foot carrying less than a few percent of the weight cannot
+#: anchor the filter: it slides or rocks on its edge (the contact-velocity model of E6-E9
+#: assumes a foot at rest), so 5 % (the online F/T and FSR thresholds, 20 N on HRP-4) is the
+#: floor, and the 5 % band between the two keeps a force hovering about one threshold (a
+#: step's touch-down or lift-off, sensor noise of ~0.2 N on a Nao's FSR sum) from toggling
+#: the contact. Dimensionless.
+CONTACT_ON_WEIGHT_FRACTION = 0.10
+CONTACT_OFF_WEIGHT_FRACTION = 0.05
 DEFAULT_GRAVITY = np.array([0.0, 0.0, -9.81])
 _I3 = np.eye(3)
 _I3.flags.writeable = False
@@ -673,6 +690,61 @@ def contact_flags_from_wrenches(wrenches: np.ndarray, threshold: float = CONTACT
     return (w[:, 5] > threshold).astype(float)
 
 
+class ContactHysteresis:
+    """Contact flags with hysteresis from per-foot normal forces: a foot's flag turns on
+    when its normal force exceeds ``on_threshold`` and off when it falls below
+    ``off_threshold`` (between the two it keeps its previous flag); every foot starts out
+    of contact. ``from_weight`` scales the thresholds to the robot's weight
+    (``CONTACT_ON_WEIGHT_FRACTION``, ``CONTACT_OFF_WEIGHT_FRACTION``).
+
+    Args:
+        num_feet: >= 1.
+        on_threshold, off_threshold: N, 0 < off <= on.
+
+    Raises:
+        ValueError: a non-positive count or threshold, off above on.
+    """
+
+    def __init__(self, num_feet: int, on_threshold: float, off_threshold: float):
+        who = "ContactHysteresis"
+        if isinstance(num_feet, bool) or not isinstance(num_feet, (int, np.integer)) or num_feet < 1:
+            raise ValueError(f"{who}: num_feet must be a positive integer, got {num_feet!r}")
+        self.on_threshold = positive_number(on_threshold, f"{who}: on_threshold")
+        self.off_threshold = positive_number(off_threshold, f"{who}: off_threshold")
+        if self.off_threshold > self.on_threshold:
+            raise ValueError(f"{who}: off_threshold {off_threshold} N is above on_threshold {on_threshold} N")
+        self._flags = np.zeros(int(num_feet), dtype=bool)
+
+    @classmethod
+    def from_weight(
+        cls,
+        num_feet: int,
+        robot_weight: float,
+        on_fraction: float = CONTACT_ON_WEIGHT_FRACTION,
+        off_fraction: float = CONTACT_OFF_WEIGHT_FRACTION,
+    ) -> ContactHysteresis:
+        """Thresholds ``on_fraction`` and ``off_fraction`` of ``robot_weight`` (m |g|, N)."""
+        weight = positive_number(robot_weight, "ContactHysteresis: robot_weight")
+        return cls(num_feet, on_fraction * weight, off_fraction * weight)
+
+    def update(self, normal_forces: np.ndarray) -> np.ndarray:
+        """The flags (1.0 in contact, 0.0 not) after reading one sample of the feet's
+        normal forces (N, the ground pushing up on each foot), in the order of the feet."""
+        f = np.asarray(normal_forces, dtype=float).reshape(-1)
+        if f.size != self._flags.size:
+            raise ValueError(f"ContactHysteresis: {f.size} normal forces for {self._flags.size} feet")
+        self._flags = np.where(self._flags, f >= self.off_threshold, f > self.on_threshold)
+        return self._flags.astype(float)
+
+
+def contact_flags_with_hysteresis(normal_forces: np.ndarray, on_threshold: float, off_threshold: float) -> np.ndarray:
+    """(N, k) flags of (N, k) normal forces (N samples of k feet, N) through a
+    :class:`ContactHysteresis` of these thresholds (N), starting out of contact."""
+    forces = np.asarray(normal_forces, dtype=float)
+    hysteresis = ContactHysteresis(forces.shape[1], on_threshold, off_threshold)
+    return np.array([hysteresis.update(f) for f in forces]).reshape(forces.shape)
+
+
 class FootContactFromForceTorque(LeafSystem):
     """Contact flags from foot F/T sensors (:func:`contact_flags_from_wrenches`).
 
@@ -1077,6 +1149,10 @@ __all__ = [
     "base_to_imu",
     "contact_flags_from_fsr",
     "contact_flags_from_wrenches",
+    "contact_flags_with_hysteresis",
+    "ContactHysteresis",
+    "CONTACT_ON_WEIGHT_FRACTION",
+    "CONTACT_OFF_WEIGHT_FRACTION",
     "imu_to_base",
     "load_compiled_filter_steps",
     "rotation_to_quaternion",

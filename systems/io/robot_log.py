@@ -7,7 +7,8 @@ Quantities and frames (SI units throughout):
 * ``time`` (N,): s, strictly increasing (the joint-state stamps for ROS logs).
 * ``joint_positions``, ``joint_velocities`` (N, n): rad and rad/s (m, m/s for prismatic
   joints), in the order of ``joint_names`` (any order; the estimators map them to the plant).
-* ``joint_torques`` (N, n): the measured motor torques, N m, without friction compensation.
+* ``joint_torques`` (N, n), optional: the measured motor torques, N m, without friction
+  compensation (None: not logged; the residuals that need them are then not estimated).
 * ``base_pose`` (N, 7), optional: the floating base's pose in the world, Drake's q order
   [qw, qx, qy, qz, x, y, z]: the unit quaternion of R_WB and p_WBo, m.
 * ``base_velocity`` (N, 6), optional: Drake's floating-base v, [w_WB; v_WBo], the base's
@@ -18,17 +19,26 @@ Quantities and frames (SI units throughout):
   environment (the ground, below the sensor) applies to the robot, moment about the sensor
   frame's origin, N m, and force, N, both expressed in the SENSOR frame (as a 6-axis
   sensor and a geometry_msgs/WrenchStamped with that ``frame_id`` report it).
-* ``fsr_forces`` (N, k), optional, with ``fsr_names``: foot force-sensing resistors, N.
+* ``normal_forces``: per foot force-sensor frame logging only its normal force (the
+  estimators take the robot's F/T frame names or its sole frames' names), (N,) fz, N: the
+  force of the environment on the robot along the SENSOR frame's z axis (the sole's
+  normal; a load cell or a 1-axis foot sensor). A frame is in ``wrenches`` or in
+  ``normal_forces``, not both.
+* ``fsr_forces`` (N, k), optional, with ``fsr_names``: foot force-sensing resistors, N
+  (pressing force, >= 0). A name ``<side>_<anything>`` (side ``left`` or ``right``, as
+  ``systems.observer.fsr_sensing.FSR_NAMES``) belongs to that foot.
 * ``imu_angular_velocity``, ``imu_linear_acceleration`` (N, 3), optional: gyro, rad/s, and
   proper acceleration (+9.81 up at rest), m/s^2, both in the IMU frame.
 
 Table layout (``.csv``, ``.parquet``), one row per sample, float64 columns:
 
     time
-    q_<joint>, v_<joint>, tau_<joint>                    one of each per joint
+    q_<joint>, v_<joint>                                 one of each per joint
+    tau_<joint>                                          one per joint (all, or none)
     base_qw base_qx base_qy base_qz base_x base_y base_z  (all seven, or none)
     base_wx base_wy base_wz base_vx base_vy base_vz        (all six, or none)
-    wrench_<frame>_tx _ty _tz _fx _fy _fz                  per F/T frame (all six)
+    wrench_<frame>_tx _ty _tz _fx _fy _fz                  per F/T frame (all six) ...
+    wrench_<frame>_fz                                      ... or its normal force only
     fsr_<name>                                             per FSR
     imu_wx imu_wy imu_wz, imu_ax imu_ay imu_az             (each triple all or none)
 
@@ -39,7 +49,8 @@ ROS messages (``.bag``: ROS 1; a folder with ``metadata.yaml``: ROS 2, sqlite3 o
 storage; ``.mcap``: a single ROS 2 MCAP file), by role, topic names from ``topics`` (a
 mapping or a YAML file with the keys of ``DEFAULT_TOPICS``; missing keys keep the defaults):
 
-    joint_states: sensor_msgs/JointState (name, position, velocity, effort)   required
+    joint_states: sensor_msgs/JointState (name, position, velocity[, effort]) required
+                  (effort empty in every message: no joint torques; in some only: refused)
     odometry:     nav_msgs/Odometry (pose in world, twist in the base frame)  optional
     imu:          sensor_msgs/Imu (angular_velocity, linear_acceleration)     optional
     wrenches:     {frame name: topic} of geometry_msgs/WrenchStamped           optional
@@ -50,7 +61,8 @@ interpolated to the joint-state stamps (quaternions: normalised linear interpola
 the shorter arc); joint-state samples outside another topic's time span are dropped, not
 extrapolated, and a gap inside it (a step longer than ``MAX_TOPIC_GAP_PERIODS`` = 5 of
 that topic's median periods) is refused naming the topic and the time, not interpolated
-across. FSR forces have no standard ROS message and are read from tables only.
+across. FSR forces and normal-force-only feet have no standard ROS message and are read
+from tables only.
 
 Reading needs ``pyarrow`` (tables), ``rosbags`` (bags; its typestores also serialise the
 messages written to MCAP) and ``mcap`` + ``mcap-ros2-support`` (MCAP).
@@ -120,17 +132,19 @@ class RobotLog:
     Raises:
         ValueError: arrays of the wrong shape, NaN or inf in a sensor (naming the sensor,
             the channel and the first time), time not strictly increasing, duplicate
-            joint names, a base quaternion that is not of unit norm.
+            joint names, a base quaternion that is not of unit norm, a frame with both a
+            wrench and a normal force.
     """
 
     time: np.ndarray
     joint_names: tuple[str, ...]
     joint_positions: np.ndarray
     joint_velocities: np.ndarray
-    joint_torques: np.ndarray
+    joint_torques: np.ndarray | None = None
     base_pose: np.ndarray | None = None
     base_velocity: np.ndarray | None = None
     wrenches: dict[str, np.ndarray] = field(default_factory=dict)
+    normal_forces: dict[str, np.ndarray] = field(default_factory=dict)
     fsr_names: tuple[str, ...] = ()
     fsr_forces: np.ndarray | None = None
     imu_angular_velocity: np.ndarray | None = None
@@ -156,8 +170,9 @@ class RobotLog:
                 f"RobotLog: time is not strictly increasing at sample {k + 1} "
                 f"(t = {float(self.time[k])!r} s, then {float(self.time[k + 1])!r} s)"
             )
-        for name in ("joint_positions", "joint_velocities", "joint_torques"):
+        for name in ("joint_positions", "joint_velocities"):
             setattr(self, name, _checked(name, getattr(self, name), (N, n), self.joint_names, self.time))
+        self.joint_torques = _checked_optional("joint_torques", self.joint_torques, (N, n), self.joint_names, self.time)
         self.base_pose = _checked_optional("base_pose", self.base_pose, (N, 7), _BASE_POSE_COLUMNS, self.time)
         if self.base_pose is not None:
             norms = np.linalg.norm(self.base_pose[:, :4], axis=1)
@@ -176,6 +191,13 @@ class RobotLog:
             str(frame): _checked(f"wrenches[{frame!r}]", w, (N, 6), _WRENCH_AXES, self.time)
             for frame, w in dict(self.wrenches).items()
         }
+        self.normal_forces = {
+            str(frame): _checked(f"normal_forces[{frame!r}]", np.reshape(f, (-1, 1)), (N, 1), ("fz",), self.time)[:, 0]
+            for frame, f in dict(self.normal_forces).items()
+        }
+        both = sorted(set(self.wrenches) & set(self.normal_forces))
+        if both:
+            raise ValueError(f"RobotLog: the frames {both} have both a wrench and a normal force (one or the other)")
         if (self.fsr_forces is None) != (len(self.fsr_names) == 0):
             raise ValueError("RobotLog: fsr_forces and fsr_names go together (both given or neither)")
         self.fsr_forces = _checked_optional(
@@ -208,10 +230,11 @@ class RobotLog:
             time=self.time[index],
             joint_positions=self.joint_positions[index],
             joint_velocities=self.joint_velocities[index],
-            joint_torques=self.joint_torques[index],
+            joint_torques=take(self.joint_torques),
             base_pose=take(self.base_pose),
             base_velocity=take(self.base_velocity),
             wrenches={frame: w[index] for frame, w in self.wrenches.items()},
+            normal_forces={frame: f[index] for frame, f in self.normal_forces.items()},
             fsr_forces=take(self.fsr_forces),
             imu_angular_velocity=take(self.imu_angular_velocity),
             imu_linear_acceleration=take(self.imu_linear_acceleration),
@@ -348,6 +371,7 @@ def _interpolated(log: RobotLog, times: np.ndarray) -> RobotLog:
         base_pose=base_pose,
         base_velocity=lerp(log.base_velocity),
         wrenches={frame: lerp(w) for frame, w in log.wrenches.items()},
+        normal_forces={frame: lerp(f[:, None])[:, 0] for frame, f in log.normal_forces.items()},
         fsr_forces=lerp(log.fsr_forces),
         imu_angular_velocity=lerp(log.imu_angular_velocity),
         imu_linear_acceleration=lerp(log.imu_linear_acceleration),
@@ -439,10 +463,11 @@ def read_log(path: str | Path, topics: Mapping | str | Path | None = None) -> Ro
 def write_log(log: RobotLog, path: str | Path, topics: Mapping | str | Path | None = None) -> Path:
     """Writes ``log`` to ``path`` (format by ``log_format``; an existing file or bag is
     replaced). ROS formats use the topics of ``topics`` (default ``DEFAULT_TOPICS``; F/T
-    frame F on ``/wrench/F`` unless mapped) and hold no FSR forces.
+    frame F on ``/wrench/F`` unless mapped) and hold no FSR forces nor normal-force-only
+    feet; without joint torques their JointState messages have an empty ``effort``.
 
     Raises:
-        ValueError: an unknown extension; FSR forces in a ROS format; wrench topics that
+        ValueError: an unknown extension; FSR forces or normal forces in a ROS format; wrench topics that
             do not name the log's F/T frames.
     """
     path = Path(path)
@@ -453,6 +478,11 @@ def write_log(log: RobotLog, path: str | Path, topics: Mapping | str | Path | No
         return path
     if log.fsr_forces is not None:
         raise ValueError(f"write_log: FSR forces have no standard ROS message; write '{path.name}' as .csv or .parquet")
+    if log.normal_forces:
+        raise ValueError(
+            f"write_log: normal-force-only feet {sorted(log.normal_forces)} have no standard ROS message; write "
+            f"'{path.name}' as .csv or .parquet"
+        )
     roles = load_topics(topics)
     wrench_topics = roles["wrenches"] or {frame: f"/wrench/{frame}" for frame in log.wrenches}
     missing = sorted(set(log.wrenches) - set(wrench_topics))
@@ -521,9 +551,12 @@ def _log_to_table(log: RobotLog):
 
     columns = {"time": log.time}
     for prefix, array in (("q", log.joint_positions), ("v", log.joint_velocities), ("tau", log.joint_torques)):
+        if array is None:
+            continue
         columns.update({f"{prefix}_{name}": array[:, i] for i, name in enumerate(log.joint_names)})
     groups = [(_BASE_POSE_COLUMNS, log.base_pose), (_BASE_VELOCITY_COLUMNS, log.base_velocity)]
     groups += [(tuple(f"wrench_{frame}_{a}" for a in _WRENCH_AXES), w) for frame, w in log.wrenches.items()]
+    groups += [((f"wrench_{frame}_fz",), f[:, None]) for frame, f in log.normal_forces.items()]
     groups += [(tuple(f"fsr_{name}" for name in log.fsr_names), log.fsr_forces)]
     groups += [(_IMU_GYRO_COLUMNS, log.imu_angular_velocity), (_IMU_ACCEL_COLUMNS, log.imu_linear_acceleration)]
     for names, array in groups:
@@ -590,7 +623,8 @@ def _table_to_log(table, path: Path) -> RobotLog:
         used.update(columns)
         return np.stack([column(c) for c in columns], axis=1)
 
-    arrays = {prefix: group([f"{prefix}_{joint}" for joint in joints], required=True) for prefix in ("q", "v", "tau")}
+    arrays = {prefix: group([f"{prefix}_{joint}" for joint in joints], required=True) for prefix in ("q", "v")}
+    arrays["tau"] = group([f"tau_{joint}" for joint in joints])  # all or none
     base_pose = group(_BASE_POSE_COLUMNS)
     base_velocity = group(_BASE_VELOCITY_COLUMNS)
     frames = []
@@ -600,7 +634,18 @@ def _table_to_log(table, path: Path) -> RobotLog:
     for name in names:
         if name.startswith("wrench_") and name[len("wrench_") : name.rfind("_")] not in frames:
             frames.append(name[len("wrench_") : name.rfind("_")])  # reported missing below
-    wrenches = {frame: group([f"wrench_{frame}_{a}" for a in _WRENCH_AXES], required=True) for frame in frames}
+
+    # A frame with its fz column alone logs only its normal force; any other subset is incomplete.
+    def frame_columns(frame: str) -> list[str]:
+        return [n for n in names if n.startswith("wrench_") and n[len("wrench_") : n.rfind("_")] == frame]
+
+    normal_only = [frame for frame in frames if frame_columns(frame) == [f"wrench_{frame}_fz"]]
+    wrenches = {
+        frame: group([f"wrench_{frame}_{a}" for a in _WRENCH_AXES], required=True)
+        for frame in frames
+        if frame not in normal_only
+    }
+    normal_forces = {frame: group([f"wrench_{frame}_fz"])[:, 0] for frame in normal_only}
     fsr_names = tuple(name[len("fsr_") :] for name in names if name.startswith("fsr_"))
     fsr = group([f"fsr_{n}" for n in fsr_names]) if fsr_names else None
     gyro, accel = group(_IMU_GYRO_COLUMNS), group(_IMU_ACCEL_COLUMNS)
@@ -621,6 +666,7 @@ def _table_to_log(table, path: Path) -> RobotLog:
         base_pose=base_pose,
         base_velocity=base_velocity,
         wrenches={frame: w for frame, w in wrenches.items() if w is not None},
+        normal_forces=normal_forces,
         fsr_names=fsr_names,
         fsr_forces=fsr,
         imu_angular_velocity=gyro,
@@ -641,6 +687,7 @@ class _Stream:
         self.stamps: list[float] = []
         self.rows: list[np.ndarray] = []
         self.names: tuple[str, ...] | None = None
+        self.has_effort: bool | None = None  # JointState: whether its messages carry effort
 
     def arrays(self, path: Path) -> tuple[np.ndarray, np.ndarray]:
         """(stamps, rows) sorted by stamp.
@@ -679,12 +726,24 @@ def _add_message(streams: dict, key, msgtype: str, message, path: Path) -> None:
         parts = [np.asarray(message.position, dtype=float)]
         for what in ("velocity", "effort"):
             values = np.asarray(getattr(message, what), dtype=float)
-            if values.size != len(names):
+            if what == "effort" and values.size == 0:
+                # No torques logged: every message of the topic must then have none.
+                has_effort = False
+            elif values.size != len(names):
                 raise LogFormatError(
                     f"log '{path}': {stream.topic} has {values.size} {what} values for {len(names)} joints "
-                    f"(the estimators need position, velocity and effort)"
+                    f"(the estimators need position and velocity, and effort for every joint or none)"
                 )
+            else:
+                has_effort = True
             parts.append(values)
+        if stream.has_effort is None:
+            stream.has_effort = has_effort
+        elif stream.has_effort != has_effort:
+            raise LogFormatError(
+                f"log '{path}': {stream.topic} has effort in some messages and none in others (at t = "
+                f"{_stamp(message.header)!r} s): log the joint torques in every message or in none"
+            )
         if parts[0].size != len(names):
             raise LogFormatError(f"log '{path}': {stream.topic} has {parts[0].size} positions for {len(names)} joints")
         row = np.concatenate(parts)
@@ -862,7 +921,7 @@ def _streams_to_log(streams: dict, roles: dict, path: Path) -> RobotLog:
         joint_names=joints.names,
         joint_positions=rows[:, :n],
         joint_velocities=rows[:, n : 2 * n],
-        joint_torques=rows[:, 2 * n :],
+        joint_torques=rows[:, 2 * n :] if joints.has_effort else None,
         base_pose=base_pose,
         base_velocity=base_velocity,
         wrenches=wrenches,
@@ -901,7 +960,7 @@ def _messages(log: RobotLog, roles: dict, store, ros1: bool):
                 name=list(log.joint_names),
                 position=log.joint_positions[k].copy(),
                 velocity=log.joint_velocities[k].copy(),
-                effort=log.joint_torques[k].copy(),
+                effort=np.zeros(0) if log.joint_torques is None else log.joint_torques[k].copy(),
             ),
         )
         if log.base_pose is not None and log.base_velocity is not None:

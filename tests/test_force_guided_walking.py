@@ -220,6 +220,7 @@ def test_bad_controller_parameters_are_refused():
         ForceGuidedWalkingController(plant, humanoid, initial_positions=q0, max_lean=0.1)
 
 
+@pytest.mark.slow
 def test_app_guided_by_the_hands_starts_and_stops_at_the_threshold(tmp_path):
     """The closed loop (apps.nao_force_guided_walk, defaults, seed 1, ~9 s wall): 3 N pull
     on the hands 1.5-5.5 s, 3 N push 7.5-10.5 s, threshold 1.5 N on the arm joints' estimate
@@ -254,6 +255,7 @@ def test_app_guided_by_the_hands_starts_and_stops_at_the_threshold(tmp_path):
     assert (out / "guided.png").stat().st_size > 20_000
 
 
+@pytest.mark.slow
 def test_app_without_force_does_not_start(tmp_path):
     """``--force 0``: the same 12.7 s with nothing on the hands (seed 2): the robot crouches
     and stands; no start decision (false start) and no fall."""

@@ -380,6 +380,7 @@ def test_identification_recovers_known_corrections(hrp4, calibration):
     assert all(M.get_mass() > 0 for M in corrections.spatial_inertias.values())
 
 
+@pytest.mark.slow
 def test_identification_with_noise(hrp4, calibration):
     """White noise on the torques (0.5 % of the rated torque), the F/T wrenches (1 N,
     0.1 N m) and every velocity (0.01 rad/s, m/s; the base's too, so its noise enters the
@@ -574,6 +575,7 @@ def test_identification_refuses_bad_input(hrp4, calibration):
         )
 
 
+@pytest.mark.slow
 def test_joints_the_log_moves_slowly_get_no_viscous_term(hrp4, calibration):
     """Below ~v_s, F_c tanh(qdot / v_s) + b qdot ~ (F_c / v_s + b) qdot: any split of the
     slope fits, and a wrong b extrapolates badly to faster motions. A joint whose 95th

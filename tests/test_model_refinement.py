@@ -77,6 +77,7 @@ def calibrated():
     return scenario, corrections, log
 
 
+@pytest.mark.slow
 def test_refinement_removes_most_of_the_standing_spurious_force(calibrated):
     """The issue's floor: >= 70 % of the RMS spurious external force of the mismatch, while
     standing, with a calibration motion the check never sees."""
@@ -104,6 +105,7 @@ def _leg_and_chest_offset_errors(scenario, corrections) -> tuple[np.ndarray, np.
     return np.abs(corrections.torque_offset - offset)[big] / rated[big], np.abs(offset[big]) / rated[big]
 
 
+@pytest.mark.slow
 def test_calibration_finds_the_torque_sensor_offsets_of_the_legs(calibrated):
     """The simulated robot's motor-torque offsets (1 % of the rated torque, seeded) against
     the identified ones on the joints rated >= 100 N m (legs and chest, whose gravity load
@@ -120,6 +122,7 @@ def test_calibration_finds_the_torque_sensor_offsets_of_the_legs(calibrated):
     assert error.max() < 0.005
 
 
+@pytest.mark.slow
 def test_calibration_with_the_base_state_estimator_finds_the_leg_offsets():
     """The same floor with the invariant EKF's base state and the realistic IMU (bias walk):
     a leg's torque offset and the horizontal first moment of the links below it are nearly
@@ -136,6 +139,7 @@ def test_calibration_with_the_base_state_estimator_finds_the_leg_offsets():
     assert error.max() < 0.005
 
 
+@pytest.mark.slow
 def test_refinement_helps_in_a_motion_it_was_not_calibrated_on(calibrated):
     scenario, corrections, _ = calibrated
     motion = SlowMotion(seed=2, amplitude_scale=0.5, min_frequency=0.15, max_frequency=0.4, ramp_time=1.0)
@@ -147,6 +151,7 @@ def test_refinement_helps_in_a_motion_it_was_not_calibrated_on(calibrated):
     assert after["internal_rms_Nm"] < 0.5 * before["internal_rms_Nm"]
 
 
+@pytest.mark.slow
 def test_corrections_saved_and_reused_by_an_experiment(calibrated, tmp_path, monkeypatch):
     _, corrections, _ = calibrated
     path = tmp_path / "corrections.npz"

@@ -3,6 +3,7 @@ a saved log; bad input."""
 
 import json
 
+import pytest
 from scenario_checks import check_scenario_convention
 
 from apps import model_refinement
@@ -15,6 +16,7 @@ SHORT = (
 )
 
 
+@pytest.mark.slow
 def test_app_calibrates_checks_and_reuses_its_log(tmp_path, capsys):
     assert model_refinement.main(["--scenario-text", SHORT, "--out", str(tmp_path)]) == 0
     out = tmp_path / "model_refinement"

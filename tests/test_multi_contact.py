@@ -511,6 +511,7 @@ def test_bad_input(hrp4, localizer):
     np.testing.assert_allclose(a.points_W, b.points_W, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_relative_error_accounts_for_a_load_proportional_model_error(hrp4):
     """A model error proportional to the load (each residual entry scaled by 1 + d, d ~
     N(0, 0.03^2): a 3 % torque-scale or inertial error times the contact's effort) on
@@ -560,6 +561,7 @@ def _scaled_contact(plant, context, dut, rng, n: int, body_name: str | None = No
     return contact, wrench * scale[:6] + noise[:6], tau * scale[6:] + noise[6:]
 
 
+@pytest.mark.slow
 def test_load_covariance_measured_on_known_pushes_accounts_for_the_model_error(hrp4):
     """The study's procedure: the model error per N^2 measured on 60 pushes of known force
     (``load_model_error``; their residuals with sensor noise and a load-proportional error,

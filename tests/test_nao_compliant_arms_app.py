@@ -22,6 +22,7 @@ def app_output(tmp_path_factory):
     return out / "nao_compliant_arms"
 
 
+@pytest.mark.slow
 def test_outputs_and_floor(app_output):
     assert (app_output / "scenario_b.png").stat().st_size > 20_000
     metrics = json.loads((app_output / "metrics.json").read_text())
@@ -44,6 +45,7 @@ def test_outputs_and_floor(app_output):
     assert all(np.isfinite(v) for v in metrics["summary"]["motor_constants_N_m_per_rad"].values())
 
 
+@pytest.mark.slow
 def test_replay_is_self_contained_and_animated(app_output):
     html = (app_output / "scenario_b.html").read_text()
     assert re.findall(r"<(?:script|link)[^>]+(?:src|href)\s*=\s*[\"']((?:https?:)?//[^\"']+)", html) == []

@@ -144,6 +144,7 @@ def test_scenario_errors_from_the_command_line(tmp_path, capsys):
     assert "unknown experiment 4" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_experiments_1_and_2_meet_the_papers_floors(tmp_path):
     """Simulated experiments 1 (2 N through the torso at three angles, eq. 23) and 2 (a 1.13 kg
     load pulling the right arm sideways), at the paper's durations: the estimate's error
@@ -161,6 +162,7 @@ def test_experiments_1_and_2_meet_the_papers_floors(tmp_path):
         assert m["meets_floors"] is True and m["invalid_samples"] == 0
 
 
+@pytest.mark.slow
 def test_step_loads_overshoot_like_the_real_robot(tmp_path):
     """The paper's setting (``apps/scenarios/hawley_paper.yaml``: step loads, nominal stance)
     for experiment 1 on the Nao whose standing CoM matches the recordings: steady-state

@@ -132,6 +132,7 @@ def pulled_walk():
     return handles, walking_metrics(handles, context), observer_metrics(handles, context)
 
 
+@pytest.mark.slow
 def test_pulled_walk_lifts_the_load_and_meets_the_walking_floors(pulled_walk):
     handles, w, o = pulled_walk
     assert w["upright"] and w["steps_detected"] >= 20
@@ -148,6 +149,7 @@ def test_pulled_walk_lifts_the_load_and_meets_the_walking_floors(pulled_walk):
     assert -o["true_pull_x_mean_N"] == pytest.approx(2.9, abs=0.1) and 2.0 < angle < 6.0
 
 
+@pytest.mark.slow
 def test_observer_meets_the_exp4_floors(pulled_walk):
     _, _, o = pulled_walk
     assert o["window_samples"] > 240  # > 4 s of walking with the load hanging

@@ -307,6 +307,7 @@ def _result(name: str) -> dict:
     return _results[name]
 
 
+@pytest.mark.slow
 def test_log_channel_positive_control():
     """A deprecated SDFormat element is logged as deprecated, and this test's handler sees it."""
     result = _result("deprecated_model_element")

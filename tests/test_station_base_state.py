@@ -154,6 +154,7 @@ def test_default_base_state_is_bit_identical():
         np.testing.assert_array_equal(implicit[key], explicit[key])
 
 
+@pytest.mark.slow
 def test_nao_like_invariant_ekf_with_fsr_contact_meets_the_floors_standing():
     """nao_like (no F/T sensors) with base_state "invariant_ekf": its contact flags come from
     its four FSRs per foot (an FsrArray and FootContactFromFsr, 5 % of its weight, 2.5 N).
@@ -184,6 +185,7 @@ def test_nao_like_invariant_ekf_with_fsr_contact_meets_the_floors_standing():
     assert position_error <= 0.01
 
 
+@pytest.mark.slow
 def test_invariant_ekf_walking_drift_on_nao_like_with_the_realistic_imu():
     """The EKF while nao_like walks (the issue-7 walk, 12 s: about 1.1 m, 20 steps of
     single and double support, FSR contact flags), with the realistic IMU (BMI088 noise,

@@ -72,7 +72,7 @@ demo: push-and-comply
 demo-check: $(STAMP)
 	@echo "a short push-and-comply run on $$($(PY) -c 'import importlib.metadata as m; print("drake", m.version("drake"))')"
 	@$(RUN) -m apps.push_and_comply --headless --out $(VENV)/demo-check \
-		--scenario-text '{duration: 3.0, push_start: 1.0, push_peak_time: 1.5, push_end: 2.5}' > $(VENV)/demo-check.log 2>&1; \
+		--scenario-text '{duration: 3.0, tare_duration: 0.8, push_start: 1.0, push_peak_time: 1.5, push_end: 2.5}' > $(VENV)/demo-check.log 2>&1; \
 		status=$$?; cat $(VENV)/demo-check.log; [ $$status = 0 ] || exit $$status; \
 		if grep -i "deprecat" $(VENV)/demo-check.log; then echo "error: the main job printed a deprecation message (above)"; exit 1; fi
 

@@ -242,7 +242,9 @@ def benchmark_closed_loop(seconds: float = 2.0) -> list[dict]:
     from diagrams.residuals.push_and_comply import PushAndComplyScenario, build_push_and_comply_diagram
     from diagrams.station.humanoid_station import add_humanoid_station
 
-    scenario = PushAndComplyScenario(duration=seconds, push_start=0.0, push_peak_time=0.6 * seconds, push_end=seconds)
+    scenario = PushAndComplyScenario(
+        duration=seconds, tare_duration=0.0, push_start=0.0, push_peak_time=0.6 * seconds, push_end=seconds
+    )
 
     def station_only():
         builder = DiagramBuilder()

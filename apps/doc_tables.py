@@ -56,18 +56,29 @@ def _push_and_comply_ablation(data: dict) -> list[str]:
 
 
 def _push_and_comply_robots(data: dict) -> list[str]:
+    from diagrams.residuals.push_and_comply import (
+        FLOOR_CLASSICAL_KNEE_DEG,
+        FLOOR_INTERNAL_KNEE_DEG,
+        meets_robot_floors,
+    )
+
     lines = [
         "| robot (imperfections / sensor seed) | internal: knee flexion | CoM drop | base tilt | upright "
-        "| classical: knee flexion | upright | push per shoulder |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+        "| classical: knee flexion | upright | push per shoulder | floors met |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for row in data["rows"]:
         i, c = row["internal"], row["classical"]
         lines.append(
             f"| {row['label']} ({row['robot_seed']} / {row['sensor_seed']}) | {_knee(i)} "
             f"| {100 * i['com_height_drop_m']:.1f} cm | {i['max_base_tilt_deg']:.1f} deg | {_yes(i['upright'])} "
-            f"| {_knee(c)} | {_yes(c['upright'])} | {i['push_peak_force_N']:.1f} N |"
+            f"| {_knee(c)} | {_yes(c['upright'])} | {i['push_peak_force_N']:.1f} N | {_yes(meets_robot_floors(i, c))} |"
         )
+    lines += [
+        "",
+        f"Floors (issue 31): the internal run upright with both knees bent >= {FLOOR_INTERNAL_KNEE_DEG:g} deg, "
+        f"the classical run upright with its knees bent < {FLOOR_CLASSICAL_KNEE_DEG:g} deg.",
+    ]
     return lines
 
 

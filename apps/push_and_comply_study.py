@@ -11,9 +11,11 @@ added one at a time, with both residuals, in the ideal and the realistic world:
    stiffness);
 4. *+ closed-chain projection*: leg rates that keep both soles still;
 5. *+ CoM hold*: rates that also keep the estimators' centre of mass over the feet;
-6. *+ dead band*: the admittance ignores residuals within its dead band (0.02 N m, and 3
-   standard deviations of the calibrated residual noise in the realistic world): the
-   project's default (``apps/scenarios/push_and_comply_default.yaml``).
+6. *+ dead band*: the admittance ignores residuals within its dead band (0.02 N m, and 2
+   standard deviations of the calibrated residual noise in the realistic world);
+7. *+ residual tare*: the residual's offset at rest, averaged over the first 2 s while the
+   robot stands untouched, is removed (``ResidualTare``): the project's default
+   (``apps/scenarios/push_and_comply_default.yaml``).
 
 ``--study robots``: the project's default in the realistic world on robots drawn with several
 imperfection seeds (model mismatch, friction, sensor errors; each its own calibration) and on
@@ -57,13 +59,15 @@ ABLATION_STEPS = (
             "hold_center_of_mass": False,
             "dead_band": 0.0,
             "dead_band_sigmas": 0.0,
+            "tare_duration": 0.0,
         },
     ),
     ("+ 20 N", {"push_peak_force": 20.0}),
     ("+ posture integration", {"integrate_from": "desired"}),
     ("+ closed-chain projection", {"closed_chain_projection": True}),
     ("+ CoM hold", {"hold_center_of_mass": True}),
-    ("+ dead band (the project's default)", {"dead_band": 0.02, "dead_band_sigmas": 3.0}),
+    ("+ dead band", {"dead_band": 0.02, "dead_band_sigmas": 2.0}),
+    ("+ residual tare (the project's default)", {"tare_duration": 2.0}),
 )
 
 #: The robots of ``--study robots``: (label, model, imperfections seed, sensor seed).
@@ -140,6 +144,7 @@ def _shortened(scenario, duration: float | None):
         push_start=scenario.push_start * scale,
         push_peak_time=scenario.push_peak_time * scale,
         push_end=scenario.push_end * scale,
+        tare_duration=scenario.tare_duration * scale,
     )
 
 

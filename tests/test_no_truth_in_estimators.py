@@ -48,7 +48,7 @@ def _simulated(diagram, handles_station, duration: float = ADVANCE):
 def _push_and_comply(residual_kind: str):
     from diagrams.residuals.push_and_comply import PushAndComplyScenario, build_push_and_comply_diagram
 
-    scenario = PushAndComplyScenario(push_start=0.0, push_peak_time=0.5, push_end=1.0, duration=1.0)
+    scenario = PushAndComplyScenario(tare_duration=0.0, push_start=0.0, push_peak_time=0.5, push_end=1.0, duration=1.0)
     diagram, handles = build_push_and_comply_diagram(scenario, residual_kind, model_corrections=_refined_model())
     return diagram, _simulated(diagram, handles.station)
 

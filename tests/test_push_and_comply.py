@@ -23,7 +23,7 @@ from systems.simulation.visualization import read_static_html
 SCENARIOS = Path(push_and_comply.__file__).parent / "scenarios"
 
 # A compressed version of the paper's scenario: the same push, 3.5 s instead of 15 s.
-SHORT = dict(duration=3.5, push_start=0.5, push_peak_time=1.7, push_end=3.0)
+SHORT = dict(duration=3.5, tare_duration=0.4, push_start=0.5, push_peak_time=1.7, push_end=3.0)
 
 
 def test_scenario_files_load_into_the_dataclass(tmp_path):
@@ -52,6 +52,8 @@ def test_scenario_files_load_into_the_dataclass(tmp_path):
         load_scenario(unknown)
     with pytest.raises(ValueError, match="push_start < push_peak_time"):
         build_push_and_comply_diagram(PushAndComplyScenario(push_peak_time=20.0), "internal")
+    with pytest.raises(ValueError, match="the tare must not average the push"):
+        build_push_and_comply_diagram(PushAndComplyScenario(tare_duration=5.5), "internal")
     with pytest.raises(ValueError, match="unknown residual"):
         build_push_and_comply_diagram(PushAndComplyScenario(), "magic")
     with pytest.raises(ValueError, match="unknown contact approximation 'ode'"):
@@ -106,6 +108,34 @@ def test_residual_follows_the_true_effort_in_the_loop(short_runs):
     window = s["t"] > 0.7
     error = np.linalg.norm(s["residual"][:, window] - s["tau_c_real"][:, window])
     assert error < 0.2 * np.linalg.norm(s["tau_c_real"][:, window])
+
+
+def test_the_tare_removes_a_torque_sensor_offset_before_the_push():
+    """An ideal world but for the torque sensors' offsets (1 % of the rated torques): the raw
+    residual carries them without any contact. Without the tare the admittance integrates
+    them before anyone pushes; with it the robot stands still until the push, and the
+    residual the admittance gets follows the push's true joint effort (the simulator's)."""
+    from systems.simulation.imperfections import Imperfections, TorqueSensorImperfections
+
+    timing = dict(duration=2.0, push_start=1.0, push_peak_time=1.5, push_end=2.0, push_peak_force=30.0)
+    runs = {}
+    for tare in (0.0, 0.5):
+        scenario = set_ideal_conditions(PushAndComplyScenario(**timing, tare_duration=tare))
+        scenario.imperfections = Imperfections(torque_sensor=TorqueSensorImperfections(offset_percent=1.0), seed=3)
+        runs[tare] = run_once(scenario, "internal", None, progress=False)["signals"]
+
+    def moved_before_push_deg(s):
+        q = s["desired_position"]
+        return np.degrees(np.abs(q[:, s["t"] <= 1.0] - q[:, [0]]).max())
+
+    assert moved_before_push_deg(runs[0.0]) > 2.0  # the offsets drive the admittance
+    assert moved_before_push_deg(runs[0.5]) < 0.05
+    s = runs[0.5]
+    pushed = s["t"] > 1.2
+    true_effort = s["tau_c_real"][:, pushed]
+    scale = np.linalg.norm(true_effort)
+    assert np.linalg.norm(s["residual"][:, pushed] - true_effort) > 0.5 * scale  # raw: offset-dominated
+    assert np.linalg.norm(s["tared_residual"][:, pushed] - true_effort) < 0.2 * scale
 
 
 @pytest.fixture(scope="module")
@@ -163,6 +193,7 @@ def _chromium() -> str | None:
     _chromium() is None and not os.environ.get("CI"),
     reason="Debian's chromium is not installed (make test installs it when run as root; CI always has it)",
 )
+@pytest.mark.slow
 def test_replay_renders_the_robot_in_headless_chromium(app_output, tmp_path):
     """Opens the replay in a real browser, offline, and checks that the robot is drawn."""
     from PIL import Image

@@ -6,7 +6,10 @@ from __future__ import annotations
 import dataclasses
 import json
 
+import pytest
+
 from apps import push_and_comply_study
+from diagrams.residuals import push_and_comply
 from diagrams.residuals.push_and_comply import PushAndComplyScenario
 from diagrams.scenarios import scenario_as_dict
 from diagrams.station.conditions import set_ideal_conditions
@@ -43,6 +46,7 @@ def test_the_robots_are_the_default_scenario_on_other_robots():
         assert row["world"] == "realistic"
 
 
+@pytest.mark.slow
 def test_app_writes_the_ablation_results_file(tmp_path):
     """Short horizon, ideal world: every row runs with both residuals. With eq. (14) as
     printed (q_d = q + K_a r T) the PD holds no stiffness and the robot sinks under its own
@@ -74,3 +78,15 @@ def test_app_writes_the_ablation_results_file(tmp_path):
     paper, integrated = rows[1], rows[2]  # 20 N: eq. (14) as printed, then integrated from q_d
     assert paper["internal"]["com_height_drop_m"] > 5 * integrated["internal"]["com_height_drop_m"]
     assert paper["internal"]["knee_pitch_flexion_deg"] > 3.0 > integrated["internal"]["knee_pitch_flexion_deg"]
+
+
+def test_robot_floors_need_both_runs_upright_the_internal_knees_bent_and_the_classical_ones_not():
+    floor = push_and_comply.FLOOR_INTERNAL_KNEE_DEG
+    internal = {"upright": True, "knee_pitch_flexion_deg": floor}
+    classical = {"upright": True, "knee_pitch_flexion_deg": 0.02}
+    assert push_and_comply.meets_robot_floors(internal, classical)
+    assert not push_and_comply.meets_robot_floors({**internal, "knee_pitch_flexion_deg": floor - 0.01}, classical)
+    assert not push_and_comply.meets_robot_floors({**internal, "upright": False}, classical)
+    assert not push_and_comply.meets_robot_floors(internal, {**classical, "upright": False})
+    bent = {**classical, "knee_pitch_flexion_deg": push_and_comply.FLOOR_CLASSICAL_KNEE_DEG}
+    assert not push_and_comply.meets_robot_floors(internal, bent)

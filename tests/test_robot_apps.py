@@ -33,7 +33,7 @@ def test_standing_on_talos(tmp_path):
 
 
 def test_push_and_comply_on_talos(tmp_path):
-    text = "{duration: 1.0, push_start: 0.3, push_peak_time: 0.6, push_end: 0.9}"
+    text = "{duration: 1.0, tare_duration: 0.2, push_start: 0.3, push_peak_time: 0.6, push_end: 0.9}"
     args = ["--robot", TALOS, "--ideal", "--headless", "--scenario-text", text, "--out", str(tmp_path)]
     assert push_and_comply.main(args) == 0
     metrics = json.loads((tmp_path / "push_and_comply" / "metrics.json").read_text())

@@ -2,8 +2,8 @@
 down on both shoulders and complies through a joint admittance controller (eq. 14) driven
 by a residual, the classical one (eq. 7) or the internal one (eq. 11).
 
-    PushSource ─► MultibodyPlant (+ ground) ─► sensors ─► residual ─► JointAdmittanceController
-        ▲ truth        ▲ actuation                │          (eq. 14: q_d = q + K_a r T)
+    PushSource ─► MultibodyPlant (+ ground) ─► sensors ─► residual ─► ResidualTare ─► JointAdmittanceController
+        ▲ truth        ▲ actuation                │                      (eq. 14: q_d = q + K_a r T)
         └── loggers    └── PdGravityController ◄──┴── sensed state     │ desired_position
                                    ▲ desired_position ◄────────────────┘
 
@@ -28,6 +28,7 @@ from diagrams.station.standing import size_ratios
 from systems.estimation.model_identification import ModelCorrections
 from systems.residuals.admittance import JointAdmittanceController, admittance_gains_by_group, joint_position_selector
 from systems.residuals.momentum_residuals import ClassicalResidual, InternalResidual
+from systems.residuals.tare import ResidualTare
 from systems.simulation.disturbances import PolynomialRampUpDown, Push, PushSource
 from systems.simulation.imperfections import Imperfections
 
@@ -35,6 +36,23 @@ RESIDUAL_KINDS = ("internal", "classical")
 #: A run counts as upright while the pelvis keeps this fraction of its height and tilts less.
 UPRIGHT_HEIGHT_FRACTION = 0.7
 UPRIGHT_MAX_TILT_DEG = 30.0
+
+#: Issue 31's floors of a robot (``make robots``): the internal run stays upright with both
+#: knees bent by at least this much (deg); the classical run stays upright and bends them
+#: less than this.
+FLOOR_INTERNAL_KNEE_DEG = 5.0
+FLOOR_CLASSICAL_KNEE_DEG = 1.0
+
+
+def meets_robot_floors(internal: dict, classical: dict) -> bool:
+    """Whether a robot meets the floors (``FLOOR_INTERNAL_KNEE_DEG``,
+    ``FLOOR_CLASSICAL_KNEE_DEG``), from its two runs' ``push_and_comply_metrics``."""
+    return bool(
+        internal["upright"]
+        and internal["knee_pitch_flexion_deg"] >= FLOOR_INTERNAL_KNEE_DEG
+        and classical["upright"]
+        and abs(classical["knee_pitch_flexion_deg"]) < FLOOR_CLASSICAL_KNEE_DEG
+    )
 
 
 @dataclass
@@ -70,8 +88,20 @@ class PushAndComplyScenario:
             deviations (the realistic world's residual noise is well above the sensors'
             white noise that ``dead_band`` was chosen for); the classical run likewise with
             the classical residual's noise, which the base-state estimate's velocity error
-            dominates (eq. 7 reads the base velocity, the internal residual does not).
+            dominates (eq. 7 reads the base velocity, the internal residual does not). With
+            the tare (``tare_duration``) removing the residual's offset, the dead band only
+            has zero-mean noise to stop: a soft threshold is odd, so noise past it moves a
+            joint back and forth rather than away, and two standard deviations suffice
+            (three, before the tare, also had to cover the offsets).
         max_rate: joint velocity limit of the admittance controller, rad/s.
+        tare_duration: s, <= push_start: the robot stands untouched for this long at the
+            start while ``ResidualTare`` measures the residual's offset at rest (over the
+            second half of it, once the residual has converged from zero; what the
+            estimators' model and the torque sensors get wrong at the standing posture),
+            which is removed from the residual the admittance gets from then on; 0 (the
+            paper) drives the admittance with the raw residual. Without it, an offset above
+            the dead band is integrated as a push from the first sample (measured on TALOS:
+            its knees bent until it crouched, `make robots` before the tare).
         integrate_from: "measured" (eq. 14 as printed: q_d = q + K_a r T) or "desired"
             (q_d integrates K_a r). With "measured" the PD keeps no stiffness, and a robot
             whose gravity compensation ignores the ground reaction collapses under its own
@@ -121,8 +151,9 @@ class PushAndComplyScenario:
     )
     dead_band: float = 0.02
     scale_to_robot: bool = True
-    dead_band_sigmas: float = 3.0
+    dead_band_sigmas: float = 2.0
     max_rate: float = 0.5
+    tare_duration: float = 2.0
     integrate_from: str = "desired"
     closed_chain_projection: bool = True
     hold_center_of_mass: bool = True
@@ -154,6 +185,7 @@ class PushAndComplyHandles:
     station: HumanoidStation
     residual_kind: str
     residual: ClassicalResidual | InternalResidual
+    tare: ResidualTare
     admittance: JointAdmittanceController
     push_source: PushSource
     loggers: dict[str, VectorLogSink]
@@ -211,6 +243,12 @@ def build_push_and_comply_diagram(
         raise ValueError(f"unknown residual '{residual_kind}'; choose one of {RESIDUAL_KINDS}")
     if not (0.0 <= scenario.push_start < scenario.push_peak_time < scenario.push_end <= scenario.duration):
         raise ValueError("the scenario needs 0 <= push_start < push_peak_time < push_end <= duration")
+    if not (0.0 <= scenario.tare_duration <= scenario.push_start):
+        raise ValueError(
+            f"the scenario needs 0 <= tare_duration <= push_start (the tare must not average the push), "
+            f"got tare_duration {scenario.tare_duration} s and push_start {scenario.push_start} s "
+            "(set tare_duration to at most push_start; 0 turns the tare off)"
+        )
     builder = DiagramBuilder()
     station = add_scenario_station(builder, scenario, model_corrections)
     plant, humanoid = station.plant, station.humanoid
@@ -267,7 +305,19 @@ def build_push_and_comply_diagram(
     admittance.set_name("joint_admittance_controller")
     measured_position = builder.AddSystem(joint_position_selector(model))
     builder.Connect(station.sensed_state, measured_position.get_input_port())
-    builder.Connect(residual.GetOutputPort("residual"), admittance.GetInputPort("residual"))
+    # The residual's offset at rest, measured while the robot stands untouched, is removed; the
+    # first half of the tare lets the residual (1/K) and the base-state estimate converge.
+    tare = builder.AddSystem(
+        ResidualTare(
+            residual.GetOutputPort("residual").size(),
+            scenario.tare_duration,
+            residual.period,
+            skip=0.5 * scenario.tare_duration,
+        )
+    )
+    tare.set_name("residual_tare")
+    builder.Connect(residual.GetOutputPort("residual"), tare.GetInputPort("residual"))
+    builder.Connect(tare.GetOutputPort("tared_residual"), admittance.GetInputPort("residual"))
     builder.Connect(measured_position.get_output_port(), admittance.GetInputPort("measured_position"))
     builder.Connect(admittance.GetOutputPort("desired_position"), station.desired_position)
 
@@ -276,6 +326,7 @@ def build_push_and_comply_diagram(
         "state": LogVectorOutput(plant.get_state_output_port(), builder, log),
         "sensed_state": LogVectorOutput(station.sensed_state, builder, log),
         "residual": LogVectorOutput(residual.GetOutputPort("residual"), builder, log),
+        "tared_residual": LogVectorOutput(tare.GetOutputPort("tared_residual"), builder, log),
         "tau_c_real": LogVectorOutput(push_source.GetOutputPort("tau_c_real"), builder, log),
         "desired_position": LogVectorOutput(admittance.GetOutputPort("desired_position"), builder, log),
         "force_world": LogVectorOutput(push_source.GetOutputPort("force_world"), builder, log),
@@ -306,6 +357,7 @@ def build_push_and_comply_diagram(
         station=station,
         residual_kind=residual_kind,
         residual=residual,
+        tare=tare,
         admittance=admittance,
         push_source=push_source,
         loggers=loggers,

@@ -10,7 +10,10 @@ IMU, joint positions and each foot's F/T wrench, normal force or FSRs
 (``diagrams.residuals.log_estimation``).
 
 Run: ``python -m apps.estimate_from_log --robot hrp4_like --log LOG [--topics FILE.yaml]
-[--out DIR] [--headless] [--no-replay] [--calibrate-first S] [--localization-period S]``, or try it end to end on a
+[--out DIR] [--headless] [--no-replay] [--calibrate-first S] [--localization-period S]
+[--estimator-settings FILE.yaml] [--gyro-noise-density X] [--accel-noise-density X]
+[--gyro-bias-random-walk X] [--accel-bias-random-walk X]`` (the EKF's settings,
+``systems.estimation.ekf_settings``), or try it end to end on a
 simulated push: ``python -m apps.estimate_from_log [--robot R] --write-demo-log out/demo_push.mcap``
 (simulates the robot under a known push, on hrp4_like 28 N, writes the log, then estimates from it).
 Writes to ``DIR/estimate_from_log/``: ``estimates.csv`` (per sample: detection, test
@@ -19,7 +22,9 @@ state used, logged or estimated, and the estimated IMU biases) and ``estimates.p
 (the same columns; with pyarrow, a dependency),
 ``contact_forces.png`` (not written when neither residual ran), ``metrics.json`` (the
 contacts found, None without a detector, the real-time factor, how the stamps were spaced:
-uniform, stamp noise or uneven, with the fitted period and jitter, and ``not_estimated``:
+uniform, stamp noise or uneven, with the fitted period and jitter, for a log without base
+state ``at_rest_imu_bias``: the still start the EKF's IMU bias was measured on, given by
+``--calibrate-first`` or detected, and the initial gyro bias, and ``not_estimated``:
 the estimates not made and why, e.g. no localization on a model without collision
 geometry, no internal residual, detection or localization on a log without joint torques,
 no residual at all on a log whose feet log only their normal forces; their columns are
@@ -32,6 +37,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -55,9 +61,17 @@ from diagrams.residuals.log_estimation import (
     simulate_push_log,
     status_reason,
 )
+from systems.estimation.ekf_settings import load_ekf_settings
 from systems.io.robot_log import read_log, write_log
 
 EXPERIMENT = "estimate_from_log"
+#: The EKF settings with a command-line option of their own, and their units.
+EKF_OPTIONS = {
+    "gyro_noise_density": "RAD/S/SQRT(HZ)",
+    "accel_noise_density": "M/S^2/SQRT(HZ)",
+    "gyro_bias_random_walk": "RAD/S^2/SQRT(HZ)",
+    "accel_bias_random_walk": "M/S^3/SQRT(HZ)",
+}
 
 
 def _parse(argv):
@@ -81,8 +95,9 @@ def _parse(argv):
         type=positive_float,
         default=None,
         metavar="S",
-        help="measure the detector's noise model on the log's first S seconds (free of contact) instead of "
-        "predicting it from the default sensor noise",
+        help="the log's first S seconds are still and free of contact: measure the detector's noise model on "
+        "them instead of predicting it from the default sensor noise and, for a log without base state, the IMU "
+        "bias the EKF starts from (default: the still start is detected)",
     )
     parser.add_argument(
         "--localization-period",
@@ -92,6 +107,23 @@ def _parse(argv):
         help=f"s between two localizations in contact (default {LogEstimationSettings.localization_period}; the "
         "online contact study uses 0.01)",
     )
+    parser.add_argument(
+        "--estimator-settings",
+        type=Path,
+        default=None,
+        metavar="FILE.yaml",
+        help="the base-state EKF's settings for a log without base state (keys of systems.estimation."
+        "ekf_settings.EkfSettings: noise densities, bias random walks, contact thresholds, stillness thresholds; "
+        "keys left out keep their documented defaults)",
+    )
+    for option, unit in EKF_OPTIONS.items():
+        parser.add_argument(
+            f"--{option.replace('_', '-')}",
+            type=positive_float,
+            default=None,
+            metavar=unit,
+            help=f"the EKF's {option.replace('_', ' ')} (overrides --estimator-settings)",
+        )
     parser.add_argument(
         "--write-demo-log",
         type=Path,
@@ -237,6 +269,43 @@ def describe_timing(estimates: LogEstimates) -> str:
     return f"uniform ({fit})"
 
 
+def at_rest_metrics(estimates: LogEstimates) -> dict | None:
+    """metrics.json's ``at_rest_imu_bias`` (None unless the EKF estimated the base with bias
+    states): ``source`` ("given" by --calibrate-first, "detected" or "none"),
+    ``still_window_s`` ([start, end], s; with "none" the still start found, too short),
+    ``samples``, ``gyro_bias_rad_s`` and ``gyro_bias_std_rad_s`` (3 each, IMU frame, the
+    EKF's initial bias and prior std), ``accel_magnitude_error_m_s2`` (|mean specific
+    force| - |g|) and ``reason`` (why none was used)."""
+    at_rest = estimates.at_rest
+    if at_rest is None:
+        return None
+    return {
+        "source": at_rest.source,
+        "still_window_s": [at_rest.start_s, at_rest.end_s],
+        "samples": at_rest.samples,
+        "gyro_bias_rad_s": None if at_rest.gyro_bias is None else at_rest.gyro_bias.tolist(),
+        "gyro_bias_std_rad_s": None if at_rest.gyro_bias_std is None else at_rest.gyro_bias_std.tolist(),
+        "accel_magnitude_error_m_s2": at_rest.accel_magnitude_error,
+        "reason": at_rest.reason,
+    }
+
+
+def describe_at_rest(estimates: LogEstimates) -> str | None:
+    """The printout's line on the at-rest IMU bias initialisation (``at_rest_metrics``)."""
+    at_rest = estimates.at_rest
+    if at_rest is None:
+        return None
+    if not at_rest.used:
+        return f"at-rest IMU bias: none ({at_rest.reason})"
+    how = "given by --calibrate-first" if at_rest.source == "given" else "detected"
+    bias = np.round(np.degrees(at_rest.gyro_bias), 4).tolist()
+    std = np.round(np.degrees(at_rest.gyro_bias_std), 4).tolist()
+    return (
+        f"at-rest IMU bias: still window {at_rest.start_s:.3f}-{at_rest.end_s:.3f} s ({how}), initial gyro bias "
+        f"{bias} deg/s +- {std} deg/s, accelerometer magnitude error {at_rest.accel_magnitude_error:.4f} m/s^2"
+    )
+
+
 def plot_contact_forces(path: Path, estimates: LogEstimates) -> Path | None:
     """The estimated contact force (eq. 19) per axis and its norm, the detected contact
     shaded; below, the detector's test statistics (empty without a detector). None
@@ -279,8 +348,9 @@ def _run(args: argparse.Namespace) -> int:
     folder = output_folder(args, EXPERIMENT)
     if not args.localization_period > 0:
         raise ValueError(f"--localization-period must be positive, got {args.localization_period}")
+    ekf = load_ekf_settings(args.estimator_settings, **{option: getattr(args, option) for option in EKF_OPTIONS})
     settings = LogEstimationSettings(
-        noise_calibration_time=args.calibrate_first, localization_period=args.localization_period
+        noise_calibration_time=args.calibrate_first, localization_period=args.localization_period, ekf=ekf
     )
     log_path = args.log
     if args.write_demo_log is not None:
@@ -312,6 +382,9 @@ def _run(args: argparse.Namespace) -> int:
         + f"; base state: {estimates.base_state}"
     )
     print(f"stamps: {describe_timing(estimates)}")
+    at_rest_line = describe_at_rest(estimates)
+    if at_rest_line is not None:
+        print(at_rest_line)
     for estimate, reason in estimates.not_estimated.items():
         print(f"not estimated: {estimate}: {reason}")
     print(
@@ -341,6 +414,7 @@ def _run(args: argparse.Namespace) -> int:
         "period_s": estimates.period,
         "resampled": estimates.resampled,
         "stamps": timing_metrics(estimates),
+        "at_rest_imu_bias": at_rest_metrics(estimates),
         "noise_model": estimates.noise_model,
         "base_state": estimates.base_state,
         "wall_time_s": estimates.wall_time_s,
@@ -348,7 +422,7 @@ def _run(args: argparse.Namespace) -> int:
         "contacts": None if estimates.contact_detected is None else contacts,
         "localization": "none (see not_estimated)" if last_status is None else status_reason(last_status),
         "not_estimated": [{"estimate": e, "reason": r} for e, r in estimates.not_estimated.items()],
-        "settings": vars(settings),
+        "settings": dataclasses.asdict(settings),
     }
     write_metrics(folder, metrics)
     meshcat = replay_meshcat(not args.no_replay, args.headless)

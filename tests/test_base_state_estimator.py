@@ -897,3 +897,25 @@ def test_level_ground_period_is_rounded_to_the_update_period_not_refused(period,
         context.SetTime(step * period)
         context.SetDiscreteState(estimator.EvalUniquePeriodicDiscreteUpdate(context))
     assert estimator.GetOutputPort("valid").Eval(context)[0] == 1.0
+
+
+def test_the_filter_starts_from_a_given_imu_bias():
+    """``initial_imu_bias`` (e.g. measured at rest): the bias output starts at it and stays
+    there after SetInitialBaseState; a standing robot whose gyro reads exactly that bias
+    about the vertical keeps its yaw (the vertical bias is not learned while standing); bad
+    values and a bias without bias states are refused."""
+    bias = np.array([0.001, -0.002, np.radians(0.35), 0.0, 0.0, 0.01])
+    estimator, context = _standing_hrp4_estimator(bias[:3], estimate_imu_bias=True, initial_imu_bias=bias)
+    np.testing.assert_array_equal(estimator.GetOutputPort("imu_bias").Eval(context), bias)
+    estimator.SetInitialBaseState(context, estimator.GetOutputPort("base_pose").Eval(context))
+    np.testing.assert_array_equal(estimator.GetOutputPort("imu_bias").Eval(context), bias)
+    q0 = estimator.GetOutputPort("base_pose").Eval(context)[:4].copy()
+    for step in range(2000):
+        context.SetTime(step * estimator.period)
+        context.SetDiscreteState(estimator.EvalUniquePeriodicDiscreteUpdate(context))
+    q = estimator.GetOutputPort("base_pose").Eval(context)[:4]
+    assert np.degrees(2.0 * np.arccos(min(1.0, abs(float(q @ q0))))) < 0.01  # 0.7 deg without the bias
+    with pytest.raises(ValueError, match="initial_imu_bias must be 6 finite"):
+        _standing_hrp4_estimator(np.zeros(3), estimate_imu_bias=True, initial_imu_bias=[0.0, np.nan, 0, 0, 0, 0])
+    with pytest.raises(ValueError, match="initial_imu_bias given without estimate_imu_bias"):
+        _standing_hrp4_estimator(np.zeros(3), initial_imu_bias=np.zeros(6))

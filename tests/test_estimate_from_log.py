@@ -867,3 +867,161 @@ def test_a_nao_log_with_fsr_feet_and_no_torques_estimates_the_base_state(tmp_pat
     left_only = replace(log, fsr_names=FSR_NAMES[:4], fsr_forces=log.fsr_forces[:, :4])
     with pytest.raises(ValueError, match=r"no force for the feet \['right'\]"):
         log_inputs(nao, left_only)
+
+
+def _yaw_deg(pose: np.ndarray) -> np.ndarray:
+    """Yaw (deg, about world z) of Drake free-joint poses (N, 7) [w, x, y, z, ...]."""
+    w, x, y, z = pose[:, :4].T
+    return np.degrees(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+
+
+def test_the_ekf_starts_from_the_gyro_bias_measured_at_rest(robot, tmp_path, capsys):
+    """hrp4_like standing still 3 s (its first 0.1 s of settling dropped: the log starts
+    still), a constant 0.35 deg/s added to every gyro axis of the log: the detected still
+    window is the whole log, the at-rest gyro bias is within 4 standard errors of the
+    truth on each axis, and the EKF's yaw drift against the simulator's yaw (the logged base
+    pose, removed before estimating) is under 0.1 deg at the end, less than a fifth of the
+    drift without the initialisation (which cannot learn the vertical bias while standing:
+    measured 1.03 deg vs 0.001 deg). The bias is still tracked after (the EKF's last vertical
+    gyro bias within 1e-4 rad/s), --calibrate-first gives the window, and the app reports it."""
+    log, _ = simulate_push_log("hrp4_like", duration=3.1, push_start=10.0, push_end=11.0)  # no push in the log
+    log = log.select(slice(100, None))
+    log.time = log.time - log.time[0]
+    truth_yaw = _yaw_deg(log.base_pose)
+    bias = np.radians(0.35)
+    biased = replace(log, base_pose=None, base_velocity=None, imu_angular_velocity=log.imu_angular_velocity + bias)
+    with_rest = log_inputs(robot, biased)
+    at_rest = with_rest.at_rest
+    assert at_rest.source == "detected" and at_rest.start_s == 0.0
+    assert at_rest.end_s == pytest.approx(3.0, abs=2e-3) and at_rest.samples == log.num_samples
+    assert np.all(np.abs(at_rest.gyro_bias - bias) <= 4.0 * at_rest.gyro_bias_std), (at_rest.gyro_bias, bias)
+    assert np.all(at_rest.gyro_bias_std >= 1e-4) and abs(at_rest.accel_magnitude_error) < 0.05
+    without = log_inputs(robot, biased, LogEstimationSettings(at_rest_bias=False))
+    assert without.at_rest is None
+    drift_with = abs(np.mean(_yaw_deg(with_rest.state[-100:, :7]) - truth_yaw[-100:]))
+    drift_without = abs(np.mean(_yaw_deg(without.state[-100:, :7]) - truth_yaw[-100:]))
+    assert drift_with < 0.1 and drift_with < 0.2 * drift_without, (drift_with, drift_without)
+    assert abs(with_rest.imu_bias[-1, 2] - bias) < 1e-4
+    given = log_inputs(robot, biased, LogEstimationSettings(noise_calibration_time=1.0))
+    assert given.at_rest.source == "given" and given.at_rest.samples == 1000
+    assert np.all(np.abs(given.at_rest.gyro_bias - bias) <= 4.0 * given.at_rest.gyro_bias_std)
+    with pytest.raises(ValueError, match="still window of 5.0 s"):
+        log_inputs(robot, biased, LogEstimationSettings(noise_calibration_time=5.0))
+    path = write_log(biased.select(slice(0, 1000)), tmp_path / "still.parquet")
+    assert estimate_from_log_app.main(["--log", str(path), "--out", str(tmp_path), "--headless", "--no-replay"]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"at-rest IMU bias: still window 0\.000-1\.000 s \(detected\), initial gyro bias \[0\.3", out), out
+    metrics = json.loads((tmp_path / "estimate_from_log" / "metrics.json").read_text())
+    assert metrics["at_rest_imu_bias"]["source"] == "detected"
+    assert metrics["at_rest_imu_bias"]["still_window_s"] == pytest.approx([0.0, 1.0])
+    np.testing.assert_allclose(metrics["at_rest_imu_bias"]["gyro_bias_rad_s"], bias, atol=1e-3)
+
+
+def test_a_log_starting_in_motion_has_no_still_window(simulated, robot, tmp_path, capsys):
+    """The simulated log starts as the robot settles on its knees (joint speeds up to 0.26
+    rad/s in its first 20 ms): no still window is detected, the EKF starts from a zero bias
+    and the printout says so; after settling it is still until the push (0.5 s) moves it; a
+    gyro turning at 5 deg/s from the start is never still."""
+    from diagrams.residuals.log_estimation import STILL_MIN_DURATION, still_samples
+
+    log = _first_second_without_base(simulated)
+    inputs = log_inputs(robot, log)
+    assert inputs.at_rest.source == "none" and not inputs.at_rest.used
+    assert inputs.at_rest.end_s < STILL_MIN_DURATION and "starts still for" in inputs.at_rest.reason
+    later = log.select(slice(100, None))  # settled at 0.1 s, pushed from 0.5 s: still up to shortly after
+    assert 400 <= still_samples(later.imu_angular_velocity, later.joint_velocities, 1e-3) < 450
+    turning = later.imu_angular_velocity + [0.0, 0.0, np.radians(5.0)]
+    assert still_samples(turning, later.joint_velocities, 1e-3) < 10  # the averaged gyro tells it within 10 ms
+    path = write_log(log, tmp_path / "moving.parquet")
+    assert estimate_from_log_app.main(["--log", str(path), "--out", str(tmp_path), "--headless", "--no-replay"]) == 0
+    out = capsys.readouterr().out
+    assert "at-rest IMU bias: none (the log starts still for" in out, out
+    metrics = json.loads((tmp_path / "estimate_from_log" / "metrics.json").read_text())
+    assert metrics["at_rest_imu_bias"]["source"] == "none" and metrics["at_rest_imu_bias"]["gyro_bias_rad_s"] is None
+
+
+def test_ekf_settings_load_from_yaml_override_and_refuse_bad_values(tmp_path):
+    """``load_ekf_settings``: the defaults are the estimator's documented constants; a YAML
+    sets some keys (the others keep their defaults); a command-line override wins over the
+    file; an unknown key, a negative, zero, NaN or non-numeric value, and an off threshold
+    above the on threshold are refused naming the key."""
+    from systems.estimation import base_state_estimator as bse
+    from systems.estimation.ekf_settings import EkfSettings, load_ekf_settings
+
+    default = load_ekf_settings()
+    assert default == EkfSettings()
+    assert (
+        default.gyro_noise_density == bse.GYRO_NOISE_DENSITY and default.accel_noise_density == bse.ACCEL_NOISE_DENSITY
+    )
+    assert default.gyro_bias_random_walk == bse.GYRO_BIAS_RANDOM_WALK
+    assert default.contact_on_weight_fraction == 0.10 and default.contact_off_weight_fraction == 0.05
+    assert default.still_min_duration == 0.5
+    path = tmp_path / "imu.yaml"
+    path.write_text("gyro_noise_density: 3.5e-4\ncontact_on_weight_fraction: 0.15\n")
+    loaded = load_ekf_settings(path)
+    assert loaded.gyro_noise_density == 3.5e-4 and loaded.contact_on_weight_fraction == 0.15
+    assert loaded.accel_noise_density == default.accel_noise_density
+    overridden = load_ekf_settings(path, gyro_noise_density=1e-3, accel_noise_density=None)
+    assert overridden.gyro_noise_density == 1e-3 and overridden.contact_on_weight_fraction == 0.15
+    bad = {
+        "gyro_nosie_density: 1e-4\n": r"unknown keys \['gyro_nosie_density'\]",
+        "accel_noise_density: -1e-3\n": "accel_noise_density must be a finite number > 0, got -0.001",
+        "gyro_bias_random_walk: .nan\n": "gyro_bias_random_walk must be a finite number > 0, got nan",
+        "still_joint_speed: 0\n": "still_joint_speed must be a finite number > 0",
+        "still_min_duration: fast\n": "still_min_duration must be a number, got 'fast'",
+        "contact_off_weight_fraction: 0.2\n": "contact_off_weight_fraction 0.2 is above contact_on_weight_fraction 0.1",
+        "- 1\n": "must hold a mapping",
+    }
+    for text, message in bad.items():
+        path.write_text(text)
+        with pytest.raises(ValueError, match=message):
+            load_ekf_settings(path)
+    with pytest.raises(ValueError, match="gyro_noise_density must be a finite number > 0, got inf"):
+        load_ekf_settings(None, gyro_noise_density=float("inf"))
+    with pytest.raises(ValueError, match="unknown EKF setting 'gyro'"):
+        load_ekf_settings(None, gyro=1.0)
+
+
+def test_ekf_settings_reach_the_estimator_and_the_app(simulated, robot, tmp_path, capsys):
+    """The settings are the EKF's: a minimum still duration shorter than the log's still
+    start (0.4 s) gives an at-rest bias, the default 0.5 s none; a larger gyro noise density changes the base estimate;
+    contact thresholds above what a standing foot carries leave the filter without contact
+    (its base drifts away from the logged one); the app reads --estimator-settings and the
+    overrides (recorded in metrics.json) and refuses a bad file naming the key."""
+    from systems.estimation.ekf_settings import EkfSettings
+
+    log, _ = simulated
+    still = replace(log.select(slice(100, 500)), base_pose=None, base_velocity=None)
+    still.time = still.time - still.time[0]
+    default = log_inputs(robot, still)  # still 0.4 s (pushed from 0.5 s), under the default 0.5 s
+    assert default.at_rest.source == "none" and "at least 0.5 s needed" in default.at_rest.reason
+    shorter = log_inputs(robot, still, LogEstimationSettings(ekf=EkfSettings(still_min_duration=0.3)))
+    assert shorter.at_rest.source == "detected" and shorter.at_rest.end_s == pytest.approx(0.4, abs=2e-3)
+    noisier = log_inputs(robot, still, LogEstimationSettings(ekf=EkfSettings(gyro_noise_density=1e-2)))
+    assert np.abs(noisier.state[:, :7] - default.state[:, :7]).max() > 1e-6
+    unanchored = log_inputs(
+        robot,
+        still,
+        LogEstimationSettings(ekf=EkfSettings(contact_on_weight_fraction=0.95, contact_off_weight_fraction=0.9)),
+    )
+    truth = log.base_pose[100:500, 4:7]  # the simulator's, plus its 1 mm-level noise: compare means
+
+    def offset(inputs) -> float:
+        return float(np.linalg.norm(np.mean(inputs.state[-100:, 4:7] - truth[-100:], axis=0)))
+
+    print("base position offset over the last 0.1 s, m:", offset(default), offset(unanchored))
+    assert offset(default) < 3e-3 and offset(unanchored) > 2.0 * offset(default)
+    path = write_log(still, tmp_path / "still.parquet")
+    settings = tmp_path / "imu.yaml"
+    settings.write_text("gyro_noise_density: 3.5e-4\nstill_min_duration: 0.2\n")
+    args = ["--log", str(path), "--out", str(tmp_path), "--headless", "--no-replay", "--estimator-settings"]
+    assert estimate_from_log_app.main([*args, str(settings), "--accel-noise-density", "2e-3"]) == 0
+    metrics = json.loads((tmp_path / "estimate_from_log" / "metrics.json").read_text())
+    ekf = metrics["settings"]["ekf"]
+    assert ekf["gyro_noise_density"] == 3.5e-4 and ekf["accel_noise_density"] == 2e-3
+    assert ekf["still_min_duration"] == 0.2 and ekf["contact_on_weight_fraction"] == 0.1
+    assert metrics["at_rest_imu_bias"]["source"] == "detected"
+    capsys.readouterr()
+    settings.write_text("gyro_noise_density: -1\n")
+    assert estimate_from_log_app.main([*args, str(settings)]) == 2
+    assert "gyro_noise_density must be a finite number > 0" in capsys.readouterr().err

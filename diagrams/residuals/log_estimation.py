@@ -27,7 +27,13 @@ al. 2020) replayed on the log as the station runs it online (``base_state``
 normal force (a 6-axis F/T wrench's, a normal-force-only sensor's, or the sum of the foot's
 FSRs; ``foot_force_sources``) with hysteresis (``ContactHysteresis``: on above 10 % of the
 robot's weight, off below 5 %; the station's online flags use a single threshold), starting
-at rest, standing on level ground.
+at rest, standing on level ground. With IMU bias states the filter starts from the bias
+measured over the log's still start (``at_rest_imu_bias``: the mean gyro reading is the gyro
+bias, the only way to learn its vertical part, to which the filter is blind while standing;
+of the accelerometer bias only its part along gravity), over the window given
+(``noise_calibration_time``, the app's ``--calibrate-first``) or detected (``still_samples``),
+and keeps tracking it. The filter's noise densities, bias random walks, contact and
+stillness thresholds are ``LogEstimationSettings.ekf`` (``systems.estimation.ekf_settings``).
 
 What the log lacks, the estimation goes without, and ``LogEstimates.not_estimated`` says
 which estimates it could not make and why: without joint torques the internal residual
@@ -65,6 +71,13 @@ from systems.estimation.base_state_estimator import (
     ContactHysteresis,
     InvariantEkfBaseStateEstimator,
 )
+from systems.estimation.ekf_settings import (
+    STILL_GYRO_OFFSET,
+    STILL_JOINT_SPEED,
+    STILL_MIN_DURATION,
+    EkfSettings,
+    check_ekf_settings,
+)
 from systems.io.robot_log import RobotLog, StampTiming, resample_uniform, stamp_timing
 from systems.residuals.contact_estimation import STATUS_REASONS, ContactDetector, ContactLocalizer
 from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual, ResidualModel
@@ -78,7 +91,13 @@ from systems.simulation.disturbances import Push, PushSource, Step
 from systems.simulation.visualization import ForceArrows
 
 __all__ = [
+    "AtRestCalibration",
     "EstimatorPlant",
+    "STILL_GYRO_OFFSET",
+    "STILL_JOINT_SPEED",
+    "STILL_MIN_DURATION",
+    "at_rest_imu_bias",
+    "still_samples",
     "LogEstimates",
     "LogEstimationSettings",
     "OnlineEstimates",
@@ -120,6 +139,17 @@ class LogEstimationSettings:
         estimate_imu_bias: for a log without base state, the invariant EKF estimates the
             IMU biases (with the level-ground correction), as on a real robot (the
             station's realistic world); False: the bias-free filter (an ideal IMU).
+        at_rest_bias: with ``estimate_imu_bias``, the EKF starts from the IMU bias measured
+            over the log's still start (``at_rest_imu_bias``): the window
+            [0, ``noise_calibration_time``) when that is given (the app's
+            ``--calibrate-first``), else the detected still start (``still_samples``, at least
+            ``STILL_MIN_DURATION``), with a prior std of the gyro bias equal to its standard
+            error (floored; the largest of the three axes', the filter's prior being one std
+            for all three); False: from a zero bias with the estimator's default prior
+            (``INITIAL_GYRO_BIAS_STD``).
+        ekf: the EKF's noise densities, bias random walks, contact hysteresis thresholds
+            and stillness thresholds (``systems.estimation.ekf_settings.EkfSettings``: the
+            defaults and their justification; the app's ``--estimator-settings FILE.yaml``).
     """
 
     internal_gain: float = 35.0
@@ -131,6 +161,8 @@ class LogEstimationSettings:
     noise_calibration_time: float | None = None
     uniform_tolerance: float = 0.01
     estimate_imu_bias: bool = True
+    at_rest_bias: bool = True
+    ekf: EkfSettings = field(default_factory=EkfSettings)
 
 
 def make_detector(
@@ -206,7 +238,9 @@ class LogInputs:
     (``imu_bias``, (N, 6) [gyro, rad/s; accelerometer, m/s^2], else None). ``timing``: how
     the log's stamps were spaced (``StampTiming``: uniform, stamp noise, whose fitted
     stamps are ``time``, or uneven, ``resampled`` to ``period``). ``contact_sources``:
-    with the base estimated, {foot side: what its contact flags came from}."""
+    with the base estimated, {foot side: what its contact flags came from}. ``at_rest``:
+    with the base estimated with bias states, the at-rest IMU bias initialisation
+    (``AtRestCalibration``), else None."""
 
     time: np.ndarray
     period: float
@@ -219,6 +253,7 @@ class LogInputs:
     imu_bias: np.ndarray | None = None
     missing_wrenches: tuple[str, ...] = ()
     contact_sources: dict = field(default_factory=dict)
+    at_rest: AtRestCalibration | None = None
 
 
 def _frame_rotations(plant: MultibodyPlant, frames: Sequence, q: np.ndarray) -> np.ndarray:
@@ -534,9 +569,9 @@ def log_inputs(
     state[:, [j.position_start() for j in topology.joints]] = log.joint_positions[:, order]
     state[:, [nq + j.velocity_start() for j in topology.joints]] = log.joint_velocities[:, order]
     base_estimated = log.base_pose is None or log.base_velocity is None
-    imu_bias = None
+    imu_bias = at_rest = None
     if base_estimated:
-        imu_bias = _estimate_base_state(robot, log, state, period, settings, initial_base_pose)
+        imu_bias, at_rest = _estimate_base_state(robot, log, state, period, settings, initial_base_pose)
     else:
         state[:, q0 : q0 + 7] = log.base_pose
         state[:, nq + v0 : nq + v0 + 6] = log.base_velocity
@@ -558,6 +593,7 @@ def log_inputs(
         imu_bias=imu_bias,
         missing_wrenches=missing_wrenches,
         contact_sources={side: kind for side, (kind, _) in sources.items()} if base_estimated else {},
+        at_rest=at_rest,
     )
 
 
@@ -580,6 +616,193 @@ def standing_base_pose(robot: EstimatorPlant, q: np.ndarray) -> np.ndarray:
     return plant.GetPositions(context)[free : free + 7].copy()
 
 
+# The at-rest IMU bias initialisation (``at_rest_imu_bias``): its defaults
+# ``STILL_MIN_DURATION`` (0.5 s), ``STILL_GYRO_OFFSET`` (the BMI088's +-1 deg/s zero-rate
+# offset) and ``STILL_JOINT_SPEED`` (0.12 rad/s) are ``systems.estimation.ekf_settings``'s,
+# justified there, and settings (``EkfSettings``). The stillness threshold on the norm of
+# the gyro averaged over ``STILL_AVERAGING_TIME`` is sqrt(3) times the offset plus
+# ``STILL_NOISE_SIGMAS`` times the averaged noise's std per axis (the noise density over
+# sqrt(averaging time)) times sqrt(3), so that neither an uncalibrated gyro nor its noise
+# reads as motion (2.2 deg/s with the BMI088's figures). A slower steady rotation is not
+# told from a bias by the gyro: the joint speeds are the stillness test of a standing robot
+# (its base cannot turn with its feet on the ground and its joints still), the gyro's that
+# of a robot carried or hanging.
+
+#: The gyro is averaged over this time before the stillness test, s (causal; fewer samples
+#: at the log's start): 0.1 s cuts the noise std by sqrt(0.1 s / period), 10 times at 1 kHz.
+STILL_AVERAGING_TIME = 0.1
+#: Multiple of the averaged gyro noise's std per axis (sigma) in the stillness threshold:
+#: the norm of three axes' noise exceeds 6 sigma with probability 7.5e-8 per sample
+#: (chi-square, 3 dof, above 36), and the threshold, 6 sqrt(3) sigma, far less: noise alone
+#: never reads as motion over a still start of seconds at 1 kHz.
+STILL_NOISE_SIGMAS = 6.0
+#: Floor of the initial gyro bias std, rad/s: Earth's rotation (7.29e-5 rad/s), which the
+#: at-rest mean takes for bias (a still gyro reads it), rounded up. Earth's rotation is far
+#: below what matters here: 0.0042 deg/s turns yaw by 0.05 deg in 12 s.
+STILL_GYRO_BIAS_STD_FLOOR = 1e-4
+
+
+@dataclass
+class AtRestCalibration:
+    """The IMU bias measured while the robot stands still at the log's start
+    (``at_rest_imu_bias``). SI units, IMU frame.
+
+    Attributes:
+        source: "given" (``LogEstimationSettings.noise_calibration_time``, the app's
+            ``--calibrate-first``), "detected", or "none" (no still window, or shorter than
+            ``STILL_MIN_DURATION``: the EKF starts from a zero bias; ``reason`` says why).
+        start_s, end_s: the still window from the log's first sample, s (end 0 with "none":
+            the longest still initial span found).
+        samples: the window's samples.
+        gyro_bias: (3,) rad/s, the window's mean gyro reading; None with "none".
+        gyro_bias_std: (3,) rad/s, its standard error (sample std / sqrt(samples), white
+            noise) combined with ``STILL_GYRO_BIAS_STD_FLOOR``; None with "none".
+        accel_magnitude_error: m/s^2, |mean specific force| - |g| (the model's gravity),
+            the accelerometer's bias along the measured vertical; None with "none".
+        accel_bias: (3,) m/s^2, that error along the mean specific force's direction (the
+            accelerometer bias's observable part; 0 across it); None with "none".
+        reason: why no window was used ("" otherwise).
+    """
+
+    source: str
+    start_s: float
+    end_s: float
+    samples: int
+    gyro_bias: np.ndarray | None = None
+    gyro_bias_std: np.ndarray | None = None
+    accel_magnitude_error: float | None = None
+    accel_bias: np.ndarray | None = None
+    reason: str = ""
+
+    @property
+    def used(self) -> bool:
+        return self.gyro_bias is not None
+
+    def imu_bias(self) -> np.ndarray:
+        """[b_g (rad/s); b_a (m/s^2)] to start the EKF from: the gyro bias and the
+        accelerometer's magnitude error along the mean specific force (its only observable
+        part, see ``at_rest_imu_bias``)."""
+        return np.concatenate((self.gyro_bias, self.accel_bias))
+
+
+def still_samples(
+    gyro: np.ndarray,
+    joint_velocities: np.ndarray,
+    period: float,
+    gyro_noise_density: float | None = None,
+    gyro_offset: float = STILL_GYRO_OFFSET,
+    joint_speed: float = STILL_JOINT_SPEED,
+) -> int:
+    """The number of samples of the log's longest initial span that is still: at every
+    sample the norm of the gyro averaged over the last ``STILL_AVERAGING_TIME`` (fewer
+    samples at the start) at most sqrt(3) (``gyro_offset`` + ``STILL_NOISE_SIGMAS``
+    sigma), sigma = ``gyro_noise_density`` / sqrt(the averaging time) rad/s the averaged
+    noise's std per axis, and every joint speed at most ``joint_speed``. 0 when the log
+    starts in motion.
+
+    Args:
+        gyro: (N, 3) rad/s. joint_velocities: (N, n) rad/s (m/s). period: s.
+        gyro_noise_density: rad/s/sqrt(Hz); None: ``EkfSettings``' default (the BMI088's).
+        gyro_offset: rad/s (default ``STILL_GYRO_OFFSET``). joint_speed: rad/s (m/s)
+            (default ``STILL_JOINT_SPEED``).
+    """
+    if gyro_noise_density is None:
+        gyro_noise_density = EkfSettings().gyro_noise_density
+    n = max(1, int(round(STILL_AVERAGING_TIME / period)))
+    counts = np.minimum(np.arange(1, gyro.shape[0] + 1), n)
+    sums = np.cumsum(np.vstack((np.zeros((1, 3)), gyro)), axis=0)
+    averaged = (sums[1:] - sums[np.arange(gyro.shape[0]) + 1 - counts]) / counts[:, None]
+    sigma = gyro_noise_density / np.sqrt(counts * period)
+    limit = math.sqrt(3.0) * (gyro_offset + STILL_NOISE_SIGMAS * sigma)
+    still = np.linalg.norm(averaged, axis=1) <= limit
+    if joint_velocities.size:
+        still &= np.abs(joint_velocities).max(axis=1) <= joint_speed
+    moving = np.flatnonzero(~still)
+    return int(moving[0]) if moving.size else len(still)
+
+
+def at_rest_imu_bias(
+    gyro: np.ndarray,
+    specific_force: np.ndarray,
+    joint_velocities: np.ndarray,
+    period: float,
+    gravity: float,
+    window: float | None = None,
+    settings: EkfSettings | None = None,
+) -> AtRestCalibration:
+    """The IMU bias measured over the log's still start: the window [0, ``window``) when
+    given (the robot is known to stand still then), else the longest still initial span
+    (``still_samples`` with ``settings``' gyro noise density and stillness thresholds),
+    used when at least ``settings.still_min_duration`` long (default ``STILL_MIN_DURATION``).
+
+    What rest makes observable: the true angular velocity is 0 (but for Earth's rotation,
+    7.29e-5 rad/s, taken for bias and below what matters here), so the mean gyro reading is
+    the gyro bias, all three axes, to its standard error; this is the only way to learn the
+    bias about the vertical, to which the EKF is blind while standing on flat ground
+    (``systems.estimation.base_state_estimator``, E11). The accelerometer reads R_WI^T (-g)
+    + b_a: with the tilt unknown, only |mean specific force| - |g| is identifiable, the
+    bias along the measured vertical (to the local gravity's difference from the model's,
+    up to 0.03 m/s^2 over the Earth); the horizontal part of b_a is indistinguishable from a
+    tilt (the tilt taken from the accelerometer itself makes it zero by construction) and
+    stays at 0 (the EKF's level-ground correction observes it later).
+
+    Args:
+        gyro, specific_force: (N, 3) rad/s, m/s^2 (IMU frame). joint_velocities: (N, n).
+        period: s. gravity: |g|, m/s^2. window: s, or None to detect it.
+        settings: the ``EkfSettings`` (default: their defaults).
+
+    Raises:
+        ValueError: a ``window`` longer than the log or of fewer than 2 samples.
+    """
+    settings = settings or EkfSettings()
+    N = gyro.shape[0]
+    if window is not None:
+        samples = int(round(window / period))
+        if samples > N or samples < 2:
+            raise ValueError(
+                f"the still window of {window} s (--calibrate-first) has {samples} samples; the log has {N}: "
+                "it needs 2 to the log's length"
+            )
+        source = "given"
+    else:
+        samples = still_samples(
+            gyro,
+            joint_velocities,
+            period,
+            settings.gyro_noise_density,
+            settings.still_gyro_offset,
+            settings.still_joint_speed,
+        )
+        if samples * period < settings.still_min_duration:
+            return AtRestCalibration(
+                "none",
+                0.0,
+                samples * period,
+                samples,
+                reason=(
+                    f"the log starts still for {samples * period:.3g} s only (at least "
+                    f"{settings.still_min_duration:g} s needed): the EKF starts from a zero IMU bias"
+                ),
+            )
+        source = "detected"
+    w = gyro[:samples]
+    gyro_bias = w.mean(axis=0)
+    standard_error = w.std(axis=0, ddof=1) / math.sqrt(samples)
+    f = specific_force[:samples].mean(axis=0)
+    norm = float(np.linalg.norm(f))
+    error = norm - gravity
+    return AtRestCalibration(
+        source,
+        0.0,
+        samples * period,
+        samples,
+        gyro_bias=gyro_bias,
+        gyro_bias_std=np.hypot(standard_error, STILL_GYRO_BIAS_STD_FLOOR),
+        accel_magnitude_error=error,
+        accel_bias=error * f / norm if norm > 0 else np.zeros(3),
+    )
+
+
 def _estimate_base_state(
     robot: EstimatorPlant,
     log: RobotLog,
@@ -587,7 +810,7 @@ def _estimate_base_state(
     period: float,
     settings: LogEstimationSettings,
     initial_base_pose: np.ndarray | None,
-) -> np.ndarray | None:
+) -> tuple[np.ndarray | None, AtRestCalibration | None]:
     """Fills the base part of ``state`` (whose joint part is filled) with the invariant
     EKF's estimate, replayed as the station runs it: at update k the residuals read the
     filter's output of update k - 1 (the initial state at k = 0), the F/T sensors express
@@ -596,9 +819,11 @@ def _estimate_base_state(
     (``foot_force_sources``: the world z force of its F/T wrench, expressed in the world
     with that sensed state; of a normal-force-only sensor, its fz along the sensor's z
     axis, whose world z component it contributes; or its FSRs' sum) through a
-    ``ContactHysteresis`` scaled to the robot's weight. Returns
-    the filter's IMU bias estimate read with the base state at each sample ((N, 6)), or
-    None without bias states (``settings.estimate_imu_bias``)."""
+    ``ContactHysteresis`` scaled to the robot's weight. With bias states and
+    ``settings.at_rest_bias`` the filter starts from the bias measured over the log's still
+    start (``at_rest_imu_bias``). Returns the filter's IMU bias estimate read with the base
+    state at each sample ((N, 6)), or None without bias states
+    (``settings.estimate_imu_bias``), and the ``AtRestCalibration`` (None unless both)."""
     plant = robot.plant
     topology = floating_base_topology(plant)
     nq = plant.num_positions()
@@ -608,6 +833,24 @@ def _estimate_base_state(
     sides = sorted(sources)
     if initial_base_pose is None:
         initial_base_pose = standing_base_pose(robot, np.concatenate(([1.0, 0, 0, 0, 0, 0, 0], state[0, 7:nq])))
+    ekf = check_ekf_settings(settings.ekf)
+    at_rest = None
+    bias_start = {}
+    if settings.estimate_imu_bias and settings.at_rest_bias:
+        at_rest = at_rest_imu_bias(
+            log.imu_angular_velocity,
+            log.imu_linear_acceleration,
+            state[:, nq:][:, [j.velocity_start() for j in topology.joints]],
+            period,
+            float(np.linalg.norm(plant.gravity_field().gravity_vector())),
+            window=settings.noise_calibration_time,
+            settings=settings.ekf,
+        )
+        if at_rest.used:
+            bias_start = {
+                "initial_imu_bias": at_rest.imu_bias(),
+                "initial_gyro_bias_std": float(at_rest.gyro_bias_std.max()),
+            }
     estimator = InvariantEkfBaseStateEstimator(
         plant,
         robot.humanoid.imu_frame,
@@ -617,8 +860,13 @@ def _estimate_base_state(
         period=period,
         initial_orientation_std=STANDING_START_ORIENTATION_STD,
         initial_velocity_std=STANDING_START_VELOCITY_STD,
+        gyro_noise_density=ekf.gyro_noise_density,
+        accel_noise_density=ekf.accel_noise_density,
+        gyro_bias_random_walk=ekf.gyro_bias_random_walk,
+        accel_bias_random_walk=ekf.accel_bias_random_walk,
         estimate_imu_bias=settings.estimate_imu_bias,
         level_ground_tilt_std=LEVEL_GROUND_TILT_STD if settings.estimate_imu_bias else None,
+        **bias_start,
     )
     context = estimator.CreateDefaultContext()
     estimator.SetInitialBaseState(context, initial_base_pose, np.zeros(6))
@@ -629,7 +877,9 @@ def _estimate_base_state(
     imu_bias = np.zeros((state.shape[0], 6)) if settings.estimate_imu_bias else None
     plant_context = plant.CreateDefaultContext()
     weight = float(plant.CalcTotalMass(plant_context)) * STANDARD_GRAVITY
-    hysteresis = ContactHysteresis.from_weight(len(sides), weight)
+    hysteresis = ContactHysteresis.from_weight(
+        len(sides), weight, ekf.contact_on_weight_fraction, ekf.contact_off_weight_fraction
+    )
     frames = {f.name(): f for f in robot.ft_frames}
     frames |= {robot.humanoid.sole_frames[side].name(): robot.humanoid.sole_frames[side] for side in sides}
     fsr_column = {name: i for i, name in enumerate(log.fsr_names)}
@@ -658,7 +908,7 @@ def _estimate_base_state(
         contact_port.FixValue(context, flags)
         context.SetTime(k * period)
         context.SetDiscreteState(estimator.EvalUniquePeriodicDiscreteUpdate(context))
-    return imu_bias
+    return imu_bias, at_rest
 
 
 # ---------------------------------------------------------------------------------------
@@ -696,6 +946,8 @@ class LogEstimates:
             frame [angular, rad/s; linear, m/s].
         imu_bias: (N, 6) the EKF's IMU bias estimate [gyro, rad/s; accelerometer, m/s^2]
             when it estimated the base with bias states, else None.
+        at_rest: the at-rest IMU bias initialisation of that EKF (``AtRestCalibration``:
+            the still window used and the initial gyro bias), else None.
         not_estimated: {estimate: why it was not made}, in the order ``INTERNAL_RESIDUAL``
             (no joint torques, or not every F/T foot's full wrench), ``EXTERNAL_RESIDUAL``
             (not every F/T foot's full wrench), ``DETECTION`` (a residual missing),
@@ -723,6 +975,7 @@ class LogEstimates:
     base_velocity: np.ndarray | None = None
     imu_bias: np.ndarray | None = None
     not_estimated: dict = field(default_factory=dict)
+    at_rest: AtRestCalibration | None = None
 
     @property
     def real_time_factor(self) -> float:
@@ -918,6 +1171,7 @@ def _estimates(
         base_velocity=inputs.state[:, nq + v0 : nq + v0 + 6].copy(),
         imu_bias=inputs.imu_bias,
         not_estimated=dict(skipped),
+        at_rest=inputs.at_rest,
     )
 
 

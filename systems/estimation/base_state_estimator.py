@@ -67,7 +67,9 @@ B dt + A_X B dt²/2 + A_X² B dt³/6. The noise map is blkdiag(Ad_X̄, I_6) and 
 σ_bg² I, σ_ba² I. The kinematic H has zero bias columns; the update adds θ⁺ = θ̄ + δ_θ.
 Defaults: the random walks of ``Imperfections.realistic().imu`` (EuRoC's ADIS16448 figures),
 initial bias std 0.1 °/s and 0.05 m/s², the bias estimate starting at 0 (the simulated
-biases start at 0: an IMU calibrated at start-up).
+biases start at 0: an IMU calibrated at start-up) or at a given ``initial_imu_bias`` (on a
+log, the bias measured while the robot stands still at its start: ``diagrams.residuals.
+log_estimation.at_rest_imu_bias``).
 
 Observability (a property of the filter, tested in tests/test_base_state_estimator.py):
 roll, pitch and velocity are observable through gravity and the contact kinematics; yaw
@@ -905,6 +907,7 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         accel_bias_random_walk: float = ACCEL_BIAS_RANDOM_WALK,
         initial_gyro_bias_std: float = INITIAL_GYRO_BIAS_STD,
         initial_accel_bias_std: float = INITIAL_ACCEL_BIAS_STD,
+        initial_imu_bias: np.ndarray | None = None,
         level_ground_tilt_std: float | None = None,
         level_ground_period: float = LEVEL_GROUND_PERIOD,
     ):
@@ -918,6 +921,10 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
             period: update period, s (default 1 ms).
             gyro_noise_density ... initial_accel_bias_std: see :class:`ContactAidedInvariantEkf`
                 (``estimate_imu_bias`` False, the default: the bias-free filter).
+            initial_imu_bias: 6, the bias estimate the filter starts from (and
+                :meth:`SetInitialBaseState` resets to), [b_g, rad/s; b_a, m/s²] in the IMU
+                frame, e.g. measured at rest (``diagrams.residuals.log_estimation.
+                at_rest_imu_bias``); default 0. Only with ``estimate_imu_bias``.
             level_ground_tilt_std: σ_t of the level-ground correction (E12), rad: the feet
                 in contact are flat on a level floor (their frames' z axes are the sole
                 normals). None (default): no such correction.
@@ -972,6 +979,14 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
             initial_gyro_bias_std=initial_gyro_bias_std,
             initial_accel_bias_std=initial_accel_bias_std,
         )
+        self._initial_bias = None
+        if initial_imu_bias is not None:
+            bias = np.asarray(initial_imu_bias, dtype=float).reshape(-1)
+            if not estimate_imu_bias:
+                raise ValueError(f"{who}: initial_imu_bias given without estimate_imu_bias")
+            if bias.shape != (6,) or not np.isfinite(bias).all():
+                raise ValueError(f"{who}: initial_imu_bias must be 6 finite numbers, got {initial_imu_bias!r}")
+            self._initial_bias = bias
         self._tilt_std = None
         if level_ground_tilt_std is not None:
             self._tilt_std = positive_number(level_ground_tilt_std, f"{who}: level_ground_tilt_std")
@@ -1035,7 +1050,7 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         if velocity.shape != (6,) or not np.isfinite(velocity).all():
             raise ValueError(f"{who}: initial base velocity must be 6 finite numbers")
         R, p, v = base_to_imu(pose, velocity, self._R_BI, self._p_BI)
-        self._core.reset(R, v, p)
+        self._core.reset(R, v, p, imu_bias=self._initial_bias)
         return self._core.state_vector(), velocity[:3] @ R, np.zeros(1)
 
     def SetInitialBaseState(

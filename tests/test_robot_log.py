@@ -49,8 +49,8 @@ def assert_logs_equal(a: RobotLog, b: RobotLog, atol: float = 0.0) -> None:
     assert a.joint_names == b.joint_names
     assert sorted(a.wrenches) == sorted(b.wrenches)
     np.testing.assert_allclose(a.time, b.time, rtol=0, atol=max(atol, 1e-9))
-    assert (a.joint_torques is None) == (b.joint_torques is None)
     for name in ("joint_positions", "joint_velocities", "joint_torques", "base_pose", "base_velocity"):
+        assert (getattr(a, name) is None) == (getattr(b, name) is None), name
         if getattr(a, name) is not None:
             np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=0, atol=atol, err_msg=name)
     for name in ("imu_angular_velocity", "imu_linear_acceleration"):

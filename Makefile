@@ -29,7 +29,7 @@ export MPLBACKEND
 TEST_WORKERS ?= auto
 RUN = LD_PRELOAD="$(TCMALLOC)$${LD_PRELOAD:+ $$LD_PRELOAD}" $(PY)
 
-.PHONY: test-slow test-all docs hawley-settings paper-settings paper-speed robots scenarios demo demo-check contact residuals push-and-comply standing residual-comparison contact-localization model-refinement estimate-from-log nao-force-observer nao-walk nao-walk-pulled nao-force-guided-walk nao-compliant-arms benchmark test install clean
+.PHONY: test-slow test-all docs hawley-settings paper-settings paper-speed robots scenarios demo demo-check contact residuals push-and-comply standing residual-comparison contact-localization model-refinement estimate-from-log base-state-from-log nao-force-observer nao-walk nao-walk-pulled nao-force-guided-walk nao-compliant-arms benchmark test install clean
 
 install: $(STAMP)
 
@@ -99,6 +99,11 @@ model-refinement: $(STAMP)
 # Offline: the estimators on a recorded log (ARGS="--robot FILE.yaml --log LOG").
 estimate-from-log: $(STAMP)
 	$(RUN) -m apps.estimate_from_log $(ARGS)
+
+# The base-state estimate from a robot's own log against its truth (issue 32): the simulated
+# walking test bed (writes results/base_state_from_log.json), or ARGS="--robot R --log LOG --truth CSV".
+base-state-from-log: $(STAMP)
+	$(RUN) -m apps.base_state_from_log $(if $(ARGS),$(ARGS),--results base_state_from_log)
 
 nao-force-observer: $(STAMP)
 	$(RUN) -m apps.nao_force_observer $(ARGS)

@@ -364,6 +364,63 @@ def _benchmark_log_estimation(data: dict) -> list[str]:
     return lines
 
 
+def _base_state_from_log(data: dict) -> list[str]:
+    floors = data["floors"]
+    lines = [
+        f"| seed | estimator | tilt RMS (<= {floors['tilt_rms_deg']:g} deg) "
+        f"| yaw error after 12 s (<= {floors['yaw_error_deg']:g} deg) "
+        f"| horizontal drift (<= {floors['drift_percent']:g} % of the distance) "
+        f"| velocity RMS walking (<= {floors['velocity_rms_m_s']:g} m/s) |",
+        "| --- | --- | --- | --- | --- | --- |",
+    ]
+
+    def row(seed, label: str, errors: dict) -> str:
+        met = errors["floors_met"]
+        cells = {
+            "tilt_rms_deg": f"{errors['tilt_rms_deg']:.2f} deg",
+            "yaw_error_deg": f"{errors['yaw_error_deg']:+.2f} deg",
+            "drift_percent": f"{100 * errors['horizontal_drift_m']:.1f} cm = {errors['drift_percent']:.1f} %",
+            "velocity_rms_m_s": f"{errors['velocity_rms_m_s']:.3f} m/s",
+        }
+        marked = [text if met[name] else f"**{text}**" for name, text in cells.items()]
+        return f"| {seed} | {label} | " + " | ".join(marked) + " |"
+
+    for r in data["rows"]:
+        lines.append(row(r["seed"], "`apps.estimate_from_log` (the default EKF)", r["front_door"]))
+        lines += [row(r["seed"], a["label"], a["errors"]) for a in r["ablations"]]
+    settings, first = data["settings"], data["rows"][0]
+    lines += [
+        "",
+        f"The log: {data['robot']} standing {settings['standing_start']:g} s then walking {settings['walking']:g} s "
+        f"({first['front_door']['displacement_m']:.2f} m for seed {first['seed']}), {first['log']['samples']} samples "
+        f"at {settings['rate_hz']:g} Hz (steps {1e3 * first['log']['step_range_s'][0]:.1f}-"
+        f"{1e3 * first['log']['step_range_s'][1]:.1f} ms), {first['log']['channels']}; gyro turn-on bias "
+        f"{[round(b, 2) for b in settings['gyro_bias_deg_s']]} deg/s. Bold: a floor missed. "
+        + ("Every floor met by the default on every seed." if data["all_floors_met"] else "A floor is missed."),
+    ]
+    return lines
+
+
+def _base_state_from_log_readme(data: dict) -> list[str]:
+    """The README's short form of ``_base_state_from_log``: the front door's rows only."""
+    full = _base_state_from_log(data)
+    rows = [line for line in full[2:] if "`apps.estimate_from_log`" in line]
+    ablations = {
+        a["label"]: max(abs(r["ablations"][i]["errors"]["yaw_error_deg"]) for r in data["rows"])
+        for i, a in enumerate(data["rows"][0]["ablations"])
+    }
+    worst = "; ".join(f"{label}, {value:.1f} deg" for label, value in ablations.items())
+    return (
+        full[:2]
+        + rows
+        + [
+            "",
+            f"The ablations' worst yaw errors: {worst}. Every figure: "
+            "[docs/robots.md](docs/robots.md#the-base-state-against-a-truth-make-base-state-from-log).",
+        ]
+    )
+
+
 def _benchmark_residual_replay(data: dict) -> list[str]:
     rows = data["residual_replay"]
     if not rows:
@@ -472,6 +529,8 @@ RENDERERS: dict[str, Callable[[dict], list[str]]] = {
     "benchmark_multi_contact_fit": _benchmark_multi_contact_fit,
     "benchmark_log_estimation": _benchmark_log_estimation,
     "benchmark_residual_replay": _benchmark_residual_replay,
+    "base_state_from_log": _base_state_from_log,
+    "base_state_from_log_readme": _base_state_from_log_readme,
     "experiments_wall_time": _experiments_wall_time,
 }
 
@@ -480,6 +539,7 @@ RENDERERS: dict[str, Callable[[dict], list[str]]] = {
 SOURCES: dict[str, tuple[str, ...]] = {
     **{name: ("benchmark",) for name in RENDERERS if name.startswith("benchmark_")},
     "experiments_wall_time": tuple(name for name, _, _ in EXPERIMENT_RUNS),
+    "base_state_from_log_readme": ("base_state_from_log",),
 }
 
 

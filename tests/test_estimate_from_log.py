@@ -450,8 +450,12 @@ def test_noise_calibrated_on_the_log_start(simulated, robot):
         estimate_from_log(robot, log.select(slice(0, 200)), LogEstimationSettings(noise_calibration_time=0.45))
 
 
-def test_robot_without_ft_feet_has_no_localization():
-    """nao_like (FSR feet, no F/T): the residuals and the detector run, no localizer."""
+def test_robot_without_ft_feet_has_no_residuals():
+    """nao_like (FSR feet, no F/T): the ground's wrenches on its feet are unknown, so neither
+    residual runs (they would report the robot's weight as an external contact), nor the
+    detector or the localizer; the base state is the log's, and the reasons are named."""
+    from diagrams.residuals.log_estimation import DETECTION, EXTERNAL_RESIDUAL, INTERNAL_RESIDUAL, LOCALIZATION
+
     nao = build_estimator_plant("nao_like")
     nq = nao.plant.num_positions()
     state = nao.standing_state
@@ -470,11 +474,12 @@ def test_robot_without_ft_feet_has_no_localization():
         base_velocity=np.zeros((samples, 6)),
     )
     estimates = estimate_from_log(nao, log)
-    assert estimates.localization is None
-    assert estimates.internal_residual.shape == (samples, len(joints))
     assert nq == 7 + len(joints)
-    # Without motor torques the internal residual carries the robot's weight: detected.
-    assert estimates.contact_detected[-1]
+    assert estimates.localization is None and estimates.contact_detected is None
+    assert estimates.internal_residual is None and estimates.external_wrench_world is None
+    assert list(estimates.not_estimated) == [INTERNAL_RESIDUAL, EXTERNAL_RESIDUAL, DETECTION, LOCALIZATION]
+    assert "no foot F/T sensors" in estimates.not_estimated[EXTERNAL_RESIDUAL]
+    np.testing.assert_array_equal(estimates.base_pose, log.base_pose)
 
 
 def _hrp4_like_without_collision_geometry(folder: Path) -> Path:
@@ -857,7 +862,7 @@ def test_a_nao_log_with_fsr_feet_and_no_torques_estimates_the_base_state(tmp_pat
     cos_half = np.abs(estimates.base_pose[:, :4] @ start[:4])
     assert np.degrees(2.0 * np.arccos(np.minimum(cos_half, 1.0))).max() < 0.05
     assert INTERNAL_RESIDUAL in estimates.not_estimated and LOCALIZATION in estimates.not_estimated
-    assert estimates.external_wrench_world is not None  # no F/T frame: the ground's reaction is all external
+    assert estimates.external_wrench_world is None  # no F/T frame: the ground's reaction is unknown
     path = write_log(log, tmp_path / "nao.csv")
     args = ["--robot", "nao_like", "--log", str(path), "--out", str(tmp_path), "--no-replay"]
     assert estimate_from_log_app.main(args) == 0
@@ -917,25 +922,35 @@ def test_the_ekf_starts_from_the_gyro_bias_measured_at_rest(robot, tmp_path, cap
     np.testing.assert_allclose(metrics["at_rest_imu_bias"]["gyro_bias_rad_s"], bias, atol=1e-3)
 
 
-def test_a_log_starting_in_motion_has_no_still_window(simulated, robot, tmp_path, capsys):
+def test_the_still_window_is_the_first_still_span_long_enough(simulated, robot, tmp_path, capsys):
     """The simulated log starts as the robot settles on its knees (joint speeds up to 0.26
-    rad/s in its first 20 ms): no still window is detected, the EKF starts from a zero bias
-    and the printout says so; after settling it is still until the push (0.5 s) moves it; a
-    gyro turning at 5 deg/s from the start is never still."""
-    from diagrams.residuals.log_estimation import STILL_MIN_DURATION, still_samples
+    rad/s in its first 20 ms), then stands still until the push (0.5 s) moves it: a still
+    span of about 0.45 s. With the default minimum of 0.5 s no still window is found, the
+    EKF starts from a zero bias and the printout says so; with a minimum of 0.3 s the
+    window is that span, after the settling (not from the first sample); a gyro turning at
+    5 deg/s is never still."""
+    from diagrams.residuals.log_estimation import STILL_MIN_DURATION, first_still_window, still_mask, still_samples
+    from systems.estimation.ekf_settings import EkfSettings
 
     log = _first_second_without_base(simulated)
     inputs = log_inputs(robot, log)
     assert inputs.at_rest.source == "none" and not inputs.at_rest.used
-    assert inputs.at_rest.end_s < STILL_MIN_DURATION and "starts still for" in inputs.at_rest.reason
+    assert inputs.at_rest.end_s < STILL_MIN_DURATION and "never still for 0.5 s" in inputs.at_rest.reason
+    shorter = log_inputs(robot, log, LogEstimationSettings(ekf=EkfSettings(still_min_duration=0.3)))
+    window = shorter.at_rest
+    assert window.source == "detected" and 0.0 < window.start_s <= 0.1 and 0.4 <= window.end_s < 0.55, window
+    assert window.samples == round((window.end_s - window.start_s) / 1e-3)
     later = log.select(slice(100, None))  # settled at 0.1 s, pushed from 0.5 s: still up to shortly after
     assert 400 <= still_samples(later.imu_angular_velocity, later.joint_velocities, 1e-3) < 450
     turning = later.imu_angular_velocity + [0.0, 0.0, np.radians(5.0)]
     assert still_samples(turning, later.joint_velocities, 1e-3) < 10  # the averaged gyro tells it within 10 ms
+    assert not still_mask(turning, later.joint_velocities, 1e-3)[10:].any()
+    assert first_still_window(np.array([1, 0, 1, 1, 1, 0, 1, 1, 1, 1], bool), 3) == (2, 5)
+    assert first_still_window(np.array([1, 1, 0, 1, 1], bool), 3) is None
     path = write_log(log, tmp_path / "moving.parquet")
     assert estimate_from_log_app.main(["--log", str(path), "--out", str(tmp_path), "--headless", "--no-replay"]) == 0
     out = capsys.readouterr().out
-    assert "at-rest IMU bias: none (the log starts still for" in out, out
+    assert "at-rest IMU bias: none (the log is never still for 0.5 s" in out, out
     metrics = json.loads((tmp_path / "estimate_from_log" / "metrics.json").read_text())
     assert metrics["at_rest_imu_bias"]["source"] == "none" and metrics["at_rest_imu_bias"]["gyro_bias_rad_s"] is None
 
@@ -994,7 +1009,7 @@ def test_ekf_settings_reach_the_estimator_and_the_app(simulated, robot, tmp_path
     still = replace(log.select(slice(100, 500)), base_pose=None, base_velocity=None)
     still.time = still.time - still.time[0]
     default = log_inputs(robot, still)  # still 0.4 s (pushed from 0.5 s), under the default 0.5 s
-    assert default.at_rest.source == "none" and "at least 0.5 s needed" in default.at_rest.reason
+    assert default.at_rest.source == "none" and "never still for 0.5 s" in default.at_rest.reason
     shorter = log_inputs(robot, still, LogEstimationSettings(ekf=EkfSettings(still_min_duration=0.3)))
     assert shorter.at_rest.source == "detected" and shorter.at_rest.end_s == pytest.approx(0.4, abs=2e-3)
     noisier = log_inputs(robot, still, LogEstimationSettings(ekf=EkfSettings(gyro_noise_density=1e-2)))

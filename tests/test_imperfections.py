@@ -228,6 +228,53 @@ def test_station_imu_gets_the_bias_and_the_datasheet_noise():
     assert ideal.sensors.imu.gyro_bias is None and ideal.sensors.imu.accel_bias is None
 
 
+def test_random_walk_starts_from_its_initial_bias():
+    """b_0 = initial_bias (scalar or per entry), then the walk; a walk of 0 holds it; bad
+    initial biases are refused naming the argument."""
+    walk = RandomWalkBias(3, 0.0, period=1e-3, seed=1, initial_bias=[0.01, -0.02, 0.03])
+    simulator = Simulator(walk)
+    context = simulator.get_mutable_context()
+    walk.get_input_port().FixValue(context, np.ones(3))
+    np.testing.assert_array_equal(walk.get_bias(context), [0.01, -0.02, 0.03])
+    simulator.AdvanceTo(0.5)
+    np.testing.assert_array_equal(walk.get_output_port().Eval(context), [1.01, 0.98, 1.03])
+    moving = RandomWalkBias(3, 0.01, period=1e-3, seed=7, initial_bias=0.5)
+    plain = RandomWalkBias(3, 0.01, period=1e-3, seed=7)
+    both = [Simulator(system) for system in (moving, plain)]
+    for simulator_, system in zip(both, (moving, plain)):
+        system.get_input_port().FixValue(simulator_.get_mutable_context(), np.zeros(3))
+        simulator_.AdvanceTo(0.2)
+    np.testing.assert_allclose(
+        moving.get_bias(both[0].get_context()) - plain.get_bias(both[1].get_context()), 0.5, atol=1e-15
+    )
+    for bad in ([0.0, 1.0], [math.nan, 0.0, 0.0], "a"):
+        with pytest.raises(ValueError, match="initial_bias"):
+            RandomWalkBias(3, 0.0, initial_bias=bad)
+
+
+def test_station_gyro_reads_its_constant_turn_on_bias_at_rest():
+    """ImuImperfections' gyro_bias_x/y/z (any sign) reach the station's gyro as a constant
+    bias from t = 0: a robot standing still reads it (mean over 0.3 s within 5 standard
+    errors of the white noise), with or without a bias walk; zero keeps the ideal IMU's
+    systems (no bias system added)."""
+    bias = np.radians([0.12, -0.08, 0.35])
+    imu = ImuImperfections(gyro_bias_x=bias[0], gyro_bias_y=bias[1], gyro_bias_z=bias[2])
+    assert not Imperfections(imu=imu).validate().is_ideal
+    builder, station = _station(imperfections=Imperfections(imu=imu))
+    assert station.sensors.imu.gyro_bias is not None and station.sensors.imu.accel_bias is None
+    log = LogVectorOutput(station.sensors.imu.angular_velocity, builder, 1e-3)
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    station.set_initial_state(context)
+    simulator.AdvanceTo(0.4)
+    gyro = log.FindLog(context).data()[:, 100:]
+    standard_error = gyro.std(axis=1) / math.sqrt(gyro.shape[1])
+    assert np.all(np.abs(gyro.mean(axis=1) - bias) < 5.0 * standard_error + 2e-4), (gyro.mean(axis=1), bias)
+    _, ideal = _station()
+    assert ideal.sensors.imu.gyro_bias is None
+
+
 # ---------------------------------------------------------------------------------------
 # Torque sensor.
 # ---------------------------------------------------------------------------------------
@@ -378,6 +425,7 @@ def test_yaml_round_trip():
         ),
         (Imperfections(encoders=EncoderImperfections(bits=-1)), "imperfections.encoders.bits"),
         (Imperfections(seed=-2), "imperfections.seed"),
+        (Imperfections(imu=ImuImperfections(gyro_bias_z=math.nan)), "imperfections.imu.gyro_bias_z"),
     ],
 )
 def test_bad_values_raise_naming_the_field(imperfections, field):

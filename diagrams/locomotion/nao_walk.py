@@ -109,6 +109,11 @@ class NaoWalkScenario:
             (``tests/test_station_base_state.py``, which prints it with ``pytest -s``).
         imperfections: the station's ``Imperfections`` (default none), e.g. the realistic IMU.
         log_period: period of every logger, s.
+        standing_start: s the robot stands in the pattern's first posture before walking
+            (``NaoWalkingController.start_delay``; default 0).
+        log_sensors: also log what a robot's own log holds, every ``log_period``: the IMU's
+            ``gyro`` and ``accel`` and the soles' ``fsr_forces`` (the station's noise; an
+            ``FsrArray`` of its own, seed 16 ``seed`` + 7) (``diagrams.locomotion.walking_log``).
         plant_config: Drake's ``MultibodyPlantConfig`` (default: 1 ms steps, point contact, SAP).
         simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``).
     """
@@ -122,6 +127,8 @@ class NaoWalkScenario:
     base_state: str = "truth_plus_noise"
     imperfections: Imperfections = dataclasses.field(default_factory=Imperfections)
     log_period: float = 0.005
+    standing_start: float = 0.0
+    log_sensors: bool = False
     plant_config: MultibodyPlantConfig = dataclasses.field(default_factory=default_plant_config)
     simulator_config: SimulatorConfig = dataclasses.field(default_factory=SimulatorConfig)
 
@@ -130,6 +137,8 @@ class NaoWalkScenario:
         check_common_fields(self)
         if self.zmp_correction_passes < 0:
             raise ValueError(f"zmp_correction_passes must be >= 0, got {self.zmp_correction_passes}")
+        if not self.standing_start >= 0.0:
+            raise ValueError(f"standing_start must be >= 0 s, got {self.standing_start}")
 
 
 def build_nao_walk_diagram(
@@ -179,6 +188,7 @@ def build_nao_walk_diagram(
             joint_stiffness=kp if stiffness_compensation else None,
             joint_damping=kd if (stiffness_compensation and velocity_lead) else None,
             zmp_correction_passes=zmp_correction_passes,
+            start_delay=scenario.standing_start,
         )
     )
     controller.set_name("nao_walking_controller")
@@ -198,6 +208,24 @@ def build_nao_walk_diagram(
     loggers = add_walking_loggers(builder, plant, controller, contact_zmp, log_period)
     loggers["sensed_state"] = LogVectorOutput(station.sensed_state, builder, log_period)
     loggers["sensed_state"].set_name("log_sensed_state")
+    if scenario.log_sensors:
+        from systems.observer.fsr_sensing import FSR_NOISE_STD, FsrArray
+        from systems.simulation.sensors import SEEDS_PER_CALL
+
+        imu = station.sensors.imu
+        loggers["gyro"] = LogVectorOutput(imu.angular_velocity, builder, log_period)
+        loggers["accel"] = LogVectorOutput(imu.linear_acceleration, builder, log_period)
+        fsr = builder.AddSystem(
+            FsrArray(
+                plant,
+                humanoid,
+                noise_std=FSR_NOISE_STD if scenario.noise else 0.0,
+                seed=SEEDS_PER_CALL * scenario.seed + 7,
+            )
+        )
+        fsr.set_name("log_fsr_array")
+        builder.Connect(plant.get_contact_results_output_port(), fsr.GetInputPort("contact_results"))
+        loggers["fsr_forces"] = LogVectorOutput(fsr.GetOutputPort("fsr_forces"), builder, log_period)
 
     visualizer = None
     if meshcat is not None:

@@ -97,6 +97,8 @@ __all__ = [
     "STILL_JOINT_SPEED",
     "STILL_MIN_DURATION",
     "at_rest_imu_bias",
+    "first_still_window",
+    "still_mask",
     "still_samples",
     "LogEstimates",
     "LogEstimationSettings",
@@ -649,10 +651,11 @@ class AtRestCalibration:
 
     Attributes:
         source: "given" (``LogEstimationSettings.noise_calibration_time``, the app's
-            ``--calibrate-first``), "detected", or "none" (no still window, or shorter than
-            ``STILL_MIN_DURATION``: the EKF starts from a zero bias; ``reason`` says why).
-        start_s, end_s: the still window from the log's first sample, s (end 0 with "none":
-            the longest still initial span found).
+            ``--calibrate-first``), "detected" (``first_still_window``), or "none" (no still
+            span of ``STILL_MIN_DURATION``: the EKF starts from a zero bias; ``reason`` says
+            why).
+        start_s, end_s: the still window from the log's first sample, s (with "none": 0 and
+            the length of the still initial span found, too short).
         samples: the window's samples.
         gyro_bias: (3,) rad/s, the window's mean gyro reading; None with "none".
         gyro_bias_std: (3,) rad/s, its standard error (sample std / sqrt(samples), white
@@ -685,20 +688,19 @@ class AtRestCalibration:
         return np.concatenate((self.gyro_bias, self.accel_bias))
 
 
-def still_samples(
+def still_mask(
     gyro: np.ndarray,
     joint_velocities: np.ndarray,
     period: float,
     gyro_noise_density: float | None = None,
     gyro_offset: float = STILL_GYRO_OFFSET,
     joint_speed: float = STILL_JOINT_SPEED,
-) -> int:
-    """The number of samples of the log's longest initial span that is still: at every
-    sample the norm of the gyro averaged over the last ``STILL_AVERAGING_TIME`` (fewer
-    samples at the start) at most sqrt(3) (``gyro_offset`` + ``STILL_NOISE_SIGMAS``
-    sigma), sigma = ``gyro_noise_density`` / sqrt(the averaging time) rad/s the averaged
-    noise's std per axis, and every joint speed at most ``joint_speed``. 0 when the log
-    starts in motion.
+) -> np.ndarray:
+    """(N,) bool: the samples at which the robot is still: the norm of the gyro averaged
+    over the last ``STILL_AVERAGING_TIME`` (fewer samples at the start) at most sqrt(3)
+    (``gyro_offset`` + ``STILL_NOISE_SIGMAS`` sigma), sigma = ``gyro_noise_density`` /
+    sqrt(the averaging time) rad/s the averaged noise's std per axis, and every joint speed
+    at most ``joint_speed``.
 
     Args:
         gyro: (N, 3) rad/s. joint_velocities: (N, n) rad/s (m/s). period: s.
@@ -717,8 +719,35 @@ def still_samples(
     still = np.linalg.norm(averaged, axis=1) <= limit
     if joint_velocities.size:
         still &= np.abs(joint_velocities).max(axis=1) <= joint_speed
+    return still
+
+
+def still_samples(
+    gyro: np.ndarray,
+    joint_velocities: np.ndarray,
+    period: float,
+    gyro_noise_density: float | None = None,
+    gyro_offset: float = STILL_GYRO_OFFSET,
+    joint_speed: float = STILL_JOINT_SPEED,
+) -> int:
+    """The number of samples of the log's longest initial span that is still
+    (``still_mask``, same arguments). 0 when the log starts in motion."""
+    still = still_mask(gyro, joint_velocities, period, gyro_noise_density, gyro_offset, joint_speed)
     moving = np.flatnonzero(~still)
     return int(moving[0]) if moving.size else len(still)
+
+
+def first_still_window(still: np.ndarray, min_samples: int) -> tuple[int, int] | None:
+    """[start, end) of the first run of at least ``min_samples`` consecutive still samples
+    (``still_mask``), or None. A log may start with the robot settling, or standing up: its
+    first still span of enough length serves all the same, its IMU bias being constant over
+    minutes."""
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], still.astype(np.int8), [0]))))
+    starts, ends = edges[0::2], edges[1::2]
+    long_enough = np.flatnonzero(ends - starts >= max(1, min_samples))
+    if not long_enough.size:
+        return None
+    return int(starts[long_enough[0]]), int(ends[long_enough[0]])
 
 
 def at_rest_imu_bias(
@@ -731,9 +760,10 @@ def at_rest_imu_bias(
     settings: EkfSettings | None = None,
 ) -> AtRestCalibration:
     """The IMU bias measured over the log's still start: the window [0, ``window``) when
-    given (the robot is known to stand still then), else the longest still initial span
-    (``still_samples`` with ``settings``' gyro noise density and stillness thresholds),
-    used when at least ``settings.still_min_duration`` long (default ``STILL_MIN_DURATION``).
+    given (the robot is known to stand still then), else the first still span of at least
+    ``settings.still_min_duration`` (default ``STILL_MIN_DURATION``; ``still_mask`` with
+    ``settings``' gyro noise density and stillness thresholds, ``first_still_window``):
+    from the log's first sample when it starts still, or after the robot has settled.
 
     What rest makes observable: the true angular velocity is 0 (but for Earth's rotation,
     7.29e-5 rad/s, taken for bias and below what matters here), so the mean gyro reading is
@@ -763,9 +793,9 @@ def at_rest_imu_bias(
                 f"the still window of {window} s (--calibrate-first) has {samples} samples; the log has {N}: "
                 "it needs 2 to the log's length"
             )
-        source = "given"
+        source, start = "given", 0
     else:
-        samples = still_samples(
+        still = still_mask(
             gyro,
             joint_velocities,
             period,
@@ -773,28 +803,34 @@ def at_rest_imu_bias(
             settings.still_gyro_offset,
             settings.still_joint_speed,
         )
-        if samples * period < settings.still_min_duration:
+        window_samples = first_still_window(still, int(math.ceil(settings.still_min_duration / period - 1e-9)))
+        if window_samples is None:
+            moving = np.flatnonzero(~still)
+            samples = int(moving[0]) if moving.size else N
             return AtRestCalibration(
                 "none",
                 0.0,
                 samples * period,
                 samples,
                 reason=(
-                    f"the log starts still for {samples * period:.3g} s only (at least "
-                    f"{settings.still_min_duration:g} s needed): the EKF starts from a zero IMU bias"
+                    f"the log is never still for {settings.still_min_duration:g} s (the gyro and the joint speeds "
+                    f"against EkfSettings' stillness thresholds; it starts still for {samples * period:.3g} s): "
+                    "the EKF starts from a zero IMU bias"
                 ),
             )
+        start, end = window_samples
+        samples = end - start
         source = "detected"
-    w = gyro[:samples]
+    w = gyro[start : start + samples]
     gyro_bias = w.mean(axis=0)
     standard_error = w.std(axis=0, ddof=1) / math.sqrt(samples)
-    f = specific_force[:samples].mean(axis=0)
+    f = specific_force[start : start + samples].mean(axis=0)
     norm = float(np.linalg.norm(f))
     error = norm - gravity
     return AtRestCalibration(
         source,
-        0.0,
-        samples * period,
+        start * period,
+        (start + samples) * period,
         samples,
         gyro_bias=gyro_bias,
         gyro_bias_std=np.hypot(standard_error, STILL_GYRO_BIAS_STD_FLOOR),
@@ -821,8 +857,9 @@ def _estimate_base_state(
     axis, whose world z component it contributes; or its FSRs' sum) through a
     ``ContactHysteresis`` scaled to the robot's weight. With bias states and
     ``settings.at_rest_bias`` the filter starts from the bias measured over the log's still
-    start (``at_rest_imu_bias``). Returns the filter's IMU bias estimate read with the base
-    state at each sample ((N, 6)), or None without bias states
+    start (``at_rest_imu_bias``). A foot that slips drops its kinematic correction
+    (``settings.ekf.slip_speed``, the filter's E13). Returns the filter's IMU bias estimate
+    read with the base state at each sample ((N, 6)), or None without bias states
     (``settings.estimate_imu_bias``), and the ``AtRestCalibration`` (None unless both)."""
     plant = robot.plant
     topology = floating_base_topology(plant)
@@ -866,6 +903,7 @@ def _estimate_base_state(
         accel_bias_random_walk=ekf.accel_bias_random_walk,
         estimate_imu_bias=settings.estimate_imu_bias,
         level_ground_tilt_std=LEVEL_GROUND_TILT_STD if settings.estimate_imu_bias else None,
+        slip_speed=ekf.slip_speed,
         **bias_start,
     )
     context = estimator.CreateDefaultContext()
@@ -1106,7 +1144,8 @@ def estimate_from_log(
 def skipped_estimates(robot: EstimatorPlant, inputs: LogInputs) -> dict[str, str]:
     """{estimate: why it cannot be made} on the log ``inputs`` (``LogEstimates.
     not_estimated``): the internal residual without joint torques or without every F/T
-    foot's full wrench, the external residual without the latter, the detector without
+    foot's full wrench, the external residual without the latter (both on a robot whose
+    feet have no F/T sensor at all: the ground's wrenches are unknown), the detector without
     both residuals, the localizer without the detector or on a model it cannot run on
     (``localization_unavailable``)."""
     skipped = {}
@@ -1115,6 +1154,11 @@ def skipped_estimates(robot: EstimatorPlant, inputs: LogInputs) -> dict[str, str
         wrenches = (
             f"the feet {list(inputs.missing_wrenches)} have no 6-axis F/T wrench in the log (a normal force at most): "
             "the residuals subtract the feet's full wrenches as known wrenches"
+        )
+    elif not robot.ft_frames and robot.humanoid is not None and robot.humanoid.sole_frames:
+        wrenches = (
+            "the robot has no foot F/T sensors: the ground's wrenches on its feet are unknown, and the residuals "
+            "would report them as an external contact (the robot's weight)"
         )
     if inputs.joint_torque is None:
         skipped[INTERNAL_RESIDUAL] = (

@@ -6,8 +6,8 @@
 
 in its right-invariant form with kinematic (leg odometry) corrections and contact switching,
 bias-free by default and optionally with IMU bias states (E11, the paper's "imperfect"
-InEKF of its section on IMU biases). The equation labels (E1)-(E11) are this module's;
-each names the part of the paper it implements.
+InEKF of its section on IMU biases). The equation labels (E1)-(E13) are this module's;
+(E1)-(E11) each name the part of the paper they implement, (E12)-(E13) are additions.
 
 State (the IMU frame I in world W, all in SI units), an element of SE_{2+K}(3)::
 
@@ -113,6 +113,23 @@ tilt estimator for humanoid robots", Humanoids 2017 / RA-L 2020, whose kinematic
 comes from the support foot).
 On a floor tilted by α the estimated tilt follows the floor: an error of about α.
 
+(E13) Slip test (optional, ``slip_speed``): a foot that slips or rolls breaks E6's fixed
+contact point, and trusted it drags the base estimate along. At each update, before the
+correction, each foot flagged in contact has its world point from the predicted state and
+the encoders, u_j = R̄ h_j + p̄ (the foot point E8 anchors), and its velocity differenced
+between consecutive updates and low-passed over τ = ``SLIP_SPEED_TIME_CONSTANT`` (20 ms)::
+
+    w_j ← w_j + α ((u_j − u_j⁻) / Δt − w_j),   α = min(1, Δt / τ),   w_j = 0 at touch-down.
+
+A foot with |w_j| > ``slip_speed`` is slipping: its correction is dropped and it leaves the
+state (E9) for as long as it slips; once below, it comes back as a new contact (E8),
+anchored where it now stands, so the filter does not pull the base back to where the foot
+was. A stance foot's |w_j| is the filter's own noise: at most 26 mm/s on nao_like's
+realistic walk at 1 kHz, 63 mm/s on its 99 Hz log (``EkfSettings.slip_speed``). A single
+difference (no low-pass) is too noisy: a 14-bit encoder's step moves the foot point by
+~0.1 mm, 0.1 m/s over 1 ms (measured: up to 0.5 m/s on hrp4_like standing); the low-pass
+bounds a step's effect to step / τ and detects a 0.3 m/s slide in ~0.4 τ.
+
 Default noises: a Bosch BMI088-class IMU (Bosch Sensortec, "BMI088 6-axis Motion Tracking
 for High-performance Applications", data sheet BST-BMI088-DS001: gyro output noise density
 0.014 °/s/√Hz, accelerometer noise density 175 µg/√Hz), contact-point velocity noise
@@ -200,6 +217,15 @@ LEVEL_GROUND_MAX_RATE = 0.01
 #: Chi-square gate (2 dof, 1e-3 false rejection) of a foot's level-ground innovation: a foot
 #: beyond it is not flat on the floor and is left out of (E12).
 LEVEL_GROUND_GATE = 13.8155
+#: The slip test's (E13) default speed threshold on a log, m/s: above the stance feet's
+#: speeds measured in the simulated realistic world (at most 26 mm/s at 1 kHz, 63 mm/s on a
+#: 99 Hz log), see ``EkfSettings.slip_speed``.
+SLIP_SPEED = 0.1
+#: Time constant of the slip test's low-pass filter on a foot's velocity (E13), s: a 14-bit
+#: encoder's step (3.8e-4 rad, ~0.1-0.3 mm at a foot 0.3-0.7 m away) changes w_j by at most
+#: step / τ, 5-15 mm/s, where a single 1 ms difference reads 0.1-0.3 m/s; a 0.3 m/s slide
+#: crosses 0.1 m/s after τ ln 1.5 = 8 ms (2.4 mm of slide trusted).
+SLIP_SPEED_TIME_CONSTANT = 0.02
 #: Default normal-force threshold of the F/T contact test, N.
 CONTACT_FORCE_THRESHOLD = 20.0
 #: Default contact threshold of :class:`FootContactFromFsr` as a fraction of the robot's
@@ -673,6 +699,7 @@ def load_compiled_filter_steps() -> None:
     ekf.correct_kinematics(feet, flags)
     ekf.correct_level_ground(np.tile([0.0, 0.0, 1.0], (2, 1)), LEVEL_GROUND_TILT_STD)
     ekf.propagate(np.zeros(3), specific_force, 1e-3)
+    steps.foot_slip_step(np.eye(3), np.zeros(3), feet, flags, np.zeros(16), 0.05, 1e-3, SLIP_SPEED)
 
 
 # ---------------------------------------------------------------------------------------
@@ -874,13 +901,18 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         base_pose: 7, the free joint's q layout: quaternion [w, x, y, z] of R_WB, then p_WBo, m.
         base_velocity: 6, the free joint's v layout: [ω_WB; v_WBo] in world, rad/s and m/s (E10).
         valid: 1, 1.0 when at least one foot was in contact at the last update (its point is
-            in the state and anchors it), 0.0 when the filter runs on the IMU alone.
+            in the state and anchors it; with the slip test, one not slipping), 0.0 when the
+            filter runs on the IMU alone.
         standard_deviation: 9, sqrt of P's diagonal for ξ_R (rad), ξ_v (m/s), ξ_p (m)
             (always 9, with or without bias states).
         imu_bias: 6, the bias estimate [b̄_g (rad/s); b̄_a (m/s²)] in the IMU frame I, the
             amounts subtracted from the gyro and accelerometer (E11); 0 without bias states.
         imu_bias_standard_deviation: 6, sqrt of P's diagonal for ζ_g (rad/s) and ζ_a
             (m/s²); 0 without bias states (the bias is then taken as known, 0).
+        foot_speed: one per foot, |w_j| of the slip test (E13), m/s (0 for a foot not in
+            contact at the last two updates, and always without the test).
+        slip_count: one per foot, the updates whose correction of that foot was dropped as a
+            slip (E13) since the start (0 without the test).
 
     With bias states the output angular velocity uses the corrected gyro ω̃ − b̄_g.
     Every input is checked: NaN or inf raises a ValueError naming the port.
@@ -910,6 +942,7 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         initial_imu_bias: np.ndarray | None = None,
         level_ground_tilt_std: float | None = None,
         level_ground_period: float = LEVEL_GROUND_PERIOD,
+        slip_speed: float | None = None,
     ):
         """Args:
             plant: a finalized floating-base plant (for forward kinematics and gravity).
@@ -933,6 +966,13 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
                 corrects every 10 updates, 101 ms (``level_ground_period_used``). A sole's tilt
                 error (floor, sole rocking) is slow, not white: fused at 1 kHz it would count a
                 thousand times a second.
+            slip_speed: the slip test (E13), m/s: a foot flagged in contact whose world
+                velocity, from the predicted state and the encoders and low-passed over
+                ``SLIP_SPEED_TIME_CONSTANT``, exceeds it slips or rolls, and its kinematic
+                correction is dropped (the foot leaves the state, E9) until it is below it
+                again, when it is re-anchored where it stands (E8). None (default): no test,
+                every flagged foot corrects (the online station's filter). ``SLIP_SPEED``
+                (0.1 m/s) is the logs' default (``EkfSettings.slip_speed``).
 
         Raises:
             ValueError: bad plant or frames, bad noise parameters or period.
@@ -992,6 +1032,11 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
             self._tilt_std = positive_number(level_ground_tilt_std, f"{who}: level_ground_tilt_std")
         every = positive_number(level_ground_period, f"{who}: level_ground_period") / self._period
         self._level_ground_every = max(1, int(round(every)))
+        self._slip_speed = None
+        if slip_speed is not None:
+            self._slip_speed = positive_number(slip_speed, f"{who}: slip_speed")
+        # The slip test's low-pass gain per update (E13).
+        self._slip_alpha = min(1.0, self._period / SLIP_SPEED_TIME_CONSTANT)
         x0 = self._initial_state(initial_base_pose, initial_base_velocity)
         n = topology.num_joints
         self._omega = self.DeclareVectorInputPort("angular_velocity", 3)
@@ -1007,6 +1052,10 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         # The soles' world normals R̄ n_j at the last level-ground update (K x 3; zero rows:
         # unknown): E12 uses the feet whose soles have not turned since.
         self._normals_index = self.DeclareDiscreteState(np.zeros(3 * len(frames)))
+        # The slip test's state (E13, ``invariant_ekf_steps.foot_slip_step``): the feet's
+        # world points u_j at the last update (3 K, m), their low-passed velocities w_j (3 K,
+        # m/s), flagged at the last update (K), and the updates dropped as a slip (K).
+        self._slip_index = self.DeclareDiscreteState(np.zeros(8 * len(frames)))
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._Update)
         xd = {self.xd_ticket()}
         # The base pose and velocity (E10), computed once per state for both outputs.
@@ -1021,6 +1070,13 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         self.DeclareVectorOutputPort("standard_deviation", 9, self._CalcStd, prerequisites_of_calc=xd)
         self.DeclareVectorOutputPort("imu_bias", 6, self._CalcBias, prerequisites_of_calc=xd)
         self.DeclareVectorOutputPort("imu_bias_standard_deviation", 6, self._CalcBiasStd, prerequisites_of_calc=xd)
+        K = len(frames)
+        self.DeclareVectorOutputPort(
+            "foot_speed", K, lambda c, o: self._CalcSlipPart(c, o, "speed"), prerequisites_of_calc=xd
+        )
+        self.DeclareVectorOutputPort(
+            "slip_count", K, lambda c, o: self._CalcSlipPart(c, o, "count"), prerequisites_of_calc=xd
+        )
 
     @property
     def period(self) -> float:
@@ -1062,11 +1118,17 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         ):
             context.SetDiscreteState(index, value)
         context.SetDiscreteState(self._normals_index, np.zeros(3 * len(self._foot_frames)))
+        context.SetDiscreteState(self._slip_index, np.zeros(8 * len(self._foot_frames)))
 
     @property
     def level_ground_tilt_std(self) -> float | None:
         """σ_t of the level-ground correction (E12), rad; None when off."""
         return self._tilt_std
+
+    @property
+    def slip_speed(self) -> float | None:
+        """The slip test's speed threshold (E13), m/s; None when off."""
+        return self._slip_speed
 
     def _foot_kinematics(
         self, joint_positions: np.ndarray, with_normals: bool = True
@@ -1096,6 +1158,15 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         else:
             h = normals = np.zeros((core.num_feet, 3))
         world_normals = context.get_discrete_state(self._normals_index).value()
+        if self._slip_speed is not None:
+            # E13: the feet that slip are left out of the correction (and the state).
+            R, _, p = core.navigation_state(x)
+            slip, flags = steps.foot_slip_step(
+                np.array(R), np.array(p), np.ascontiguousarray(h, dtype=float), flags,
+                np.array(context.get_discrete_state(self._slip_index).value()),
+                self._slip_alpha, self._period, self._slip_speed,
+            )  # fmt: skip
+            discrete_state.set_value(self._slip_index, slip)
         if not level_ground:
             # Most steps: the correction (E6-E9) and the propagation in one compiled call.
             x = core.correct_and_propagate(x, h, flags, omega, accel, self._period)
@@ -1144,6 +1215,14 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
     def _CalcStd(self, context: Context, output: BasicVector) -> None:
         P = self._core.covariance_of(context.get_discrete_state(self._filter_index).value())
         output.SetFromVector(np.sqrt(np.maximum(np.diag(P)[:9], 0.0)))
+
+    def _CalcSlipPart(self, context: Context, output: BasicVector, part: str) -> None:
+        K = len(self._foot_frames)
+        slip = context.get_discrete_state(self._slip_index).value()
+        if part == "speed":
+            output.SetFromVector(np.linalg.norm(slip[3 * K : 6 * K].reshape(K, 3), axis=1))
+        else:
+            output.SetFromVector(slip[7 * K :])
 
     def _CalcBias(self, context: Context, output: BasicVector) -> None:
         output.SetFromVector(self._core.imu_bias_of(context.get_discrete_state(self._filter_index).value()))

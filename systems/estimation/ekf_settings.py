@@ -1,7 +1,8 @@
 """The invariant EKF's settings for a recorded log (``diagrams.residuals.log_estimation``):
 the IMU's noise densities and bias random walks, the contact hysteresis thresholds and the
-thresholds of the at-rest IMU bias initialisation, with their defaults and each default's
-justification (a data sheet or a measured sensor figure; none is tuned on a log).
+thresholds of the at-rest IMU bias initialisation, and the slip test's speed, with their
+defaults and each default's justification (a data sheet or a measured sensor figure; none is
+tuned on a log).
 
 Set them for a robot's IMU in a YAML file (``apps.estimate_from_log --estimator-settings
 FILE.yaml``), read by ``pydrake.common.yaml.yaml_load_typed`` on :class:`EkfSettings`; keys
@@ -28,6 +29,7 @@ from systems.estimation.base_state_estimator import (
     CONTACT_ON_WEIGHT_FRACTION,
     GYRO_BIAS_RANDOM_WALK,
     GYRO_NOISE_DENSITY,
+    SLIP_SPEED,
 )
 
 #: The at-rest initialisation's defaults (``diagrams.residuals.log_estimation``'s
@@ -69,6 +71,18 @@ class EkfSettings:
             for (``STILL_GYRO_OFFSET``, the BMI088's ±1 °/s zero-rate offset).
         still_joint_speed: rad/s (m/s), a joint speed beyond it is motion
             (``STILL_JOINT_SPEED``, 0.12: 6 sigma of a 17-bit encoder differenced at 1 kHz).
+        slip_speed: m/s, a foot flagged in contact whose kinematic world velocity (E13 of
+            ``base_state_estimator``: from the filter's predicted state and the encoders,
+            low-passed over 20 ms) exceeds it slips or rolls: its kinematic correction is
+            dropped until it stops, then it is re-anchored. Default 0.1 (``SLIP_SPEED``),
+            above every stance foot's speed measured in the simulated realistic world (no
+            slip there; the filter's and the sensors' noise): at 1 kHz, nao_like walking 12 s
+            with the realistic IMU at most 26 mm/s (99.9th percentile 25), 24 mm/s with
+            14-bit encoders, hrp4_like standing 4 mm/s (22 mm/s with 14-bit encoders); the
+            99 Hz jittery walking log of ``diagrams.locomotion.walking_log`` through this
+            pipeline at most 43 mm/s in mid-stance and 63 mm/s at a touch-down (seeds 0 and 1,
+            99.9th percentiles 43-48 mm/s). A third of a 0.3 m/s slide, which it drops after
+            ~8 ms at 1 kHz (tests/test_base_state_estimator.py).
     """
 
     gyro_noise_density: float = GYRO_NOISE_DENSITY
@@ -80,6 +94,7 @@ class EkfSettings:
     still_min_duration: float = STILL_MIN_DURATION
     still_gyro_offset: float = STILL_GYRO_OFFSET
     still_joint_speed: float = STILL_JOINT_SPEED
+    slip_speed: float = SLIP_SPEED
 
 
 def check_ekf_settings(settings: EkfSettings, where: str = "EKF settings") -> EkfSettings:

@@ -4,7 +4,7 @@
 simulations, with a 21 x 21 covariance (two feet and the IMU bias states). In numpy its
 small-matrix operations cost mostly call overhead, which compiling them removes from each
 propagation and kinematic correction (measured when this was chosen; see the git history of
-BENCHMARKS.md). The equations and their labels (E1)-(E11) are those of
+BENCHMARKS.md). The equations and their labels (E1)-(E13) are those of
 ``base_state_estimator``'s docstring; the filter's state is passed as arrays:
 
     R (3 x 3), v (3), p (3): R_WI, v_WIo (m/s), p_WIo (m);
@@ -251,3 +251,38 @@ def correct_and_propagate_state_vector(
         s += 6
     out[s : s + n * n] = P.reshape(n * n)
     return out
+
+
+@njit(cache=True)
+def foot_slip_step(R, p, h, flags, slip, alpha: float, dt: float, slip_speed: float):
+    """The slip test (E13) of the feet flagged in contact, before their correction: each
+    foot point's world position from the predicted state, u_j = R̄ h_j + p̄ (m), its velocity
+    (u_j − u_j⁻) / dt against the previous update's u_j⁻ low-passed, w_j ← w_j + α ((u_j −
+    u_j⁻) / dt − w_j) (m/s; reset to 0 for a foot not flagged at both updates), and the feet
+    flagged at both whose |w_j| exceeds ``slip_speed`` (m/s) are slipping. ``slip``: the test's
+    state, [u⁻ (3 K); w (3 K); flagged at the previous update (K); slip count (K)]. Returns
+    (the new ``slip``, the flags of the feet whose correction is used: flagged and not
+    slipping)."""
+    K = flags.shape[0]
+    out = slip.copy()
+    used = flags.copy()
+    for j in range(K):
+        u = R @ h[j] + p
+        s = 3 * j
+        t = 3 * K + s
+        speed2 = 0.0
+        if flags[j] and slip[6 * K + j] > 0.5:
+            for i in range(3):
+                w = slip[t + i] + alpha * ((u[i] - slip[s + i]) / dt - slip[t + i])
+                out[t + i] = w
+                speed2 += w * w
+        else:
+            for i in range(3):
+                out[t + i] = 0.0
+        for i in range(3):
+            out[s + i] = u[i] if flags[j] else 0.0
+        out[6 * K + j] = 1.0 if flags[j] else 0.0
+        if flags[j] and speed2 > slip_speed * slip_speed:
+            used[j] = False
+            out[7 * K + j] += 1.0
+    return out, used

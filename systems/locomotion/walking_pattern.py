@@ -857,7 +857,8 @@ class NaoWalkingController(LeafSystem):
         sole_targets: (6) left then right sole frame origin targets, world, m.
         planned_contact: (2) 1.0 where the plan has the left / right foot on the ground.
 
-    Before t = 0 and after the pattern's end the first / last sample is held.
+    Before t = ``start_delay`` (the pattern's t = 0) and after the pattern's end the first /
+    last sample is held.
     """
 
     def __init__(
@@ -871,6 +872,7 @@ class NaoWalkingController(LeafSystem):
         joint_stiffness: np.ndarray | None = None,
         joint_damping: np.ndarray | None = None,
         zmp_correction_passes: int = 1,
+        start_delay: float = 0.0,
     ):
         """Builds the pattern and the joint targets.
 
@@ -887,6 +889,8 @@ class NaoWalkingController(LeafSystem):
                 (only with ``joint_stiffness``), or None.
             zmp_correction_passes: passes of ``correct_for_multibody_zmp`` (Kajita 2003's
                 multibody ZMP correction; 0 = the cart-table CoM only).
+            start_delay: s (>= 0) the robot stands in the pattern's first posture before the
+                pattern starts (a standing start, as a real log's).
 
         Raises:
             ValueError: bad parameters, unreachable steps, joint limits (see
@@ -903,6 +907,10 @@ class NaoWalkingController(LeafSystem):
         com0 = plant.CalcCenterOfMassPositionInWorld(context, [humanoid.model_instance])
         if not (isinstance(zmp_correction_passes, (int, np.integer)) and zmp_correction_passes >= 0):
             raise ValueError(f"zmp_correction_passes must be an integer >= 0, got {zmp_correction_passes!r}")
+        if not (isinstance(start_delay, (int, float)) and math.isfinite(start_delay) and start_delay >= 0.0):
+            raise ValueError(f"start_delay must be a finite number of seconds >= 0, got {start_delay!r}")
+        #: s the first posture is held before the pattern starts.
+        self.start_delay = float(start_delay)
         pattern = make_walking_pattern(self.parameters, soles0["left"], soles0["right"], com0)
         #: The cart-table pattern before the multibody ZMP correction.
         self.cart_table_pattern = pattern
@@ -942,14 +950,14 @@ class NaoWalkingController(LeafSystem):
 
     @property
     def duration(self) -> float:
-        """Length of the pattern, s."""
-        return float(self._t[-1])
+        """Length of the pattern plus ``start_delay``, s."""
+        return self.start_delay + float(self._t[-1])
 
     def sample(self, table: np.ndarray, t: float) -> np.ndarray:
-        """Linear interpolation of a (K, m) table on the pattern grid at time t (held at
-        the ends)."""
+        """Linear interpolation of a (K, m) table on the pattern grid at time t of the
+        simulation (the pattern's t - ``start_delay``; held at the ends)."""
         T = self.parameters.sample_period
-        s = min(max(t / T, 0.0), self._t.size - 1.0)
+        s = min(max((t - self.start_delay) / T, 0.0), self._t.size - 1.0)
         k = min(int(s), self._t.size - 2)
         a = s - k
         return (1.0 - a) * table[k] + a * table[k + 1]
@@ -967,7 +975,8 @@ class NaoWalkingController(LeafSystem):
         output.SetFromVector(self.sample(self._soles, context.get_time()))
 
     def _CalcContact(self, context: Context, output: BasicVector) -> None:
-        k = min(max(int(round(context.get_time() / self.parameters.sample_period)), 0), self._t.size - 1)
+        t = context.get_time() - self.start_delay
+        k = min(max(int(round(t / self.parameters.sample_period)), 0), self._t.size - 1)
         output.SetFromVector(self._contact[k])
 
 

@@ -62,12 +62,26 @@ class ImuImperfections:
             accelerometer noise density in the +-3 g range, typ.).
         accel_bias_random_walk: sigma_ba, m/s^3/sqrt(Hz). Realistic: 3.0e-3 (EuRoC
             sensor.yaml, ADIS16448).
+        gyro_bias_x, gyro_bias_y, gyro_bias_z: the gyro's constant turn-on bias per IMU
+            axis, rad/s (any sign), from the start of the run (the bias walk starts there).
+            Real humanoid IMUs show 0.1-0.5 deg/s (e.g. the BMI088's zero-rate offset is
+            +-1 deg/s max. after soldering); the log test bed uses 0.35 deg/s about the
+            vertical (``diagrams.locomotion.walking_log``). Realistic: 0 (the online
+            station's filter learns no bias at start: its gyro counts as calibrated at
+            start-up, as a robot's boot-time calibration does).
     """
 
     gyro_noise_density: float = 0.0
     gyro_bias_random_walk: float = 0.0
     accel_noise_density: float = 0.0
     accel_bias_random_walk: float = 0.0
+    gyro_bias_x: float = 0.0
+    gyro_bias_y: float = 0.0
+    gyro_bias_z: float = 0.0
+
+    def gyro_turn_on_bias(self) -> np.ndarray:
+        """(3,) rad/s: [gyro_bias_x, gyro_bias_y, gyro_bias_z]."""
+        return np.array([self.gyro_bias_x, self.gyro_bias_y, self.gyro_bias_z], dtype=float)
 
 
 @dataclass
@@ -207,7 +221,7 @@ class Imperfections:
                     raise ValueError(f"{path} must be a percentage in [0, 100), got {value!r}")
                 if f.name == "smoothing_velocity" and not value > 0.0:
                     raise ValueError(f"{path} must be > 0 rad/s, got {value!r}")
-                if value < 0.0:
+                if value < 0.0 and not f.name.startswith("gyro_bias_"):
                     raise ValueError(f"{path} must be >= 0, got {value!r}")
         return self
 

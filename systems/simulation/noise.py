@@ -190,8 +190,9 @@ class RandomWalkBias(LeafSystem):
 
     The bias b is discrete state, updated every ``period`` T seconds:
     b_{k+1} = b_k + sigma sqrt(T) n_k, n_k ~ N(0, I) a pure function of (seed, k) (see
-    ``SampledNoise``), b_0 = 0 (the bias is calibrated at start-up). So the bias at time
-    t = k T has standard deviation sigma sqrt(t) per entry (Kalibr's "bias random walk"
+    ``SampledNoise``), b_0 = ``initial_bias`` (default 0: the bias is calibrated at
+    start-up; else the sensor's constant turn-on bias). So the bias at time t = k T is b_0
+    plus a walk of standard deviation sigma sqrt(t) per entry (Kalibr's "bias random walk"
     model, sigma in signal units per sqrt(s), i.e. per s per sqrt(Hz)).
 
     With ``white_noise_std`` the system also adds the white noise w(t) of a
@@ -213,9 +214,11 @@ class RandomWalkBias(LeafSystem):
         white_noise_std: the white noise's standard deviation, scalar or ``size`` entries
             (>= 0), signal units; None (default): none.
         white_noise_seed: its seed (non-negative integer; needed with ``white_noise_std``).
+        initial_bias: b_0, scalar or ``size`` finite entries, signal units (default 0).
 
     Raises:
-        ValueError: bad size, random_walk, period, seed or white noise (the message names it),
+        ValueError: bad size, random_walk, period, seed, white noise or initial bias (the
+            message names it),
             NaN/inf on ``clean`` (at evaluation).
     """
 
@@ -228,6 +231,7 @@ class RandomWalkBias(LeafSystem):
         *,
         white_noise_std=None,
         white_noise_seed: int | None = None,
+        initial_bias=0.0,
     ):
         super().__init__()
         if isinstance(size, (bool, np.bool_)) or not isinstance(size, (int, np.integer)) or size < 1:
@@ -242,7 +246,17 @@ class RandomWalkBias(LeafSystem):
         self._white = SampledNoise(int(size), white_std, period, white_seed)
         self._period = period
         self._clean = self.DeclareVectorInputPort("clean", int(size))
-        self._bias = self.DeclareDiscreteState(int(size))
+        try:
+            initial = np.asarray(initial_bias, dtype=float)
+        except (TypeError, ValueError):
+            initial = np.full(1, np.nan)
+        if initial.ndim == 0:
+            initial = np.full(int(size), float(initial))
+        if initial.shape != (int(size),) or not np.isfinite(initial).all():
+            raise ValueError(
+                f"initial_bias must be a finite scalar or {int(size)} finite entries, got {initial_bias!r}"
+            )
+        self._bias = self.DeclareDiscreteState(initial)
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._Update)
         self.DeclareVectorOutputPort("biased", int(size), self._CalcBiased)
 

@@ -599,6 +599,7 @@ def add_imu(
     name: str = "imu",
     gyro_bias_random_walk: float = 0.0,
     accel_bias_random_walk: float = 0.0,
+    gyro_turn_on_bias=(0.0, 0.0, 0.0),
 ) -> Imu:
     """Adds a gyroscope and an accelerometer at ``frame`` (on its body), with noise.
 
@@ -623,6 +624,9 @@ def add_imu(
             noise: bias std sigma sqrt(t). Default 0 (none).
         accel_bias_random_walk: the same for the accelerometer, m/s^3/sqrt(Hz) (seed
             ``seed`` + 3000003).
+        gyro_turn_on_bias: the gyro's constant bias at start (3 entries, rad/s, IMU frame),
+            the bias walk's start: non-zero adds the gyro's RandomWalkBias even without a
+            walk. Default 0 (a gyro calibrated at start-up).
 
     Returns:
         The Imu handles (output ports ``angular_velocity``, ``linear_acceleration``).
@@ -643,6 +647,9 @@ def add_imu(
         "accel": _std(accel_bias_random_walk, 3, "accel_bias_random_walk", who),
     }
     period, seed = _period_seed(period, seed, who)
+    turn_on = {"gyro": np.asarray(gyro_turn_on_bias, dtype=float), "accel": np.zeros(3)}
+    if turn_on["gyro"].shape != (3,) or not np.isfinite(turn_on["gyro"]).all():
+        raise ValueError(f"{who}: gyro_turn_on_bias must be 3 finite rad/s, got {gyro_turn_on_bias!r}")
     body = frame.body()
     X_BS = RigidTransform(frame.GetFixedPoseInBodyFrame())
     gravity = np.asarray(plant.gravity_field().gravity_vector(), dtype=float)
@@ -659,7 +666,7 @@ def add_imu(
     measurements = {"gyro": gyro.get_measurement_output_port(), "accel": accel.get_measurement_output_port()}
     stds = {"gyro": gyro_std, "accel": accel_std}
     for kind, noise_offset, bias_offset in (("gyro", 0, 2000003), ("accel", 1000003, 3000003)):
-        if np.any(walks[kind] > 0.0):
+        if np.any(walks[kind] > 0.0) or np.any(turn_on[kind] != 0.0):
             system = builder.AddSystem(
                 RandomWalkBias(
                     3,
@@ -668,6 +675,7 @@ def add_imu(
                     seed + bias_offset,
                     white_noise_std=stds[kind],
                     white_noise_seed=seed + noise_offset,
+                    initial_bias=turn_on[kind],
                 )
             )
             system.set_name(f"{name}_{kind}_noise_and_bias")
@@ -1028,6 +1036,7 @@ def add_sensors(
         name=f"{name_prefix}imu",
         gyro_bias_random_walk=imp.imu.gyro_bias_random_walk,
         accel_bias_random_walk=imp.imu.accel_bias_random_walk,
+        gyro_turn_on_bias=imp.imu.gyro_turn_on_bias(),
     )
 
     base = None

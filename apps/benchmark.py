@@ -16,6 +16,12 @@ generated (``make docs``). For each humanoid model it prints the microseconds pe
 each as a ratio to the ``CalcMassMatrix`` unit measured in the same run, so that the ratios
 hold on a noisy machine. Each figure is the median over several batches at random states.
 
+The three residuals (classical, internal, external; one shared model) are timed per update,
+and, on ``hrp4_like`` and TALOS (``--model all``), beside their obvious peer (issue 33): the
+same residuals as a plain loop on Pinocchio's C++ kernels
+(``systems.residuals.pinocchio_peer``), with the ratio project / peer and the largest
+relative difference of their outputs over ``--peer-steps`` updates of one input sequence.
+
 It also times the push-and-comply closed loop (``hrp4_like``, 1 ms steps, the scenario's
 contact solver, its first ``--loop-seconds`` with the push moved to start at once): the
 station alone (plant with contact, sensors, PD + gravity; constant posture), the whole internal-residual loop, and
@@ -57,7 +63,7 @@ from apps.runner import (
     run_app,
     write_metrics,
 )
-from models import MODEL_NAMES, add_humanoid
+from models import MODEL_NAMES, MODELS_DIR, add_humanoid
 from systems.dynamics.floating_base import FloatingBaseDynamics
 from systems.residuals.momentum_residuals import ClassicalResidual, ExternalResidual, InternalResidual, ResidualModel
 
@@ -72,6 +78,10 @@ FLOORS = {
     "fast_compute_floor_model": "hrp4_like",
     # The residual estimators' issue: classical + internal + external, one update.
     "three_residuals_update_max_us": 100.0,
+    # Issue 33: the three residuals' bank against the same residuals as a plain loop on
+    # Pinocchio (benchmark_residual_peer), per update; goal 0.5x the peer.
+    "residual_bank_max_ratio_to_peer": 1.0,
+    "residual_bank_max_ratio_to_mass_matrix": 6.0,  # x one CalcMassMatrix at a new state, same run
     # The Kalman force observer's throughput on a real recording.
     "observer_min_samples_per_s": 20000.0,
     # The contact localizer (Flacco et al. Sec. VI): one update.
@@ -91,6 +101,23 @@ def _median_microseconds(call: Callable[[int], object], calls: int, batches: int
             call(i)
         samples.append((time.perf_counter() - start) / calls * 1e6)
     return statistics.median(samples)
+
+
+def _interleaved_median_microseconds(
+    calls_by_name: dict[str, Callable[[int], object]], calls: int, batches: int
+) -> dict[str, float]:
+    """``_median_microseconds`` of several functions, their batches interleaved (one batch of
+    each in turn), so that a change of the machine's load during the run falls on all."""
+    samples: dict[str, list[float]] = {name: [] for name in calls_by_name}
+    for call in calls_by_name.values():
+        call(0)  # warm up
+    for _ in range(batches):
+        for name, call in calls_by_name.items():
+            start = time.perf_counter()
+            for i in range(calls):
+                call(i)
+            samples[name].append((time.perf_counter() - start) / calls * 1e6)
+    return {name: statistics.median(values) for name, values in samples.items()}
 
 
 def _random_states(plant: MultibodyPlant, count: int, seed: int) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -152,6 +179,28 @@ def benchmark_model(name: str, *, calls: int = 300, batches: int = 7, reference_
     return results
 
 
+def _project_residual_bank(plant: MultibodyPlant, frames, torque: np.ndarray, wrenches: np.ndarray, x0: np.ndarray):
+    """The project's classical, internal and external residuals sharing one ResidualModel
+    (gain 35 1/s, 1 ms), each with a context whose torque and wrench inputs are fixed; returns
+    (residuals, contexts, the fixed state input values)."""
+    model = ResidualModel(plant)
+    residuals = [
+        ClassicalResidual(plant, 35.0, known_wrench_frames=frames, model=model),
+        InternalResidual(plant, 35.0, known_wrench_frames=frames, model=model),
+        ExternalResidual(plant, 35.0, known_wrench_frames=frames, model=model),
+    ]
+    contexts = []
+    for residual in residuals:  # the same sensor signals feed all three, as in a diagram
+        context = residual.CreateDefaultContext()
+        if residual.HasInputPort("measured_torque"):
+            residual.GetInputPort("measured_torque").FixValue(context, torque)
+        if frames:
+            residual.GetInputPort("known_wrenches").FixValue(context, wrenches)
+        contexts.append(context)
+    fixed = [residual.GetInputPort("state").FixValue(context, x0) for residual, context in zip(residuals, contexts)]
+    return residuals, contexts, fixed
+
+
 def benchmark_residual_update(name: str, *, calls: int = 200, batches: int = 7) -> dict:
     """One update of the classical, internal and external residuals (sharing one
     ResidualModel, with the humanoid's F/T sensors as known wrenches) at a new state [us]."""
@@ -161,26 +210,9 @@ def benchmark_residual_update(name: str, *, calls: int = 200, batches: int = 7) 
     states = _random_states(plant, 16, seed=1)
     n = plant.num_velocities() - 6
     frames = tuple(handles.ft_sensor_frames.values())
-    model = ResidualModel(plant)
-    residuals = [
-        ClassicalResidual(plant, 35.0, known_wrench_frames=frames, model=model),
-        InternalResidual(plant, 35.0, known_wrench_frames=frames, model=model),
-        ExternalResidual(plant, 35.0, known_wrench_frames=frames, model=model),
-    ]
     rng = np.random.default_rng(2)
     torque, wrenches = rng.normal(size=n), rng.normal(size=6 * len(frames))
-    contexts = []
-    for residual in residuals:  # the same sensor signals feed all three, as in a diagram
-        context = residual.CreateDefaultContext()
-        if residual.HasInputPort("measured_torque"):
-            residual.GetInputPort("measured_torque").FixValue(context, torque)
-        if frames:
-            residual.GetInputPort("known_wrenches").FixValue(context, wrenches)
-        contexts.append(context)
-    fixed = [
-        residual.GetInputPort("state").FixValue(context, np.concatenate(states[0]))
-        for residual, context in zip(residuals, contexts)
-    ]
+    residuals, contexts, fixed = _project_residual_bank(plant, frames, torque, wrenches, np.concatenate(states[0]))
     full_states = [np.concatenate(s) for s in states]
 
     def update_all(i: int):
@@ -203,6 +235,153 @@ def benchmark_residual_update(name: str, *, calls: int = 200, batches: int = 7) 
         "calc_mass_matrix_us": unit,
         "three_residuals_update_us": update,
         "three_residuals_update_ratio": update / unit,
+    }
+
+
+#: The robots of the residual bank's comparison with its Pinocchio peer: the built-in model and
+#: the public URDF robot, both with two ankle F/T sensors (name, add_humanoid's argument).
+PEER_ROBOTS = (("hrp4_like", "hrp4_like"), ("talos", str(MODELS_DIR / "robots" / "talos.yaml")))
+
+
+def _relative_difference(ours: list[np.ndarray], peer: list[np.ndarray]) -> float:
+    """max_k |ours_k - peer_k|_inf / max_k |peer_k|_inf over a sequence of residuals (the
+    absolute difference when the peer's are all zero: a single, first update)."""
+    scale = max(float(np.abs(p).max()) for p in peer)
+    difference = max(float(np.abs(a - b).max()) for a, b in zip(ours, peer))
+    return difference / scale if scale > 0.0 else difference
+
+
+def benchmark_residual_peer(robot: str, *, calls: int = 150, batches: int = 7, steps: int = 200) -> dict:
+    """The project's three residuals against the obvious peer (issue 33): the same residuals
+    as a plain loop on Pinocchio (``systems.residuals.pinocchio_peer``), on ``robot`` (a
+    built-in name or a description YAML) with its F/T sensors as known wrenches.
+
+    Timed exactly as ``benchmark_residual_update`` (the same 16 random states, changing at
+    every call, the same torques and wrenches; their batches interleaved with those of the
+    unit, ``_interleaved_median_microseconds``), after one update (both take their
+    steady-state branch): the project's bank (three Drake systems sharing one ResidualModel)
+    and the peer's ``step`` (its inputs in Pinocchio's coordinates, converted beforehand as
+    a Pinocchio user's sensors would give them), with one CalcMassMatrix at a new state as
+    the unit. Then ``steps`` updates of both on one sequence of random states, torques and
+    wrenches, from the first update: the largest relative difference of each residual
+    (max over the steps of the largest entry's difference / the largest entry of the peer's
+    residual over the steps), and of the joint-space mass matrix at a state (the peer's model
+    against the plant's: armature, inertias)."""
+    from systems.residuals.pinocchio_peer import (
+        PinocchioResidualPeer,
+        PlantCoordinates,
+        peer_model_from_plant,
+        peer_model_from_urdf,
+        plant_joint_parameters,
+    )
+
+    plant = MultibodyPlant(time_step=0.0)
+    handles = add_humanoid(plant, robot)
+    plant.Finalize()
+    frames = tuple(handles.ft_sensor_frames.values())
+    armature, damping = plant_joint_parameters(plant)
+    urdf = handles.description.model_file if handles.description is not None else None
+    if urdf is not None and urdf.suffix.lower() == ".urdf":
+        pin_model, pin_damping = peer_model_from_urdf(urdf, armature, damping)
+        source = "URDF"
+    else:
+        pin_model, pin_damping = peer_model_from_plant(plant, armature, damping)
+        source = "plant"
+    coordinates = PlantCoordinates(plant, pin_model)
+
+    def make_peer():
+        return PinocchioResidualPeer(pin_model, [f.name() for f in frames], pin_damping, (35.0, 35.0, 35.0), 1e-3)
+
+    # Timing: benchmark_residual_update's states and inputs.
+    states = _random_states(plant, 16, seed=1)
+    n = plant.num_velocities() - 6
+    rng = np.random.default_rng(2)
+    torque, wrenches = rng.normal(size=n), rng.normal(size=6 * len(frames))
+    full_states = [np.concatenate(s) for s in states]
+    residuals, contexts, fixed = _project_residual_bank(plant, frames, torque, wrenches, full_states[-1])
+    for residual, context in zip(residuals, contexts):
+        context.SetDiscreteState(residual.EvalUniquePeriodicDiscreteUpdate(context))
+
+    def update_all(i: int):
+        x = full_states[i % 16]
+        for residual, context, value in zip(residuals, contexts, fixed):
+            value.GetMutableData().set_value(x)
+            residual.EvalUniquePeriodicDiscreteUpdate(context)
+
+    peer = make_peer()
+    pin_states = [coordinates.state(x) for x in full_states]
+    pin_torque = coordinates.joints_to_pin(torque)
+    peer.step(*pin_states[-1], pin_torque, wrenches)
+
+    def peer_step(i: int):
+        q, v = pin_states[i % 16]
+        return peer.step(q, v, pin_torque, wrenches)
+
+    plant_context = plant.CreateDefaultContext()
+
+    def mass_matrix(i: int):
+        plant.SetPositions(plant_context, states[i % 16][0])
+        return plant.CalcMassMatrix(plant_context)
+
+    timings = _interleaved_median_microseconds(
+        {"unit": mass_matrix, "project": update_all, "peer": peer_step}, calls, batches
+    )
+    unit, project, peer_us = timings["unit"], timings["project"], timings["peer"]
+
+    # Agreement: both from their first update on one sequence of inputs.
+    rng = np.random.default_rng(3)
+    sequence = _random_states(plant, steps, seed=4)
+    residuals, contexts, fixed = _project_residual_bank(plant, frames, torque, wrenches, full_states[0])
+    torque_ports = [r.GetInputPort("measured_torque") if r.HasInputPort("measured_torque") else None for r in residuals]
+    peer = make_peer()
+    ours: dict[str, list] = {"classical": [], "internal": [], "external": [], "external_world": []}
+    theirs: dict[str, list] = {key: [] for key in ours}
+    for q, v in sequence:
+        x = np.concatenate((q, v))
+        tau, w = 20.0 * rng.normal(size=n), 20.0 * rng.normal(size=6 * len(frames))
+        for residual, context, port in zip(residuals, contexts, torque_ports):
+            residual.GetInputPort("state").FixValue(context, x)
+            if port is not None:
+                port.FixValue(context, tau)
+            if frames:
+                residual.GetInputPort("known_wrenches").FixValue(context, w)
+            context.SetDiscreteState(residual.EvalUniquePeriodicDiscreteUpdate(context))
+        ours["classical"].append(residuals[0].GetOutputPort("residual").Eval(contexts[0]).copy())
+        ours["internal"].append(residuals[1].GetOutputPort("residual").Eval(contexts[1]).copy())
+        ours["external"].append(residuals[2].GetOutputPort("external_wrench_base").Eval(contexts[2]).copy())
+        ours["external_world"].append(residuals[2].GetOutputPort("external_wrench_world").Eval(contexts[2]).copy())
+        step = coordinates.residuals_to_drake(peer.step(*coordinates.state(x), coordinates.joints_to_pin(tau), w))
+        for key, value in zip(theirs, step):
+            theirs[key].append(value)
+    difference = {key: _relative_difference(ours[key], theirs[key]) for key in ours}
+
+    # The peer's model against the plant's: the joint-space inertia H (armature included).
+    q_pin, _ = coordinates.state(full_states[0])
+    import pinocchio as pin
+
+    H_pin = pin.crba(pin_model, pin_model.createData(), q_pin)[6:, 6:]
+    plant.SetPositions(plant_context, states[0][0])
+    H_drake = plant.CalcMassMatrix(plant_context)[6:, 6:]
+    order = np.empty(n, dtype=int)
+    order[coordinates.joint_drake] = coordinates.joint_pin
+    H_pin = H_pin[np.ix_(order, order)]  # Drake's joint order
+    return {
+        "model": robot if robot in MODEL_NAMES else handles.name,
+        "num_joints": n,
+        "known_wrench_frames": len(frames),
+        "peer_model_source": source,
+        "calc_mass_matrix_us": unit,
+        "project_bank_us": project,
+        "peer_us": peer_us,
+        "project_bank_ratio_to_mass_matrix": project / unit,
+        "peer_ratio_to_mass_matrix": peer_us / unit,
+        "project_over_peer": project / peer_us,
+        "agreement_steps": steps,
+        "classical_relative_difference": difference["classical"],
+        "internal_relative_difference": difference["internal"],
+        "external_relative_difference": max(difference["external"], difference["external_world"]),
+        "largest_relative_difference": max(difference.values()),
+        "mass_matrix_relative_difference": float(np.abs(H_pin - H_drake).max() / np.abs(H_drake).max()),
     }
 
 
@@ -533,6 +712,13 @@ def main(argv: list[str] | None = None) -> int:
         help="the push's duration in that log, from 0.5 s (default: to the end, the localizer's worst case)",
     )
     parser.add_argument(
+        "--peer-steps",
+        type=non_negative_int,
+        default=200,
+        help="updates on which the three residuals are compared with their Pinocchio peer, timed beside it "
+        "on hrp4_like and (with --model all) TALOS (0 skips the comparison)",
+    )
+    parser.add_argument(
         "--fit-pairs",
         type=non_negative_int,
         default=10,
@@ -559,6 +745,16 @@ def _run(args: argparse.Namespace) -> int:
     dataset_dir = published_dataset_dir()
 
     names = MODEL_NAMES if args.model == "all" else (args.model,)
+    peer_robots = [
+        robot for name, robot in PEER_ROBOTS if name in names or (name not in MODEL_NAMES and args.model == "all")
+    ]
+    if args.peer_steps > 0 and peer_robots:
+        try:  # also before the long timings: the peer needs Pinocchio (the test extra)
+            import systems.residuals.pinocchio_peer  # noqa: F401
+        except ImportError as error:
+            raise ValueError(
+                f"the residuals' Pinocchio peer needs Pinocchio ({error}): pip install pin, or --peer-steps 0"
+            ) from error
     rows = [benchmark_model(name, calls=args.calls, batches=args.batches) for name in names]
     _table_header(
         "Floating-base decomposition, us per call (x one CalcMassMatrix in the same run)",
@@ -587,6 +783,24 @@ def _run(args: argparse.Namespace) -> int:
             f"{r['model']:<10} {r['known_wrench_frames']:>10} {r['calc_mass_matrix_us']:>12.1f} us"
             f" {r['three_residuals_update_us']:>11.1f} us ({r['three_residuals_update_ratio']:>5.1f}x)"
         )
+    peer_rows = [
+        benchmark_residual_peer(robot, calls=max(args.calls // 2, 1), batches=args.batches, steps=args.peer_steps)
+        for robot in (peer_robots if args.peer_steps > 0 else ())
+    ]
+    if peer_rows:
+        _table_header(
+            "The three residuals: the project's bank against the same residuals as a plain loop on Pinocchio "
+            "(us per update, x one CalcMassMatrix)",
+            f"{'model':<10} {'n':>3} {'CalcMassMatrix':>15} {'project bank':>21} {'Pinocchio peer':>21}"
+            f" {'project/peer':>13} {'largest rel. difference':>24}",
+        )
+        for r in peer_rows:
+            print(
+                f"{r['model']:<10} {r['num_joints']:>3} {r['calc_mass_matrix_us']:>12.1f} us"
+                f" {r['project_bank_us']:>9.1f} us ({r['project_bank_ratio_to_mass_matrix']:>5.1f}x)"
+                f" {r['peer_us']:>9.1f} us ({r['peer_ratio_to_mass_matrix']:>5.1f}x)"
+                f" {r['project_over_peer']:>12.2f}x {r['largest_relative_difference']:>24.1e}"
+            )
     observer = benchmark_force_observer(batches=args.batches, dataset_dir=dataset_dir)
     print()
     print(
@@ -675,12 +889,14 @@ def _run(args: argparse.Namespace) -> int:
             "log_seconds": args.log_seconds,
             "log_push_seconds": args.log_push_seconds,
             "fit_pairs": args.fit_pairs,
+            "peer_steps": args.peer_steps,
         },
         "floors": FLOORS,
         "log_estimation": log_rows,
         "residual_replay": replay_rows,
         "floating_base": rows,
         "residual_update": residual_rows,
+        "residual_peer": peer_rows,
         "force_observer": observer,
         "closed_loop": loop_rows,
         "contact_localizer": localizer_rows,

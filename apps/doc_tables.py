@@ -274,6 +274,48 @@ def _benchmark_residual_update(data: dict) -> list[str]:
     return lines
 
 
+_PEER_SOURCES = {
+    "URDF": "from its URDF (`pin.buildModelFromUrdf`, free-flyer root)",
+    "plant": "rebuilt from the Drake plant's joints and inertias (its model is SDFormat only)",
+}
+
+
+def _benchmark_residual_peer(data: dict) -> list[str]:
+    rows = data.get("residual_peer", [])
+    if not rows:
+        return _not_measured("the Pinocchio peer", "`--peer-steps 0`, or neither hrp4_like nor `--model all`")
+    floors = data["floors"]
+    to_peer, to_unit = floors["residual_bank_max_ratio_to_peer"], floors["residual_bank_max_ratio_to_mass_matrix"]
+    lines = [
+        "| model | DoF (joints) | known wrench frames | CalcMassMatrix | project bank (x CalcMassMatrix) "
+        f"| Pinocchio peer | project / peer | floors met (<= {to_peer:g}x the peer, <= {to_unit:g}x CalcMassMatrix) "
+        "| largest difference |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for r in rows:
+        met = r["project_over_peer"] <= to_peer and r["project_bank_ratio_to_mass_matrix"] <= to_unit
+        lines.append(
+            f"| {r['model']} | {r['num_joints']} | {r['known_wrench_frames']} | {r['calc_mass_matrix_us']:.1f} us "
+            f"| {r['project_bank_us']:.0f} us ({_ratio(r['project_bank_ratio_to_mass_matrix'])}) "
+            f"| {r['peer_us']:.0f} us ({_ratio(r['peer_ratio_to_mass_matrix'])}) "
+            f"| {r['project_over_peer']:.2f}x | {_met(met)} "
+            f"| {100 * r['largest_relative_difference']:.2g} % |"
+        )
+    lines += [
+        "",
+        "Largest difference: of the classical, internal and external residuals over "
+        + ", ".join(
+            f"{r['agreement_steps']} updates on {r['model']} ({100 * r['classical_relative_difference']:.2g} %, "
+            f"{100 * r['internal_relative_difference']:.2g} %, {100 * r['external_relative_difference']:.2g} %)"
+            for r in rows
+        )
+        + ", relative to the peer's largest entry. The peer's model: "
+        + "; ".join(f"{r['model']} {_PEER_SOURCES.get(r['peer_model_source'], r['peer_model_source'])}" for r in rows)
+        + ", with the plant's reflected rotor inertia as `model.armature` and its joint damping.",
+    ]
+    return lines
+
+
 def _benchmark_force_observer(data: dict) -> list[str]:
     r, floor = data["force_observer"], data["floors"]["observer_min_samples_per_s"]
     return [
@@ -523,6 +565,7 @@ RENDERERS: dict[str, Callable[[dict], list[str]]] = {
     "nao_force_observer_steps_wide": _nao_force_observer,
     "benchmark_floating_base": _benchmark_floating_base,
     "benchmark_residual_update": _benchmark_residual_update,
+    "benchmark_residual_peer": _benchmark_residual_peer,
     "benchmark_force_observer": _benchmark_force_observer,
     "benchmark_closed_loop": _benchmark_closed_loop,
     "benchmark_contact_localizer": _benchmark_contact_localizer,

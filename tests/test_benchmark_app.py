@@ -68,3 +68,20 @@ def test_residual_replay_benchmark_times_both_paths_on_one_log():
     assert row["per_sample_us"] > 0.0 and row["stacked_us"] > 0.0
     assert row["speedup"] == row["per_sample_us"] / row["stacked_us"]
     assert row["largest_difference"] < 1e-6
+
+
+def test_benchmark_times_the_pinocchio_peer_beside_the_residual_bank(tmp_path, monkeypatch):
+    """Issue 33: on hrp4_like the three residuals' bank is timed beside its Pinocchio peer in
+    the same run, the ratio and their agreement go to the results file, and its table renders."""
+    monkeypatch.setenv(RESULTS_DIR_VARIABLE, str(tmp_path / "results"))
+    argv = ["--model", "hrp4_like", "--calls", "2", "--batches", "1", "--loop-seconds", "0", "--log-seconds", "0"]
+    argv += ["--fit-pairs", "0", "--peer-steps", "3", "--out", str(tmp_path), "--results", "benchmark"]
+    assert benchmark.main(argv) == 0
+    results = json.loads((tmp_path / "benchmark" / "metrics.json").read_text())
+    (row,) = results["residual_peer"]
+    assert row["model"] == "hrp4_like" and row["agreement_steps"] == 3 and results["settings"]["peer_steps"] == 3
+    assert row["project_over_peer"] == row["project_bank_us"] / row["peer_us"] > 0.0
+    assert row["largest_relative_difference"] < 1e-8
+    assert results["floors"]["residual_bank_max_ratio_to_peer"] == 1.0
+    body = doc_tables.render("benchmark_residual_peer", tmp_path / "results")
+    assert body.startswith("| model | DoF (joints) |") and "| hrp4_like | 34 | 2 |" in body

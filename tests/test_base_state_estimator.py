@@ -887,6 +887,54 @@ def test_contact_flags_from_fsr_and_the_system():
         FootContactFromFsr(0.0)
 
 
+def _flags_through(system, port: str, samples: np.ndarray) -> np.ndarray:
+    """The system's flags at each sample, stepped as a diagram steps it: the output at t_k
+    reads sample k, then the periodic update stores the flags."""
+    context = system.CreateDefaultContext()
+    flags = []
+    for k, sample in enumerate(samples):
+        context.SetTime(k * 1e-3)
+        system.GetInputPort(port).FixValue(context, sample)
+        flags.append(system.GetOutputPort("foot_contact").Eval(context).copy())
+        if system.num_discrete_state_groups():
+            context.SetDiscreteState(system.EvalUniquePeriodicDiscreteUpdate(context))
+    return np.array(flags)
+
+
+def test_online_contact_flags_have_the_logs_hysteresis():
+    """The station's contact systems with an off threshold give, sample by sample, the flags
+    of the log pipeline's ContactHysteresis (on above 40 N, off below 20 N; between the two a
+    foot keeps its flag; a late release is not a contact); without one, the plain threshold,
+    stateless. The station builds them at 10 % and 5 % of the estimators' model's weight."""
+    from diagrams.station.humanoid_station import add_humanoid_station
+    from systems.estimation.base_state_estimator import contact_flags_with_hysteresis
+
+    normal = np.array([[0.0, 50.0], [30.0, 30.0], [45.0, 19.0], [30.0, 25.0], [15.0, 45.0], [30.0, 20.0]])
+    expected = contact_flags_with_hysteresis(normal, 40.0, 20.0)
+    np.testing.assert_array_equal(expected[:, 0], [0, 0, 1, 1, 0, 0])  # 30 N: off before, on after 45 N
+    np.testing.assert_array_equal(expected[:, 1], [1, 1, 0, 0, 1, 1])
+    wrenches = np.zeros((len(normal), 12))
+    wrenches[:, 5], wrenches[:, 11] = normal[:, 0], normal[:, 1]
+    ft = FootContactFromForceTorque(2, 40.0, off_threshold=20.0)
+    np.testing.assert_array_equal(_flags_through(ft, "wrenches", wrenches), expected)
+    assert (ft.threshold, ft.off_threshold) == (40.0, 20.0)
+    plain = FootContactFromForceTorque(2, 40.0)
+    assert plain.num_discrete_state_groups() == 0
+    np.testing.assert_array_equal(_flags_through(plain, "wrenches", wrenches), normal > 40.0)
+    fsr = FootContactFromFsr(400.0, weight_fraction=0.1, off_weight_fraction=0.05)  # 40 N and 20 N
+    forces = np.repeat(normal / 4.0, 4, axis=1)
+    np.testing.assert_array_equal(_flags_through(fsr, "fsr_forces", forces), expected)
+    with pytest.raises(ValueError, match="off_threshold 50.0 N is above the threshold 40.0 N"):
+        FootContactFromForceTorque(2, 40.0, off_threshold=50.0)
+    builder = DiagramBuilder()
+    station = add_humanoid_station(builder, "hrp4_like", base_state="invariant_ekf")
+    model = station.estimator.plant
+    weight = model.CalcTotalMass(model.CreateDefaultContext()) * 9.81
+    contact = station.foot_contact
+    assert contact.threshold == pytest.approx(0.10 * weight, rel=1e-3)
+    assert contact.off_threshold == pytest.approx(0.05 * weight, rel=1e-3)
+
+
 @pytest.mark.parametrize(("period", "every"), [(1e-3, 100), (0.010104, 10), (0.003003, 33), (0.25, 1)])
 def test_level_ground_period_is_rounded_to_the_update_period_not_refused(period, every):
     """Real logs come at 99, 333 or 4 Hz: the level-ground correction runs every

@@ -242,7 +242,9 @@ class LogInputs:
     stamps are ``time``, or uneven, ``resampled`` to ``period``). ``contact_sources``:
     with the base estimated, {foot side: what its contact flags came from}. ``at_rest``:
     with the base estimated with bias states, the at-rest IMU bias initialisation
-    (``AtRestCalibration``), else None."""
+    (``AtRestCalibration``), else None. ``slip_updates``: with the base estimated with the
+    slip test (``EkfSettings.slip_speed``), {foot side: the updates whose contact correction
+    it dropped as a slip}, else empty."""
 
     time: np.ndarray
     period: float
@@ -256,6 +258,7 @@ class LogInputs:
     missing_wrenches: tuple[str, ...] = ()
     contact_sources: dict = field(default_factory=dict)
     at_rest: AtRestCalibration | None = None
+    slip_updates: dict[str, int] = field(default_factory=dict)
 
 
 def _frame_rotations(plant: MultibodyPlant, frames: Sequence, q: np.ndarray) -> np.ndarray:
@@ -572,8 +575,9 @@ def log_inputs(
     state[:, [nq + j.velocity_start() for j in topology.joints]] = log.joint_velocities[:, order]
     base_estimated = log.base_pose is None or log.base_velocity is None
     imu_bias = at_rest = None
+    slips = {}
     if base_estimated:
-        imu_bias, at_rest = _estimate_base_state(robot, log, state, period, settings, initial_base_pose)
+        imu_bias, at_rest, slips = _estimate_base_state(robot, log, state, period, settings, initial_base_pose)
     else:
         state[:, q0 : q0 + 7] = log.base_pose
         state[:, nq + v0 : nq + v0 + 6] = log.base_velocity
@@ -596,6 +600,7 @@ def log_inputs(
         missing_wrenches=missing_wrenches,
         contact_sources={side: kind for side, (kind, _) in sources.items()} if base_estimated else {},
         at_rest=at_rest,
+        slip_updates=slips,
     )
 
 
@@ -846,7 +851,7 @@ def _estimate_base_state(
     period: float,
     settings: LogEstimationSettings,
     initial_base_pose: np.ndarray | None,
-) -> tuple[np.ndarray | None, AtRestCalibration | None]:
+) -> tuple[np.ndarray | None, AtRestCalibration | None, dict[str, int]]:
     """Fills the base part of ``state`` (whose joint part is filled) with the invariant
     EKF's estimate, replayed as the station runs it: at update k the residuals read the
     filter's output of update k - 1 (the initial state at k = 0), the F/T sensors express
@@ -860,7 +865,9 @@ def _estimate_base_state(
     start (``at_rest_imu_bias``). A foot that slips drops its kinematic correction
     (``settings.ekf.slip_speed``, the filter's E13). Returns the filter's IMU bias estimate
     read with the base state at each sample ((N, 6)), or None without bias states
-    (``settings.estimate_imu_bias``), and the ``AtRestCalibration`` (None unless both)."""
+    (``settings.estimate_imu_bias``), the ``AtRestCalibration`` (None unless both), and
+    {foot side: the updates its correction was dropped as a slip} (``LogInputs.
+    slip_updates``)."""
     plant = robot.plant
     topology = floating_base_topology(plant)
     nq = plant.num_positions()
@@ -946,7 +953,11 @@ def _estimate_base_state(
         contact_port.FixValue(context, flags)
         context.SetTime(k * period)
         context.SetDiscreteState(estimator.EvalUniquePeriodicDiscreteUpdate(context))
-    return imu_bias, at_rest
+    slips = {}
+    if estimator.slip_speed is not None:
+        counts = estimator.GetOutputPort("slip_count").Eval(context)
+        slips = {side: int(round(count)) for side, count in zip(sides, counts)}
+    return imu_bias, at_rest, slips
 
 
 # ---------------------------------------------------------------------------------------
@@ -1072,7 +1083,10 @@ def estimate_from_log(
     sensors and collision geometry on the links above them) the localizer on ``log`` (see
     the module docstring); what cannot run for want of data (joint torques, the feet's
     full wrenches) or of model (``localization_unavailable``) is left out and listed in
-    ``LogEstimates.not_estimated`` (``skipped_estimates``).
+    ``LogEstimates.not_estimated`` (``skipped_estimates``). The residuals run stacked over
+    the whole log (``systems.residuals.offline``: the same Drake calls per sample, the
+    algebra over all samples at once), equal to the systems' per-sample updates to rounding
+    (tests/test_offline_speed_paths.py).
 
     Raises:
         ValueError: see ``log_inputs``; a noise calibration window with fewer than 100
@@ -1184,7 +1198,7 @@ def _estimates(
     robot: EstimatorPlant, inputs: LogInputs, replay: ReplayedEstimation, wall: float, settings, skipped: dict
 ) -> LogEstimates:
     plant = robot.plant
-    free_joint = floating_base_topology(plant).free_joint
+    free_joint = robot.topology.free_joint
     q0, v0, nq = free_joint.position_start(), free_joint.velocity_start(), plant.num_positions()
     localization = None
     if replay.localization is not None:

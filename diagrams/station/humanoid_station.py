@@ -57,6 +57,8 @@ from models import (
 )
 from systems.common.topology import FloatingBaseTopology, floating_base_topology
 from systems.estimation.base_state_estimator import (
+    CONTACT_OFF_WEIGHT_FRACTION,
+    CONTACT_ON_WEIGHT_FRACTION,
     LEVEL_GROUND_TILT_STD,
     STANDING_START_ORIENTATION_STD,
     STANDING_START_VELOCITY_STD,
@@ -417,13 +419,16 @@ def _add_invariant_ekf(
 ) -> tuple[InvariantEkfBaseStateEstimator, FootContactFromForceTorque | FootContactFromFsr]:
     """The contact-aided invariant EKF as the source of the assembler's base pose and velocity:
     gyro and accelerometer from the IMU, joint positions from the encoders, one contact flag
-    per foot (its sole frame is the foot point): from the F/T sensors when the robot has them
-    (hrp4_like), else from the sum of each foot's four FSRs (nao_like) above 5 % of the
-    robot's weight (``FootContactFromFsr``). The FSRs are an ``FsrArray`` added here, with
-    the noise and seed (16 seed + 5) that ``diagrams.observer.nao_sensing`` gives its own,
-    so both read the same sensors. The filter estimates the IMU biases (its default random
-    walks, ``Imperfections.realistic()``'s) when the simulated IMU has a bias random walk,
-    and is the bias-free filter otherwise (the ideal default IMU). With the bias states it
+    per foot (its sole frame is the foot point) from its normal force, with the logs'
+    hysteresis (on above ``CONTACT_ON_WEIGHT_FRACTION``, 10 %, of the estimators' model's
+    weight, off below ``CONTACT_OFF_WEIGHT_FRACTION``, 5 %; ``ContactHysteresis``): from the
+    F/T sensors when the robot has them (hrp4_like, ``FootContactFromForceTorque``), else
+    from the sum of each foot's four FSRs (nao_like, ``FootContactFromFsr``). The FSRs are
+    an ``FsrArray`` added here, with the noise and seed (16 seed + 5) that
+    ``diagrams.observer.nao_sensing`` gives its own, so both read the same sensors. The
+    filter estimates the IMU biases (its default random walks, ``Imperfections.realistic()``'s)
+    when the simulated IMU has a bias random walk, and is the bias-free filter otherwise (the
+    ideal default IMU). With the bias states it
     also takes the soles in contact as flat on level ground (E12, ``LEVEL_GROUND_TILT_STD``):
     without that the horizontal accelerometer bias reads as a base tilt, which the refined
     model absorbs during the calibration and the internal residual then shows as gravity
@@ -435,9 +440,20 @@ def _add_invariant_ekf(
     from systems.observer.fsr_sensing import FSR_NOISE_STD, FSR_SIDES, FsrArray
     from systems.simulation.sensors import SEEDS_PER_CALL
 
+    model = estimator.plant
+    mass = model.CalcTotalMass(model.CreateDefaultContext(), [estimator.humanoid.model_instance])
+    weight = mass * float(np.linalg.norm(model.gravity_field().gravity_vector()))
+    period = plant.time_step()
     if sensors.ft_sides:
         sides = sensors.ft_sides
-        contact = builder.AddSystem(FootContactFromForceTorque(len(sides)))
+        contact = builder.AddSystem(
+            FootContactFromForceTorque(
+                len(sides),
+                CONTACT_ON_WEIGHT_FRACTION * weight,
+                off_threshold=CONTACT_OFF_WEIGHT_FRACTION * weight,
+                period=period,
+            )
+        )
         contact.set_name("foot_contact_from_force_torque")
         builder.Connect(sensors.ft_wrenches, contact.GetInputPort("wrenches"))
     else:
@@ -447,10 +463,15 @@ def _add_invariant_ekf(
         fsr = builder.AddSystem(FsrArray(plant, humanoid, noise_std=noise_std, seed=SEEDS_PER_CALL * seed + 5))
         fsr.set_name("invariant_ekf_fsr_array")
         builder.Connect(plant.get_contact_results_output_port(), fsr.GetInputPort("contact_results"))
-        model = estimator.plant
-        mass = model.CalcTotalMass(model.CreateDefaultContext(), [estimator.humanoid.model_instance])
-        weight = mass * float(np.linalg.norm(model.gravity_field().gravity_vector()))
-        contact = builder.AddSystem(FootContactFromFsr(weight, num_feet=len(sides)))
+        contact = builder.AddSystem(
+            FootContactFromFsr(
+                weight,
+                weight_fraction=CONTACT_ON_WEIGHT_FRACTION,
+                off_weight_fraction=CONTACT_OFF_WEIGHT_FRACTION,
+                num_feet=len(sides),
+                period=period,
+            )
+        )
         contact.set_name("foot_contact_from_fsr")
         builder.Connect(fsr.GetOutputPort("fsr_forces"), contact.GetInputPort("fsr_forces"))
     topology, initial_state = estimator.topology, estimator.standing_state

@@ -143,11 +143,13 @@ when the normal (world z) force of the ground on the sole exceeds a threshold. A
 F/T sensor but four FSRs per foot (``systems.observer.fsr_sensing.FsrArray``):
 :func:`contact_flags_from_fsr` / :class:`FootContactFromFsr` apply the same test to the sum
 of a foot's four FSR forces, with the threshold a fraction of the robot's weight
-(``CONTACT_WEIGHT_FRACTION``, 5 %).
+(``CONTACT_WEIGHT_FRACTION``, 5 %). Both take an off threshold below it (hysteresis, as
+:class:`ContactHysteresis`), which the station sets as on logs.
 
-Offline, on a recorded log (``diagrams.residuals.log_estimation``), the flags come from
-whatever the log holds per foot (a 6-axis wrench's normal force, a normal-force-only
-sensor, or the sum of the foot's FSRs) through :class:`ContactHysteresis`: on above
+Offline, on a recorded log (``diagrams.residuals.log_estimation``), and online in the
+station (``diagrams.station.humanoid_station``), the flags come from whatever the robot
+senses per foot (a 6-axis wrench's normal force, a normal-force-only sensor, or the sum of
+the foot's FSRs) through :class:`ContactHysteresis`' rule: on above
 ``CONTACT_ON_WEIGHT_FRACTION`` (10 %) of the robot's weight, off below
 ``CONTACT_OFF_WEIGHT_FRACTION`` (5 %), so that a foot's force hovering about one threshold
 during a step's loading or unloading does not toggle the filter's contact on and off.
@@ -236,10 +238,10 @@ CONTACT_WEIGHT_FRACTION = 0.05
 #: comes into contact when its normal force exceeds 10 % of the weight and leaves it when
 #: the force falls below 5 %. A foot carrying less than a few percent of the weight cannot
 #: anchor the filter: it slides or rocks on its edge (the contact-velocity model of E6-E9
-#: assumes a foot at rest), so 5 % (the online F/T and FSR thresholds, 20 N on HRP-4) is the
-#: floor, and the 5 % band between the two keeps a force hovering about one threshold (a
-#: step's touch-down or lift-off, sensor noise of ~0.2 N on a Nao's FSR sum) from toggling
-#: the contact. Dimensionless.
+#: assumes a foot at rest), so 5 % (19 N on HRP-4, 2.5 N on a Nao) is the floor, and the
+#: 5 % band between the two keeps a force hovering about one threshold (a step's touch-down
+#: or lift-off, sensor noise of ~0.2 N on a Nao's FSR sum) from toggling the contact.
+#: Dimensionless. The station's online flags use them too.
 CONTACT_ON_WEIGHT_FRACTION = 0.10
 CONTACT_OFF_WEIGHT_FRACTION = 0.05
 DEFAULT_GRAVITY = np.array([0.0, 0.0, -9.81])
@@ -774,8 +776,60 @@ def contact_flags_with_hysteresis(normal_forces: np.ndarray, on_threshold: float
     return np.array([hysteresis.update(f) for f in forces]).reshape(forces.shape)
 
 
-class FootContactFromForceTorque(LeafSystem):
-    """Contact flags from foot F/T sensors (:func:`contact_flags_from_wrenches`).
+class _FootContactFlags(LeafSystem):
+    """One contact flag per foot from its normal force, with :class:`ContactHysteresis`'s
+    rule: a foot comes into contact above ``on_threshold`` and leaves it below
+    ``off_threshold`` (between the two it keeps its flag, held as discrete state updated
+    every ``period``; every foot starts out of contact). With ``off_threshold`` equal to
+    ``on_threshold`` the flag is the plain test force > threshold (no state). The flag
+    output reads the current input and the flags of the last update (direct feedthrough,
+    no delay). Subclasses give the feet's normal forces (``_normal_forces``)."""
+
+    def __init__(self, who: str, num_feet: int, on_threshold: float, off_threshold: float | None, period: float):
+        super().__init__()
+        if isinstance(num_feet, bool) or not isinstance(num_feet, (int, np.integer)) or num_feet < 1:
+            raise ValueError(f"{who}: num_feet must be a positive integer, got {num_feet!r}")
+        self._who = who
+        self._on = positive_number(on_threshold, f"{who}: threshold")
+        self._off = self._on if off_threshold is None else positive_number(off_threshold, f"{who}: off_threshold")
+        if self._off > self._on:
+            raise ValueError(f"{who}: off_threshold {off_threshold} N is above the threshold {on_threshold} N")
+        self._state = None
+        if self._off < self._on:
+            self._state = self.DeclareDiscreteState(int(num_feet))
+            self.DeclarePeriodicDiscreteUpdateEvent(positive_number(period, f"{who}: period"), 0.0, self._Update)
+        self.DeclareVectorOutputPort("foot_contact", int(num_feet), self._CalcContact)
+
+    @property
+    def threshold(self) -> float:
+        """The normal force above which a foot comes into contact, N."""
+        return self._on
+
+    @property
+    def off_threshold(self) -> float:
+        """The normal force below which a foot in contact leaves it, N."""
+        return self._off
+
+    def _normal_forces(self, context: Context) -> np.ndarray:
+        raise NotImplementedError
+
+    def _flags(self, context: Context) -> np.ndarray:
+        f = self._normal_forces(context)
+        if self._state is None:
+            return (f > self._on).astype(float)
+        previous = context.get_discrete_state(self._state).value() > 0.5
+        return np.where(previous, f >= self._off, f > self._on).astype(float)
+
+    def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
+        discrete_state.set_value(self._state, self._flags(context))
+
+    def _CalcContact(self, context: Context, output: BasicVector) -> None:
+        output.SetFromVector(self._flags(context))
+
+
+class FootContactFromForceTorque(_FootContactFlags):
+    """Contact flags from foot F/T sensors: the ground's normal (world z) force on each sole
+    (:func:`contact_flags_from_wrenches` without hysteresis).
 
     Inputs:
         wrenches: 6 per foot, the ``FootForceTorqueSensors`` output (world frame).
@@ -786,22 +840,30 @@ class FootContactFromForceTorque(LeafSystem):
     For a Nao's FSRs see :class:`FootContactFromFsr`.
     """
 
-    def __init__(self, num_feet: int, threshold: float = CONTACT_FORCE_THRESHOLD):
+    def __init__(
+        self,
+        num_feet: int,
+        threshold: float = CONTACT_FORCE_THRESHOLD,
+        *,
+        off_threshold: float | None = None,
+        period: float = 1e-3,
+    ):
         """Args:
         num_feet: number of F/T sensors (feet), >= 1.
-        threshold: normal-force threshold, N (default 20 N, ~5 % of HRP-4's weight).
+        threshold: the normal force above which a foot comes into contact, N (default 20 N,
+            ~5 % of HRP-4's weight).
+        off_threshold: below which it leaves contact, N (<= ``threshold``; default: the
+            threshold, no hysteresis). The station uses ``CONTACT_ON_WEIGHT_FRACTION`` and
+            ``CONTACT_OFF_WEIGHT_FRACTION`` of the robot's weight, as on logs.
+        period: the hysteresis' update period, s (the estimator's).
         """
-        super().__init__()
         who = "FootContactFromForceTorque"
-        if isinstance(num_feet, bool) or not isinstance(num_feet, (int, np.integer)) or num_feet < 1:
-            raise ValueError(f"{who}: num_feet must be a positive integer, got {num_feet!r}")
-        self._threshold = positive_number(threshold, f"{who}: threshold")
+        super().__init__(who, num_feet, threshold, off_threshold, period)
         self._wrenches = self.DeclareVectorInputPort("wrenches", 6 * int(num_feet))
-        self.DeclareVectorOutputPort("foot_contact", int(num_feet), self._CalcContact)
 
-    def _CalcContact(self, context: Context, output: BasicVector) -> None:
+    def _normal_forces(self, context: Context) -> np.ndarray:
         w = eval_finite_input("FootContactFromForceTorque", self._wrenches, context)
-        output.SetFromVector(contact_flags_from_wrenches(w, self._threshold))
+        return np.asarray(w, dtype=float).reshape(-1, 6)[:, 5]
 
 
 def contact_flags_from_fsr(forces: np.ndarray, threshold: float, sensors_per_foot: int = 4) -> np.ndarray:
@@ -817,12 +879,14 @@ def contact_flags_from_fsr(forces: np.ndarray, threshold: float, sensors_per_foo
     return (f.sum(axis=1) > threshold).astype(float)
 
 
-class FootContactFromFsr(LeafSystem):
-    """Contact flags from foot force-sensing resistors (:func:`contact_flags_from_fsr`).
+class FootContactFromFsr(_FootContactFlags):
+    """Contact flags from foot force-sensing resistors (:func:`contact_flags_from_fsr`
+    without hysteresis).
 
-    A foot is in contact when the sum of its FSR readings exceeds ``weight_fraction`` times
-    the robot's weight (default ``CONTACT_WEIGHT_FRACTION`` = 5 %: 2.5 N on a 5.19 kg Nao;
-    the F/T default 20 N is the same 5 % of HRP-4's weight).
+    A foot comes into contact when the sum of its FSR readings exceeds ``weight_fraction``
+    times the robot's weight (default ``CONTACT_WEIGHT_FRACTION`` = 5 %: 2.5 N on a 5.19 kg
+    Nao; the F/T default 20 N is the same 5 % of HRP-4's weight) and, with
+    ``off_weight_fraction``, leaves it below that fraction (hysteresis).
 
     Inputs:
         fsr_forces: ``sensors_per_foot`` per foot, N, foot by foot (``FsrArray``'s
@@ -840,19 +904,23 @@ class FootContactFromFsr(LeafSystem):
         robot_weight: float,
         *,
         weight_fraction: float = CONTACT_WEIGHT_FRACTION,
+        off_weight_fraction: float | None = None,
         num_feet: int = 2,
         sensors_per_foot: int = 4,
+        period: float = 1e-3,
     ):
         """Args:
         robot_weight: the robot's weight m |g|, N.
-        weight_fraction: the threshold as a fraction of ``robot_weight``, in (0, 1).
+        weight_fraction: the contact threshold as a fraction of ``robot_weight``, in (0, 1).
+        off_weight_fraction: the release threshold's fraction (<= ``weight_fraction``;
+            default: the same, no hysteresis).
         num_feet: number of feet, >= 1 (default 2).
         sensors_per_foot: FSRs per foot, >= 1 (default 4, Nao).
+        period: the hysteresis' update period, s.
 
         Raises:
             ValueError: a non-positive weight, a fraction outside (0, 1), bad counts.
         """
-        super().__init__()
         who = "FootContactFromFsr"
         for name, value in (("num_feet", num_feet), ("sensors_per_foot", sensors_per_foot)):
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
@@ -860,19 +928,17 @@ class FootContactFromFsr(LeafSystem):
         fraction = positive_number(weight_fraction, f"{who}: weight_fraction")
         if fraction >= 1.0:
             raise ValueError(f"{who}: weight_fraction must be below 1, got {weight_fraction!r}")
-        self._threshold = fraction * positive_number(robot_weight, f"{who}: robot_weight")
+        weight = positive_number(robot_weight, f"{who}: robot_weight")
+        off = None
+        if off_weight_fraction is not None:
+            off = positive_number(off_weight_fraction, f"{who}: off_weight_fraction") * weight
+        super().__init__(who, num_feet, fraction * weight, off, period)
         self._per_foot = int(sensors_per_foot)
         self._forces = self.DeclareVectorInputPort("fsr_forces", self._per_foot * int(num_feet))
-        self.DeclareVectorOutputPort("foot_contact", int(num_feet), self._CalcContact)
 
-    @property
-    def threshold(self) -> float:
-        """The contact threshold on a foot's FSR sum, N."""
-        return self._threshold
-
-    def _CalcContact(self, context: Context, output: BasicVector) -> None:
+    def _normal_forces(self, context: Context) -> np.ndarray:
         f = eval_finite_input("FootContactFromFsr", self._forces, context)
-        output.SetFromVector(contact_flags_from_fsr(f, self._threshold, self._per_foot))
+        return np.asarray(f, dtype=float).reshape(-1, self._per_foot).sum(axis=1)
 
 
 # ---------------------------------------------------------------------------------------

@@ -63,7 +63,7 @@ class EkfSettings:
             off threshold, wider than a force's noise, ~0.2 N on a Nao's FSR sum).
         contact_off_weight_fraction: and leaves it below this fraction. Default 0.05
             (``CONTACT_OFF_WEIGHT_FRACTION``: a foot carrying less slides or rocks on its edge
-            and cannot anchor the filter; the online F/T threshold, 20 N on HRP-4). At most
+            and cannot anchor the filter; the station's, online). At most
             the on fraction.
         still_min_duration: s, the shortest still start the at-rest IMU bias is measured
             on (``STILL_MIN_DURATION``, 0.5 s).

@@ -103,6 +103,7 @@ def test_study_trials_split_over_seeds_and_match_each_seeds_own_draw():
     assert len({s["noise_seed"] for s in specs}) == 7
 
 
+@pytest.mark.slow
 def test_trials_run_one_after_another_each_detected_and_localized_in_its_window():
     """Three pushes in one run (``run_schedule``, 0.4 s apart): each trial's window holds its
     own detection (none carried over from the previous push, no false detection in the

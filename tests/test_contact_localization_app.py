@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 from scenario_checks import SCENARIOS, check_scenario_convention
 
 from apps import contact_localization
@@ -22,6 +23,7 @@ from diagrams.station.conditions import set_ideal_conditions
 from systems.simulation.visualization import read_static_html
 
 
+@pytest.mark.slow
 def test_app_smoke(tmp_path):
     code = contact_localization.main(
         [
@@ -104,6 +106,7 @@ def test_app_smoke(tmp_path):
         assert True in visible, path  # shown during the push
 
 
+@pytest.mark.slow
 def test_app_two_contacts(tmp_path):
     """``--contacts 2``: two links pushed at once in each trial (ideal world, noise on); the
     one-or-two-contact fit says two contacts and finds both, and the replay shows both
@@ -198,6 +201,7 @@ def test_app_reads_scenario_text_and_reports_errors(tmp_path, capsys):
     assert "at least one trial" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_app_calibrates_once_in_the_realistic_world(tmp_path, monkeypatch):
     """The default (realistic) study calibrates the robot's model once, saves it, and every
     run reads the saved file (here the calibration is replaced by the estimators' own model

@@ -270,6 +270,7 @@ def test_no_contact_and_joint_stops(hrp4, localizer):
 # ---------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_two_contacts_exact(hrp4, localizer):
     """24 seeded pairs (8 on one limb, 16 on two limbs), exact residuals.
 

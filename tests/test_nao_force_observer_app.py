@@ -25,6 +25,7 @@ def app_output(tmp_path_factory):
     return out / "nao_force_observer"
 
 
+@pytest.mark.slow
 def test_app_writes_plot_replay_and_metrics(app_output):
     assert (app_output / "experiment_3.png").stat().st_size > 20_000
     metrics = json.loads((app_output / "metrics.json").read_text())
@@ -39,6 +40,7 @@ def test_app_writes_plot_replay_and_metrics(app_output):
     assert m["invalid_samples"] == 0 and m["fsr_saturated_samples"] == 0 and m["base_height_drop_m"] < 0.01
 
 
+@pytest.mark.slow
 def test_estimate_tracks_the_expected_virtual_force(app_output):
     m = json.loads((app_output / "metrics.json").read_text())["experiment_3"]
     quiet, loaded, unloaded = m["steady_state_windows"]  # before, with and after the load
@@ -56,6 +58,7 @@ def test_estimate_tracks_the_expected_virtual_force(app_output):
     assert max(m["rms_error_N"].values()) < 1.5  # half-length ramps: a larger transient share
 
 
+@pytest.mark.slow
 def test_experiment_3_hand_is_where_eq_24_puts_it():
     """The paper's stance (nominal) with experiment 3's arm and its load hanging from the
     hand: the simulator's expected virtual force (eq. 11, from the true CoM and the load's
@@ -92,6 +95,7 @@ def test_experiment_3_hand_is_where_eq_24_puts_it():
     assert experiment_posture(scenario, make_experiment(1)) is None
 
 
+@pytest.mark.slow
 def test_replay_is_self_contained_and_animated(app_output):
     html = (app_output / "experiment_3.html").read_text()
     assert re.findall(r"<(?:script|link)[^>]+(?:src|href)\s*=\s*[\"']((?:https?:)?//[^\"']+)", html) == []

@@ -74,6 +74,7 @@ def test_signed_distance_to_polygon():
     assert signed_distance_to_polygon(square, np.array([1.2, 0.5])) == pytest.approx(-0.2)
 
 
+@pytest.mark.slow
 def test_app_full_walk_meets_the_floors(tmp_path):
     assert nao_walk.main(["--out", str(tmp_path), "--headless", "--no-replay"]) == 0
     out = tmp_path / "nao_walk"

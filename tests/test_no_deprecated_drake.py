@@ -315,6 +315,7 @@ def test_log_channel_positive_control():
     assert any("_drake_deprecation_unit_test_element" in m for m in result["drake_deprecated"]), result
 
 
+@pytest.mark.slow
 def test_warning_channel_positive_control():
     result = _result("deprecated_callable")
     assert result["error"] is None, result["error"]

@@ -110,6 +110,7 @@ def test_residual_follows_the_true_effort_in_the_loop(short_runs):
     assert error < 0.2 * np.linalg.norm(s["tau_c_real"][:, window])
 
 
+@pytest.mark.slow
 def test_the_tare_removes_a_torque_sensor_offset_before_the_push():
     """An ideal world but for the torque sensors' offsets (1 % of the rated torques): the raw
     residual carries them without any contact. Without the tare the admittance integrates

@@ -50,6 +50,7 @@ def test_residual_comparison_on_talos(tmp_path):
     assert metrics["internal_rel_rms_error"] < 0.2
 
 
+@pytest.mark.slow
 def test_contact_study_on_talos(tmp_path):
     args = ["--robot", TALOS, "--ideal", "--trials", "2", "--workers", "1", "--replays", "0", "--headless"]
     args += ["--push-start", "0.2", "--contact-duration", "0.4", "--no-contact-duration", "0.3"]

@@ -99,6 +99,7 @@ def test_set_initial_state_starts_the_estimator_at_that_state():
     np.testing.assert_allclose(pose, moved[q0 : q0 + 7], atol=1e-12)
 
 
+@pytest.mark.slow
 def test_residual_comparison_with_the_invariant_ekf_stays_finite():
     """A short residual comparison (2 s, the push from 0.5 s) with each base-state source;
     the internal residual's relative error is printed for both (``pytest -s``)."""

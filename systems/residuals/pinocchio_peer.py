@@ -7,7 +7,9 @@ external (eq. 16) residuals, one function per update on Pinocchio's C++ kernels 
 for the rest: M_dot = C + C^T, and the base elimination of eq. (9) (the Schur complement
 H_fb = H - F^T I0c^-1 F) written out. ``apps.benchmark`` times it beside the project's
 ``ClassicalResidual``/``InternalResidual``/``ExternalResidual`` bank, and the tests use it as
-an independent check of those systems (no code shared with ``systems.dynamics``).
+an independent check of those systems: it shares only the model builder
+(``systems.dynamics.pinocchio_model``, for ``peer_model_from_plant``) with the project, none of
+the residual or floating-base algebra.
 
 It computes what ``systems.residuals.momentum_residuals`` computes, with the same
 discretisation (its module docstring): at each update, the momentum p, the model's momentum
@@ -28,7 +30,8 @@ Pinocchio user's sensors give Pinocchio's coordinates).
 The robot: ``peer_model_from_urdf`` (``pin.buildModelFromUrdf`` with a free-flyer root, the
 user's way) or, for a model that exists only as SDFormat (``hrp4_like``; this Pinocchio is
 built without SDFormat), ``peer_model_from_plant`` (the plant's joints, frames and inertias,
-rebuilt with Pinocchio's own joints). ``plant_joint_parameters`` gives the project's
+rebuilt with Pinocchio's own joints, ``systems.dynamics.pinocchio_model``, the builder of the
+project's ``"pinocchio"`` dynamics). ``plant_joint_parameters`` gives the project's
 reflected rotor inertia (Pinocchio's ``model.armature``) and joint damping, which the
 project's loader may add to what the URDF says (TALOS: its SRDF gives the grippers no rotor;
 the project's description gives every joint 0.1 kg m^2).
@@ -41,7 +44,16 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 import pinocchio as pin
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import FrameIndex
+
+from systems.dynamics.pinocchio_model import pinocchio_model_from_plant, plant_joint_parameters, set_joint_parameters
+
+__all__ = [
+    "PinocchioResidualPeer",
+    "PlantCoordinates",
+    "peer_model_from_plant",
+    "peer_model_from_urdf",
+    "plant_joint_parameters",
+]
 
 
 class PinocchioResidualPeer:
@@ -153,89 +165,15 @@ def peer_model_from_plant(
     plant: MultibodyPlant, armature: Mapping[str, float] | None = None, damping: Mapping[str, float] | None = None
 ) -> tuple[pin.Model, np.ndarray]:
     """(model, damping) of a finalized Drake floating-base plant rebuilt with Pinocchio's
-    joints: the plant's default inertias, joint placements and axes; every frame of the
-    plant becomes a Pinocchio frame of the same name. Joints are added depth first
-    (Pinocchio's CRBA needs each subtree's velocities contiguous). Revolute and prismatic
-    joints and welds only."""
-    ctx = plant.CreateDefaultContext()
-
-    def se3(X) -> pin.SE3:
-        return pin.SE3(np.array(X.rotation().matrix()), np.array(X.translation()))
-
-    def inertia(body) -> pin.Inertia:
-        M = body.CalcSpatialInertiaInBodyFrame(ctx)
-        com = np.array(M.get_com())
-        return pin.Inertia(M.get_mass(), com, M.Shift(com).CalcRotationalInertia().CopyToFullMatrix3())
-
-    model = pin.Model()
-    model.gravity = pin.Motion(np.concatenate((plant.gravity_field().gravity_vector(), np.zeros(3))))
-    joints = [plant.get_joint(i) for i in plant.GetJointIndices()]
-    (free,) = [j for j in joints if j.type_name() == "quaternion_floating"]
-    root = model.addJoint(0, pin.JointModelFreeFlyer(), se3(free.frame_on_parent().CalcPoseInWorld(ctx)), free.name())
-    base = free.child_body()
-    # Each body's Pinocchio joint and pose in that joint's frame.
-    placement = {int(base.index()): (root, se3(free.frame_on_child().CalcPoseInBodyFrame(ctx)).inverse())}
-    model.appendBodyToJoint(root, inertia(base), placement[int(base.index())][1])
-    children: dict = {}
-    for joint in joints:
-        if joint is not free and joint.parent_body().index() != plant.world_body().index():
-            children.setdefault(int(joint.parent_body().index()), []).append(joint)
-
-    def add_subtree(body_index: int) -> None:
-        for joint in children.get(body_index, []):
-            parent, X_J_P = placement[body_index]
-            X_J_F = X_J_P * se3(joint.frame_on_parent().CalcPoseInBodyFrame(ctx))
-            X_M_C = se3(joint.frame_on_child().CalcPoseInBodyFrame(ctx)).inverse()
-            child = joint.child_body()
-            if joint.type_name() == "weld":
-                placement[int(child.index())] = (parent, X_J_F * se3(joint.X_FM()) * X_M_C)
-                model.appendBodyToJoint(parent, inertia(child), placement[int(child.index())][1])
-            else:
-                if joint.type_name() == "revolute":
-                    kind = pin.JointModelRevoluteUnaligned(np.array(joint.revolute_axis()))
-                elif joint.type_name() == "prismatic":
-                    kind = pin.JointModelPrismaticUnaligned(np.array(joint.translation_axis()))
-                else:
-                    raise ValueError(f"peer_model_from_plant: unsupported joint type {joint.type_name()}")
-                jid = model.addJoint(parent, kind, X_J_F, joint.name())
-                placement[int(child.index())] = (jid, X_M_C)
-                model.appendBodyToJoint(jid, inertia(child), X_M_C)
-            add_subtree(int(child.index()))
-
-    add_subtree(int(base.index()))
-    if model.nv != plant.num_velocities():
-        raise ValueError("peer_model_from_plant: some joints are not reachable from the floating base")
-    for index in range(plant.num_frames()):
-        frame = plant.get_frame(FrameIndex(index))
-        body = int(frame.body().index())
-        if body in placement and not model.existFrame(frame.name()):
-            jid, X_J_B = placement[body]
-            X_J_frame = X_J_B * se3(frame.GetFixedPoseInBodyFrame())
-            model.addFrame(pin.Frame(frame.name(), jid, X_J_frame, pin.FrameType.OP_FRAME))
+    joints (``systems.dynamics.pinocchio_model.pinocchio_model_from_plant``: the plant's
+    default inertias, joint placements and axes, every frame of the plant as a Pinocchio
+    frame of the same name), without armature unless ``armature`` gives it."""
+    model = pinocchio_model_from_plant(plant, reflected_inertia=False).model
     return _with_joint_parameters(model, armature, damping)
 
 
 def _with_joint_parameters(model: pin.Model, armature, damping) -> tuple[pin.Model, np.ndarray]:
-    for name, value in (armature or {}).items():
-        model.armature[model.joints[model.getJointId(name)].idx_v] = value
-    if damping is not None:
-        for name, value in damping.items():
-            model.damping[model.joints[model.getJointId(name)].idx_v] = value
-    return model, np.array(model.damping[6:], dtype=float)
-
-
-def plant_joint_parameters(plant: MultibodyPlant) -> tuple[dict[str, float], dict[str, float]]:
-    """({joint: reflected rotor inertia}, {joint: viscous damping}) of the plant's 1-DoF
-    joints: what Drake adds to the mass matrix's diagonal, and the project residuals' default
-    friction model."""
-    ctx = plant.CreateDefaultContext()
-    armature = {}
-    for index in plant.GetJointActuatorIndices():
-        actuator = plant.get_joint_actuator(index)
-        armature[actuator.joint().name()] = actuator.calc_reflected_inertia(ctx)
-    joints = [plant.get_joint(i) for i in plant.GetJointIndices()]
-    damping = {j.name(): float(j.default_damping()) for j in joints if j.num_velocities() == 1}
-    return armature, damping
+    return model, set_joint_parameters(model, armature, damping)
 
 
 class PlantCoordinates:

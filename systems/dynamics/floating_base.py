@@ -154,7 +154,13 @@ class DrakeFloatingBaseDynamics:
         and, for each of ``frames``, the spatial-velocity Jacobian of its origin in F0
         coordinates, world-aligned F0 axes), the rest stacked over the samples. Returns
         (M, M_dot, bias, R_WB, v0) as in ``mass_matrix_terms`` with a leading K axis, and J
-        (K, len(frames), 6, nv); equal to ``mass_matrix_terms`` to rounding (tests)."""
+        (K, len(frames), 6, nv); equal to ``mass_matrix_terms`` to rounding (tests): the same
+        Drake calls at the same F0 configurations, the same central difference
+        (M(q + h qdot) - M(q - h qdot)) * (0.5 / h). The F0 configurations [q + h qdot,
+        q - h qdot] and the F0 state [q; v_F0] of every sample are stacked before the loop
+        over the samples, which makes only Drake's calls (four per sample and one per frame)
+        and writes their results in place.
+        """
         plant, n, context = self._plant, self._n, self._context_F0
         K = q.shape[0]
         R_PB = quaternions_to_rotations(q[:, :4])
@@ -162,27 +168,36 @@ class DrakeFloatingBaseDynamics:
         v0 = (v[:, None, :6].reshape(K, 2, 3) @ R_PB).reshape(K, 6)
         q_joints, qdot = q[:, 7:], v[:, 6:]
         speed = np.sqrt(np.einsum("ki,ki->k", qdot, qdot))
-        h = np.where(speed > 0.0, self._step / np.where(speed > 0.0, speed, 1.0), 0.0)
-        M, M_dot, Cv = np.empty((K, 6 + n, 6 + n)), np.zeros((K, 6 + n, 6 + n)), np.empty((K, 6 + n))
-        J = np.empty((K, len(frames), 6, 6 + n))
-        v_F0 = v.copy()
-        v_F0[:, :6] = v0
-        world = plant.world_frame()
-        dq = h[:, None] * qdot
-        q_plus, q_minus = q_joints + dq, q_joints - dq
-        mass_matrix = self._mass_matrix_F0
-        for k in np.flatnonzero(speed > 0.0).tolist():
-            np.subtract(mass_matrix(q_plus[k]), mass_matrix(q_minus[k]), out=M_dot[k])
-        for k in range(K):
-            M[k] = mass_matrix(q_joints[k])
-            plant.SetVelocities(context, v_F0[k])
-            Cv[k] = plant.CalcBiasTerm(context)
-            for f, frame in enumerate(frames):  # at the joint positions just set
-                J[k, f] = plant.CalcJacobianSpatialVelocity(
-                    context, JacobianWrtVariable.kV, frame, np.zeros(3), world, world
-                )
         moving = speed > 0.0
-        M_dot[moving] *= (0.5 / h[moving])[:, None, None]
+        h = np.where(moving, self._step / np.where(moving, speed, 1.0), 0.0)
+        scale = (0.5 / np.where(moving, h, 1.0)).tolist()  # the difference's 0.5 / h
+        dq = h[:, None] * qdot
+        # Per sample, the F0 configurations [q + dq, q - dq] of the difference and the F0
+        # state [q; v_F0] of M, the bias and the Jacobians (the base at the identity pose).
+        q_F0 = np.empty((K, 2, q.shape[1]))
+        q_F0[:, :, :7] = self._q_F0[:7]
+        q_F0[:, 0, 7:] = q_joints + dq
+        q_F0[:, 1, 7:] = q_joints - dq
+        x_F0 = np.concatenate((q, v), axis=1)
+        x_F0[:, :7] = self._q_F0[:7]
+        x_F0[:, q.shape[1] : q.shape[1] + 6] = v0
+        M, M_dot, Cv = np.empty((K, 6 + n, 6 + n)), np.empty((K, 6 + n, 6 + n)), np.empty((K, 6 + n))
+        J = np.empty((K, len(frames), 6, 6 + n))
+        world, origin, kV = plant.world_frame(), np.zeros(3), JacobianWrtVariable.kV
+        for k, is_moving in enumerate(moving.tolist()):
+            if is_moving:
+                plant.SetPositions(context, q_F0[k, 0])
+                M_plus = plant.CalcMassMatrix(context)
+                plant.SetPositions(context, q_F0[k, 1])
+                np.subtract(M_plus, plant.CalcMassMatrix(context), out=M_dot[k])
+                M_dot[k] *= scale[k]
+            else:
+                M_dot[k] = 0.0
+            plant.SetPositionsAndVelocities(context, x_F0[k])
+            M[k] = plant.CalcMassMatrix(context)
+            Cv[k] = plant.CalcBiasTerm(context)
+            for f, frame in enumerate(frames):
+                J[k, f] = plant.CalcJacobianSpatialVelocity(context, kV, frame, origin, world, world)
         # The bias of ``mass_matrix_terms``: Cv + M[:, 3:6] a, a = w x v - g (in F0).
         g = np.einsum("i,kij->kj", self._gravity_W, R_WB)
         wx, wy, wz, vx, vy, vz = v0.T
@@ -246,7 +261,7 @@ class FloatingBaseDynamics:
             from systems.dynamics.floating_base_reference import RecursiveFloatingBaseDynamics
 
             self._impl = RecursiveFloatingBaseDynamics(plant)
-        self.topology = floating_base_topology(plant)
+        self.topology = self._impl.topology  # one walk of the plant's tree (``floating_base_topology``)
         self.plant = plant
         self._gravity_context: Context | None = None  # the "reference" implementation's
 

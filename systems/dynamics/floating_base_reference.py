@@ -93,7 +93,7 @@ class RecursiveFloatingBaseDynamics:
     def __init__(self, plant: MultibodyPlant):
         topo = floating_base_topology(plant)
         self._plant = plant
-        self._topology = topo
+        self.topology = topo
         self._n = topo.num_joints
         self._nq = plant.num_positions()
         self._nv = plant.num_velocities()

@@ -42,6 +42,10 @@ from systems.common.checks import eval_finite_input, positive_number, resolve_bo
 from systems.common.spatial import cross, skew
 from systems.common.topology import floating_base_topology, rigid_link_of_bodies, same_rigid_link
 from systems.residuals.geometry_intersection import (
+    BOX,
+    CAPSULE,
+    CYLINDER,
+    SPHERE,
     RobotGeometry,
     line_intersections,
     outward_normals,
@@ -115,6 +119,18 @@ class _SensedConfiguration:
 
     def base_pose(self) -> np.ndarray:
         return self.topology.base_frame.CalcPoseInWorld(self.context).GetAsMatrix34()
+
+
+def _bounding_radii(geometry: RobotGeometry) -> np.ndarray:
+    """(g,) the radius of each primitive's bounding sphere about its frame's origin, m:
+    a sphere's radius, a box's half diagonal, a cylinder's hypot(radius, half length), a
+    capsule's radius plus half length; inf for a convex hull (never bounded)."""
+    kinds, p = geometry.kinds, geometry.params
+    return np.select(
+        [kinds == SPHERE, kinds == BOX, kinds == CYLINDER, kinds == CAPSULE],
+        [p[:, 0], np.linalg.norm(p, axis=1), np.hypot(p[:, 0], p[:, 1]), p[:, 0] + p[:, 1]],
+        np.inf,
+    )
 
 
 def candidate_geometry(
@@ -668,10 +684,39 @@ class ContactDetector(LeafSystem):
         it): the detector's next state (the layout of the class docstring) from its
         ``state``, the test statistics ``s`` = (s_ext, s_int) of this update's inputs
         (``statistics``) and the time t, s."""
-        detected, t_detect, above, below_time = (float(v) for v in state[:4])  # the _DetectorState fields
         use = self._use
         is_above = t >= self._startup_time and any(u and si > th for u, si, th in zip(use, s, self._on))
         is_below = all((not u) or si < th for u, si, th in zip(use, s, self._off))
+        return self._transition(state, is_above, is_below, t) + [s[0], s[1]]
+
+    def replay(
+        self, state: Sequence[float], statistics: np.ndarray, times: np.ndarray
+    ) -> tuple[np.ndarray, list[float]]:
+        """``advance`` over N successive updates from ``state``: (N,) the detector's flag
+        after each and its state after the last (``state`` itself for N = 0), from the test
+        statistics (N, 2) of their inputs (``statistics_of_samples``) and their times (N,),
+        s. Equal to stepping ``advance``: the threshold tests, which read only each update's
+        statistics and time, are made for all updates at once, and only the switching logic
+        (``_transition``, ``advance``'s own) runs update by update."""
+        statistics = np.asarray(statistics, dtype=float)
+        times = np.asarray(times, dtype=float)
+        use = np.array(self._use)
+        above = (times >= self._startup_time) & ((statistics > np.array(self._on)) & use).any(axis=1)
+        below = ((statistics < np.array(self._off)) | ~use).all(axis=1)
+        flags = np.empty(len(times), dtype=bool)
+        state = list(state)
+        for k, (is_above, is_below, t) in enumerate(zip(above.tolist(), below.tolist(), times.tolist())):
+            state[:4] = self._transition(state, is_above, is_below, t)
+            flags[k] = state[0] > 0.5
+        if len(times):
+            state[4:6] = statistics[-1].tolist()
+        return flags, state
+
+    def _transition(self, state: Sequence[float], is_above: bool, is_below: bool, t: float) -> list[float]:
+        """The switching logic of ``advance``: the next [detected, detection time, updates
+        above, time below] from ``state``'s, given whether this update's statistics are
+        above the on thresholds (after the start-up) and below the off ones."""
+        detected, t_detect, above, below_time = (float(v) for v in state[:4])  # the _DetectorState fields
         if detected < 0.5:
             above = above + 1.0 if is_above else 0.0
             if above >= self._on_samples:
@@ -681,7 +726,7 @@ class ContactDetector(LeafSystem):
             below_time = below_time + self._period if is_below else 0.0
             if below_time >= self._release_time - 1e-12 and is_below:
                 detected, below_time = 0.0, 0.0
-        return [detected, t_detect, above, below_time, s[0], s[1]]
+        return [detected, t_detect, above, below_time]
 
 
 # ---------------------------------------------------------------------------------------
@@ -886,6 +931,8 @@ class ContactLocalizer(LeafSystem):
             raise ValueError(f"{who}: limit_margin must be finite and non-negative, got {limit_margin}")
         self._stops = _JointStops(kin.topology.joints, self._limit_margin)
         self._same_body = self._geometry.body_indices[:, None] == self._geometry.body_indices[None, :]
+        # The squared radius, a hair wider, of each primitive's bounding sphere about its origin.
+        self._bounding_radius2 = (_bounding_radii(self._geometry) * (1.0 + 1e-9) + 1e-9) ** 2
         self._rigid_link = rigid_link_of_bodies(plant)  # welded bodies are one link
 
         self._state_port = self.DeclareVectorInputPort("state", nq + nv)
@@ -939,7 +986,14 @@ class ContactLocalizer(LeafSystem):
 
     def localize(self, q: np.ndarray, wrench_W: np.ndarray, residual: np.ndarray) -> LocalizationResult:
         """Steps 1-4 of the class docstring for one (q, external wrench, internal residual),
-        contact assumed detected. Never raises for finite inputs of the right sizes."""
+        contact assumed detected. Never raises for finite inputs of the right sizes.
+
+        The geometric queries skip the primitives whose bounding sphere (about the
+        primitive's origin) the line of action misses, or, for the buried-point test, that
+        holds none of the candidate points, since neither can change the result: such a
+        line misses the primitive, and such a point lies outside it (a positive signed
+        distance, never below the tolerance); convex hulls are never skipped. The numbers
+        of the primitives queried are those of querying all (row by row)."""
         wrench_W = np.asarray(wrench_W, dtype=float)
         m, f = wrench_W[:3], wrench_W[3:]
         f2 = float(f @ f)
@@ -954,7 +1008,12 @@ class ContactLocalizer(LeafSystem):
         R_WG, p_WG = geo.world_poses(X_WB)
         o_G = np.einsum("gji,gj->gi", R_WG, p0 - p_WG)
         d_G = np.einsum("gji,j->gi", R_WG, d)
-        l_in, _, hit = line_intersections(o_G, d_G, geo.kinds, geo.params, geo.planes)
+        off_line = (p_WG - p0) - np.outer((p_WG - p0) @ d, d)
+        near = np.flatnonzero(np.einsum("gi,gi->g", off_line, off_line) <= self._bounding_radius2)
+        l_in, hit = np.full(len(geo), np.inf), np.zeros(len(geo), dtype=bool)
+        l_in[near], _, hit[near] = line_intersections(
+            o_G[near], d_G[near], geo.kinds[near], geo.params[near], geo.planes[near]
+        )
         index = np.flatnonzero(hit & np.isfinite(l_in))
         if index.size:
             pts_G = o_G[index] + l_in[index, None] * d_G[index]
@@ -963,10 +1022,15 @@ class ContactLocalizer(LeafSystem):
             index = index[inward]
         if index.size:
             pts_W = p0 + l_in[index, None] * d
-            # Buried in another link's primitive?  (m, g) signed distances.
+            # Buried in another link's primitive?  (m, g) signed distances, of the primitives
+            # of other links whose bounding sphere holds one of the points.
             rel = pts_W[:, None, :] - p_WG[None, :, :]
-            local = np.einsum("gji,mgj->mgi", R_WG, rel)
-            sd = signed_distances(local, geo.kinds, geo.params, geo.planes)
+            holds = np.einsum("mgi,mgi->mg", rel, rel) <= self._bounding_radius2
+            near = np.flatnonzero((holds & ~self._same_body[index]).any(axis=0))
+            sd = np.full(holds.shape, np.inf)
+            if near.size:
+                local = np.einsum("gji,mgj->mgi", R_WG[near], rel[:, near])
+                sd[:, near] = signed_distances(local, geo.kinds[near], geo.params[near], geo.planes[near])
             sd[self._same_body[index]] = np.inf
             index = index[sd.min(axis=1) >= -self._tolerance]
         if index.size == 0:

@@ -6,10 +6,12 @@ residual noise model a calibration log gives the contact detector.
 (``systems.residuals.momentum_residuals``) through the log's samples, so a log replays
 exactly as the robot's estimators would have run on it. ``replay_contact_estimation`` adds
 the ``ContactDetector`` and the ``ContactLocalizer`` (``systems.residuals.contact_estimation``)
-with the one-update delay they have in a diagram. Both call each system's own update code
-(its ``advance`` method, which its periodic update event also runs) without the framework's
-contexts and fixed input ports, whose per-sample cost would exceed the dynamics' (the floor
-of issue 14: a 1 kHz log of a 34-joint robot at 5x real time on one core). Without an unknown contact, what
+with the one-update delay they have in a diagram. Both run each system's own update code
+(its ``advance`` method, which its periodic update event also runs, or the same algebra and
+logic over all samples at once: ``_stacked_residuals``, ``ContactDetector.replay``,
+``ContactLocalizer.replay_from``) without the framework's contexts and fixed input ports,
+whose per-sample cost would exceed the dynamics' (the floor of issue 14: a 1 kHz log of a
+34-joint robot at 5x real time on one core). Without an unknown contact, what
 they report is model error plus sensor noise: ``residual_noise_model`` takes their
 covariance over a calibration log as the detector's noise model (``ContactDetector``'s
 ``covariance_internal`` and ``covariance_external_force``), in place of the covariance
@@ -134,9 +136,10 @@ def replay_residuals(
         internal_gain, external_gain: K, 1/s. period: T, s.
         classical_gain: K of the classical residual, 1/s; None: not replayed.
         stacked: True: the whole log at once (``_stacked_residuals``; 2.4x faster,
-            ``make benchmark``), equal to the per-sample updates to the rounding of the
-            mass matrix's central difference (1e-7 N m after 1 s of motion); False
-            (default): the systems' own updates, sample by sample.
+            ``make benchmark``), equal to the per-sample updates to rounding (9e-14 N m
+            on ``make benchmark``'s 2 s push log, of residuals up to 24 N m: the same
+            Drake calls, the algebra in another order); False (default): the systems' own
+            updates, sample by sample.
 
     Raises:
         ValueError: arrays of inconsistent sizes or non-finite values (naming them).
@@ -252,7 +255,7 @@ def _stacked_residuals(
     state: np.ndarray,
     joint_torque: np.ndarray,
     known_wrenches: np.ndarray,
-    chunk: int = 1000,
+    chunk: int = 128,
     integral: np.ndarray | None = None,
     classical: ClassicalResidual | None = None,
 ) -> tuple[ReplayedResiduals, np.ndarray] | None:
@@ -269,7 +272,10 @@ def _stacked_residuals(
     too, from the same terms, starting afresh at the first sample. Returns the residuals and
     I^+ after the last sample; None when the model's dynamics is not the "fast"
     implementation or the residuals do not share the model and period (then ``advance``
-    runs per sample)."""
+    runs per sample). ``chunk``: samples stacked at a time (the numbers do not depend on it):
+    128 keeps a chunk's mass matrices (2 x 1.6 MB for 34 joints) near the cache and in
+    memory reused from chunk to chunk (1000: 5000 page faults per estimation of
+    ``make benchmark``'s 2 s log, 128: none)."""
     model = internal.model
     if external.model is not model or internal.period != external.period:
         return None
@@ -301,37 +307,43 @@ def _stacked_residuals(
         qdot = x[:, nq + 6 :, None]
         I0c, F, H = M[:, :6, :6], M[:, :6, 6:], M[:, 6:, 6:]
         I0c_dot, F_dot, H_dot = M_dot[:, :6, :6], M_dot[:, :6, 6:], M_dot[:, 6:, 6:]
+        FT, F_dot_T = F.transpose(0, 2, 1), F_dot.transpose(0, 2, 1)
         p_hat, C_hat = bias[:, :6, None], bias[:, 6:, None]
-        # Eq. (9)'s elimination (``reduce_to_floating_terms``) applied to the joint velocities
-        # rather than formed: H_fb qdot = H qdot - F^T G qdot, H_fb_dot qdot (eq. 13) =
-        # H_dot qdot - G^T F_dot qdot - F_dot^T G qdot + G^T I0c_dot G qdot, C_fb = C^ - G^T p^,
-        # with G = I0c^-1 F.
-        G = np.linalg.solve(I0c, F)
-        GT = G.transpose(0, 2, 1)
-        G_qdot = G @ qdot
-        H_fb_qdot = H @ qdot - F.transpose(0, 2, 1) @ G_qdot
-        H_fb_dot_qdot = H_dot @ qdot - GT @ (F_dot @ qdot) - F_dot.transpose(0, 2, 1) @ G_qdot + GT @ (I0c_dot @ G_qdot)
-        C_fb = C_hat - GT @ p_hat
         # ResidualModel.known_wrench_forces: [m; f] per frame rotated into F0, through J^T.
         generalized = np.zeros((K, n + 6, 1))
         if frames:
             w = known_wrenches[rows.start : rows.stop].reshape(K, len(frames), 2, 3) @ R_WB[:, None]
             generalized = (J.transpose(0, 1, 3, 2) @ w.reshape(K, len(frames), 6, 1)).sum(axis=1)
         w_F0, tau_joints = generalized[:, :6], generalized[:, 6:]
+        # Eq. (9)'s elimination (``reduce_to_floating_terms``) applied to vectors rather than
+        # formed: with G = I0c^-1 F, H_fb qdot = H qdot - F^T G qdot, H_fb_dot qdot (eq. 13) =
+        # H_dot qdot - G^T F_dot qdot - F_dot^T G qdot + G^T I0c_dot G qdot, C_fb = C^ - G^T p^,
+        # and eq. (10)'s known-wrench torques take G^T w_F0. G itself is never formed: G qdot
+        # and G^T x = F^T I0c^-1 x (I0c is symmetric) are two solves with I0c of one and four
+        # right-hand sides, equal to forming G to rounding and 4x cheaper than its n columns.
+        H_qdot, H_dot_qdot = H @ qdot, H_dot @ qdot
+        F_qdot, F_dot_qdot = F @ qdot, F_dot @ qdot
+        G_qdot = np.linalg.solve(I0c, F_qdot)
+        GT_F_dot_qdot, GT_I0c_dot_G_qdot, GT_p_hat, GT_w_F0 = np.split(
+            FT @ np.linalg.solve(I0c, np.concatenate((F_dot_qdot, I0c_dot @ G_qdot, p_hat, w_F0), axis=2)), 4, axis=2
+        )
+        H_fb_qdot = H_qdot - FT @ G_qdot
+        H_fb_dot_qdot = H_dot_qdot - GT_F_dot_qdot - F_dot_T @ G_qdot + GT_I0c_dot_G_qdot
+        C_fb = C_hat - GT_p_hat
         # InternalResidual and ExternalResidual._momentum_and_rates.
         tau_m = joint_torque[rows.start : rows.stop, :, None] - internal._damping[:, None] * qdot
         v0c = v0[:, :, None]
-        momentum = np.concatenate((H_fb_qdot, I0c @ v0c + F @ qdot), axis=1)[:, :, 0]
-        rate = np.concatenate((H_fb_dot_qdot - C_fb, I0c_dot @ v0c + F_dot @ qdot - p_hat), axis=1)[:, :, 0]
-        measured = np.concatenate((tau_m + tau_joints - GT @ w_F0, w_F0), axis=1)[:, :, 0]
+        momentum = np.concatenate((H_fb_qdot, I0c @ v0c + F_qdot), axis=1)[:, :, 0]
+        rate = np.concatenate((H_fb_dot_qdot - C_fb, I0c_dot @ v0c + F_dot_qdot - p_hat), axis=1)[:, :, 0]
+        measured = np.concatenate((tau_m + tau_joints - GT_w_F0, w_F0), axis=1)[:, :, 0]
         residual, previous = _momentum_observer(gain, period, momentum, rate, measured, previous)
         out_internal[rows.start : rows.stop] = residual[:, :n]
         if classical is not None:
             # ClassicalResidual._momentum_and_rates: the virtual-joint model's momentum and
             # rates, [base (F0), the external residual's rows; joints], with its own damping.
             tau_c = joint_torque[rows.start : rows.stop, :, None] - classical._damping[:, None] * qdot
-            joints_momentum = (F.transpose(0, 2, 1) @ v0c + H @ qdot)[:, :, 0]
-            joints_rate = (F_dot.transpose(0, 2, 1) @ v0c + H_dot @ qdot - C_hat)[:, :, 0]
+            joints_momentum = (FT @ v0c + H_qdot)[:, :, 0]
+            joints_rate = (F_dot_T @ v0c + H_dot_qdot - C_hat)[:, :, 0]
             momentum_c = np.concatenate((momentum[:, n:], joints_momentum), axis=1)
             rate_c = np.concatenate((rate[:, n:], joints_rate), axis=1)
             measured_c = np.concatenate((measured[:, n:], (tau_c + tau_joints)[:, :, 0]), axis=1)
@@ -439,8 +451,11 @@ def replay_contact_estimation(
     and with the timing they have in a diagram (``diagrams.residuals.log_estimation``):
     at update k (time k T) the residuals read sample k, while the detector and the
     localizer read the residuals' (and the detector's) outputs of update k - 1 (zeros at
-    k = 0) and the localizer sample k's state. Each system's update is its own code
-    (``advance``), so the outputs equal what the systems report online, to rounding.
+    k = 0) and the localizer sample k's state. Each system runs its own update code over
+    the whole log: the residuals stacked (``_stacked_residuals``: ``advance``'s algebra and
+    recursion over all samples at once), the detector's ``replay`` (its ``advance``'s
+    switching logic, the threshold tests of all samples at once) and the localizer's
+    ``replay_from``, so the outputs equal what the systems report online, to rounding.
 
     Args:
         internal, external: the residual systems (sharing one ``ResidualModel``).
@@ -498,11 +513,8 @@ def replay_contact_estimation(
         detector_state = detector.CreateDefaultContext().get_discrete_state_vector().CopyToVector()
     else:
         detector_state = np.array(start.detector, dtype=float)
-    detected = np.zeros(samples, dtype=bool)
     statistics = detector.statistics_of_samples(late_external, late_internal)
-    for k, s in enumerate(statistics.tolist()):
-        detector_state = detector.advance(detector_state, s, float(times[k]))
-        detected[k] = detector_state[0] > 0.5
+    detected, detector_state = detector.replay(detector_state, statistics, times)
     localization = None
     localizer_end = None
     if localizer is not None:

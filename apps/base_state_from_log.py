@@ -248,7 +248,7 @@ def run_test_bed(seeds: list[int], folder: Path, base: WalkingLogSettings | None
 
 def _json(text: str) -> dict:
     payload = json.loads(text)
-    keep = ("stamps", "at_rest_imu_bias", "base_state", "real_time_factor", "not_estimated")
+    keep = ("stamps", "at_rest_imu_bias", "slip_updates", "base_state", "real_time_factor", "not_estimated")
     return {key: payload.get(key) for key in keep}
 
 

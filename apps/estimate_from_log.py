@@ -24,7 +24,8 @@ state used, logged or estimated, and the estimated IMU biases) and ``estimates.p
 contacts found, None without a detector, the real-time factor, how the stamps were spaced:
 uniform, stamp noise or uneven, with the fitted period and jitter, for a log without base
 state ``at_rest_imu_bias``: the still start the EKF's IMU bias was measured on, given by
-``--calibrate-first`` or detected, and the initial gyro bias, and ``not_estimated``:
+``--calibrate-first`` or detected, and the initial gyro bias, and ``slip_updates``: per foot
+the contact updates the EKF's slip test dropped, and ``not_estimated``:
 the estimates not made and why, e.g. no localization on a model without collision
 geometry, no internal residual, detection or localization on a log without joint torques,
 no residual at all on a log whose feet log only their normal forces; their columns are
@@ -385,6 +386,9 @@ def _run(args: argparse.Namespace) -> int:
     at_rest_line = describe_at_rest(estimates)
     if at_rest_line is not None:
         print(at_rest_line)
+    if estimates.slip_updates:
+        slips = ", ".join(f"{side} {count}" for side, count in estimates.slip_updates.items())
+        print(f"slip test: contact updates dropped as slips, per foot: {slips}")
     for estimate, reason in estimates.not_estimated.items():
         print(f"not estimated: {estimate}: {reason}")
     print(
@@ -415,6 +419,7 @@ def _run(args: argparse.Namespace) -> int:
         "resampled": estimates.resampled,
         "stamps": timing_metrics(estimates),
         "at_rest_imu_bias": at_rest_metrics(estimates),
+        "slip_updates": estimates.slip_updates or None,
         "noise_model": estimates.noise_model,
         "base_state": estimates.base_state,
         "wall_time_s": estimates.wall_time_s,

@@ -146,6 +146,8 @@ def test_the_app_runs_the_front_door_and_checks_a_log_against_its_truth(app_run,
     (row,) = metrics["rows"]
     assert row["log"]["channels"].endswith("no torques, no base state")
     assert row["front_door_metrics"]["at_rest_imu_bias"]["source"] == "detected"
+    assert set(row["front_door_metrics"]["slip_updates"]) == {"left", "right"}  # the slip test ran
+    assert "slip test: contact updates dropped as slips, per foot: left" in printed
     assert all(row["front_door"]["floors_met"].values()), row["front_door"]
     labels = [ablation["label"] for ablation in row["ablations"]]
     assert labels == [label for label, _ in app.ABLATIONS]

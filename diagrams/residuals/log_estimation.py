@@ -997,6 +997,8 @@ class LogEstimates:
             when it estimated the base with bias states, else None.
         at_rest: the at-rest IMU bias initialisation of that EKF (``AtRestCalibration``:
             the still window used and the initial gyro bias), else None.
+        slip_updates: with the base estimated with the EKF's slip test, {foot side: the
+            updates whose contact correction it dropped as a slip}, else empty.
         not_estimated: {estimate: why it was not made}, in the order ``INTERNAL_RESIDUAL``
             (no joint torques, or not every F/T foot's full wrench), ``EXTERNAL_RESIDUAL``
             (not every F/T foot's full wrench), ``DETECTION`` (a residual missing),
@@ -1025,6 +1027,7 @@ class LogEstimates:
     imu_bias: np.ndarray | None = None
     not_estimated: dict = field(default_factory=dict)
     at_rest: AtRestCalibration | None = None
+    slip_updates: dict[str, int] = field(default_factory=dict)
 
     @property
     def real_time_factor(self) -> float:
@@ -1230,6 +1233,7 @@ def _estimates(
         imu_bias=inputs.imu_bias,
         not_estimated=dict(skipped),
         at_rest=inputs.at_rest,
+        slip_updates=dict(inputs.slip_updates),
     )
 
 

@@ -65,7 +65,13 @@ from apps.runner import (
 )
 from models import MODEL_NAMES, MODELS_DIR, add_humanoid
 from systems.dynamics.floating_base import FloatingBaseDynamics
-from systems.residuals.momentum_residuals import ClassicalResidual, ExternalResidual, InternalResidual, ResidualModel
+from systems.residuals.momentum_residuals import (
+    ClassicalResidual,
+    ExternalResidual,
+    InternalResidual,
+    ResidualBank,
+    ResidualModel,
+)
 
 EXPERIMENT = "benchmark"
 
@@ -259,9 +265,10 @@ def benchmark_residual_peer(robot: str, *, calls: int = 150, batches: int = 7, s
     Timed exactly as ``benchmark_residual_update`` (the same 16 random states, changing at
     every call, the same torques and wrenches; their batches interleaved with those of the
     unit, ``_interleaved_median_microseconds``), after one update (both take their
-    steady-state branch): the project's bank (three Drake systems sharing one ResidualModel)
-    and the peer's ``step`` (its inputs in Pinocchio's coordinates, converted beforehand as
-    a Pinocchio user's sensors would give them), with one CalcMassMatrix at a new state as
+    steady-state branch): the project's bank (three Drake systems sharing one ResidualModel),
+    the fused ``ResidualBank`` (the same three in one system) and the peer's ``step`` (its
+    inputs in Pinocchio's coordinates, converted beforehand as a Pinocchio user's sensors
+    would give them), with one CalcMassMatrix at a new state as
     the unit. Then ``steps`` updates of both on one sequence of random states, torques and
     wrenches, from the first update: the largest relative difference of each residual
     (max over the steps of the largest entry's difference / the largest entry of the peer's
@@ -323,8 +330,20 @@ def benchmark_residual_peer(robot: str, *, calls: int = 150, batches: int = 7, s
         plant.SetPositions(plant_context, states[i % 16][0])
         return plant.CalcMassMatrix(plant_context)
 
+    bank = ResidualBank(plant, 35.0, known_wrench_frames=frames)
+    bank_context = bank.CreateDefaultContext()
+    bank.GetInputPort("measured_torque").FixValue(bank_context, torque)
+    if frames:
+        bank.GetInputPort("known_wrenches").FixValue(bank_context, wrenches)
+    bank_state = bank.GetInputPort("state").FixValue(bank_context, full_states[-1])
+    bank_context.SetDiscreteState(bank.EvalUniquePeriodicDiscreteUpdate(bank_context))
+
+    def update_bank(i: int):
+        bank_state.GetMutableData().set_value(full_states[i % 16])
+        bank.EvalUniquePeriodicDiscreteUpdate(bank_context)
+
     timings = _interleaved_median_microseconds(
-        {"unit": mass_matrix, "project": update_all, "peer": peer_step}, calls, batches
+        {"unit": mass_matrix, "project": update_all, "fused": update_bank, "peer": peer_step}, calls, batches
     )
     unit, project, peer_us = timings["unit"], timings["project"], timings["peer"]
 
@@ -372,6 +391,9 @@ def benchmark_residual_peer(robot: str, *, calls: int = 150, batches: int = 7, s
         "peer_model_source": source,
         "calc_mass_matrix_us": unit,
         "project_bank_us": project,
+        "fused_bank_us": timings["fused"],
+        "fused_bank_over_peer": timings["fused"] / peer_us,
+        "fused_bank_ratio_to_mass_matrix": timings["fused"] / unit,
         "peer_us": peer_us,
         "project_bank_ratio_to_mass_matrix": project / unit,
         "peer_ratio_to_mass_matrix": peer_us / unit,

@@ -5,6 +5,11 @@
   it estimates the true joint effort of the unknown external forces, tau_c,real (eq. 12).
 * ``ExternalResidual``: eq. (16); it estimates the total unknown external wrench on the
   floating base, eq. (17), reported in the base frame and in the world.
+* ``ResidualBank``: the three in one system (one update, one read of each input), with
+  the same outputs bit for bit.
+
+Residuals that share one ``ResidualModel`` share its per-state work: the dynamics, the
+known wrenches' generalized forces and the momenta and model rates.
 
 All three are discrete-time momentum observers (what runs on a real robot). At each update
 k (period T) they read the momentum p_k of the sensed state, the model's momentum rate a_k
@@ -66,6 +71,8 @@ from systems.dynamics.floating_base_terms import FloatingBaseTerms
 #: Default update period of the residuals [s].
 DEFAULT_PERIOD = 1e-3
 
+_ONE = np.ones(1)  # the "initialised" flag's value
+
 
 class ResidualModel:
     """The dynamics the residuals need at one sensed state, computed once per state.
@@ -101,10 +108,20 @@ class ResidualModel:
         X_WP = free_parent.CalcPoseInWorld(plant.CreateDefaultContext())
         self._p_WP = X_WP.translation().copy()
         self._R_WP = X_WP.rotation().matrix().copy()
+        # The usual case: the free joint's parent frame is the world (p_WBo = the q[4:7]).
+        self._parent_is_world = bool(np.array_equal(self._R_WP, np.eye(3)) and not self._p_WP.any())
+        self._qdot_start = self.num_positions + self.joint_velocity_start
         self._key: bytes | None = None
+        self._context_synced = self._context_is_current
+        self._q_joints = self._q_F0[7:].copy()  # q's joints of the last evaluate (own context)
+        self._impl_at_key = False
         self._terms: FloatingBaseTerms | None = None
         self._jacobians: dict[int, np.ndarray] = {}
         self._known_cache: dict = {}
+        # Per-state momenta and rates shared by the residuals (None: not computed yet).
+        self._base_rates: tuple[np.ndarray, np.ndarray] | None = None
+        self._classical_rates: tuple[np.ndarray, np.ndarray] | None = None
+        self._internal_rates: tuple[np.ndarray, np.ndarray] | None = None
 
     def set_spatial_inertias(self, inertias: Mapping[int, SpatialInertia]) -> None:
         """Makes this model differ from the plant: the bodies' spatial inertias M_BBo_B
@@ -129,11 +146,51 @@ class ResidualModel:
             self._terms = self.dynamics.compute(x[:nq], x[nq:])
             self._jacobians = {}
             self._known_cache = {}
+            self._base_rates = self._classical_rates = self._internal_rates = None
             self._key = key
+            self._context_synced = self._context_is_current  # else set by spatial_jacobian_F0
             if not self._context_is_current:
-                self._q_F0[7:] = x[7:nq]
-                self.plant.SetPositions(self._context_F0, self._q_F0)
+                self._q_joints = x[7:nq].copy()
+                self._impl_at_key = True  # the implementation's own kinematics are of x
         return self._terms
+
+    def base_momentum_and_rate(self, terms: FloatingBaseTerms, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(p0, a0) at the last evaluated state x: the base rows of model (8)'s momentum,
+        p0 = I0c v0 + F qdot, and of its model rate, a0 = I0c_dot v0 + F_dot qdot - p^
+        ([moment about the F0 origin; force] in F0, N m s and N s; N m and N). Computed once
+        per state (the classical and external residuals share them)."""
+        rates = self._base_rates
+        if rates is None:
+            v0, qdot = terms.v0, x[self._qdot_start :]
+            rates = (terms.I0c @ v0 + terms.F @ qdot, terms.I0c_dot @ v0 + terms.F_dot @ qdot - terms.p_hat)
+            self._base_rates = rates
+        return rates
+
+    def classical_momentum_and_rate(self, terms: FloatingBaseTerms, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(p, a) of the virtual-joint model (8) at the last evaluated state x, size nv:
+        p = M_F0 [v0; qdot] and a = M_F0_dot [v0; qdot] - [p^; C^] (eq. 7 with
+        M_dot - C = C^T). Computed once per state."""
+        rates = self._classical_rates
+        if rates is None:
+            v0, qdot = terms.v0, x[self._qdot_start :]
+            p0, a0 = self.base_momentum_and_rate(terms, x)
+            rates = (
+                np.concatenate((p0, terms.F.T @ v0 + terms.H @ qdot)),
+                np.concatenate((a0, terms.F_dot.T @ v0 + terms.H_dot @ qdot - terms.C_hat)),
+            )
+            self._classical_rates = rates
+        return rates
+
+    def internal_momentum_and_rate(self, terms: FloatingBaseTerms, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(H_fb qdot, H_fb_dot qdot - C_fb) at the last evaluated state x, size n: the
+        floating-base joint momentum and its model rate of eq. (11) (with eq. 13). Computed
+        once per state."""
+        rates = self._internal_rates
+        if rates is None:
+            qdot = x[self._qdot_start :]
+            rates = (terms.H_fb @ qdot, terms.H_fb_dot @ qdot - terms.C_fb)
+            self._internal_rates = rates
+        return rates
 
     def gravity_joint_torques(self, x: np.ndarray) -> np.ndarray:
         """The joint entries (v[6:] order) of Drake's generalized gravity force tau_g
@@ -145,6 +202,7 @@ class ResidualModel:
         systems share this model (the contact study simulates its sensors without them and
         runs the estimators on the log afterwards, ``diagrams.residuals.contact_localization``).
         """
+        self._impl_at_key = False  # the gravity call may move the implementation's kinematics
         return self.dynamics.gravity_generalized_forces(x[: self.num_positions])[6:]
 
     def spatial_jacobian_F0(self, frame: Frame) -> np.ndarray:
@@ -152,13 +210,24 @@ class ResidualModel:
         [angular; linear]: J^T [m; f] (wrench at the frame origin, in F0) is the wrench's
         generalized force (base rows: [moment about the F0 origin; force] in F0). Valid for
         the state of the last ``evaluate``."""
-        J = self._jacobians.get(int(frame.index()))
+        index = int(frame.index())
+        J = self._jacobians.get(index)
         if J is None:
-            world = self.plant.world_frame()
-            J = self.plant.CalcJacobianSpatialVelocity(
-                self._context_F0, JacobianWrtVariable.kV, frame, np.zeros(3), world, world
-            )
-            self._jacobians[int(frame.index())] = J
+            # An implementation that keeps its own kinematics of the state (the "pinocchio"
+            # one) gives the Jacobian itself; else Drake's, on the F0 context.
+            own = getattr(self.dynamics._impl, "spatial_jacobian_F0", None) if self._impl_at_key else None
+            if own is not None:
+                J = own(frame)
+            else:
+                if not self._context_synced:  # q's joints at the identity base pose
+                    self._q_F0[7:] = self._q_joints
+                    self.plant.SetPositions(self._context_F0, self._q_F0)
+                    self._context_synced = True
+                world = self.plant.world_frame()
+                J = self.plant.CalcJacobianSpatialVelocity(
+                    self._context_F0, JacobianWrtVariable.kV, frame, np.zeros(3), world, world
+                )
+            self._jacobians[index] = J
         return J
 
     def known_wrench_forces(
@@ -184,12 +253,17 @@ class ResidualModel:
         cached = self._known_cache.get(key)
         if cached is not None:
             return cached
-        R_WB = terms.R_WB
-        generalized = np.zeros(self.num_velocities)
+        # Rotate every [m; f] into F0 (the Jacobians are expressed in F0, at the frame origins).
+        w_B = (wrenches_W.reshape(-1, 3) @ terms.R_WB).ravel()
+        generalized = None
         for i, frame in enumerate(frames):
-            # Rotate [m; f] into F0 (the Jacobian is expressed in F0, at the frame origin).
-            w_B = (wrenches_W[6 * i : 6 * i + 6].reshape(2, 3) @ R_WB).reshape(6)
-            generalized += self.spatial_jacobian_F0(frame).T @ w_B
+            force = self.spatial_jacobian_F0(frame).T @ w_B[6 * i : 6 * i + 6]
+            if generalized is None:
+                generalized = force
+            else:
+                generalized += force
+        if generalized is None:
+            generalized = np.zeros(self.num_velocities)
         result = (generalized[:6], generalized[6:])
         self._known_cache[key] = result
         return result
@@ -197,11 +271,13 @@ class ResidualModel:
     def base_wrench_to_world(self, terms: FloatingBaseTerms, x: np.ndarray, w_F0: np.ndarray) -> np.ndarray:
         """[moment about the F0 origin; force] in F0 -> [moment about the world origin; force]
         in world."""
-        moment_W, force_W = w_F0.reshape(2, 3) @ terms.R_WB.T  # rows: R m, R f
-        px, py, pz = (self._p_WP + self._R_WP @ x[4:7]).tolist()
-        fx, fy, fz = force_W.tolist()
-        shift = np.array((py * fz - pz * fy, pz * fx - px * fz, px * fy - py * fx))  # p_WBo x f
-        return np.concatenate((moment_W + shift, force_W))
+        mx, my, mz, fx, fy, fz = (w_F0.reshape(2, 3) @ terms.R_WB.T).ravel().tolist()  # rows: R m, R f
+        if self._parent_is_world:
+            px, py, pz = x[4:7].tolist()  # p_WBo, m
+        else:
+            px, py, pz = (self._p_WP + self._R_WP @ x[4:7]).tolist()
+        # + p_WBo x f, in floats (one array at the end).
+        return np.array((mx + (py * fz - pz * fy), my + (pz * fx - px * fz), mz + (px * fy - py * fx), fx, fy, fz))
 
 
 def check_wrench_frames(plant: MultibodyPlant, frames: Sequence[Frame | str]) -> tuple[Frame, ...]:
@@ -287,9 +363,9 @@ class FixedBaseModel:
             self._key = key
         return self._value
 
-    def known_wrench_forces(self, terms, frames: Sequence[Frame], wrenches_W: np.ndarray):
+    def known_wrench_forces(self, terms, frames: Sequence[Frame], wrenches_W: np.ndarray, frames_key=None):
         """(None, J^T w): generalized forces of wrenches [moment about the frame origin; force]
-        in world, at the last evaluated state."""
+        in world, at the last evaluated state (``frames_key`` is unused)."""
         world = self.plant.world_frame()
         tau = np.zeros(self.num_velocities)
         for i, frame in enumerate(frames):
@@ -326,7 +402,9 @@ class _MomentumResidual(LeafSystem):
         if not np.isfinite(period) or period <= 0.0:
             raise ValueError(f"{type(self).__name__}: period must be a positive number of seconds, got {period}")
         self._period = period
+        self._half_period = 0.5 * period  # T/2 of the trapezoidal rule, s
         self._size = size
+        self._name = type(self).__name__
         self._gain = _vector_parameter(gain, size, f"{type(self).__name__}: gain")
         if np.any(self._gain <= 0.0) or np.any(self._gain * period >= 1.0):
             raise ValueError(
@@ -335,6 +413,7 @@ class _MomentumResidual(LeafSystem):
             )
         self._frames = self._model.check_frames(known_wrench_frames)
         self._frames_key = tuple(int(f.index()) for f in self._frames)
+        self._has_frames = bool(self._frames)
         n = self._model.num_joints
         nx = self._model.num_positions + self._model.num_velocities
         self._num_positions = self._model.num_positions
@@ -379,14 +458,16 @@ class _MomentumResidual(LeafSystem):
         return eval_finite_input(type(self).__name__, port, context)
 
     def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
-        x = self._checked_input(self._state_port, context)
-        torque = self._checked_input(self._torque_port, context) if self._torque_port is not None else None
-        wrenches = self._checked_input(self._wrench_port, context) if self._frames else None
-        previous = None
-        if context.get_discrete_state(self._flag_index).get_value()[0] > 0.5:
-            previous = context.get_discrete_state(self._integral_index).get_value()
+        name = self._name
+        x = eval_finite_input(name, self._state_port, context)
+        torque = eval_finite_input(name, self._torque_port, context) if self._torque_port is not None else None
+        wrenches = eval_finite_input(name, self._wrench_port, context) if self._has_frames else None
+        # Drake passes discrete_state initialised to the context's values: read them there.
+        flag = discrete_state.get_value(self._flag_index)[0]
+        previous = discrete_state.get_value(self._integral_index) if flag > 0.5 else None
         integral, residual, terms = self.advance(x, torque, wrenches, previous)
-        discrete_state.set_value(self._flag_index, [1.0])
+        if flag != 1.0:
+            discrete_state.set_value(self._flag_index, _ONE)
         discrete_state.set_value(self._integral_index, integral)
         discrete_state.set_value(self._residual_index, residual)
         self._after_update(discrete_state, terms, x, residual)
@@ -412,11 +493,11 @@ class _MomentumResidual(LeafSystem):
         if self._torque_port is not None:
             tau_m = measured_torque - self._damping * x[self._qdot_start :]
         known = None
-        if self._frames:
+        if self._has_frames:
             known = self._model.known_wrench_forces(terms, self._frames, known_wrenches, self._frames_key)
         momentum, model_rate, measured_rate = self._momentum_and_rates(terms, x, tau_m, known)
 
-        half_step = 0.5 * self._period * model_rate
+        half_step = self._half_period * model_rate
         if integral is not None:
             integral = integral + half_step + self._period * measured_rate
             residual = self._gain * (momentum - integral)
@@ -497,19 +578,12 @@ class ClassicalResidual(_MomentumResidual):
             if known is not None:
                 tau_m = tau_m + known[1]
             return M @ qdot, rate, tau_m
-        v0, qdot = terms.v0, x[self._qdot_start :]
-        momentum = np.concatenate((terms.I0c @ v0 + terms.F @ qdot, terms.F.T @ v0 + terms.H @ qdot))
-        model_rate = np.concatenate(
-            (
-                terms.I0c_dot @ v0 + terms.F_dot @ qdot - terms.p_hat,
-                terms.F_dot.T @ v0 + terms.H_dot @ qdot - terms.C_hat,
-            )
-        )
-        measured = np.zeros(self._size)
-        measured[6:] = tau_m
-        if known is not None:
-            measured[:6] += known[0]
-            measured[6:] += known[1]
+        momentum, model_rate = self._model.classical_momentum_and_rate(terms, x)
+        if known is None:
+            measured = np.zeros(self._size)
+            measured[6:] = tau_m
+        else:  # [f_bar_sum; tau_m + J_j^T w]
+            measured = np.concatenate((known[0], tau_m + known[1]))
         return momentum, model_rate, measured
 
 
@@ -551,9 +625,7 @@ class InternalResidual(_MomentumResidual):
         self._declare_residual_output()
 
     def _momentum_and_rates(self, terms, x, tau_m, known):
-        qdot = x[self._qdot_start :]
-        momentum = terms.H_fb @ qdot
-        model_rate = terms.H_fb_dot @ qdot - terms.C_fb
+        momentum, model_rate = self._model.internal_momentum_and_rate(terms, x)
         measured = tau_m
         if known is not None:
             w_F0, tau_joints = known
@@ -605,9 +677,7 @@ class ExternalResidual(_MomentumResidual):
         self.DeclareStateOutputPort("external_wrench_world", self._world_index)
 
     def _momentum_and_rates(self, terms, x, tau_m, known):
-        v0, qdot = terms.v0, x[self._qdot_start :]
-        momentum = terms.I0c @ v0 + terms.F @ qdot
-        model_rate = terms.I0c_dot @ v0 + terms.F_dot @ qdot - terms.p_hat
+        momentum, model_rate = self._model.base_momentum_and_rate(terms, x)
         return momentum, model_rate, (np.zeros(6) if known is None else known[0])
 
     def _after_update(self, discrete_state: DiscreteValues, terms, x, residual) -> None:
@@ -616,6 +686,161 @@ class ExternalResidual(_MomentumResidual):
     def world_wrench(self, terms, x: np.ndarray, residual: np.ndarray) -> np.ndarray:
         """``external_wrench_world`` of the residual ``residual`` (``advance``'s) at x."""
         return self._model.base_wrench_to_world(terms, x, residual)
+
+
+class ResidualBank(LeafSystem):
+    """The classical (eq. 7), internal (eq. 11) and external (eq. 16) residuals of one robot
+    in one system: one periodic discrete update computes all three at the sensed state.
+
+    Its outputs equal those of a ``ClassicalResidual``, an ``InternalResidual`` and an
+    ``ExternalResidual`` with the same parameters fed the same inputs, bit for bit: the same
+    momenta and rates (the shared ``ResidualModel``'s), the same measured forces, and the
+    observer recursion of the module docstring applied entrywise to the three stacked. It
+    costs one Drake update, one evaluation and check of each input, one friction term and
+    one recursion instead of three.
+
+    Inputs: ``state`` (nq + nv), ``measured_torque`` (n), ``known_wrenches`` (6 per frame),
+    as the three systems'.
+    State: discrete groups [flag; I_classical (nv); I_internal (n); I_external (6)] (the
+    flag and the momentum integrals), r_classical (nv), r_internal (n), r_external (6) and
+    r_external in world (6), updated every ``period``.
+    Outputs (state output ports):
+        ``classical_residual`` (nv): ``ClassicalResidual``'s ``residual``, N m and N.
+        ``internal_residual`` (n): ``InternalResidual``'s ``residual``, N m (N prismatic).
+        ``external_wrench_base``, ``external_wrench_world`` (6): ``ExternalResidual``'s.
+
+    Args:
+        plant: finalized floating-base plant (see ``FloatingBaseDynamics``).
+        gain: K, 1/s: a scalar for all three residuals, or a tuple of three gains
+            (classical: scalar or nv-vector; internal: scalar or n-vector; external: scalar
+            or 6-vector); 0 < K period < 1.
+        period, known_wrench_frames, joint_damping, model, implementation: as
+            ``ClassicalResidual``'s (one ``ResidualModel`` serves the three residuals).
+    """
+
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        gain,
+        period: float = DEFAULT_PERIOD,
+        known_wrench_frames: Sequence[Frame | str] = (),
+        *,
+        joint_damping=None,
+        model: ResidualModel | None = None,
+        implementation: str = "fast",
+    ):
+        super().__init__()
+        gains = tuple(gain) if isinstance(gain, tuple) and len(gain) == 3 else (gain, gain, gain)
+        try:
+            if not isinstance(plant, MultibodyPlant):
+                raise ValueError(f"plant must be a MultibodyPlant, got {type(plant).__name__}")
+            if plant.is_finalized() and not _has_free_joint(plant):
+                raise ValueError("the plant has no floating base (use ClassicalResidual for a fixed-base robot)")
+            if model is None and plant.is_finalized():
+                model = ResidualModel(plant, implementation)
+            common = dict(period=period, known_wrench_frames=known_wrench_frames, model=model)
+            classical = ClassicalResidual(plant, gains[0], joint_damping=joint_damping, **common)
+            internal = InternalResidual(plant, gains[1], joint_damping=joint_damping, **common)
+            external = ExternalResidual(plant, gains[2], **common)
+        except ValueError as error:
+            raise ValueError(f"ResidualBank: {error}") from None
+        self._residuals = (classical, internal, external)
+        self._model = classical.model
+        self._frames = classical.known_wrench_frames
+        self._frames_key = classical._frames_key
+        self._period = classical.period
+        self._half_period = classical._half_period
+        self._damping = classical._damping  # = internal's (same joint_damping)
+        self._gain = np.concatenate((classical._gain, internal._gain, external._gain))
+        nv, n = plant.num_velocities(), plant.num_velocities() - 6
+        self._qdot_start = classical._qdot_start
+        self._sizes = (nv, n, 6)
+        self._zeros = np.zeros(nv + n + 6)
+        self._state_port = self.DeclareVectorInputPort("state", plant.num_positions() + nv)
+        self._torque_port = self.DeclareVectorInputPort("measured_torque", n)
+        self._wrench_port = self.DeclareVectorInputPort("known_wrenches", 6 * len(self._frames))
+        self._integral_index = self.DeclareDiscreteState(1 + nv + n + 6)
+        names = ("classical_residual", "internal_residual", "external_wrench_base", "external_wrench_world")
+        self._residual_indices = tuple(self.DeclareDiscreteState(size) for size in (nv, n, 6, 6))
+        for name, index in zip(names, self._residual_indices):
+            self.DeclareStateOutputPort(name, index)
+        self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._Update)
+
+    @property
+    def model(self) -> ResidualModel:
+        """The dynamics model the three residuals share."""
+        return self._model
+
+    @property
+    def known_wrench_frames(self) -> tuple[Frame, ...]:
+        return self._frames
+
+    @property
+    def period(self) -> float:
+        """The update period T, s."""
+        return self._period
+
+    @property
+    def residuals(self) -> tuple[ClassicalResidual, InternalResidual, ExternalResidual]:
+        """Equivalent separate systems (the same parameters and model; in no diagram)."""
+        return self._residuals
+
+    def advance(
+        self, x: np.ndarray, measured_torque: np.ndarray, known_wrenches: np.ndarray | None, integral
+    ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray], FloatingBaseTerms]:
+        """One update of the three observers without a Context (as ``_MomentumResidual.advance``).
+
+        Args:
+            x: the sensed [q; v]. measured_torque: n motor torques. known_wrenches: 6 per
+                F/T frame, world (None without frames).
+            integral: [I_classical; I_internal; I_external]^+ of the previous update, or
+                None at the first update.
+
+        Returns:
+            ([I_classical; I_internal; I_external]^+ of this update, (r_classical,
+            r_internal, r_external), the model's terms at x). Inputs are not checked.
+        """
+        model = self._model
+        terms = model.evaluate(x)
+        p_c, a_c = model.classical_momentum_and_rate(terms, x)
+        p_i, a_i = model.internal_momentum_and_rate(terms, x)
+        p_e, a_e = model.base_momentum_and_rate(terms, x)
+        tau_m = measured_torque - self._damping * x[self._qdot_start :]  # tau - tau_mu
+        if self._frames:
+            w_F0, tau_joints = model.known_wrench_forces(terms, self._frames, known_wrenches, self._frames_key)
+            joint_c = tau_m + tau_joints  # tau_m + J_j^T w (classical joint entries)
+            # Internal: tau_m + tau_bar_c, tau_bar_c = J^fb^T w (eq. 10).
+            measured = np.concatenate((w_F0, joint_c, joint_c - terms.I0c_inv_F.T @ w_F0, w_F0))
+        else:
+            measured = self._zeros.copy()
+            nv, n, _ = self._sizes
+            measured[6:nv] = tau_m
+            measured[nv : nv + n] = tau_m
+        momentum = np.concatenate((p_c, p_i, p_e))
+        half_step = self._half_period * np.concatenate((a_c, a_i, a_e))
+        if integral is not None:
+            integral = integral + half_step + self._period * measured
+            residual = self._gain * (momentum - integral)
+        else:  # First update: I_0 = p_0, so that r_0 = 0.
+            integral = momentum
+            residual = self._zeros.copy()
+        nv, n, _ = self._sizes
+        residuals = (residual[:nv], residual[nv : nv + n], residual[nv + n :])
+        return integral + half_step + self._period * residual, residuals, terms
+
+    def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
+        x = eval_finite_input("ResidualBank", self._state_port, context)
+        torque = eval_finite_input("ResidualBank", self._torque_port, context)
+        wrenches = eval_finite_input("ResidualBank", self._wrench_port, context) if self._frames else None
+        # Drake passes discrete_state initialised to the context's values: read them there.
+        stored = discrete_state.get_value(self._integral_index)
+        integral, (r_c, r_i, r_e), terms = self.advance(x, torque, wrenches, stored[1:] if stored[0] > 0.5 else None)
+        discrete_state.set_value(self._integral_index, np.concatenate((_ONE, integral)))
+        i_c, i_i, i_e, i_w = self._residual_indices
+        discrete_state.set_value(i_c, r_c)
+        discrete_state.set_value(i_i, r_i)
+        discrete_state.set_value(i_e, r_e)
+        discrete_state.set_value(i_w, self._model.base_wrench_to_world(terms, x, r_e))
 
 
 def _has_free_joint(plant: MultibodyPlant) -> bool:

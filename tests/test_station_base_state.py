@@ -158,7 +158,8 @@ def test_default_base_state_is_bit_identical():
 @pytest.mark.slow
 def test_nao_like_invariant_ekf_with_fsr_contact_meets_the_floors_standing():
     """nao_like (no F/T sensors) with base_state "invariant_ekf": its contact flags come from
-    its four FSRs per foot (an FsrArray and FootContactFromFsr, 5 % of its weight, 2.5 N).
+    its four FSRs per foot (an FsrArray and FootContactFromFsr: on above 10 % of its weight,
+    5.1 N, off below 5 %, 2.5 N).
     20 s standing with the noisy sensors: tilt <= 0.5 deg, base linear velocity RMS <= 0.02
     m/s (the issue's floors), both feet flagged in contact after the first step. The IMU is
     the station's default (no bias walk: the bias-free filter). Measured (``pytest -s``):
@@ -169,7 +170,8 @@ def test_nao_like_invariant_ekf_with_fsr_contact_meets_the_floors_standing():
     duration = 20.0
     data, station = _standing(duration, model="nao_like", base_state="invariant_ekf", log_contact=True)
     assert isinstance(station.foot_contact, FootContactFromFsr)
-    assert station.foot_contact.threshold == pytest.approx(0.05 * 5.19 * 9.81, rel=0.02)
+    assert station.foot_contact.threshold == pytest.approx(0.10 * 5.19 * 9.81, rel=0.02)
+    assert station.foot_contact.off_threshold == pytest.approx(0.05 * 5.19 * 9.81, rel=0.02)
     sensed, true = data["sensed"], data["true"]
     errors = _base_errors(station, sensed, true)
     tilt, yaw, velocity_rms = errors["tilt"], errors["yaw"], errors["velocity_rms"]

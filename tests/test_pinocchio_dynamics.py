@@ -18,7 +18,7 @@ from random_trees import make_random_floating_tree, random_spatial_inertia, rand
 
 from models import MODELS_DIR, add_humanoid
 from systems.dynamics.base_state import quaternion_to_rotation
-from systems.dynamics.floating_base import IMPLEMENTATIONS, FloatingBaseDynamics
+from systems.dynamics.floating_base import FloatingBaseDynamics
 from systems.dynamics.pinocchio_dynamics import PinocchioFloatingBaseDynamics
 from systems.dynamics.pinocchio_model import pinocchio_model_from_plant
 from systems.residuals.momentum_residuals import ClassicalResidual, ExternalResidual, InternalResidual, ResidualModel
@@ -253,14 +253,8 @@ def _bank(plant, frames, model):
 
 
 def pinocchio_residual_model(plant) -> ResidualModel:
-    """A ResidualModel on the Pinocchio dynamics (``implementation="pinocchio"`` once
-    ``FloatingBaseDynamics`` registers it; until then its implementation object is swapped
-    in a model built with no Drake F0 context of its own)."""
-    if "pinocchio" in IMPLEMENTATIONS:
-        return ResidualModel(plant, "pinocchio")
-    model = ResidualModel(plant, "reference")
-    model.dynamics._impl = PinocchioFloatingBaseDynamics(plant)
-    return model
+    """A ResidualModel on the Pinocchio dynamics."""
+    return ResidualModel(plant, "pinocchio")
 
 
 def test_the_residual_bank_on_pinocchio_dynamics_matches_the_fast_bank():

@@ -311,6 +311,14 @@ class FloatingBaseDynamics:
         """All terms of eq. (9) and their derivatives at (q, v) (Drake's coordinates in)."""
         return self._impl.compute(q, v)
 
+    @property
+    def own_spatial_jacobian_F0(self):
+        """The implementation's F0 spatial-velocity Jacobian of a frame at the state of its
+        last ``compute``, read from the kinematics that pass left (``"pinocchio"``:
+        ``PinocchioFloatingBaseDynamics.spatial_jacobian_F0``, a callable of the frame), or
+        None: the caller takes Drake's on a context of its own."""
+        return getattr(self._impl, "spatial_jacobian_F0", None)
+
     def mass_matrix_terms_of_samples(self, q: np.ndarray, v: np.ndarray, frames: Sequence[Frame] = ()):
         """See ``DrakeFloatingBaseDynamics.mass_matrix_terms_of_samples``; "fast"
         implementation only (None for "reference")."""

@@ -215,7 +215,7 @@ class ResidualModel:
         if J is None:
             # An implementation that keeps its own kinematics of the state (the "pinocchio"
             # one) gives the Jacobian itself; else Drake's, on the F0 context.
-            own = getattr(self.dynamics._impl, "spatial_jacobian_F0", None) if self._impl_at_key else None
+            own = self.dynamics.own_spatial_jacobian_F0 if self._impl_at_key else None
             if own is not None:
                 J = own(frame)
             else:

@@ -26,14 +26,16 @@ al. 2020) replayed on the log as the station runs it online (``base_state``
 "invariant_ekf"): gyro, accelerometer, joint positions and contact flags from each foot's
 normal force (a 6-axis F/T wrench's, a normal-force-only sensor's, or the sum of the foot's
 FSRs; ``foot_force_sources``) with hysteresis (``ContactHysteresis``: on above 10 % of the
-robot's weight, off below 5 %; the station's online flags use a single threshold), starting
+robot's weight, off below 5 %, as the station's online flags), starting
 at rest, standing on level ground. With IMU bias states the filter starts from the bias
 measured over the log's still start (``at_rest_imu_bias``: the mean gyro reading is the gyro
 bias, the only way to learn its vertical part, to which the filter is blind while standing;
 of the accelerometer bias only its part along gravity), over the window given
-(``noise_calibration_time``, the app's ``--calibrate-first``) or detected (``still_samples``),
-and keeps tracking it. The filter's noise densities, bias random walks, contact and
-stillness thresholds are ``LogEstimationSettings.ekf`` (``systems.estimation.ekf_settings``).
+(``noise_calibration_time``, the app's ``--calibrate-first``) or detected (the first still
+span long enough, ``still_mask``, ``first_still_window``), and keeps tracking it. A stance
+foot that slips or rolls drops its kinematic correction (``EkfSettings.slip_speed``). The
+filter's noise densities, bias random walks, contact and stillness thresholds and slip
+speed are ``LogEstimationSettings.ekf`` (``systems.estimation.ekf_settings``).
 
 What the log lacks, the estimation goes without, and ``LogEstimates.not_estimated`` says
 which estimates it could not make and why: without joint torques the internal residual
@@ -144,8 +146,8 @@ class LogEstimationSettings:
         at_rest_bias: with ``estimate_imu_bias``, the EKF starts from the IMU bias measured
             over the log's still start (``at_rest_imu_bias``): the window
             [0, ``noise_calibration_time``) when that is given (the app's
-            ``--calibrate-first``), else the detected still start (``still_samples``, at least
-            ``STILL_MIN_DURATION``), with a prior std of the gyro bias equal to its standard
+            ``--calibrate-first``), else the detected still span (``first_still_window``,
+            at least ``STILL_MIN_DURATION``), with a prior std of the gyro bias equal to its standard
             error (floored; the largest of the three axes', the filter's prior being one std
             for all three); False: from a zero bias with the estimator's default prior
             (``INITIAL_GYRO_BIAS_STD``).

@@ -238,10 +238,11 @@ def test_mass_matrix_terms_of_samples_match_one_at_a_time_and_drake(source):
             assert relative_error(stacked[k], single) < 1e-14
         for f, frame in enumerate(frames):
             assert relative_error(J[k, f], _jacobian_F0(plant, q, frame)) < 1e-12
-    if source == "hrp4_like":  # a free joint on the world frame: Drake's F0 = world Jacobians
-        expected = fast.mass_matrix_terms_of_samples(Q, V, frames)
-        for name, a, b in zip(("M", "M_dot", "bias", "R_WB", "v0", "J"), (M, M_dot, bias, R_WB, v0, J), expected):
-            assert relative_error(a, b) < (1e-8 if name == "M_dot" else 1e-10), name
+    # The "fast" implementation too, also with the tree's free joint on a rotated, offset
+    # parent frame (its Jacobians' rows turned from the world to F0 axes).
+    expected = fast.mass_matrix_terms_of_samples(Q, V, frames)
+    for name, a, b in zip(("M", "M_dot", "bias", "R_WB", "v0", "J"), (M, M_dot, bias, R_WB, v0, J), expected):
+        assert relative_error(a, b) < (1e-8 if name == "M_dot" else 1e-10), name
 
 
 def _bank(plant, frames, model):
@@ -332,3 +333,26 @@ def test_spatial_jacobian_F0_is_drakes_in_F0_coordinates(source):
         model.evaluate(np.concatenate((q, v)))
         for frame in frames:
             assert relative_error(pinocchio.spatial_jacobian_F0(frame), model.spatial_jacobian_F0(frame)) < 1e-12
+
+
+def test_the_residual_model_jacobians_are_in_F0_with_a_rotated_free_joint_parent():
+    """A free joint whose parent frame is rotated and offset from the world: the residual
+    model's F0 Jacobians (the known wrenches' generalized forces, eq. 10) are Drake's
+    Jacobian at the true pose turned to F0 rows and columns, for the "fast" and
+    "pinocchio" dynamics alike; the known wrench's generalized force agrees between them."""
+    plant, _ = make_random_floating_tree(12, 4, explicit_free_joint=True)
+    topology = FloatingBaseDynamics(plant).topology
+    R_WP = topology.free_joint.frame_on_parent().CalcPoseInWorld(plant.CreateDefaultContext()).rotation().matrix()
+    assert np.abs(R_WP - np.eye(3)).max() > 0.1  # the case under test
+    frames = [topology.joints[-1].child_body().body_frame(), topology.joints[0].child_body().body_frame()]
+    rng = np.random.default_rng(23)
+    wrench = rng.normal(size=6 * len(frames))
+    q, v = random_state(plant, rng)
+    forces = []
+    for implementation in ("fast", "pinocchio"):
+        model = ResidualModel(plant, implementation)
+        terms = model.evaluate(np.concatenate((q, v)))
+        for frame in frames:
+            assert relative_error(model.spatial_jacobian_F0(frame), _jacobian_F0(plant, q, frame)) < 1e-12
+        forces.append(np.concatenate(model.known_wrench_forces(terms, tuple(frames), wrench)))
+    assert relative_error(forces[0], forces[1]) < 1e-12

@@ -202,6 +202,11 @@ class DrakeFloatingBaseDynamics:
             Cv[k] = plant.CalcBiasTerm(context)
             for f, frame in enumerate(frames):
                 J[k, f] = plant.CalcJacobianSpatialVelocity(context, kV, frame, origin, world, world)
+        if self._R_WP is not None and frames:
+            # At the identity base pose F0 is the free joint's parent frame P, not the world:
+            # rows from world to F0 axes (the columns are already F0's: Drake's base
+            # velocities are expressed in P).
+            J = np.einsum("ji,kfsjn->kfsin", self._R_WP, J.reshape(K, len(frames), 2, 3, 6 + n)).reshape(J.shape)
         # The bias of ``mass_matrix_terms``: Cv + M[:, 3:6] a, a = w x v - g (in F0).
         g = np.einsum("i,kij->kj", self._gravity_W, R_WB)
         wx, wy, wz, vx, vy, vz = v0.T

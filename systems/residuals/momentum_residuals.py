@@ -227,6 +227,10 @@ class ResidualModel:
                 J = self.plant.CalcJacobianSpatialVelocity(
                     self._context_F0, JacobianWrtVariable.kV, frame, np.zeros(3), world, world
                 )
+                if not self._parent_is_world:
+                    # F0 is the free joint's parent frame P at the identity base pose: rows
+                    # from world to F0 axes (the columns, Drake's base velocities, are in P).
+                    J = np.vstack((self._R_WP.T @ J[:3], self._R_WP.T @ J[3:]))
             self._jacobians[index] = J
         return J
 

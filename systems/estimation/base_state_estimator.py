@@ -162,7 +162,7 @@ accelerometer's random walk σ_a √t, and the position by one power of t more.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -783,10 +783,20 @@ class _FootContactFlags(LeafSystem):
     every ``period``; every foot starts out of contact). With ``off_threshold`` equal to
     ``on_threshold`` the flag is the plain test force > threshold (no state). The flag
     output reads the current input and the flags of the last update (direct feedthrough,
-    no delay). Subclasses give the feet's normal forces (``_normal_forces``)."""
+    no delay). ``normal_forces(context)`` gives the feet's normal forces (N, one per foot)
+    from the subclass's input port."""
 
-    def __init__(self, who: str, num_feet: int, on_threshold: float, off_threshold: float | None, period: float):
+    def __init__(
+        self,
+        who: str,
+        num_feet: int,
+        on_threshold: float,
+        off_threshold: float | None,
+        period: float,
+        normal_forces: Callable[[Context], np.ndarray],
+    ):
         super().__init__()
+        self._normal_forces = normal_forces
         if isinstance(num_feet, bool) or not isinstance(num_feet, (int, np.integer)) or num_feet < 1:
             raise ValueError(f"{who}: num_feet must be a positive integer, got {num_feet!r}")
         self._who = who
@@ -809,9 +819,6 @@ class _FootContactFlags(LeafSystem):
     def off_threshold(self) -> float:
         """The normal force below which a foot in contact leaves it, N."""
         return self._off
-
-    def _normal_forces(self, context: Context) -> np.ndarray:
-        raise NotImplementedError
 
     def _flags(self, context: Context) -> np.ndarray:
         f = self._normal_forces(context)
@@ -858,10 +865,10 @@ class FootContactFromForceTorque(_FootContactFlags):
         period: the hysteresis' update period, s (the estimator's).
         """
         who = "FootContactFromForceTorque"
-        super().__init__(who, num_feet, threshold, off_threshold, period)
+        super().__init__(who, num_feet, threshold, off_threshold, period, self._world_normal_forces)
         self._wrenches = self.DeclareVectorInputPort("wrenches", 6 * int(num_feet))
 
-    def _normal_forces(self, context: Context) -> np.ndarray:
+    def _world_normal_forces(self, context: Context) -> np.ndarray:
         w = eval_finite_input("FootContactFromForceTorque", self._wrenches, context)
         return np.asarray(w, dtype=float).reshape(-1, 6)[:, 5]
 
@@ -932,11 +939,11 @@ class FootContactFromFsr(_FootContactFlags):
         off = None
         if off_weight_fraction is not None:
             off = positive_number(off_weight_fraction, f"{who}: off_weight_fraction") * weight
-        super().__init__(who, num_feet, fraction * weight, off, period)
+        super().__init__(who, num_feet, fraction * weight, off, period, self._fsr_sums)
         self._per_foot = int(sensors_per_foot)
         self._forces = self.DeclareVectorInputPort("fsr_forces", self._per_foot * int(num_feet))
 
-    def _normal_forces(self, context: Context) -> np.ndarray:
+    def _fsr_sums(self, context: Context) -> np.ndarray:
         f = eval_finite_input("FootContactFromFsr", self._forces, context)
         return np.asarray(f, dtype=float).reshape(-1, self._per_foot).sum(axis=1)
 

@@ -501,14 +501,10 @@ class _MomentumResidual(LeafSystem):
             known = self._model.known_wrench_forces(terms, self._frames, known_wrenches, self._frames_key)
         momentum, model_rate, measured_rate = self._momentum_and_rates(terms, x, tau_m, known)
 
-        half_step = self._half_period * model_rate
-        if integral is not None:
-            integral = integral + half_step + self._period * measured_rate
-            residual = self._gain * (momentum - integral)
-        else:  # First update: I_0 = p_0, so that r_0 = 0 (no measured period yet).
-            integral = momentum
-            residual = np.zeros(self._size)
-        return integral + half_step + self._period * residual, residual, terms
+        integral, residual = _observer_step(
+            momentum, self._half_period * model_rate, measured_rate, integral, self._gain, self._period
+        )
+        return integral, residual, terms
 
     def _after_update(self, discrete_state: DiscreteValues, terms, x, residual) -> None:
         """Hook for subclasses that keep more discrete state."""
@@ -822,15 +818,9 @@ class ResidualBank(LeafSystem):
             measured[nv : nv + n] = tau_m
         momentum = np.concatenate((p_c, p_i, p_e))
         half_step = self._half_period * np.concatenate((a_c, a_i, a_e))
-        if integral is not None:
-            integral = integral + half_step + self._period * measured
-            residual = self._gain * (momentum - integral)
-        else:  # First update: I_0 = p_0, so that r_0 = 0.
-            integral = momentum
-            residual = self._zeros.copy()
+        integral, residual = _observer_step(momentum, half_step, measured, integral, self._gain, self._period)
         nv, n, _ = self._sizes
-        residuals = (residual[:nv], residual[nv : nv + n], residual[nv + n :])
-        return integral + half_step + self._period * residual, residuals, terms
+        return integral, (residual[:nv], residual[nv : nv + n], residual[nv + n :]), terms
 
     def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
         x = eval_finite_input("ResidualBank", self._state_port, context)
@@ -845,6 +835,27 @@ class ResidualBank(LeafSystem):
         discrete_state.set_value(i_i, r_i)
         discrete_state.set_value(i_e, r_e)
         discrete_state.set_value(i_w, self._model.base_wrench_to_world(terms, x, r_e))
+
+
+def _observer_step(
+    momentum: np.ndarray,
+    half_step: np.ndarray,
+    measured_rate: np.ndarray,
+    integral: np.ndarray | None,
+    gain: np.ndarray,
+    period: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One update of the discrete momentum observer (module docstring) from the momentum p_k,
+    T/2 times the model rate a_k, and the measured rate u_k: I_k = I_{k-1}^+ + T/2 a_k +
+    T u_k, r_k = K (p_k - I_k), and I_k^+ = I_k + T/2 a_k + T r_k; at the first update
+    (``integral`` None) I_0 = p_0 and r_0 = 0 (no measured period yet). Returns (I_k^+, r_k)."""
+    if integral is not None:
+        integral = integral + half_step + period * measured_rate
+        residual = gain * (momentum - integral)
+    else:
+        integral = momentum
+        residual = np.zeros(momentum.shape[0])
+    return integral + half_step + period * residual, residual
 
 
 def _has_free_joint(plant: MultibodyPlant) -> bool:

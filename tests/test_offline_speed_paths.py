@@ -35,11 +35,13 @@ def short_log(robot):
     return log_inputs(robot, log)
 
 
-def test_stacked_dynamics_terms_equal_the_per_sample_ones(robot, short_log):
-    """``mass_matrix_terms_of_samples`` (the Drake calls of all samples in one loop, the rest
-    stacked) equals ``mass_matrix_terms`` sample by sample, a still sample (no central
-    difference: M_dot = 0) included."""
-    settings = LogEstimationSettings()
+@pytest.mark.parametrize("dynamics", ["fast", "pinocchio"])
+def test_stacked_dynamics_terms_equal_the_per_sample_ones(robot, short_log, dynamics):
+    """``mass_matrix_terms_of_samples`` (the C++ calls of all samples in one loop, the rest
+    stacked) equals ``mass_matrix_terms`` sample by sample, a sample with still joints
+    included (M_F0 depends on the joint positions only: M_dot = 0, "fast" skipping the
+    central difference, "pinocchio" to rounding)."""
+    settings = LogEstimationSettings(dynamics=dynamics)
     model, _, _ = build_offline_estimators(robot, settings, short_log.period)
     dynamics = model.dynamics._impl
     nq = robot.plant.num_positions()
@@ -47,7 +49,8 @@ def test_stacked_dynamics_terms_equal_the_per_sample_ones(robot, short_log):
     x[0, nq + 6 :] = 0.0
     M, M_dot, bias, R_WB, v0, J = dynamics.mass_matrix_terms_of_samples(x[:, :nq], x[:, nq:], robot.ft_frames)
     assert J.shape == (5, len(robot.ft_frames), 6, robot.plant.num_velocities())
-    assert not M_dot[0].any() and np.abs(M_dot[1:]).max() > 1e-3
+    still = np.abs(M_dot[0]).max()
+    assert (still == 0.0 if dynamics == "fast" else still < 1e-12) and np.abs(M_dot[1:]).max() > 1e-3
     for k in range(len(x)):
         expected = dynamics.mass_matrix_terms(x[k, :nq], x[k, nq:])
         for got, want in zip((M[k], M_dot[k], bias[k], R_WB[k], v0[k]), expected):
@@ -129,6 +132,41 @@ def test_contact_estimation_replay_equals_each_system_stepped(robot, short_log):
     np.testing.assert_allclose(replayed.localization["point_world"], localization[:, 2:5], rtol=0, atol=1e-9)
     np.testing.assert_allclose(replayed.localization["force_world"], localization[:, 5:8], rtol=0, atol=1e-9)
     assert detected[550:].all() and (localization[650:, 0] == VALID).all()  # not vacuous
+
+
+def test_offline_dynamics_choice_changes_only_rounding(robot, short_log):
+    """The offline default "pinocchio" (M_dot = C + C^T exactly) and the online systems'
+    "fast" (M_dot by central difference) give the same estimation of the short push's log
+    to the difference's rounding: residuals to 1e-9 of their size, the same detection and
+    localizations; an unknown implementation is refused by name."""
+    period = short_log.period
+    out = {}
+    for dynamics in ("fast", "pinocchio"):
+        settings = LogEstimationSettings(dynamics=dynamics)
+        _, internal, external = build_offline_estimators(robot, settings, period)
+        assert internal.model.dynamics.implementation == dynamics
+        out[dynamics] = replay_contact_estimation(
+            internal,
+            external,
+            lambda *_, s=settings: make_detector(robot, s, period),
+            make_localizer(robot, settings, period),
+            short_log.state,
+            short_log.joint_torque,
+            short_log.known_wrenches,
+        )
+    fast, pinocchio = out["fast"], out["pinocchio"]
+    for got, want in (
+        (pinocchio.internal, fast.internal),
+        (pinocchio.external_wrench_world, fast.external_wrench_world),
+    ):
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-9 * np.abs(want).max())
+        assert np.abs(got - want).max() > 0.0  # two computations of M_dot, not one
+    np.testing.assert_array_equal(pinocchio.contact_detected, fast.contact_detected)
+    np.testing.assert_array_equal(pinocchio.localization["body_index"], fast.localization["body_index"])
+    np.testing.assert_allclose(pinocchio.localization["point_world"], fast.localization["point_world"], atol=1e-9)
+    assert fast.contact_detected[550:].all()
+    with pytest.raises(ValueError, match="dynamics must be one of"):
+        LogEstimationSettings(dynamics="reference")
 
 
 def test_localizer_bounding_sphere_culling_changes_no_result(robot):

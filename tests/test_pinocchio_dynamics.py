@@ -356,3 +356,27 @@ def test_the_residual_model_jacobians_are_in_F0_with_a_rotated_free_joint_parent
             assert relative_error(model.spatial_jacobian_F0(frame), _jacobian_F0(plant, q, frame)) < 1e-12
         forces.append(np.concatenate(model.known_wrench_forces(terms, tuple(frames), wrench)))
     assert relative_error(forces[0], forces[1]) < 1e-12
+
+
+@pytest.mark.parametrize("source", ["hrp4_like", "tree"])
+def test_frame_rotations_of_samples_match_drake(source):
+    """The offline log's sensor rotations R_WF from Pinocchio's forward kinematics equal
+    Drake's ``CalcPoseInWorld`` at random states, a free joint on a rotated, offset parent
+    included (the tree)."""
+    if source == "tree":
+        plant, _ = make_random_floating_tree(12, 4, explicit_free_joint=True)
+    else:
+        plant = robot(source)
+    dynamics = PinocchioFloatingBaseDynamics(plant)
+    joints = dynamics.topology.joints
+    frames = [joints[-1].child_body().body_frame(), joints[len(joints) // 2].frame_on_child()]
+    rng = np.random.default_rng(23)
+    Q = np.array([random_state(plant, rng)[0] for _ in range(4)])
+    R = dynamics.frame_rotations_of_samples(Q, frames)
+    context = plant.CreateDefaultContext()
+    for k, q in enumerate(Q):
+        plant.SetPositions(context, q)
+        for f, frame in enumerate(frames):
+            expected = frame.CalcPoseInWorld(context).rotation().matrix()
+            assert np.abs(R[k, f] - expected).max() < 1e-13
+            assert np.abs(expected - np.eye(3)).max() > 1e-2  # not trivially the identity

@@ -94,6 +94,7 @@ class PinocchioFloatingBaseDynamics:
         R_WP = X_WP.rotation().matrix()
         self._R_WP = None if np.array_equal(R_WP, np.eye(3)) else R_WP
         self._R_WB_last: np.ndarray | None = None  # F0 rotation of the last compute
+        self._gravity_W = np.array(self.model.gravity.linear)  # the plant's, world axes (m/s^2)
 
     def _use_permutation(self, P: np.ndarray) -> None:
         """Sets P and the gathers derived from it (the tests' controls pass a wrong one)."""
@@ -196,9 +197,17 @@ class PinocchioFloatingBaseDynamics:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``mass_matrix_terms`` of K checked samples (q (K, nq), v (K, nv)) stacked on a
         leading axis, and J (K, len(frames), 6, nv): each frame origin's spatial-velocity
-        Jacobian w.r.t. [v0; qdot], rows [angular; linear] expressed in F0 (at F0 = world,
-        as ``DrakeFloatingBaseDynamics.mass_matrix_terms_of_samples`` for a free joint whose
-        parent frame is the world)."""
+        Jacobian w.r.t. [v0; qdot], rows [angular; linear] expressed in F0 (the contract of
+        ``DrakeFloatingBaseDynamics.mass_matrix_terms_of_samples``).
+
+        Per sample two C++ kernels, ``crba`` and ``computeCoriolisMatrix`` (which leaves the
+        joint Jacobians in ``data`` for ``getFrameJacobian``), written in place in Pinocchio's
+        coordinates; the rest is stacked over the samples: the gathers to F0 order, M_dot =
+        C + C^T, and the bias C v + g(q) with the gravity term read off the mass matrix
+        (g(q) = -M[:, 3:6] R_WB^T g_W in F0 order: a free fall from rest, base acceleration
+        R_WB^T g_W and no joint acceleration, has M a + g = 0), equal to ``nonLinearEffects``
+        to rounding (tests) for a third of its cost.
+        """
         K, nv = q.shape[0], v.shape[1]
         model, data, P = self.model, self.data, self.permutation
         R_PB = quaternions_to_rotations(q[:, :4])
@@ -206,21 +215,53 @@ class PinocchioFloatingBaseDynamics:
         v_F0 = v.copy()
         v_F0[:, :6] = (v[:, None, :6].reshape(K, 2, 3) @ R_PB).reshape(K, 6)
         q_pin, v_pin = q[:, self._q_source], v_F0[:, self._v_source]
-        M, M_dot, bias = np.empty((K, nv, nv)), np.empty((K, nv, nv)), np.empty((K, nv))
-        J = np.empty((K, len(frames), 6, nv))
+        M_pin, C_pin = np.empty((K, nv, nv)), np.empty((K, nv, nv))
         frame_ids = [self._frame_id(f) for f in frames]
-        for k in range(K):
-            M[k] = pin.crba(model, data, q_pin[k]).take(self._flat).reshape(nv, nv)
-            C = pin.computeCoriolisMatrix(model, data, q_pin[k], v_pin[k])
-            M_dot[k] = C.take(self._flat).reshape(nv, nv) + C.take(self._flat_T).reshape(nv, nv)
-            bias[k] = pin.nonLinearEffects(model, data, q_pin[k], v_pin[k])[P]
-            if frame_ids:  # computeCoriolisMatrix left the joint Jacobians in data
-                R_BW = R_WB[k].T
-                for f, frame_id in enumerate(frame_ids):
-                    J_W = pin.getFrameJacobian(model, data, frame_id, pin.LOCAL_WORLD_ALIGNED)
-                    J[k, f, :3] = R_BW @ J_W[3:][:, P]
-                    J[k, f, 3:] = R_BW @ J_W[:3][:, P]
+        J_W = np.empty((K, len(frame_ids), 6, nv))
+        crba, coriolis = pin.crba, pin.computeCoriolisMatrix
+        frame_jacobian, aligned = pin.getFrameJacobian, pin.LOCAL_WORLD_ALIGNED
+        for k, (q_k, v_k) in enumerate(zip(q_pin, v_pin)):
+            M_pin[k] = crba(model, data, q_k)
+            C_pin[k] = coriolis(model, data, q_k, v_k)
+            for f, frame_id in enumerate(frame_ids):  # rows [linear; angular], world axes
+                J_W[k, f] = frame_jacobian(model, data, frame_id, aligned)
+        Cv = (C_pin @ v_pin[:, :, None])[:, P, 0]
+        M_dot = np.add(C_pin, C_pin.transpose(0, 2, 1), out=C_pin)
+        M, M_dot = self._to_F0_order(M_pin), self._to_F0_order(M_dot)
+        g_B = np.einsum("i,kij->kj", self._gravity_W, R_WB)  # R_WB^T g_W
+        bias = Cv - (M[:, :, 3:6] @ g_B[:, :, None])[:, :, 0]
+        J = np.empty((K, len(frame_ids), 6, nv))
+        if frame_ids:
+            J_W = J_W[..., P]
+            R_BW = R_WB.transpose(0, 2, 1)[:, None]
+            J[:, :, :3], J[:, :, 3:] = R_BW @ J_W[:, :, 3:], R_BW @ J_W[:, :, :3]
         return M, M_dot, bias, R_WB, v_F0[:, :6], J
+
+    def _to_F0_order(self, A: np.ndarray) -> np.ndarray:
+        """A (K, nv, nv) in Pinocchio's velocity order -> A[:, P][:, :, P], in place when the
+        joints' orders agree (only the base's six rows and columns swap: a sixth of the
+        work of the whole gather and no new array)."""
+        if self._joint_flat is not None:
+            P = self.permutation
+            return A[:, P[:, None], P[None, :]]
+        s = self._base_swap
+        A[:, :6] = A[:, s]
+        A[:, :, :6] = A[:, :, s]
+        return A
+
+    def frame_rotations_of_samples(self, q: np.ndarray, frames: Sequence[Frame]) -> np.ndarray:
+        """(K, len(frames), 3, 3) R_WF of each frame at each of the K checked positions q
+        (K, nq): one forward-kinematics pass per sample (``forwardKinematics``, then
+        ``updateFramePlacement`` of the frames only)."""
+        model, data = self.model, self.data
+        frame_ids = [self._frame_id(f) for f in frames]
+        out = np.empty((q.shape[0], len(frame_ids), 3, 3))
+        kinematics, placement = pin.forwardKinematics, pin.updateFramePlacement
+        for k, q_k in enumerate(q[:, self._q_source]):
+            kinematics(model, data, q_k)
+            for f, frame_id in enumerate(frame_ids):
+                out[k, f] = placement(model, data, frame_id).rotation
+        return out
 
     def gravity_generalized_forces(self, q: np.ndarray) -> np.ndarray:
         """Drake's generalized gravity force tau_g (nv, the convention of

@@ -687,7 +687,7 @@ class ContactDetector(LeafSystem):
         use = self._use
         is_above = t >= self._startup_time and any(u and si > th for u, si, th in zip(use, s, self._on))
         is_below = all((not u) or si < th for u, si, th in zip(use, s, self._off))
-        return self._transition(state, is_above, is_below, t) + [s[0], s[1]]
+        return [*self._transition(*(float(v) for v in state[:4]), is_above, is_below, t), s[0], s[1]]
 
     def replay(
         self, state: Sequence[float], statistics: np.ndarray, times: np.ndarray
@@ -705,18 +705,29 @@ class ContactDetector(LeafSystem):
         below = ((statistics < np.array(self._off)) | ~use).all(axis=1)
         flags = np.empty(len(times), dtype=bool)
         state = list(state)
+        switching, transition = tuple(float(v) for v in state[:4]), self._transition
         for k, (is_above, is_below, t) in enumerate(zip(above.tolist(), below.tolist(), times.tolist())):
-            state[:4] = self._transition(state, is_above, is_below, t)
-            flags[k] = state[0] > 0.5
+            switching = transition(*switching, is_above, is_below, t)
+            flags[k] = switching[0] > 0.5
+        state[:4] = switching
         if len(times):
             state[4:6] = statistics[-1].tolist()
         return flags, state
 
-    def _transition(self, state: Sequence[float], is_above: bool, is_below: bool, t: float) -> list[float]:
-        """The switching logic of ``advance``: the next [detected, detection time, updates
-        above, time below] from ``state``'s, given whether this update's statistics are
-        above the on thresholds (after the start-up) and below the off ones."""
-        detected, t_detect, above, below_time = (float(v) for v in state[:4])  # the _DetectorState fields
+    def _transition(
+        self,
+        detected: float,
+        t_detect: float,
+        above: float,
+        below_time: float,
+        is_above: bool,
+        is_below: bool,
+        t: float,
+    ) -> tuple[float, float, float, float]:
+        """The switching logic of ``advance``: the next (detected, detection time, updates
+        above, time below) from the current ones (the first four _DetectorState fields),
+        given whether this update's statistics are above the on thresholds (after the
+        start-up) and below the off ones."""
         if detected < 0.5:
             above = above + 1.0 if is_above else 0.0
             if above >= self._on_samples:
@@ -726,7 +737,7 @@ class ContactDetector(LeafSystem):
             below_time = below_time + self._period if is_below else 0.0
             if below_time >= self._release_time - 1e-12 and is_below:
                 detected, below_time = 0.0, 0.0
-        return [detected, t_detect, above, below_time]
+        return detected, t_detect, above, below_time
 
 
 # ---------------------------------------------------------------------------------------

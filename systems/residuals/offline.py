@@ -33,6 +33,11 @@ from systems.dynamics.base_state import QUATERNION_NORM_TOLERANCE
 from systems.residuals.contact_estimation import ContactDetector, ContactLocalizer
 from systems.residuals.momentum_residuals import ClassicalResidual, ExternalResidual, InternalResidual, ResidualModel
 
+#: The dynamics implementations whose ``mass_matrix_terms_of_samples`` the stacked replay
+#: runs on ("reference" has none: it replays sample by sample). "pinocchio" gives M_dot
+#: exactly (C + C^T), "fast" by the central difference the live systems use.
+STACKED_IMPLEMENTATIONS = ("fast", "pinocchio")
+
 
 @dataclass
 class ResidualNoiseModel:
@@ -270,8 +275,8 @@ def _stacked_residuals(
     integral I^+ [internal (n); external (6)] of the update before the first sample (None:
     the first sample is the first update). With ``classical`` the classical residual (eq. 7)
     too, from the same terms, starting afresh at the first sample. Returns the residuals and
-    I^+ after the last sample; None when the model's dynamics is not the "fast"
-    implementation or the residuals do not share the model and period (then ``advance``
+    I^+ after the last sample; None when the model's dynamics is not one of
+    ``STACKED_IMPLEMENTATIONS`` or the residuals do not share the model and period (then ``advance``
     runs per sample). ``chunk``: samples stacked at a time (the numbers do not depend on it):
     128 keeps a chunk's mass matrices (2 x 1.6 MB for 34 joints) near the cache and in
     memory reused from chunk to chunk (1000: 5000 page faults per estimation of
@@ -282,7 +287,7 @@ def _stacked_residuals(
     if classical is not None and (classical.model is not model or classical.period != internal.period):
         return None
     dynamics = model.dynamics
-    if dynamics.implementation != "fast":
+    if dynamics.implementation not in STACKED_IMPLEMENTATIONS:
         return None
     nq, n = model.num_positions, model.num_joints
     off = np.flatnonzero(np.abs(np.linalg.norm(state[:, :4], axis=1) - 1.0) > QUATERNION_NORM_TOLERANCE)

@@ -55,7 +55,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, Rgba
 from pydrake.math import RigidTransform
-from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
+from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
@@ -66,7 +66,6 @@ from diagrams.station.estimator_plant import EstimatorPlant, build_estimator_pla
 from diagrams.station.humanoid_station import add_humanoid_station
 from models import add_ground, add_humanoid, point_contact_scene_graph_config
 from systems.common.topology import floating_base_topology
-from systems.dynamics.pinocchio_dynamics import PinocchioFloatingBaseDynamics
 from systems.estimation.base_state_estimator import (
     LEVEL_GROUND_TILT_STD,
     STANDING_START_ORIENTATION_STD,
@@ -276,13 +275,6 @@ class LogInputs:
     contact_sources: dict = field(default_factory=dict)
     at_rest: AtRestCalibration | None = None
     slip_updates: dict[str, int] = field(default_factory=dict)
-
-
-def _frame_rotations(plant: MultibodyPlant, frames: Sequence, q: np.ndarray) -> np.ndarray:
-    """(N, k, 3, 3) R_WS of each frame at each of the positions q (N, nq): Pinocchio's
-    forward kinematics on a model built from the plant (a third of the cost of Drake's
-    ``SetPositions`` and ``CalcPoseInWorld`` per sample; equal to rounding, tests)."""
-    return PinocchioFloatingBaseDynamics(plant).frame_rotations_of_samples(q, frames)
 
 
 #: A step of the log's time longer than this many median periods is a gap: refused, never
@@ -596,7 +588,7 @@ def log_inputs(
         state[:, nq + v0 : nq + v0 + 6] = log.base_velocity
     wrenches = None if missing_wrenches else np.zeros((N, 6 * len(ft_names)))
     if ft_names and not missing_wrenches:
-        R_WS = _frame_rotations(plant, robot.ft_frames, state[:, :nq])
+        R_WS = robot.frame_rotations(robot.ft_frames, state[:, :nq])
         for j, name in enumerate(ft_names):
             w = log.wrenches[name].reshape(N, 2, 3)
             wrenches[:, 6 * j : 6 * j + 6] = np.einsum("nij,nkj->nki", R_WS[:, j], w).reshape(N, 6)
@@ -1441,7 +1433,7 @@ def log_from_signals(
     N = state.shape[0]
     wrenches = {}
     if robot.ft_frames:
-        R_WS = _frame_rotations(plant, robot.ft_frames, state[:, :nq])
+        R_WS = robot.frame_rotations(robot.ft_frames, state[:, :nq])
         for j, frame in enumerate(robot.ft_frames):
             w_W = known_wrenches[:, 6 * j : 6 * j + 6].reshape(N, 2, 3)
             wrenches[frame.name()] = np.einsum("nji,nkj->nki", R_WS[:, j], w_W).reshape(N, 6)

@@ -15,7 +15,7 @@ serves the simulator, the sensors and the ground-truth systems only.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -23,7 +23,7 @@ import numpy as np
 from pydrake.geometry import SceneGraph
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
-from pydrake.multibody.tree import BodyIndex, SpatialInertia
+from pydrake.multibody.tree import BodyIndex, Frame, SpatialInertia
 from pydrake.systems.framework import DiagramBuilder
 
 from models import (
@@ -65,6 +65,18 @@ class EstimatorPlant:
     excluded_bodies: tuple[str, ...]
     standing_state: np.ndarray
     link_inertias: dict = field(default_factory=dict)
+    _kinematics: object = field(default=None, init=False, repr=False, compare=False)
+
+    def frame_rotations(self, frames: Sequence[Frame], q: np.ndarray) -> np.ndarray:
+        """(N, k, 3, 3) R_WF of each of the plant's ``frames`` at each of the positions q
+        (N, nq): Pinocchio's forward kinematics on a model built from the plant once
+        (``PinocchioFloatingBaseDynamics``, used here for kinematics only), a third of the
+        cost of Drake's ``SetPositions`` and ``CalcPoseInWorld`` per sample."""
+        if self._kinematics is None:
+            from systems.dynamics.pinocchio_dynamics import PinocchioFloatingBaseDynamics  # (imports Pinocchio)
+
+            self._kinematics = PinocchioFloatingBaseDynamics(self.plant)
+        return self._kinematics.frame_rotations_of_samples(np.asarray(q, dtype=float), frames)
 
     @property
     def joint_names(self) -> tuple[str, ...]:

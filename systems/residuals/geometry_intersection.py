@@ -1,10 +1,11 @@
 """Analytic line / primitive geometry for contact localization (Flacco et al. 2016, Sec. VI).
 
 The contact of a single unknown force lies on its line of action (eq. 22). This module
-intersects such lines with a robot's collision primitives, all at once (vectorised numpy,
-no Python loop over geometries), and gives the signed distance of points to the same
-primitives (to discard intersections buried inside another link's geometry) and uniform
-random points on their surfaces (for Monte Carlo studies).
+intersects such lines with a robot's collision primitives, all at once (one compiled loop
+over the primitives, numba; a localization's queries cost microseconds), and gives the
+signed distance of points to the same primitives (to discard intersections buried inside
+another link's geometry) and uniform random points on their surfaces (for Monte Carlo
+studies).
 
 Primitives, each in its own geometry frame G (Drake's conventions, SI units):
 
@@ -34,6 +35,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from pydrake.geometry import Box, Capsule, Convex, Cylinder, Mesh, SceneGraphInspector, Sphere
 from pydrake.multibody.plant import MultibodyPlant
 
@@ -43,49 +45,193 @@ KIND_NAMES = ("sphere", "box", "cylinder", "capsule", "convex")
 _INF = np.inf
 
 
-def _slab(o: np.ndarray, d: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Entry/exit parameters of lines o + l d through slabs |x| <= h (element-wise).
-
-    Where d = 0 the interval is (-inf, inf) if |o| <= h, else empty (+inf, -inf)."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t1 = (-h - o) / d
-        t2 = (h - o) / d
-    lo = np.minimum(t1, t2)
-    hi = np.maximum(t1, t2)
-    parallel = d == 0.0
-    if np.any(parallel):
-        inside = np.abs(o) <= h
-        lo = np.where(parallel, np.where(inside, -_INF, _INF), lo)
-        hi = np.where(parallel, np.where(inside, _INF, -_INF), hi)
-    return lo, hi
+# ---------------------------------------------------------------------------------------
+# The queries' per-primitive arithmetic, compiled (numba): a localization queries a few to a
+# few dozen primitives, where numpy's per-call overhead (about 60 array operations per query)
+# cost ten times the arithmetic. One loop over the primitives, the formulas in the order of
+# the module docstring's definitions.
+# ---------------------------------------------------------------------------------------
 
 
-def _sphere_interval(o: np.ndarray, d: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(l_in, l_out) of unit-direction lines through spheres of radius r at the origin
-    (l_in = +inf, l_out = -inf on a miss)."""
-    b = np.einsum("ij,ij->i", o, d)
-    c = np.einsum("ij,ij->i", o, o) - r * r
+@njit(cache=True)
+def _slab_1d(o: float, d: float, h: float) -> tuple[float, float]:
+    """(lo, hi) of the line o + l d through the slab |x| <= h; d = 0: (-inf, inf) when
+    |o| <= h, else the empty (inf, -inf)."""
+    if d == 0.0:
+        if abs(o) <= h:
+            return -_INF, _INF
+        return _INF, -_INF
+    t1 = (-h - o) / d
+    t2 = (h - o) / d
+    return min(t1, t2), max(t1, t2)
+
+
+@njit(cache=True)
+def _sphere_1(ox: float, oy: float, oz: float, dx: float, dy: float, dz: float, r: float) -> tuple[float, float]:
+    """(l_in, l_out) of a unit-direction line through a sphere of radius r at the origin."""
+    b = ox * dx + oy * dy + oz * dz
+    c = (ox * ox + oy * oy + oz * oz) - r * r
     disc = b * b - c
-    hit = disc >= 0.0
-    s = np.sqrt(np.where(hit, disc, 0.0))
-    return np.where(hit, -b - s, _INF), np.where(hit, -b + s, -_INF)
+    if disc >= 0.0:
+        s = math.sqrt(disc)
+        return -b - s, -b + s
+    return _INF, -_INF
 
 
-def _radial_interval(o: np.ndarray, d: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(l_in, l_out) of lines through infinite cylinders x^2 + y^2 <= r^2 (axis z)."""
-    a = d[:, 0] ** 2 + d[:, 1] ** 2
-    b = o[:, 0] * d[:, 0] + o[:, 1] * d[:, 1]
-    c = o[:, 0] ** 2 + o[:, 1] ** 2 - r * r
-    parallel = a < 1e-14
-    safe_a = np.where(parallel, 1.0, a)
+@njit(cache=True)
+def _radial_1(ox: float, oy: float, dx: float, dy: float, r: float) -> tuple[float, float]:
+    """(l_in, l_out) of a line through the infinite cylinder x^2 + y^2 <= r^2."""
+    a = dx * dx + dy * dy
+    b = ox * dx + oy * dy
+    c = ox * ox + oy * oy - r * r
+    if a < 1e-14:  # parallel to the axis
+        if c <= 0.0:
+            return -_INF, _INF
+        return _INF, -_INF
     disc = b * b - a * c
-    hit = disc >= 0.0
-    s = np.sqrt(np.where(hit, disc, 0.0))
-    lo = np.where(hit, (-b - s) / safe_a, _INF)
-    hi = np.where(hit, (-b + s) / safe_a, -_INF)
-    lo = np.where(parallel, np.where(c <= 0.0, -_INF, _INF), lo)
-    hi = np.where(parallel, np.where(c <= 0.0, _INF, -_INF), hi)
-    return lo, hi
+    if disc >= 0.0:
+        s = math.sqrt(disc)
+        return (-b - s) / a, (-b + s) / a
+    return _INF, -_INF
+
+
+@njit(cache=True)
+def _line_intervals(o, d, kinds, params, planes, l_in, l_out) -> None:
+    for g in range(kinds.shape[0]):
+        ox, oy, oz = o[g, 0], o[g, 1], o[g, 2]
+        dx, dy, dz = d[g, 0], d[g, 1], d[g, 2]
+        kind, r, h = kinds[g], params[g, 0], params[g, 1]
+        lo, hi = _INF, -_INF
+        if kind == SPHERE:
+            lo, hi = _sphere_1(ox, oy, oz, dx, dy, dz, r)
+        elif kind == BOX:
+            lx, hx = _slab_1d(ox, dx, params[g, 0])
+            ly, hy = _slab_1d(oy, dy, params[g, 1])
+            lz, hz = _slab_1d(oz, dz, params[g, 2])
+            lo, hi = max(lx, ly, lz), min(hx, hy, hz)
+        elif kind == CYLINDER:
+            rlo, rhi = _radial_1(ox, oy, dx, dy, r)
+            zlo, zhi = _slab_1d(oz, dz, h)
+            lo, hi = max(rlo, zlo), min(rhi, zhi)
+        elif kind == CAPSULE:
+            # Convex union of the finite cylinder and the two end spheres: the interval is
+            # the union of the pieces' intervals (they overlap): min of entries, max of exits.
+            rlo, rhi = _radial_1(ox, oy, dx, dy, r)
+            zlo, zhi = _slab_1d(oz, dz, h)
+            clo, chi = max(rlo, zlo), min(rhi, zhi)
+            if not clo <= chi:
+                clo, chi = _INF, -_INF
+            alo, ahi = _sphere_1(ox, oy, oz - h, dx, dy, dz, r)
+            blo, bhi = _sphere_1(ox, oy, oz + h, dx, dy, dz, r)
+            lo, hi = min(min(clo, alo), blo), max(max(chi, ahi), bhi)
+        elif kind == CONVEX:
+            # Cyrus-Beck: clip the line against every face plane n . x <= c.
+            lo, hi = -_INF, _INF
+            blocked = False
+            for p in range(planes.shape[1]):
+                nx, ny, nz, c = planes[g, p, 0], planes[g, p, 1], planes[g, p, 2], planes[g, p, 3]
+                denom = nx * dx + ny * dy + nz * dz  # n . d
+                room = c - (nx * ox + ny * oy + nz * oz)  # c - n . o
+                if denom < 0.0:
+                    lo = max(lo, room / denom)
+                elif denom > 0.0:
+                    hi = min(hi, room / denom)
+                elif room < 0.0:  # parallel and outside the face
+                    blocked = True
+            if blocked:
+                lo, hi = _INF, -_INF
+        l_in[g], l_out[g] = lo, hi
+
+
+@njit(cache=True)
+def _normals(p, kinds, params, planes, out) -> None:
+    for g in range(kinds.shape[0]):
+        x, y, z = p[g, 0], p[g, 1], p[g, 2]
+        kind = kinds[g]
+        nx, ny, nz = 0.0, 0.0, 0.0
+        if kind == SPHERE:
+            nx, ny, nz = x, y, z
+        elif kind == BOX:
+            # The face of the largest normalised coordinate (the first on a tie).
+            rx, ry, rz = abs(x) - params[g, 0], abs(y) - params[g, 1], abs(z) - params[g, 2]
+            if rx >= ry and rx >= rz:
+                nx = np.sign(x)
+            elif ry >= rz:
+                ny = np.sign(y)
+            else:
+                nz = np.sign(z)
+        elif kind == CYLINDER:
+            if math.hypot(x, y) - params[g, 0] >= abs(z) - params[g, 1]:
+                nx, ny = x, y
+            else:
+                nz = np.sign(z)
+        elif kind == CAPSULE:
+            h = params[g, 1]
+            nx, ny, nz = x, y, z - min(max(z, -h), h)
+        elif kind == CONVEX:
+            best, face = -_INF, 0
+            for f in range(planes.shape[1]):
+                s = (planes[g, f, 0] * x + planes[g, f, 1] * y + planes[g, f, 2] * z) - planes[g, f, 3]
+                if s > best:
+                    best, face = s, f
+            nx, ny, nz = planes[g, face, 0], planes[g, face, 1], planes[g, face, 2]
+        norm = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if not norm > 0.0:
+            norm = 1.0
+        out[g, 0], out[g, 1], out[g, 2] = nx / norm, ny / norm, nz / norm
+
+
+@njit(cache=True)
+def _distances(p, kinds, params, planes, out) -> None:
+    for g in range(kinds.shape[0]):
+        kind, r, h = kinds[g], params[g, 0], params[g, 1]
+        for i in range(p.shape[0]):
+            x, y, z = p[i, g, 0], p[i, g, 1], p[i, g, 2]
+            if kind == SPHERE:
+                out[i, g] = math.sqrt(x * x + y * y + z * z) - r
+            elif kind == BOX:
+                qx, qy, qz = abs(x) - params[g, 0], abs(y) - params[g, 1], abs(z) - params[g, 2]
+                ux, uy, uz = max(qx, 0.0), max(qy, 0.0), max(qz, 0.0)
+                out[i, g] = math.sqrt(ux * ux + uy * uy + uz * uz) + min(max(qx, qy, qz), 0.0)
+            elif kind == CYLINDER:
+                qr, qz = math.hypot(x, y) - r, abs(z) - h
+                ur, uz = max(qr, 0.0), max(qz, 0.0)
+                out[i, g] = math.sqrt(ur * ur + uz * uz) + min(max(qr, qz), 0.0)
+            elif kind == CAPSULE:
+                zc = z - min(max(z, -h), h)
+                out[i, g] = math.sqrt(x * x + y * y + zc * zc) - r
+            elif kind == CONVEX:
+                best = -_INF
+                for f in range(planes.shape[1]):
+                    s = (planes[g, f, 0] * x + planes[g, f, 1] * y + planes[g, f, 2] * z) - planes[g, f, 3]
+                    best = max(best, s)
+                out[i, g] = best
+            else:
+                out[i, g] = _INF
+
+
+def load_compiled_queries() -> None:
+    """Compiles the queries' kernels (a machine's first run, a few seconds; ``make`` does it
+    at install) or loads them from numba's cache beside this file: one query of each kind."""
+    kinds = np.arange(5)
+    params, planes = np.full((5, 3), 0.1), np.zeros((5, 1, 4))
+    planes[4, 0] = (0.0, 0.0, 1.0, 0.1)
+    o, d = np.zeros((5, 3)), np.tile([0.0, 0.0, 1.0], (5, 1))
+    line_intersections(o, d, kinds, params, planes)
+    outward_normals(o, kinds, params, planes)
+    signed_distances(o[None], kinds, params, planes)
+
+
+def _query_arrays(kinds: np.ndarray, params: np.ndarray, planes: np.ndarray | None, who: str):
+    """(kinds int64, params float64 (g, 3), planes float64 (g, P, 4)) contiguous, as the
+    kernels take them; planes may be None only without CONVEX primitives."""
+    kinds = np.ascontiguousarray(kinds, dtype=np.int64)
+    params = np.ascontiguousarray(params, dtype=float)
+    if planes is None:
+        if np.any(kinds == CONVEX):
+            raise ValueError(f"{who}: CONVEX primitives need their face planes")
+        planes = np.zeros((kinds.shape[0], 0, 4))
+    return kinds, params, np.ascontiguousarray(planes, dtype=float)
 
 
 def outward_normals(
@@ -101,43 +247,10 @@ def outward_normals(
         (g, 3). For a box the face of the largest normalised coordinate; for a cylinder the
         side or the cap, whichever the point is closer to (edges: either).
     """
-    p = np.asarray(points, dtype=float)
-    n = np.zeros_like(p)
-    r = params[:, 0]
-    m = kinds == SPHERE
-    n[m] = p[m]
-    m = kinds == BOX
-    if np.any(m):
-        ratio = np.abs(p[m]) - params[m]  # signed distance to each face plane
-        axis = np.argmax(ratio, axis=1)
-        rows = np.arange(axis.size)
-        nb = np.zeros((axis.size, 3))
-        nb[rows, axis] = np.sign(p[m][rows, axis])
-        n[m] = nb
-    m = kinds == CYLINDER
-    if np.any(m):
-        pc = p[m]
-        radial = np.hypot(pc[:, 0], pc[:, 1]) - r[m]
-        cap = np.abs(pc[:, 2]) - params[m, 1]
-        side = radial >= cap
-        nc = np.where(
-            side[:, None],
-            pc * np.array([1.0, 1.0, 0.0]),
-            np.stack([np.zeros(len(pc)), np.zeros(len(pc)), np.sign(pc[:, 2])], axis=1),
-        )
-        n[m] = nc
-    m = kinds == CAPSULE
-    if np.any(m):
-        pc = p[m].copy()
-        pc[:, 2] -= np.clip(pc[:, 2], -params[m, 1], params[m, 1])
-        n[m] = pc
-    m = kinds == CONVEX
-    if np.any(m):
-        pl = planes[m]
-        face = np.argmax(np.einsum("gpj,gj->gp", pl[:, :, :3], p[m]) - pl[:, :, 3], axis=1)
-        n[m] = pl[np.arange(face.size), face, :3]
-    norm = np.linalg.norm(n, axis=1, keepdims=True)
-    return n / np.where(norm > 0.0, norm, 1.0)
+    kinds, params, planes = _query_arrays(kinds, params, planes, "outward_normals")
+    out = np.empty((kinds.shape[0], 3))
+    _normals(np.ascontiguousarray(points, dtype=float), kinds, params, planes, out)
+    return out
 
 
 def line_intersections(
@@ -157,54 +270,12 @@ def line_intersections(
         is a unit vector) and whether the line meets the primitive (l_in <= l_out). For
         tangent lines l_in == l_out.
     """
-    o = np.asarray(origins, dtype=float)
-    d = np.asarray(directions, dtype=float)
-    g = len(kinds)
-    l_in = np.full(g, _INF)
-    l_out = np.full(g, -_INF)
-    r = params[:, 0]
-
-    m = kinds == SPHERE
-    if np.any(m):
-        l_in[m], l_out[m] = _sphere_interval(o[m], d[m], r[m])
-    m = kinds == BOX
-    if np.any(m):
-        lo, hi = _slab(o[m], d[m], params[m])
-        l_in[m], l_out[m] = lo.max(axis=1), hi.min(axis=1)
-    m = kinds == CYLINDER
-    if np.any(m):
-        rlo, rhi = _radial_interval(o[m], d[m], r[m])
-        zlo, zhi = _slab(o[m, 2], d[m, 2], params[m, 1])
-        l_in[m], l_out[m] = np.maximum(rlo, zlo), np.minimum(rhi, zhi)
-    m = kinds == CAPSULE
-    if np.any(m):
-        om, dm, rm, hm = o[m], d[m], r[m], params[m, 1]
-        # Convex union of the finite cylinder and the two end spheres: the interval is the
-        # union of the pieces' intervals (they overlap), i.e. min of entries, max of exits.
-        rlo, rhi = _radial_interval(om, dm, rm)
-        zlo, zhi = _slab(om[:, 2], dm[:, 2], hm)
-        clo, chi = np.maximum(rlo, zlo), np.minimum(rhi, zhi)
-        clo, chi = np.where(clo <= chi, clo, _INF), np.where(clo <= chi, chi, -_INF)
-        shift = np.zeros_like(om)
-        shift[:, 2] = hm
-        alo, ahi = _sphere_interval(om - shift, dm, rm)
-        blo, bhi = _sphere_interval(om + shift, dm, rm)
-        l_in[m] = np.minimum(np.minimum(clo, alo), blo)
-        l_out[m] = np.maximum(np.maximum(chi, ahi), bhi)
-    m = kinds == CONVEX
-    if np.any(m):
-        pl = planes[m]
-        denom = np.einsum("gpj,gj->gp", pl[:, :, :3], d[m])  # n . d
-        room = pl[:, :, 3] - np.einsum("gpj,gj->gp", pl[:, :, :3], o[m])  # c - n . o
-        with np.errstate(divide="ignore", invalid="ignore"):
-            bound = room / denom
-        entry = np.where(denom < 0.0, bound, -_INF)
-        exit_ = np.where(denom > 0.0, bound, _INF)
-        blocked = ((denom == 0.0) & (room < 0.0)).any(axis=1)  # parallel and outside a face
-        l_in[m] = np.where(blocked, _INF, entry.max(axis=1))
-        l_out[m] = np.where(blocked, -_INF, exit_.min(axis=1))
-    hit = l_in <= l_out
-    return l_in, l_out, hit
+    kinds, params, planes = _query_arrays(kinds, params, planes, "line_intersections")
+    g = kinds.shape[0]
+    l_in, l_out = np.empty(g), np.empty(g)
+    o = np.ascontiguousarray(origins, dtype=float)
+    _line_intervals(o, np.ascontiguousarray(directions, dtype=float), kinds, params, planes, l_in, l_out)
+    return l_in, l_out, l_in <= l_out
 
 
 def signed_distances(
@@ -220,30 +291,10 @@ def signed_distances(
         (m, g). Exact for spheres, boxes, cylinders and capsules; for CONVEX exact inside and
         a lower bound outside (the largest face-plane distance).
     """
-    p = np.asarray(points, dtype=float)
+    kinds, params, planes = _query_arrays(kinds, params, planes, "signed_distances")
+    p = np.ascontiguousarray(points, dtype=float)
     out = np.empty(p.shape[:2])
-    r = params[:, 0]
-    m = kinds == SPHERE
-    if np.any(m):
-        out[:, m] = np.linalg.norm(p[:, m], axis=2) - r[m]
-    m = kinds == BOX
-    if np.any(m):
-        q = np.abs(p[:, m]) - params[m]
-        out[:, m] = np.linalg.norm(np.maximum(q, 0.0), axis=2) + np.minimum(q.max(axis=2), 0.0)
-    m = kinds == CYLINDER
-    if np.any(m):
-        pc = p[:, m]
-        q = np.stack([np.hypot(pc[..., 0], pc[..., 1]) - r[m], np.abs(pc[..., 2]) - params[m, 1]], axis=-1)
-        out[:, m] = np.linalg.norm(np.maximum(q, 0.0), axis=2) + np.minimum(q.max(axis=2), 0.0)
-    m = kinds == CAPSULE
-    if np.any(m):
-        pc = p[:, m].copy()
-        pc[..., 2] -= np.clip(pc[..., 2], -params[m, 1], params[m, 1])
-        out[:, m] = np.linalg.norm(pc, axis=2) - r[m]
-    m = kinds == CONVEX
-    if np.any(m):
-        pl = planes[m]
-        out[:, m] = (np.einsum("gpj,mgj->mgp", pl[:, :, :3], p[:, m]) - pl[None, :, :, 3]).max(axis=2)
+    _distances(p, kinds, params, planes, out)
     return out
 
 

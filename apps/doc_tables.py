@@ -391,12 +391,14 @@ def _benchmark_log_estimation(data: dict) -> list[str]:
     if not rows:
         return _not_measured("the offline estimation", "`--log-seconds 0`, or a model other than hrp4_like")
     lines = [
-        f"| model | joints | log | in contact | per sample | real-time factor | floor >= {floor:g}x real time |",
-        "| --- | --- | --- | --- | --- | --- | --- |",
+        "| model | joints | dynamics | log | in contact | per sample | real-time factor "
+        f"| floor >= {floor:g}x real time |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for r in rows:
         lines.append(
-            f"| {r['model']} | {r['num_joints']} | {r['log_seconds']:.1f} s at {r['log_rate_hz']:.0f} Hz "
+            f"| {r['model']} | {r['num_joints']} | `{r.get('dynamics', 'fast')}` "
+            f"| {r['log_seconds']:.1f} s at {r['log_rate_hz']:.0f} Hz "
             f"| {100 * r['contact_fraction']:.0f} % | {r['us_per_sample']:.0f} us | {r['real_time_factor']:.2f} "
             f"| {_met(r['real_time_factor'] >= floor)} |"
         )

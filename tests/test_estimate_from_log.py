@@ -5,6 +5,7 @@ same estimators reported in the simulation; the app end to end."""
 from __future__ import annotations
 
 import json
+import os
 import re
 from dataclasses import replace
 from pathlib import Path
@@ -598,7 +599,9 @@ def test_benchmark_reports_the_real_time_factor():
     """``make benchmark``'s figure for the issue's floor (timings are not asserted)."""
     from apps.benchmark import benchmark_log_estimation
 
+    blas_threads = os.environ.get("OPENBLAS_NUM_THREADS")
     row = benchmark_log_estimation(0.7, repeats=1)
+    assert row["blas_threads"] == "1" and os.environ.get("OPENBLAS_NUM_THREADS") == blas_threads  # restored
     assert row["num_joints"] == 34 and row["log_rate_hz"] == pytest.approx(1000.0)
     assert row["log_seconds"] == pytest.approx(0.7, abs=2e-3)
     assert 0.1 < row["contact_fraction"] < 0.5  # the push from 0.5 s

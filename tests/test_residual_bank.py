@@ -238,3 +238,46 @@ def test_known_wrench_forces_without_a_drake_f0_context(humanoid, implementation
             model.gravity_joint_torques(other)
         value = np.concatenate(model.known_wrench_forces(terms, frames, wrenches))
         np.testing.assert_allclose(value, expected, rtol=0.0, atol=1e-12 * np.abs(expected).max())
+
+
+@pytest.mark.parametrize("implementation", ["fast", "pinocchio", "reference"])
+def test_state_rates_equal_the_eliminated_matrices(humanoid, implementation):
+    """``ResidualModel.state_rates`` (eq. 9 and 13 applied to vectors, G never formed) gives
+    the momenta and model rates of the matrices ``evaluate`` forms (H_fb, H_fb_dot, C_fb,
+    the blocks of M_F0) times the velocities, and ``eliminated_base_wrench`` G^T w, to
+    rounding; the same known-wrench forces from either; a massless model is refused."""
+    plant, frames = humanoid
+    rng = np.random.default_rng(12)
+    model = ResidualModel(plant, implementation)
+    for _ in range(3):
+        x = _random_state(plant, rng)
+        rates = model.state_rates(x)
+        t = model.evaluate(x)
+        qdot, v0 = x[plant.num_positions() + 6 :], t.v0
+        classical = (
+            np.concatenate((t.I0c @ v0 + t.F @ qdot, t.F.T @ v0 + t.H @ qdot)),
+            np.concatenate((t.I0c_dot @ v0 + t.F_dot @ qdot - t.p_hat, t.F_dot.T @ v0 + t.H_dot @ qdot - t.C_hat)),
+        )
+        internal = (t.H_fb @ qdot, t.H_fb_dot @ qdot - t.C_fb)
+        for got, want in zip((*rates.classical, *rates.internal, *rates.base), (*classical, *internal, *classical)):
+            want = want[: got.size]
+            np.testing.assert_allclose(got, want, rtol=0.0, atol=1e-11 * np.abs(want).max())
+        w = 30.0 * rng.normal(size=6)
+        np.testing.assert_allclose(model.eliminated_base_wrench(rates, w), t.I0c_inv_F.T @ w, rtol=0.0, atol=1e-11)
+        wrenches = 20.0 * rng.normal(size=6 * len(frames))
+        from_rates = np.concatenate(model.known_wrench_forces(rates, frames, wrenches))
+        other = ResidualModel(plant, implementation)  # its own cache
+        from_terms = np.concatenate(other.known_wrench_forces(other.evaluate(x), frames, wrenches))
+        np.testing.assert_allclose(from_rates, from_terms, rtol=0.0, atol=1e-12 * np.abs(from_terms).max())
+    if implementation == "fast":
+        massless = ResidualModel(plant, implementation)
+        massless.dynamics.mass_matrix_terms = lambda q, v: (
+            (np.zeros((plant.num_velocities(),) * 2),) * 2
+            + (
+                np.zeros(plant.num_velocities()),
+                np.eye(3),
+                np.zeros(6),
+            )
+        )
+        with pytest.raises(ValueError, match="I0c is not positive definite"):
+            massless.state_rates(_random_state(plant, rng))

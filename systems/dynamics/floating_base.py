@@ -324,9 +324,25 @@ class FloatingBaseDynamics:
         None: the caller takes Drake's on a context of its own."""
         return getattr(self._impl, "spatial_jacobian_F0", None)
 
+    def mass_matrix_terms(
+        self, q: np.ndarray, v: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(M, M_dot, bias, R_WB, v0) at (q, v) before eq. (9)'s elimination: the F0 mass
+        matrix [[I0c, F], [F^T, H]], its derivative along the motion, the bias [p^; C^]
+        (gravity included), F0's rotation and v0 = [w_B; v_B] in F0
+        (``DrakeFloatingBaseDynamics.mass_matrix_terms``); "reference": assembled from the
+        blocks of its ``compute``."""
+        impl = self._impl
+        if hasattr(impl, "mass_matrix_terms"):
+            return impl.mass_matrix_terms(q, v)
+        t = impl.compute(q, v)
+        M = np.block([[t.I0c, t.F], [t.F.T, t.H]])
+        M_dot = np.block([[t.I0c_dot, t.F_dot], [t.F_dot.T, t.H_dot]])
+        return M, M_dot, np.concatenate((t.p_hat, t.C_hat)), t.R_WB, t.v0
+
     def mass_matrix_terms_of_samples(self, q: np.ndarray, v: np.ndarray, frames: Sequence[Frame] = ()):
-        """See ``DrakeFloatingBaseDynamics.mass_matrix_terms_of_samples``; "fast"
-        implementation only (None for "reference")."""
+        """See ``DrakeFloatingBaseDynamics.mass_matrix_terms_of_samples``; "fast" and
+        "pinocchio" implementations (None for "reference")."""
         if not hasattr(self._impl, "mass_matrix_terms_of_samples"):
             return None
         return self._impl.mass_matrix_terms_of_samples(q, v, frames)

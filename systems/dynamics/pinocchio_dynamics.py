@@ -140,15 +140,20 @@ class PinocchioFloatingBaseDynamics:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(M, M_dot, bias, R_WB, v0) at (q, v) as ``DrakeFloatingBaseDynamics.mass_matrix_terms``:
         the F0 mass matrix [[I0c, F], [F^T, H]], its exact derivative C + C^T, the bias
-        [p^0c; C^] (gravity included, Algorithm 1), F0's rotation and v0 = [w_B; v_B]."""
+        [p^0c; C^] (gravity included, Algorithm 1: C v + g(q), with g read off M as in
+        ``mass_matrix_terms_of_samples``), F0's rotation and v0 = [w_B; v_B]. Two kernels,
+        ``crba`` and ``computeCoriolisMatrix``; the latter leaves the joint Jacobians in
+        ``data`` for ``spatial_jacobian_F0``."""
         q, v = checked_state(self._plant, q, v, self._sizes)
         q_pin, v_pin, R_WB, v0 = self._pinocchio_state(q, v)
+        self._R_WB_last = R_WB
         model, data = self.model, self.data
-        M = pin.crba(model, data, q_pin).take(self._flat).reshape(v.size, v.size)
+        nv = v.size
+        M = pin.crba(model, data, q_pin).take(self._flat).reshape(nv, nv)
         C = pin.computeCoriolisMatrix(model, data, q_pin, v_pin)
-        M_dot = C.take(self._flat).reshape(v.size, v.size)
-        M_dot += C.take(self._flat_T).reshape(v.size, v.size)
-        bias = pin.nonLinearEffects(model, data, q_pin, v_pin)[self.permutation]
+        M_dot = C.take(self._flat).reshape(nv, nv)
+        M_dot += C.take(self._flat_T).reshape(nv, nv)
+        bias = (C @ v_pin)[self.permutation] - M[:, 3:6] @ (self._gravity_W @ R_WB)
         return M, M_dot, bias, R_WB, v0
 
     def compute(self, q: np.ndarray, v: np.ndarray) -> FloatingBaseTerms:

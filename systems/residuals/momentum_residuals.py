@@ -58,11 +58,13 @@ has no ``measured_torque`` input.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import NamedTuple
 
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Frame, JacobianWrtVariable, SpatialInertia
 from pydrake.systems.framework import Context, DiscreteValues, LeafSystem
+from scipy.linalg import lapack
 
 from systems.common.checks import eval_finite_input
 from systems.dynamics.floating_base import FloatingBaseDynamics
@@ -72,6 +74,31 @@ from systems.dynamics.floating_base_terms import FloatingBaseTerms
 DEFAULT_PERIOD = 1e-3
 
 _ONE = np.ones(1)  # the "initialised" flag's value
+
+
+class StateRates(NamedTuple):
+    """What the three residuals need at one sensed state x = [q; v] (``ResidualModel.
+    state_rates``), in F0 coordinates (module docstring). SI units.
+
+    Attributes:
+        R_WB: F0's rotation in world. v0: [w_B; v_B] in F0.
+        classical: (p, a) of the virtual-joint model (8), size nv: p = M_F0 [v0; qdot],
+            a = M_F0_dot [v0; qdot] - [p^; C^] (eq. 7 with M_dot - C = C^T).
+        internal: (H_fb qdot, H_fb_dot qdot - C_fb), size n: the floating-base joint
+            momentum and its model rate of eq. (11) (eq. 9, 13).
+        base: (p0, a0), the base rows of ``classical`` ([moment about the F0 origin;
+            force] in F0): the external residual's (eq. 16).
+        F: (6, n) the base-joint block of M_F0. I0c_factor: (6, 6) the Cholesky factor of
+            I0c (upper, LAPACK ``dpotrf``): with F, G^T w = F^T I0c^-1 w (eq. 10).
+    """
+
+    R_WB: np.ndarray
+    v0: np.ndarray
+    classical: tuple[np.ndarray, np.ndarray]
+    internal: tuple[np.ndarray, np.ndarray]
+    base: tuple[np.ndarray, np.ndarray]
+    F: np.ndarray
+    I0c_factor: np.ndarray
 
 
 class ResidualModel:
@@ -115,13 +142,11 @@ class ResidualModel:
         self._context_synced = self._context_is_current
         self._q_joints = self._q_F0[7:].copy()  # q's joints of the last evaluate (own context)
         self._impl_at_key = False
+        # Per-state results (None: not computed at the state ``_key`` yet).
         self._terms: FloatingBaseTerms | None = None
+        self._rates: StateRates | None = None
         self._jacobians: dict[int, np.ndarray] = {}
         self._known_cache: dict = {}
-        # Per-state momenta and rates shared by the residuals (None: not computed yet).
-        self._base_rates: tuple[np.ndarray, np.ndarray] | None = None
-        self._classical_rates: tuple[np.ndarray, np.ndarray] | None = None
-        self._internal_rates: tuple[np.ndarray, np.ndarray] | None = None
 
     def set_spatial_inertias(self, inertias: Mapping[int, SpatialInertia]) -> None:
         """Makes this model differ from the plant: the bodies' spatial inertias M_BBo_B
@@ -138,59 +163,77 @@ class ResidualModel:
         """See ``check_wrench_frames``."""
         return check_wrench_frames(self.plant, frames)
 
-    def evaluate(self, x: np.ndarray) -> FloatingBaseTerms:
-        """The floating-base terms at the sensed state x = [q; v] (cached per state)."""
+    def _at_state(self, x: np.ndarray) -> None:
+        """Makes x = [q; v] the current state: the per-state results are reset when it is new."""
         key = x.tobytes()
         if key != self._key:
-            nq = self.num_positions
-            self._terms = self.dynamics.compute(x[:nq], x[nq:])
+            self._terms = self._rates = None
             self._jacobians = {}
             self._known_cache = {}
-            self._base_rates = self._classical_rates = self._internal_rates = None
             self._key = key
             self._context_synced = self._context_is_current  # else set by spatial_jacobian_F0
             if not self._context_is_current:
-                self._q_joints = x[7:nq].copy()
-                self._impl_at_key = True  # the implementation's own kinematics are of x
+                self._q_joints = x[7 : self.num_positions].copy()
+
+    def evaluate(self, x: np.ndarray) -> FloatingBaseTerms:
+        """The floating-base terms of eq. (9) and (13) at the sensed state x = [q; v], as
+        matrices (cached per state; the residuals need only ``state_rates``)."""
+        self._at_state(x)
+        if self._terms is None:
+            nq = self.num_positions
+            self._terms = self.dynamics.compute(x[:nq], x[nq:])
+            self._impl_at_key = not self._context_is_current  # its own kinematics are of x
         return self._terms
 
-    def base_momentum_and_rate(self, terms: FloatingBaseTerms, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(p0, a0) at the last evaluated state x: the base rows of model (8)'s momentum,
-        p0 = I0c v0 + F qdot, and of its model rate, a0 = I0c_dot v0 + F_dot qdot - p^
-        ([moment about the F0 origin; force] in F0, N m s and N s; N m and N). Computed once
-        per state (the classical and external residuals share them)."""
-        rates = self._base_rates
-        if rates is None:
-            v0, qdot = terms.v0, x[self._qdot_start :]
-            rates = (terms.I0c @ v0 + terms.F @ qdot, terms.I0c_dot @ v0 + terms.F_dot @ qdot - terms.p_hat)
-            self._base_rates = rates
+    def state_rates(self, x: np.ndarray) -> StateRates:
+        """The momenta and model rates of the three residuals at the sensed state x = [q; v]
+        (``StateRates``), computed once per state for every residual sharing this model.
+
+        From the dynamics' (M, M_dot, bias) (``FloatingBaseDynamics.mass_matrix_terms``), the
+        elimination of eq. (9) and its derivative (eq. 13) applied to vectors rather than
+        formed: with G = I0c^-1 F, H_fb qdot = H qdot - F^T G qdot, H_fb_dot qdot = H_dot
+        qdot - G^T F_dot qdot - F_dot^T G qdot + G^T I0c_dot G qdot and C_fb = C^ - G^T p^,
+        G never formed (two Cholesky solves with I0c, of one and three right-hand sides):
+        the same numbers as ``evaluate``'s matrices times qdot, to rounding (tests), at a
+        fraction of the cost (``systems.residuals.offline`` does the same over a log).
+
+        Raises:
+            ValueError: I0c is not positive definite (a model without mass).
+        """
+        self._at_state(x)
+        rates = self._rates
+        if rates is not None:
+            return rates
+        nq, nv = self.num_positions, self.num_velocities
+        M, M_dot, bias, R_WB, v0 = self.dynamics.mass_matrix_terms(x[:nq], x[nq:])
+        self._impl_at_key = not self._context_is_current  # its own kinematics are of x
+        qdot = x[self._qdot_start :]
+        X = np.zeros((nv, 2))  # [[v0; qdot], [0; qdot]]
+        X[:6, 0] = v0
+        X[6:, 0] = X[6:, 1] = qdot
+        MX, M_dot_X = M @ X, M_dot @ X
+        classical = (MX[:, 0], M_dot_X[:, 0] - bias)
+        I0c_factor, info = lapack.dpotrf(M[:6, :6])
+        if info != 0:
+            raise ValueError(f"the composite inertia I0c is not positive definite (LAPACK dpotrf info={info})")
+        F = M[:6, 6:]
+        G_qdot = lapack.dpotrs(I0c_factor, MX[:6, 1])[0]
+        # G^T applied to [F_dot qdot, I0c_dot G qdot, p^] at once.
+        GT = F.T @ lapack.dpotrs(I0c_factor, np.column_stack((M_dot_X[:6, 1], M_dot[:6, :6] @ G_qdot, bias[:6])))[0]
+        H_fb_qdot = MX[6:, 1] - F.T @ G_qdot
+        H_fb_dot_qdot = M_dot_X[6:, 1] - GT[:, 0] - M_dot[6:, :6] @ G_qdot + GT[:, 1]
+        internal = (H_fb_qdot, H_fb_dot_qdot - (bias[6:] - GT[:, 2]))
+        base = (classical[0][:6], classical[1][:6])
+        rates = StateRates(R_WB, v0, classical, internal, base, F, I0c_factor)
+        self._rates = rates
         return rates
 
-    def classical_momentum_and_rate(self, terms: FloatingBaseTerms, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(p, a) of the virtual-joint model (8) at the last evaluated state x, size nv:
-        p = M_F0 [v0; qdot] and a = M_F0_dot [v0; qdot] - [p^; C^] (eq. 7 with
-        M_dot - C = C^T). Computed once per state."""
-        rates = self._classical_rates
-        if rates is None:
-            v0, qdot = terms.v0, x[self._qdot_start :]
-            p0, a0 = self.base_momentum_and_rate(terms, x)
-            rates = (
-                np.concatenate((p0, terms.F.T @ v0 + terms.H @ qdot)),
-                np.concatenate((a0, terms.F_dot.T @ v0 + terms.H_dot @ qdot - terms.C_hat)),
-            )
-            self._classical_rates = rates
-        return rates
-
-    def internal_momentum_and_rate(self, terms: FloatingBaseTerms, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(H_fb qdot, H_fb_dot qdot - C_fb) at the last evaluated state x, size n: the
-        floating-base joint momentum and its model rate of eq. (11) (with eq. 13). Computed
-        once per state."""
-        rates = self._internal_rates
-        if rates is None:
-            qdot = x[self._qdot_start :]
-            rates = (terms.H_fb @ qdot, terms.H_fb_dot @ qdot - terms.C_fb)
-            self._internal_rates = rates
-        return rates
+    @staticmethod
+    def eliminated_base_wrench(rates: StateRates, w_F0: np.ndarray) -> np.ndarray:
+        """G^T w = F^T I0c^-1 w (n) of a base wrench w_F0 (6) at the state of ``rates``:
+        the joint torques eq. (10) removes with the base's elimination (tau_bar_c = J^fb^T
+        w = J_j^T w - G^T w_base)."""
+        return rates.F.T @ lapack.dpotrs(rates.I0c_factor, w_F0)[0]
 
     def gravity_joint_torques(self, x: np.ndarray) -> np.ndarray:
         """The joint entries (v[6:] order) of Drake's generalized gravity force tau_g
@@ -235,12 +278,12 @@ class ResidualModel:
         return J
 
     def known_wrench_forces(
-        self, terms: FloatingBaseTerms, frames: Sequence[Frame], wrenches_W: np.ndarray, frames_key=None
+        self, terms: StateRates | FloatingBaseTerms, frames: Sequence[Frame], wrenches_W: np.ndarray, frames_key=None
     ) -> tuple[np.ndarray, np.ndarray]:
         """Generalized forces of measured wrenches (F/T sensors) at the last evaluated state.
 
         Args:
-            terms: the result of ``evaluate`` for this state.
+            terms: the result of ``state_rates`` or ``evaluate`` for this state.
             frames: the frames at whose origins the wrenches act.
             wrenches_W: (6 k,) [moment about the frame origin; force] per frame, in world.
             frames_key: a hashable that identifies ``frames`` (their indices by default).
@@ -272,7 +315,9 @@ class ResidualModel:
         self._known_cache[key] = result
         return result
 
-    def base_wrench_to_world(self, terms: FloatingBaseTerms, x: np.ndarray, w_F0: np.ndarray) -> np.ndarray:
+    def base_wrench_to_world(
+        self, terms: StateRates | FloatingBaseTerms, x: np.ndarray, w_F0: np.ndarray
+    ) -> np.ndarray:
         """[moment about the F0 origin; force] in F0 -> [moment about the world origin; force]
         in world."""
         mx, my, mz, fx, fy, fz = (w_F0.reshape(2, 3) @ terms.R_WB.T).ravel().tolist()  # rows: R m, R f
@@ -366,6 +411,10 @@ class FixedBaseModel:
             self._value = (M, M_dot_qdot - bias)
             self._key = key
         return self._value
+
+    def state_rates(self, x: np.ndarray):
+        """``evaluate``: the residual systems call this name on either model."""
+        return self.evaluate(x)
 
     def known_wrench_forces(self, terms, frames: Sequence[Frame], wrenches_W: np.ndarray, frames_key=None):
         """(None, J^T w): generalized forces of wrenches [moment about the frame origin; force]
@@ -489,10 +538,10 @@ class _MomentumResidual(LeafSystem):
                 first update (I_0 = p_0, r_0 = 0).
 
         Returns:
-            (I^+ of this update, the residual r, the model's terms at x). Inputs are not
-            checked (the caller checks them once).
+            (I^+ of this update, the residual r, the model's ``StateRates`` at x). Inputs
+            are not checked (the caller checks them once).
         """
-        terms = self._model.evaluate(x)
+        terms = self._model.state_rates(x)
         tau_m = None
         if self._torque_port is not None:
             tau_m = measured_torque - self._damping * x[self._qdot_start :]
@@ -578,7 +627,7 @@ class ClassicalResidual(_MomentumResidual):
             if known is not None:
                 tau_m = tau_m + known[1]
             return M @ qdot, rate, tau_m
-        momentum, model_rate = self._model.classical_momentum_and_rate(terms, x)
+        momentum, model_rate = terms.classical
         if known is None:
             measured = np.zeros(self._size)
             measured[6:] = tau_m
@@ -625,11 +674,12 @@ class InternalResidual(_MomentumResidual):
         self._declare_residual_output()
 
     def _momentum_and_rates(self, terms, x, tau_m, known):
-        momentum, model_rate = self._model.internal_momentum_and_rate(terms, x)
+        momentum, model_rate = terms.internal
         measured = tau_m
         if known is not None:
             w_F0, tau_joints = known
-            measured = tau_m + tau_joints - terms.I0c_inv_F.T @ w_F0  # tau_bar_c = J^fb^T w (eq. 10)
+            # tau_bar_c = J^fb^T w (eq. 10)
+            measured = tau_m + tau_joints - self._model.eliminated_base_wrench(terms, w_F0)
         return momentum, model_rate, measured
 
 
@@ -677,7 +727,7 @@ class ExternalResidual(_MomentumResidual):
         self.DeclareStateOutputPort("external_wrench_world", self._world_index)
 
     def _momentum_and_rates(self, terms, x, tau_m, known):
-        momentum, model_rate = self._model.base_momentum_and_rate(terms, x)
+        momentum, model_rate = terms.base
         return momentum, model_rate, (np.zeros(6) if known is None else known[0])
 
     def _after_update(self, discrete_state: DiscreteValues, terms, x, residual) -> None:
@@ -787,7 +837,7 @@ class ResidualBank(LeafSystem):
 
     def advance(
         self, x: np.ndarray, measured_torque: np.ndarray, known_wrenches: np.ndarray | None, integral
-    ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray], FloatingBaseTerms]:
+    ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray], StateRates]:
         """One update of the three observers without a Context (as ``_MomentumResidual.advance``).
 
         Args:
@@ -798,19 +848,17 @@ class ResidualBank(LeafSystem):
 
         Returns:
             ([I_classical; I_internal; I_external]^+ of this update, (r_classical,
-            r_internal, r_external), the model's terms at x). Inputs are not checked.
+            r_internal, r_external), the model's ``StateRates`` at x). Inputs are not checked.
         """
         model = self._model
-        terms = model.evaluate(x)
-        p_c, a_c = model.classical_momentum_and_rate(terms, x)
-        p_i, a_i = model.internal_momentum_and_rate(terms, x)
-        p_e, a_e = model.base_momentum_and_rate(terms, x)
+        terms = model.state_rates(x)
+        (p_c, a_c), (p_i, a_i), (p_e, a_e) = terms.classical, terms.internal, terms.base
         tau_m = measured_torque - self._damping * x[self._qdot_start :]  # tau - tau_mu
         if self._frames:
             w_F0, tau_joints = model.known_wrench_forces(terms, self._frames, known_wrenches, self._frames_key)
             joint_c = tau_m + tau_joints  # tau_m + J_j^T w (classical joint entries)
             # Internal: tau_m + tau_bar_c, tau_bar_c = J^fb^T w (eq. 10).
-            measured = np.concatenate((w_F0, joint_c, joint_c - terms.I0c_inv_F.T @ w_F0, w_F0))
+            measured = np.concatenate((w_F0, joint_c, joint_c - model.eliminated_base_wrench(terms, w_F0), w_F0))
         else:
             measured = self._zeros.copy()
             nv, n, _ = self._sizes

@@ -619,7 +619,7 @@ def _print_summary(metrics: dict) -> None:
         ok = metrics["meets_floors"].get(key)
         text = "n/a" if value is None else f"{value:.4g}"
         ci = f"[{intervals[key][0]:.4g}, {intervals[key][1]:.4g}]" if key in intervals else ""
-        verdict = "ok" if ok else "MISSED" if ok is not None else ""
+        verdict = "ok" if ok else "MISSED" if ok is not None else "not measured"
         print(f"  {key:32s} {text:>10s} {ci:>20s}   floor {op} {floor:<6}  {verdict}")
     extra = (
         "valid_rate",

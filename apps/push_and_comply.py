@@ -180,6 +180,8 @@ def main(argv: list[str] | None = None) -> int:
 
     def body() -> int:
         scenario = scenario_from_args(PushAndComplyScenario, args, seed=args.seed)
+        # A bad model, joint group or push schedule fails here, before the calibration (0.3 s).
+        build_push_and_comply_diagram(scenario, args.runs[0])
         out_dir = output_folder(args, "push_and_comply")
         corrections = refined_model(scenario, calibration_cache_folder(args))
         meshcat = replay_meshcat(True, args.headless)

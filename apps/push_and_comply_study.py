@@ -44,6 +44,7 @@ from apps.runner import (
     positive_int,
     run_app,
     simulate,
+    writable_folder,
 )
 from diagrams.scenarios import scenario_as_yaml
 from diagrams.station.conditions import set_ideal_conditions
@@ -249,7 +250,10 @@ def _parse(argv):
         help="shorten every run to S s (push times scaled); a smoke test",
     )
     parser.add_argument(
-        "--results-folder", type=Path, default=None, help="write the results file there instead of results/"
+        "--results-folder",
+        type=writable_folder,
+        default=None,
+        help="write the results file there instead of results/",
     )
     add_out_argument(parser, "push_and_comply_study")
     return parser.parse_args(argv)

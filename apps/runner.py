@@ -31,6 +31,7 @@ from diagrams.scenarios import (
     ScenarioError,
     check_finite_and_signs,
     load_scenario,
+    one_line,
     scenario_as_dict,
     scenario_file_text,
 )
@@ -79,6 +80,7 @@ def experiment_parser(
     add_out_argument(parser)
     parser.add_argument(
         "--results",
+        type=results_name,
         default=None,
         metavar="NAME",
         help="also write the metrics to results/NAME.json, with this command (the file the docs' tables are "
@@ -162,15 +164,44 @@ def writable_folder(text: str) -> Path:
             (the reason named).
     """
     folder = Path(text)
+    problem = _unwritable(folder)
+    if problem is not None:
+        raise argparse.ArgumentTypeError(problem)
+    return folder
+
+
+def results_name(text: str) -> str:
+    """``--results``'s type: a plain file stem whose results file
+    (``apps.results.results_path``) can be written; checked before any simulation.
+
+    Raises:
+        argparse.ArgumentTypeError: a name with a folder in it, or a results folder that is
+            a file or cannot be written.
+    """
+    from apps.results import results_path
+
+    try:
+        path = results_path(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+    problem = _unwritable(path.parent)
+    if problem is not None:
+        raise argparse.ArgumentTypeError(problem)
+    return text
+
+
+def _unwritable(folder: Path) -> str | None:
+    """Why ``folder`` (created if missing) cannot take a file, or None when a file was
+    written into it."""
     if folder.exists() and not folder.is_dir():
-        raise argparse.ArgumentTypeError(f"'{folder}' is a file, not a folder")
+        return f"'{folder}' is a file, not a folder"
     try:
         folder.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryFile(dir=folder):
             pass
     except OSError as error:
-        raise argparse.ArgumentTypeError(f"cannot write into '{folder}': {error.strerror or error}") from None
-    return folder
+        return f"cannot write into '{folder}': {error.strerror or error}"
+    return None
 
 
 def add_out_argument(parser: argparse.ArgumentParser, folder: str = "<experiment>") -> None:
@@ -196,8 +227,8 @@ def scenario_from_args(schema: type, args: argparse.Namespace, defaults: Any = N
     Raises:
         ScenarioError: see ``diagrams.scenarios.load_scenario``; an override of an unknown field.
         ValueError: a ``--robot`` that is no readable description (naming the field); a number
-            that is not finite, a negative duration or a period that is not positive
-            (``diagrams.scenarios.check_finite_and_signs``).
+            that is not finite, a negative duration, time or seed, or a period that is not
+            positive (``diagrams.scenarios.check_finite_and_signs``).
     """
     robot = getattr(args, "robot", None)
     if robot is not None:
@@ -276,8 +307,17 @@ def output_folder(args: argparse.Namespace, experiment: str) -> Path:
 
 def calibration_cache_folder(args: argparse.Namespace) -> Path:
     """``OUT/calibration_cache/``: where ``diagrams.residuals.model_refinement.refined_model``
-    keeps the calibrations the realistic apps reuse."""
-    return Path(args.out) / CALIBRATION_CACHE
+    keeps the calibrations the realistic apps reuse; created, and checked to take a file
+    before anything is calibrated.
+
+    Raises:
+        ValueError: it is a file, or cannot be created or written (the reason named).
+    """
+    folder = Path(args.out) / CALIBRATION_CACHE
+    problem = _unwritable(folder)
+    if problem is not None:
+        raise ValueError(f"the calibration cache: {problem}")
+    return folder
 
 
 def finish_outputs(success: bool) -> None:
@@ -442,20 +482,20 @@ def print_written(folder: Path) -> None:
 def run_app(name: str, body: Callable[[], int | None]) -> int:
     """Runs an app's ``body``; a ``ValueError`` (bad scenario, bad option, bad input data) or
     an ``OSError`` (a file that cannot be read or written) becomes ``<name>: error:
-    <message>`` on stderr and exit code 2, never a traceback. The run's output folders
-    (``output_folder``) are kept when ``body`` returns 0 or 1 (it ran and reports, e.g. a
-    robot that fell); after an error or an interruption they are removed and the earlier
-    outputs put back unchanged."""
+    <message>`` on stderr (one line, ``diagrams.scenarios.one_line``) and exit code 2, never a
+    traceback. The run's output folders (``output_folder``) are kept when ``body`` returns 0
+    or 1 (it ran and reports, e.g. a robot that fell); after an error or an interruption
+    they are removed and the earlier outputs put back unchanged."""
     try:
         code = int(body() or 0)
     except ValueError as error:
         finish_outputs(False)
-        print(f"\n{name}: error: {error}", file=sys.stderr)
+        print(f"\n{name}: error: {one_line(error)}", file=sys.stderr)
         return 2
     except OSError as error:
         finish_outputs(False)
         where = f" '{error.filename}'" if error.filename else ""
-        print(f"\n{name}: error: {error.strerror or error}{where}", file=sys.stderr)
+        print(f"\n{name}: error: {one_line(error.strerror or error)}{where}", file=sys.stderr)
         return 2
     except BaseException:
         finish_outputs(False)
@@ -485,6 +525,7 @@ __all__ = [
     "print_written",
     "replace_fields",
     "replay_meshcat",
+    "results_name",
     "run_app",
     "save_replay",
     "scenario_from_args",

@@ -34,10 +34,11 @@ from apps.runner import (
 from diagrams.station.standing import (
     StandingScenario,
     build_standing_diagram,
+    check_standing_scenario,
     set_initial_state,
     standing_run_metrics,
 )
-from models import MODEL_NAMES, robot_description, set_standing_state
+from models import MODEL_NAMES, set_standing_state
 
 
 def _parse(argv):
@@ -96,10 +97,7 @@ def main(argv=None) -> int:
     def body() -> int:
         models = None if args.model is None else (list(MODEL_NAMES) if args.model == "all" else [args.model])
         scenario = scenario_from_args(StandingScenario, args, models=models, duration=args.duration)
-        if not scenario.models:
-            raise ValueError("the scenario's models list is empty: nothing to simulate")
-        for name in scenario.models:
-            robot_description(name)  # every model read and checked before the first is simulated
+        check_standing_scenario(scenario)  # every model read and checked before the first is simulated
         print("standing simulation of the humanoids (PD + gravity compensation)")
         out_dir = output_folder(args, "standing")
         meshcat = replay_meshcat(not args.no_replay, args.headless)

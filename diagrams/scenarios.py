@@ -15,6 +15,8 @@ import dataclasses
 import inspect
 import math
 import textwrap
+import types
+import typing
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -52,13 +54,57 @@ def load_scenario(
         try:
             scenario = yaml_load_typed(schema=schema, filename=str(path), defaults=scenario)
         except Exception as error:  # Drake's YAML reader raises RuntimeError with details
-            raise ScenarioError(f"could not read the scenario file '{path}': {error}") from error
+            raise ScenarioError(f"could not read the scenario file '{path}': {one_line(error)}") from error
+        _check_lists(schema, _yaml_data(path.read_text()), f"scenario file '{path}': ")
     if text is not None and text.strip():
         try:
             scenario = yaml_load_typed(schema=schema, data=text, defaults=scenario)
         except Exception as error:
-            raise ScenarioError(f"could not read the scenario text {text!r}: {error}") from error
+            raise ScenarioError(f"could not read the scenario text {text!r}: {one_line(error)}") from error
+        _check_lists(schema, _yaml_data(text), f"scenario text {text!r}: ")
     return scenario
+
+
+def _yaml_data(text: str) -> Any:
+    """``text`` read by PyYAML (None where PyYAML cannot read what Drake's reader could)."""
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError:
+        return None
+
+
+def _check_lists(schema: type, data: Any, where: str, path: str = "") -> None:
+    """Drake's YAML reader turns a string given for a list field into a list of its letters
+    (``models: hrp4_like``) and a mapping into a list of its keys: refused here, from the
+    YAML ``data`` of ``schema`` (nested dataclasses included).
+
+    Raises:
+        ScenarioError: a list field given something else than a list, named.
+    """
+    if not (dataclasses.is_dataclass(schema) and isinstance(data, dict)):
+        return
+    try:
+        hints = typing.get_type_hints(schema)
+    except Exception:  # an annotation that does not resolve at run time: Drake's reader judged it
+        return
+    for field in dataclasses.fields(schema):
+        if field.name not in data:
+            continue
+        value, name = data[field.name], f"{path}{field.name}"
+        hint = hints[field.name]
+        union = typing.get_origin(hint) in (typing.Union, types.UnionType)
+        kinds = [t for t in typing.get_args(hint) if t is not type(None)] if union else [hint]
+        if value is not None and not isinstance(value, list) and all(typing.get_origin(t) is list for t in kinds):
+            raise ScenarioError(f"{where}{name} must be a list, got {value!r}")
+        for kind in kinds:
+            _check_lists(kind, value, where, f"{name}.")
+
+
+def one_line(error: BaseException | str) -> str:
+    """An error's message on one line: its lines stripped and joined by spaces, without the
+    caret lines that point into an echoed source line (a YAML parser's message spans five)."""
+    lines = (line.strip() for line in str(error).splitlines())
+    return " ".join(line for line in lines if line and set(line) != {"^"})
 
 
 #: Fields that, where a scenario has them, must be positive (s).
@@ -85,11 +131,16 @@ def check_common_fields(scenario: Any) -> None:
             raise ValueError(f"{name} must be positive, got {getattr(scenario, name)}")
 
 
+#: A field whose name ends in one of these is a time in a run, s: >= 0 (``check_finite_and_signs``).
+TIME_SUFFIXES = ("_time", "_start", "_end")
+
+
 def check_finite_and_signs(scenario: Any) -> None:
     """The checks every scenario gets when it is read (``apps.runner.scenario_from_args``):
     every number, nested ones included, is finite (a duration of ``inf`` would simulate for
-    ever); a field whose name ends in ``duration`` is >= 0 and one that ends in ``period``
-    is > 0 (None where a field allows it).
+    ever); a field whose name ends in ``duration`` or in one of ``TIME_SUFFIXES`` (a time
+    in the run, e.g. ``push_start``, ``settle_time``) is >= 0, one that ends in ``period``
+    is > 0, and a ``seed`` (or ``*_seed``) is >= 0 (None where a field allows it).
 
     Raises:
         ValueError: a bad value, named by its dotted field path.
@@ -106,8 +157,10 @@ def check_finite_and_signs(scenario: Any) -> None:
             name = path.rsplit(".", 1)[-1]
             if not math.isfinite(value):
                 raise ValueError(f"{path} must be finite, got {value}")
-            if name.endswith("duration") and value < 0:
+            if (name.endswith("duration") or name.endswith(TIME_SUFFIXES)) and value < 0:
                 raise ValueError(f"{path} must be >= 0 s, got {value}")
+            if (name == "seed" or name.endswith("_seed")) and value < 0:
+                raise ValueError(f"{path} must be a non-negative integer, got {value}")
             if name.endswith("period") and value <= 0:
                 raise ValueError(f"{path} must be positive, got {value}")
 
@@ -208,10 +261,12 @@ def scenario_file_text(scenario: Any, header: str) -> str:
 __all__ = [
     "POSITIVE_FIELDS",
     "ScenarioError",
+    "TIME_SUFFIXES",
     "attribute_docs",
     "check_common_fields",
     "check_finite_and_signs",
     "load_scenario",
+    "one_line",
     "scenario_as_dict",
     "scenario_as_yaml",
     "scenario_file_text",

@@ -513,6 +513,40 @@ def mesh_vertices(path: Path) -> np.ndarray:
     )
 
 
+def _model_xml(description: RobotDescription, kind: str):
+    """(the model file's XML root, its path, the error prefix) of ``description``.
+
+    Raises:
+        RobotDescriptionError: the file cannot be read or is not XML (``kind`` names it).
+    """
+    import xml.etree.ElementTree as ET
+
+    path = description.model_file
+    where = f"{description.source or path}: model"
+    try:
+        return ET.fromstring(path.read_text()), path, where
+    except (OSError, ET.ParseError) as error:
+        raise _error(where, f"cannot read {kind}'{path}': {error}") from error
+
+
+def collision_mesh_files(description: RobotDescription) -> list[Path]:
+    """The mesh files the description's model uses for collision (URDF ``<collision>``'s
+    ``<mesh filename>``, SDFormat's ``<mesh><uri>``), resolved to paths, sorted, each once:
+    with the model file, what the simulated robot's contact geometry is read from.
+
+    Raises:
+        RobotDescriptionError: a model that is not XML, an unknown package, a missing mesh.
+    """
+    root, path, where = _model_xml(description, "")
+    uris = set()
+    for collision in root.iter("collision"):
+        for mesh in collision.iter("mesh"):
+            uri = mesh.get("filename") or mesh.findtext("uri") or ""
+            if uri.strip():
+                uris.add(uri.strip())
+    return sorted({resolve_model_uri(uri, path.parent, description.packages, where) for uri in uris})
+
+
 def prepare_urdf(description: RobotDescription) -> str:
     """The description's URDF text, ready for Drake's parser: mesh file names made absolute
     (package:// URIs resolved), the ``remove_collisions`` bodies' collision elements dropped,
@@ -528,12 +562,7 @@ def prepare_urdf(description: RobotDescription) -> str:
     """
     import xml.etree.ElementTree as ET
 
-    path = description.model_file
-    where = f"{description.source or path}: model"
-    try:
-        root = ET.fromstring(path.read_text())
-    except (OSError, ET.ParseError) as error:
-        raise _error(where, f"cannot read the URDF '{path}': {error}") from error
+    root, path, where = _model_xml(description, "the URDF ")
     links = {link.get("name"): link for link in root.iter("link")}
     for joint in root.iter("joint"):
         if joint.get("type") == "fixed":  # a reduced model's fixed joints keep <mimic>, which Drake refuses
@@ -588,6 +617,7 @@ __all__ = [
     "FootDescription",
     "RobotDescription",
     "RobotDescriptionError",
+    "collision_mesh_files",
     "find_package",
     "load_robot_description",
     "mesh_vertices",

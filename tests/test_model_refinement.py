@@ -327,3 +327,49 @@ def test_the_calibration_cache_is_keyed_by_content_and_heals_a_corrupt_file(tmp_
     assert len(calls) == 3 and "the cached calibration cannot be read" in capsys.readouterr().out
     ModelCorrections.load(edited)  # written again, whole
     assert not [p for p in cache.iterdir() if "partial" in p.name]
+
+
+def test_the_calibration_cache_key_follows_the_collision_meshes(tmp_path, monkeypatch):
+    """The meshes a model collides with are read by content into the key (their bounding
+    boxes or convex hulls are the robot's contact geometry); visual meshes are not."""
+    from models.description import RobotDescription, collision_mesh_files
+
+    (tmp_path / "meshes").mkdir()
+    for name in ("foot.stl", "look.stl", "hand.obj"):
+        (tmp_path / "meshes" / name).write_text(f"solid {name}\nendsolid\n")
+    urdf = tmp_path / "robot.urdf"
+    urdf.write_text(
+        '<robot name="r"><link name="a">'
+        '<visual><geometry><mesh filename="meshes/look.stl"/></geometry></visual>'
+        '<collision><geometry><mesh filename="meshes/foot.stl"/></geometry></collision>'
+        '<collision><geometry><box size="1 1 1"/></geometry></collision></link></robot>'
+    )
+    sdf = tmp_path / "robot.sdf"
+    sdf.write_text(
+        '<sdf version="1.9"><model name="r"><link name="a"><collision name="c"><geometry><mesh>'
+        "<uri>meshes/hand.obj</uri></mesh></geometry></collision></link></model></sdf>"
+    )
+    assert collision_mesh_files(RobotDescription("r", None, urdf)) == [(tmp_path / "meshes" / "foot.stl").resolve()]
+    assert collision_mesh_files(RobotDescription("r", None, sdf)) == [(tmp_path / "meshes" / "hand.obj").resolve()]
+    assert collision_mesh_files(RobotDescription("r", None, model_file("hrp4_like"))) == []
+
+    mesh = tmp_path / "meshes" / "foot.stl"
+    monkeypatch.setattr(model_refinement, "collision_mesh_files", lambda description: [mesh])
+    experiment = ResidualComparisonScenario()
+    before = calibration_file(experiment, tmp_path / "cache")
+    assert calibration_file(experiment, tmp_path / "cache") == before
+    mesh.write_text("solid foot, edited\nendsolid\n")
+    assert calibration_file(experiment, tmp_path / "cache") != before
+
+
+def test_a_calibration_that_cannot_be_saved_leaves_no_partial_file(tmp_path, monkeypatch):
+    monkeypatch.setattr(model_refinement, "calibrate_model", lambda scenario: (_tiny_corrections(), None))
+
+    def full_disk(self, path):
+        path.write_bytes(b"PK half")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(ModelCorrections, "save", full_disk)
+    with pytest.raises(OSError, match="No space left"):
+        refined_model(ResidualComparisonScenario(), tmp_path / "cache")
+    assert list((tmp_path / "cache").iterdir()) == []

@@ -1256,8 +1256,10 @@ def contact_localization_metrics(
 ) -> dict:
     """The study's totals (module docstring) from its trials' ``trial_result``s and the
     ``no_contact_result`` of its standing run and of its slow-motion run (None: skipped),
-    and whether each meets its floor (``floors``, default ``FLOORS``; see ``floors_for``).
-    ``false_detections`` counts all three."""
+    and whether each meets its floor (``floors``, default ``FLOORS``; see ``floors_for``;
+    None: not measured). ``false_detections`` counts all three; its floor is judged only
+    with a standing run without contact (``no_contact`` of a positive duration): the
+    trials' quiet starts alone do not make it met."""
     floors = FLOORS if floors is None else floors
     n = len(results)
     detected = [r for r in results if r["detected"]]
@@ -1313,6 +1315,8 @@ def contact_localization_metrics(
     for key, (op, floor) in floors.items():
         value = metrics.get(key)
         checks[key] = None if value is None else bool(value >= floor if op == ">=" else value <= floor)
+    if "false_detections" in checks and not (no_contact and no_contact["duration_s"] > 0):
+        checks["false_detections"] = None  # no standing run without contact: the floor is not judged
     metrics["floors"] = {k: f"{op} {v}" for k, (op, v) in floors.items()}
     metrics["meets_floors"] = checks
     return metrics

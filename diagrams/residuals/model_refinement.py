@@ -19,6 +19,7 @@ arrays, so the same call calibrates a real robot from its own recording.
 
 import hashlib
 import os
+import tempfile
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -36,6 +37,7 @@ from diagrams.station.conditions import check_model_refinement
 from diagrams.station.humanoid_station import HumanoidStation, add_scenario_station, default_plant_config
 from diagrams.station.motions import SlowMotion, slow_whole_body_motion
 from models import robot_description
+from models.description import collision_mesh_files
 from systems.estimation.model_identification import (
     CalibrationLog,
     IdentificationOptions,
@@ -386,11 +388,11 @@ _CALIBRATION_CODE = ("models", "systems", "diagrams")
 
 def _content_digest(scenario: Any) -> str:
     """A digest of what a calibration of ``scenario``'s robot depends on beyond its scenario:
-    the robot description and model file it names (by content, not by path), and the
-    project's sources under ``_CALIBRATION_CODE``."""
+    the robot description, the model file it names and the collision meshes that file uses
+    (by content, not by path), and the project's sources under ``_CALIBRATION_CODE``."""
     digest = hashlib.sha1()
     description = robot_description(scenario.model)
-    for path in (description.source, description.model_file):
+    for path in (description.source, description.model_file, *collision_mesh_files(description)):
         if path is not None:
             digest.update(Path(path).read_bytes())
     root = Path(__file__).resolve().parents[2]
@@ -403,9 +405,9 @@ def _content_digest(scenario: Any) -> str:
 def calibration_file(scenario: Any, cache_folder: Path) -> Path:
     """Where ``refined_model`` saves the calibration of ``scenario``'s robot in
     ``cache_folder``: named by a hash of ``refinement_scenario_for(scenario)``, the
-    identification's options, ``CALIBRATION_REVISION``, the robot's description and model
-    file (their content: an edited URDF is calibrated again) and the project's code (any
-    change of it calibrates again)."""
+    identification's options, ``CALIBRATION_REVISION``, the robot's description, model file
+    and collision meshes (their content: an edited URDF is calibrated again) and the
+    project's code (any change of it calibrates again)."""
     text = (
         scenario_as_yaml(refinement_scenario_for(scenario))
         + repr((CALIBRATION_OPTIONS, TORQUE_OFFSET_PRIOR_FRACTION, COULOMB_PRIOR_FRACTION))
@@ -420,11 +422,15 @@ def refined_model(scenario: Any, cache_folder: Path | None = None) -> ModelCorre
     """The model corrections an experiment's ``scenario`` asks for with its
     ``model_refinement`` field: None for "none", the saved file's for a path, and for
     "calibrate" those of ``calibrate_model(refinement_scenario_for(scenario))``. With a
-    ``cache_folder`` a calibration is saved there under a hash of its scenario and reused
-    by later runs of the same robot (delete the folder to calibrate again).
+    ``cache_folder`` a calibration is saved there under a hash of its scenario and of the
+    content of everything it depends on (``calibration_file``) and reused by later runs of
+    the same robot (delete the folder to calibrate again); a cached file that cannot be read
+    is calibrated again, with a message. The file is written atomically (a temporary file in
+    the same folder, then ``os.replace``).
 
     Raises:
-        ValueError: a bad ``model_refinement`` or an unreadable corrections file.
+        ValueError: a bad ``model_refinement``, an unreadable corrections file, or a
+            ``cache_folder`` that cannot be created or written (found before calibrating).
     """
     choice = check_model_refinement(scenario.model_refinement)
     if choice == "none":
@@ -443,6 +449,7 @@ def refined_model(scenario: Any, cache_folder: Path | None = None) -> ModelCorre
             else:
                 print(f"model refinement: reusing {path}")
                 return corrections
+        _check_cache_folder(path.parent)  # before the calibration, not after it
     print(
         f"model refinement: {calibration.calibration_duration:g} s calibration motion of the standing robot, "
         "then identification ...",
@@ -452,8 +459,26 @@ def refined_model(scenario: Any, cache_folder: Path | None = None) -> ModelCorre
     corrections, _ = calibrate_model(calibration)
     print(f"model refinement: done in {time.perf_counter() - start:.0f} s", flush=True)
     if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
         partial = path.with_name(f".{path.stem}.{os.getpid()}.partial.npz")
-        corrections.save(partial)
-        os.replace(partial, path)  # atomic: a run stopped while saving leaves no truncated file
+        try:
+            corrections.save(partial)
+            os.replace(partial, path)  # atomic: a run stopped while saving leaves no truncated file
+        finally:
+            partial.unlink(missing_ok=True)
     return corrections
+
+
+def _check_cache_folder(folder: Path) -> None:
+    """Creates ``folder`` and writes a file into it.
+
+    Raises:
+        ValueError: a file, or a folder that cannot be created or written (the reason named).
+    """
+    if folder.exists() and not folder.is_dir():
+        raise ValueError(f"the calibration cache '{folder}' is a file, not a folder")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as error:
+        raise ValueError(f"cannot write into the calibration cache '{folder}': {error.strerror or error}") from None

@@ -38,6 +38,7 @@ from models import (
     add_humanoid,
     is_humanoid,
     point_contact_scene_graph_config,
+    robot_description,
     set_standing_state,
 )
 from systems.common.contact_results import robot_point_contacts
@@ -275,7 +276,9 @@ class StandingMetrics:
 
     @property
     def feet_flat(self) -> bool:
-        return (
+        """Both soles level (< 1 deg), on the ground (< 1 mm) and every foot sphere pressed:
+        a Python bool (a NumPy bool is no JSON)."""
+        return bool(
             max(self.sole_tilt_rad.values()) < np.radians(1.0)
             and max(abs(h) for h in self.sole_height_m.values()) < 1e-3
             and self.min_sphere_force_N > 0.0
@@ -311,6 +314,23 @@ def standing_metrics(handles: StandingHandles, context: Context, settle_time: fl
     return StandingMetrics(drift_m, drift_rad, tilt, height, forces, fell)
 
 
+def check_standing_scenario(scenario: StandingScenario) -> None:
+    """Checks what ``diagrams.scenarios.check_finite_and_signs`` does not, before anything is
+    simulated: ``models`` is a non-empty list whose every entry is a readable robot (a built-in
+    name or a description file, ``models.robot_description``).
+
+    Raises:
+        ValueError: the first bad field, named (a bad robot: its description's error).
+    """
+    models = scenario.models
+    if not isinstance(models, list) or not all(isinstance(name, str) for name in models):
+        raise ValueError(f"models must be a list of robot names or description files, got {models!r}")
+    if not models:
+        raise ValueError("the scenario's models list is empty: nothing to simulate")
+    for name in models:
+        robot_description(name)
+
+
 def standing_run_metrics(
     scenario: StandingScenario, handles: StandingHandles, context: Context, wall_time_s: float
 ) -> dict:
@@ -342,6 +362,7 @@ __all__ = [
     "StandingMetrics",
     "StandingScenario",
     "build_standing_diagram",
+    "check_standing_scenario",
     "default_gains",
     "foot_sphere_normal_forces",
     "set_initial_state",

@@ -29,7 +29,7 @@ export MPLBACKEND
 TEST_WORKERS ?= auto
 RUN = LD_PRELOAD="$(TCMALLOC)$${LD_PRELOAD:+ $$LD_PRELOAD}" $(PY)
 
-.PHONY: test-slow test-all docs hawley-settings paper-settings paper-speed robots scenarios demo demo-check contact residuals push-and-comply standing residual-comparison contact-localization model-refinement estimate-from-log base-state-from-log nao-force-observer nao-walk nao-walk-pulled nao-force-guided-walk nao-compliant-arms benchmark test install clean
+.PHONY: test-slow test-all docs hawley-settings paper-settings paper-speed robots scenarios demo demo-check contact residuals push-and-comply standing residual-comparison contact-localization model-refinement estimate-from-log base-state-from-log nao-force-observer nao-walk nao-walk-pulled nao-force-guided-walk nao-compliant-arms benchmark time-tests test install clean
 
 install: $(STAMP)
 
@@ -124,6 +124,11 @@ nao-compliant-arms: $(STAMP)
 # The timings of BENCHMARKS.md: prints them and writes results/benchmark.json (then `make docs`).
 benchmark: $(STAMP)
 	$(RUN) -m apps.benchmark --results benchmark $(ARGS)
+
+# make test's wall time on 2 workers (issue 33's floor), into results/test_suite.json: run it
+# on an idle machine.
+time-tests: $(STAMP)
+	$(PY) -m apps.time_test_suite --results test_suite $(ARGS)
 
 # Flacco et al. Sec. IV as published, then each of the project's changes (issue 31), and the
 # realistic push-and-comply on several robots: both write results/*.json (about 10 and 20 min).

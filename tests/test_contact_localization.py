@@ -169,7 +169,10 @@ def test_trials_from_one_shared_standing_start_match_the_trials_run_alone():
         assert a["sole_slip_m"] < 0.002 and not a["run_restarted_after"]
 
 
-@pytest.mark.parametrize("world", ["ideal", "ekf", "uncalibrated"])
+@pytest.mark.parametrize(
+    "world",
+    ["ideal", pytest.param("ekf", marks=pytest.mark.slow), pytest.param("uncalibrated", marks=pytest.mark.slow)],
+)
 def test_offline_estimation_of_the_trials_equals_the_estimators_in_the_loop(world):
     """The study's default ``estimation: offline`` (the robot, its sensors and base-state
     estimator simulated, the residuals, detector and localizer run on the recorded inputs

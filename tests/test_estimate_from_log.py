@@ -883,6 +883,7 @@ def _yaw_deg(pose: np.ndarray) -> np.ndarray:
     return np.degrees(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
 
 
+@pytest.mark.slow
 def test_the_ekf_starts_from_the_gyro_bias_measured_at_rest(robot, tmp_path, capsys):
     """hrp4_like standing still 3 s (its first 0.1 s of settling dropped: the log starts
     still), a constant 0.35 deg/s added to every gyro axis of the log: the detected still

@@ -347,6 +347,7 @@ def test_noise_false_alarm_and_calibration(hrp4, localizer):
     assert 0.01 <= small_p <= 0.12
 
 
+@pytest.mark.slow
 def test_noise_two_contacts_detected(hrp4, localizer):
     """Two contacts with the same noise, 40 seeded pairs: localize says 2 in >= 90 %, and
     names both links right in >= 90 %."""

@@ -32,6 +32,7 @@ def test_standing_on_talos(tmp_path):
     assert row["fell"] is False and row["feet_flat"] is True
 
 
+@pytest.mark.slow
 def test_push_and_comply_on_talos(tmp_path):
     text = "{duration: 1.0, tare_duration: 0.2, push_start: 0.3, push_peak_time: 0.6, push_end: 0.9}"
     args = ["--robot", TALOS, "--ideal", "--headless", "--scenario-text", text, "--out", str(tmp_path)]
@@ -42,6 +43,7 @@ def test_push_and_comply_on_talos(tmp_path):
     assert set(metrics["internal"]["knee_pitch_flexion_per_knee_deg"]) == {"leg_left_4_joint", "leg_right_4_joint"}
 
 
+@pytest.mark.slow
 def test_residual_comparison_on_talos(tmp_path):
     args = ["--robot", TALOS, "--ideal", "--duration", "1.5", "--seed", "2", "--out", str(tmp_path)]
     assert residual_comparison.main(args) == 0
@@ -60,6 +62,7 @@ def test_contact_study_on_talos(tmp_path):
     assert metrics["trials"] == 2 and metrics["detection_rate"] == 1.0
 
 
+@pytest.mark.slow
 def test_model_refinement_on_talos_says_which_joints_a_short_calibration_leaves_undetermined(tmp_path, capsys):
     # The full run (its default calibration motion) is too long for a test; a 3 s motion
     # does not excite every joint of this robot, and the app says which, instead of a
@@ -106,6 +109,7 @@ def test_feet_without_sensing_are_refused_by_the_base_state_estimator_that_needs
     assert "needs foot F/T sensors or four FSRs per foot" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_estimate_from_log_on_talos_recovers_a_known_push(tmp_path, capsys):
     """The offline pipeline on a robot the project never shipped: a demo log of TALOS under a
     random contact of the contact study, written as MCAP, read back and estimated."""

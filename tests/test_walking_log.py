@@ -51,6 +51,7 @@ def walk(app_run):
     )
 
 
+@pytest.mark.slow
 def test_the_log_holds_what_a_robot_logs_and_no_truth(walk):
     """Joint states, the IMU and the soles' normal forces at ~99 Hz with jittery stamps; no
     torques, no base state, no F/T wrench; standing, the two soles carry the robot's weight
@@ -87,6 +88,7 @@ def _quaternion(R):
     return rotation_to_quaternion(R)
 
 
+@pytest.mark.slow
 def test_the_error_figures_against_known_errors(walk):
     """The truth against itself: every error 0 and every floor met; a known yaw drift, tilt,
     displacement error and velocity error come out as injected."""
@@ -135,6 +137,7 @@ def test_bad_settings_are_refused_naming_them():
             simulate_walking_log(WalkingLogSettings(**changes))
 
 
+@pytest.mark.slow
 def test_the_app_runs_the_front_door_and_checks_a_log_against_its_truth(app_run, tmp_path, capsys):
     """The test bed on a short walk: the app writes the log and truth, runs
     apps.estimate_from_log on it, and meets every floor (the EKF with the at-rest bias; the

@@ -148,6 +148,16 @@ class ResidualModel:
         self._jacobians: dict[int, np.ndarray] = {}
         self._known_cache: dict = {}
 
+    def forget_state(self) -> None:
+        """Drops the per-state results: for a caller that moved the dynamics' own context or
+        kinematics outside this model (``FloatingBaseDynamics.mass_matrix_terms_of_samples``,
+        as ``systems.residuals.offline`` does), so that no later call at the same state reads
+        them (the Jacobians of the known-wrench frames)."""
+        self._key = None
+        self._terms = self._rates = None
+        self._jacobians = {}
+        self._known_cache = {}
+
     def set_spatial_inertias(self, inertias: Mapping[int, SpatialInertia]) -> None:
         """Makes this model differ from the plant: the bodies' spatial inertias M_BBo_B
         (``{body index: SpatialInertia}``) replace the plant's defaults in every dynamics

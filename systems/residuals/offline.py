@@ -302,6 +302,7 @@ def _stacked_residuals(
     out_classical, previous_classical = None, None
     if classical is not None:
         out_classical = np.empty((samples, n + 6))
+    model.forget_state()  # the samples' dynamics move its context or kinematics
     for start in range(0, samples, chunk):
         rows = range(start, min(start + chunk, samples))
         K = len(rows)

@@ -149,9 +149,14 @@ hawley-settings: $(STAMP)
 paper-speed: $(STAMP)
 	$(RUN) -m apps.paper_speed $(ARGS)
 
-# The generated tables of README.md, docs/*.md and BENCHMARKS.md, from results/*.json.
+# The generated tables of README.md, docs/*.md and BENCHMARKS.md, from results/*.json; then
+# the documentation site (docs/conf.py: the guides and the API reference built from the
+# docstrings) into docs/_build/html (open docs/_build/html/index.html), with warnings as errors:
+# -W --keep-going lists them all, -E reads every page again so that none is hidden by an
+# earlier build (about 2 min on one core; tests/test_docs.py builds it the same way).
 docs: $(STAMP)
 	$(PY) -m apps.doc_tables
+	$(PY) -m sphinx -b html -E -W --keep-going -q docs docs/_build/html
 
 # The apps' default scenario files (apps/scenarios/*_default.yaml), written from the dataclasses.
 scenarios: $(STAMP)

@@ -138,12 +138,17 @@ class NaoWalkPulledHandles(NaoWalkHandles):
 
     Attributes (besides the walking ones):
         cable: the PulleyLoad; setup: its CableSetup; slack_length: its natural length, m.
+
         planned_tighten_time / planned_lift_time: when the plan makes the line taut / the
             load start rising (quasi-static, from the planned torso motion), s.
+
         frame_origin: p_WF0, m.
+
         pipeline (``diagrams.observer.nao_sensing.ObserverPipeline``, F at ``frame_origin``),
             fsr_array, imu_com_acceleration, observer: its parts; truth: the ground truth.
+
         parameters: the observer's parameters (eq. 22 with the model's mass, T = 1/60 s).
+
         observer_loggers: loggers at the observer period: ``virtual_force``, ``valid``,
             ``truth`` (eq. 11), ``cable_force``, ``tension``, ``load_height``, ``zmp``
             (FSR CoP in F0), ``normal_force`` (f_n^o), ``com_position`` (sensed, F0),

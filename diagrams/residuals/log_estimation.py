@@ -118,8 +118,8 @@ __all__ = [
 
 @dataclass
 class LogEstimationSettings:
-    """The estimators' settings (those of the contact study, ``diagrams.residuals.
-    contact_localization``). SI units.
+    """The estimators' settings (those of the contact study,
+    ``diagrams.residuals.contact_localization``). SI units.
 
     Attributes:
         internal_gain, external_gain: the residual gains K, 1/s (eqs. 11, 16).
@@ -475,8 +475,8 @@ def _check_plausible(robot: EstimatorPlant, log: RobotLog, column_order: list) -
 def foot_force_sources(robot: EstimatorPlant, log: RobotLog) -> dict[str, tuple[str, tuple[str, ...]]]:
     """{foot side: (kind, names)} of what gives each foot's normal force for the EKF's
     contact flags, the first the log has of: "wrench" (the side's F/T frame's 6-axis
-    wrench, (name,)), "normal force" (a normal-force-only sensor, ``RobotLog.
-    normal_forces``, at the side's F/T frame or its sole frame, (name,)) or "fsr" (the sum
+    wrench, (name,)), "normal force" (a normal-force-only sensor,
+    ``RobotLog.normal_forces``, at the side's F/T frame or its sole frame, (name,)) or "fsr" (the sum
     of the FSRs named ``<side>_*``, their names). A foot with none of them is left out:
     the EKF needs every foot (``log_inputs`` refuses the log). Empty for a model that is not
     a humanoid description (no feet)."""
@@ -1164,8 +1164,8 @@ def estimate_from_log(
 
 
 def skipped_estimates(robot: EstimatorPlant, inputs: LogInputs) -> dict[str, str]:
-    """{estimate: why it cannot be made} on the log ``inputs`` (``LogEstimates.
-    not_estimated``): the internal residual without joint torques or without every F/T
+    """{estimate: why it cannot be made} on the log ``inputs``
+    (``LogEstimates.not_estimated``): the internal residual without joint torques or without every F/T
     foot's full wrench, the external residual without the latter (both on a robot whose
     feet have no F/T sensor at all: the ground's wrenches are unknown), the detector without
     both residuals, the localizer without the detector or on a model it cannot run on

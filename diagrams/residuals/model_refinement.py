@@ -272,8 +272,8 @@ def calibrate_from_log(
 ) -> ModelCorrections:
     """The model corrections identified from ``log`` (a robot's own recording, or one of
     ``calibrate_model``), and their ``residual_noise``: the covariances of the internal and
-    external residuals replayed on the log with the refined model (``systems.residuals.
-    offline``), after the first ``scenario.skip`` s. ``handles``: a refinement diagram of the
+    external residuals replayed on the log with the refined model
+    (``systems.residuals.offline``), after the first ``scenario.skip`` s. ``handles``: a refinement diagram of the
     robot (its station's estimators' plant: the model before refinement, and F/T frames)."""
     station = handles.station
     # The estimators' plant: its default inertias are the model before refinement.

@@ -47,7 +47,7 @@ dropped.
 
 ROS messages (``.bag``: ROS 1; a folder with ``metadata.yaml``: ROS 2, sqlite3 or mcap
 storage; ``.mcap``: a single ROS 2 MCAP file), by role, topic names from ``topics`` (a
-mapping or a YAML file with the keys of ``DEFAULT_TOPICS``; missing keys keep the defaults):
+mapping or a YAML file with the keys of ``DEFAULT_TOPICS``; missing keys keep the defaults)::
 
     joint_states: sensor_msgs/JointState (name, position, velocity[, effort]) required
                   (effort empty in every message: no joint torques; in some only: refused)

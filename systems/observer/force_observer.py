@@ -457,6 +457,7 @@ class LipForceObserverSystem(LeafSystem):
     State: discrete groups ``filters`` (3 x FILTER_STATE_SIZE: the x, y and z filters as
         ``LipForceObserver.state()``), ``valid`` (1) and ``initialised`` (1: 0 before the
         first update).
+
     Outputs:
         virtual_force: (3,) F^ = [F^_x, F^_y, F^_z] (eq. 11), N, world-aligned CoM frame.
         valid: (1,) 1 when the normal force allows the x/y estimate, else 0 (feet off the

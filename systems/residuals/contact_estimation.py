@@ -230,12 +230,15 @@ class ContactForceEstimator(LeafSystem):
         ``state`` (stacked, classical): the sensed [q; v] (only q is used).
         ``external_wrench_world`` (external, stacked): ExternalResidual's output, 6.
         ``residual`` (stacked: InternalResidual's, n; classical: ClassicalResidual's, nv).
+
         ``contact_points`` (stacked, classical, when no points are given at construction):
             4 k numbers, [body index, p_x, p_y, p_z] per contact, p in the body frame, m.
 
     Outputs (direct feedthrough, no state: a static map of the residuals, solved once per
     change of the inputs and cached):
+
         ``contact_forces_world``: 3 k, the forces f_c in world, N.
+
         ``fit_error``: 1, ||W (A f - b)||, the weighted mismatch (0 when the points explain
             the residuals exactly; large when the assumed points are wrong). 0 in mode
             ``"external"``.
@@ -507,9 +510,11 @@ class ContactDetector(LeafSystem):
     its noise band means an unknown external force), with hysteresis.
 
     Test statistics (squared Mahalanobis norms, chi-square distributed without contact if
-    the noise is Gaussian with the given covariances):
+    the noise is Gaussian with the given covariances)::
+
         s_ext = r_ext,f^T S_ext^-1 r_ext,f   (3 dof; the external residual's force, world)
         s_int = r_int^T S_int^-1 r_int       (n dof; the internal residual)
+
     Contact switches ON when s_ext > chi2.isf(p_on, 3) or s_int > chi2.isf(p_on, n) for
     ``on_samples`` consecutive updates, and OFF when both stay below chi2.isf(p_off, dof)
     for ``release_time`` seconds.
@@ -528,6 +533,7 @@ class ContactDetector(LeafSystem):
         ``residual`` (n): InternalResidual's output.
     State (discrete): [detected (0/1), detection time (s, -1 before the first detection),
         consecutive samples above, time since both went below (s), s_ext, s_int].
+
     Outputs:
         ``contact_detected`` (1): 1.0 in contact, else 0.0.
         ``detection_time`` (1): time of the most recent OFF->ON switch, s; -1 if none yet.
@@ -853,6 +859,7 @@ class ContactLocalizer(LeafSystem):
         the means [wrench (6), residual (n), q (nq)], the inputs of the last localization
         (same layout) and the result [status, body, point (3), force (3), score, runner-up
         score, runner-up body, runner-up point (3)].
+
     Outputs:
         ``contact_body`` (1): BodyIndex of the link, -1 if none.
         ``contact_point_world`` (3), m. ``contact_force_world`` (3), N.

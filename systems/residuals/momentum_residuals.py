@@ -77,8 +77,8 @@ _ONE = np.ones(1)  # the "initialised" flag's value
 
 
 class StateRates(NamedTuple):
-    """What the three residuals need at one sensed state x = [q; v] (``ResidualModel.
-    state_rates``), in F0 coordinates (module docstring). SI units.
+    """What the three residuals need at one sensed state x = [q; v]
+    (``ResidualModel.state_rates``), in F0 coordinates (module docstring). SI units.
 
     Attributes:
         R_WB: F0's rotation in world. v0: [w_B; v_B] in F0.
@@ -702,10 +702,11 @@ class ExternalResidual(_MomentumResidual):
     Inputs: ``state`` (nq + nv), ``known_wrenches`` (6 per frame).
     State: discrete, [flag; momentum integral (6); residual (6); residual in world (6)],
     updated every ``period``.
+
     Outputs:
         ``external_wrench_base``: [moment about the F0 origin; force], in F0, N m and N.
         ``external_wrench_world``: the same wrench as [moment about the world origin;
-        force], in world (rotated with the sensed base pose).
+            force], in world (rotated with the sensed base pose).
 
     Args: as ``ClassicalResidual`` without ``joint_damping``; ``gain`` scalar or 6-vector.
     """
@@ -764,6 +765,7 @@ class ResidualBank(LeafSystem):
     State: discrete groups [flag; I_classical (nv); I_internal (n); I_external (6)] (the
     flag and the momentum integrals), r_classical (nv), r_internal (n), r_external (6) and
     r_external in world (6), updated every ``period``.
+
     Outputs (state output ports):
         ``classical_residual`` (nv): ``ClassicalResidual``'s ``residual``, N m and N.
         ``internal_residual`` (n): ``InternalResidual``'s ``residual``, N m (N prismatic).

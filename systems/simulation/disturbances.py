@@ -435,7 +435,7 @@ class PushSource(LeafSystem):
     outputs share one cached kinematics evaluation (~25 µs); ``tau_c_real`` adds ~40 µs:
     one translational Jacobian per push whose force is non-zero at t, one mass matrix and
     one 6x6 solve (nothing when all forces are zero). Log ground truth at the rate you need. ``tau_c_real`` equals
-    Σ_c ``dynamics.floating_jacobian(q, B_c, p_c)``^T f_c, summed before the base
+    Σ_c (``dynamics.floating_jacobian(q, B_c, p_c)``)^T f_c, summed before the base
     elimination so that k pushes need one mass matrix rather than k.
     """
 

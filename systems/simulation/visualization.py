@@ -669,8 +669,10 @@ class StaticHtmlScene:
         transforms: path -> 4x4 matrix of the last ``set_transform``.
         properties: path -> {property: last value}.
         objects: paths that received ``set_object``.
+
         tracks: path -> {property ("position", "quaternion", "scale", "visible"):
             list of (time s, value)} from the recorded animation.
+
         fps: the animation's frames per second (None without one).
     """
 

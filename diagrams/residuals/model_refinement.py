@@ -363,13 +363,16 @@ def reduction(before: float, after: float) -> float:
 def refinement_scenario_for(scenario: Any) -> ModelRefinementScenario:
     """The calibration of the robot an experiment's ``scenario`` simulates: the same model,
     imperfections (the same robot: its mismatch and torque-sensor errors), base-state source
-    and plant configuration; the sensor noise is a different draw (seed + 1)."""
+    and plant configuration; the sensor noise is a different draw (seed + 1). An experiment
+    whose residuals run with another gain (``residual_gain``: push-and-comply's) gets its
+    residual noise model measured at that gain (``ResidualNoiseModel.check_gains``)."""
     return ModelRefinementScenario(
         model=scenario.model,
         noise=scenario.noise,
         seed=scenario.seed + 1,
         imperfections=scenario.imperfections,
         base_state=scenario.base_state,
+        internal_gain=float(getattr(scenario, "residual_gain", ModelRefinementScenario.internal_gain)),
         plant_config=scenario.plant_config,
     )
 

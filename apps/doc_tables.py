@@ -560,6 +560,103 @@ def _experiments_wall_time(sources: dict[str, dict]) -> list[str]:
     return lines
 
 
+def _test_suite(data: dict) -> list[str]:
+    counts = ", ".join(f"{v} {k}" for k, v in data["counts"].items())
+    return [
+        f"| workers | ruff | pytest | `make test` | tests | floor <= {data['floor_s'] / 60:g} min |",
+        "| --- | --- | --- | --- | --- | --- |",
+        f"| {data['workers']} | {data['ruff_s']:.1f} s | {data['pytest_s']:.1f} s | {data['wall_s'] / 60:.1f} min "
+        f"| {counts} | {_met(data['wall_s'] <= data['floor_s'])} |",
+    ]
+
+
+def _speed(sources: dict[str, dict]) -> list[str]:
+    """Issue 33's speed floors, each judged from the results file that measures it."""
+    bench, floors = sources["benchmark"], sources["benchmark"]["floors"]
+    lines = ["| what (issue 33) | measured | floor | verdict | command |", "| --- | --- | --- | --- | --- |"]
+
+    def row(what: str, measured: str, floor: str, ok: bool | None, command: str) -> None:
+        verdict = "not measured" if ok is None else _met(ok)
+        lines.append(f"| {what} | {measured} | {floor} | {verdict} | `{command}` |")
+
+    for r in bench["residual_peer"]:
+        row(
+            f"three residuals in one `ResidualBank` update, {r['model']} ({r['num_joints']} joints), "
+            "x the Pinocchio plain-loop peer",
+            _ratio(r["fused_bank_over_peer"]),
+            f"<= {_ratio(floors['residual_bank_max_ratio_to_peer'])}",
+            r["fused_bank_over_peer"] <= floors["residual_bank_max_ratio_to_peer"],
+            "make benchmark",
+        )
+        row(
+            f"the same, x one CalcMassMatrix at a new state, {r['model']}",
+            _ratio(r["fused_bank_ratio_to_mass_matrix"]),
+            f"<= {_ratio(floors['residual_bank_max_ratio_to_mass_matrix'])}",
+            r["fused_bank_ratio_to_mass_matrix"] <= floors["residual_bank_max_ratio_to_mass_matrix"],
+            "make benchmark",
+        )
+    for r in bench["log_estimation"]:
+        floor = floors["log_estimation_speed_min_real_time_factor"]
+        row(
+            f"offline estimation of a {r['log_rate_hz']:.0f} Hz log, {r['num_joints']} joints, one core "
+            f"(`{r.get('dynamics', 'fast')}` dynamics)",
+            f"{r['real_time_factor']:.1f}x real time",
+            f">= {floor:g}x",
+            r["real_time_factor"] >= floor,
+            "make benchmark",
+        )
+    loop = [r for r in bench["closed_loop"] if r["loop"].startswith("push-and-comply")]
+    for r in loop:
+        floor = floors["closed_loop_min_real_time_factor"]
+        row(
+            "the main job's closed loop (push-and-comply, internal residual, realistic estimators)",
+            f"real-time factor {r['real_time_factor']:.2f}",
+            f">= {floor:g}",
+            r["real_time_factor"] >= floor,
+            "make benchmark",
+        )
+    for name, label, command in (
+        ("contact_study_single", "contact study, single contacts", "make contact"),
+        ("contact_study_two", "contact study, two contacts", "make contact ARGS='--contacts 2'"),
+    ):
+        data, floor = sources[name], floors[f"{name}_max_s"]
+        row(
+            f"{label}: {data.get('trials')} realistic trials on {data.get('workers', 2)} workers",
+            f"{data['wall_time_s'] / 60:.1f} min",
+            f"<= {floor / 60:g} min",
+            data["wall_time_s"] <= floor,
+            command,
+        )
+    suite = sources["test_suite"]
+    row(
+        f"`make test` (ruff and {suite['counts'].get('passed', 0)} tests on {suite['workers']} workers)",
+        f"{suite['wall_s'] / 60:.1f} min",
+        f"<= {suite['floor_s'] / 60:g} min",
+        suite["wall_s"] <= suite["floor_s"],
+        "make time-tests",
+    )
+    return lines
+
+
+def _readme_speed(data: dict) -> list[str]:
+    """One sentence for the README's first screen: the main job's real-time factor."""
+    floor = data["floors"]["closed_loop_min_real_time_factor"]
+    loops = {r["loop"]: r["real_time_factor"] for r in data["closed_loop"]}
+    main = next((v for k, v in loops.items() if k.startswith("push-and-comply")), None)
+    if main is None:
+        return _not_measured("the closed loop", "`--loop-seconds 0`")
+    station = next((v for k, v in loops.items() if k.startswith("station")), None)
+    alone = f"; the simulated robot and its sensors alone: {station:.2f}" if station is not None else ""
+    return [
+        f"Speed: the main job's closed loop runs at real-time factor {main:.2f} "
+        f"({'meets' if main >= floor else 'below'} the goal of {floor:g}{alone}), its offline estimation "
+        f"from a log at {data['log_estimation'][0]['real_time_factor']:.1f}x real time on one core "
+        '([BENCHMARKS.md](BENCHMARKS.md), "Speed").'
+        if data["log_estimation"]
+        else f"Speed: the main job's closed loop runs at real-time factor {main:.2f}{alone}."
+    ]
+
+
 #: NAME -> the table's lines from the results file's ``data`` (or, for a block with several
 #: ``SOURCES``, from {results file name: its ``data``}).
 RENDERERS: dict[str, Callable[[dict], list[str]]] = {
@@ -585,6 +682,9 @@ RENDERERS: dict[str, Callable[[dict], list[str]]] = {
     "base_state_from_log": _base_state_from_log,
     "base_state_from_log_readme": _base_state_from_log_readme,
     "experiments_wall_time": _experiments_wall_time,
+    "speed": _speed,
+    "readme_speed": _readme_speed,
+    "test_suite": _test_suite,
 }
 
 #: The results files of the blocks that do not read ``results/<NAME>.json``: one file (the
@@ -593,6 +693,8 @@ SOURCES: dict[str, tuple[str, ...]] = {
     **{name: ("benchmark",) for name in RENDERERS if name.startswith("benchmark_")},
     "experiments_wall_time": tuple(name for name, _, _ in EXPERIMENT_RUNS),
     "base_state_from_log_readme": ("base_state_from_log",),
+    "speed": ("benchmark", "contact_study_single", "contact_study_two", "test_suite"),
+    "readme_speed": ("benchmark",),
 }
 
 

@@ -646,15 +646,16 @@ def _readme_speed(data: dict) -> list[str]:
     if main is None:
         return _not_measured("the closed loop", "`--loop-seconds 0`")
     station = next((v for k, v in loops.items() if k.startswith("station")), None)
-    alone = f"; the simulated robot and its sensors alone: {station:.2f}" if station is not None else ""
-    return [
-        f"Speed: the main job's closed loop runs at real-time factor {main:.2f} "
-        f"({'meets' if main >= floor else 'below'} the goal of {floor:g}{alone}), its offline estimation "
-        f"from a log at {data['log_estimation'][0]['real_time_factor']:.1f}x real time on one core "
-        '([BENCHMARKS.md](BENCHMARKS.md), "Speed").'
-        if data["log_estimation"]
-        else f"Speed: the main job's closed loop runs at real-time factor {main:.2f}{alone}."
-    ]
+    verdict = "meets" if main >= floor else "is below"
+    sentence = (
+        f"Speed: the main job's closed loop runs at real-time factor {main:.2f}, which {verdict} the goal of {floor:g}"
+    )
+    if station is not None:
+        sentence += f" (the simulated robot and its sensors alone: {station:.2f})"
+    if data["log_estimation"]:
+        factor = data["log_estimation"][0]["real_time_factor"]
+        sentence += f"; the offline estimation from a log runs at {factor:.1f}x real time on one core"
+    return [sentence + ' ([BENCHMARKS.md](BENCHMARKS.md), "Speed").']
 
 
 #: NAME -> the table's lines from the results file's ``data`` (or, for a block with several

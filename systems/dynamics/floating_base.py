@@ -256,8 +256,9 @@ class FloatingBaseDynamics:
 
     Args:
         plant: the robot's finalized MultibodyPlant (its own contexts are created here).
-        implementation: ``"fast"`` (Drake kernels) or ``"reference"`` (the paper's
-            recursive algorithms).
+        implementation: ``"fast"`` (Drake kernels), ``"pinocchio"`` (Pinocchio's C++
+            kernels on a model built from the plant; the module docstring) or
+            ``"reference"`` (the paper's recursive algorithms).
     """
 
     def __init__(self, plant: MultibodyPlant, implementation: str = "fast"):

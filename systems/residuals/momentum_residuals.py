@@ -110,7 +110,7 @@ class ResidualModel:
 
     Args:
         plant: the robot's finalized plant (any plant ``FloatingBaseDynamics`` accepts).
-        implementation: ``"fast"`` or ``"reference"`` (see ``FloatingBaseDynamics``).
+        implementation: ``"fast"``, ``"pinocchio"`` or ``"reference"`` (see ``FloatingBaseDynamics``).
     """
 
     def __init__(self, plant: MultibodyPlant, implementation: str = "fast"):
@@ -601,7 +601,7 @@ class ClassicalResidual(_MomentumResidual):
         joint_damping: viscous friction model D (scalar or n-vector, N m s/rad), subtracted
             inside (tau_mu = D qdot); default: the plant's joint damping.
         model: a ``ResidualModel`` shared with other residuals of the same plant.
-        implementation: ``"fast"`` or ``"reference"`` dynamics, when ``model`` is None.
+        implementation: ``"fast"``, ``"pinocchio"`` or ``"reference"`` dynamics, when ``model`` is None.
     """
 
     def __init__(

@@ -1,10 +1,7 @@
 """The documentation site (docs/conf.py, `make docs`): it builds with warnings as errors, and a
 reader finds the API reference of ``InternalResidual`` from the front page in a real browser."""
 
-import os
 import re
-import shutil
-import signal
 import subprocess
 import sys
 from html import unescape
@@ -13,62 +10,24 @@ from urllib.parse import urljoin
 
 import pytest
 
+from tests.headless_chromium import requires_chromium, run_chromium
+
 ROOT = Path(__file__).resolve().parents[1]
 CLASS = "systems.residuals.momentum_residuals.InternalResidual"
 
 
-def _chromium() -> str | None:
-    return shutil.which("chromium") or shutil.which("chromium-browser")
-
-
-def _dump_dom(chromium: str, url: str, tmp_path: Path, name: str) -> str:
+def _dump_dom(url: str, tmp_path: Path, name: str) -> str:
     """The page's DOM after headless Chromium loaded it (and ran its scripts), offline."""
-    log_tail = ""
-    for attempt in range(3):
-        command = [
-            chromium,
-            "--headless=new",
-            "--no-sandbox",
-            "--disable-gpu",
-            "--disable-quic",
-            "--disable-dev-shm-usage",
-            "--disable-background-networking",
-            "--disable-component-update",
-            "--no-first-run",
-            "--disable-sync",
-            "--virtual-time-budget=1000",
-            f"--user-data-dir={tmp_path / f'profile-{name}{attempt}'}",
-            "--dump-dom",
-            url,
-        ]
-        log = tmp_path / f"chromium-{name}{attempt}.log"
-        with log.open("w") as stderr:
-            process = subprocess.Popen(
-                command, stdout=subprocess.PIPE, stderr=stderr, text=True, start_new_session=True
-            )
-            try:
-                dom, _ = process.communicate(timeout=90)
-            except subprocess.TimeoutExpired:
-                os.killpg(process.pid, signal.SIGKILL)
-                dom, _ = process.communicate()
-        if "</html>" in dom:
-            return dom
-        log_tail = "\n".join(log.read_text(errors="replace").splitlines()[-15:])
-    raise AssertionError(f"chromium dumped no page for {url} in 3 attempts; last stderr lines:\n{log_tail}")
+    return run_chromium(["--dump-dom"], url, tmp_path, name, lambda dom: "</html>" in dom)
 
 
-@pytest.mark.skipif(
-    _chromium() is None and not os.environ.get("CI"),
-    reason="Debian's chromium is not installed (make test-slow installs it when run as root; CI always has it)",
-)
+@requires_chromium
 @pytest.mark.slow
 def test_docs_build_and_the_internal_residual_page_opens_in_headless_chromium(tmp_path):
     """Builds the site as `make docs` does (Sphinx, warnings as errors) into a temporary folder,
     opens its front page in headless Chromium, follows the navigation's link to
     ``InternalResidual``'s page and checks that the page documents the class (its signature,
     its docstring and its methods)."""
-    chromium = _chromium()
-    assert chromium, "chromium must be installed in CI (.ci/run runs make test-slow, which installs it)"
     html = tmp_path / "html"
     build = subprocess.run(
         [sys.executable, "-m", "sphinx", "-b", "html", "-W", "--keep-going", "-q"]
@@ -80,14 +39,14 @@ def test_docs_build_and_the_internal_residual_page_opens_in_headless_chromium(tm
     assert build.returncode == 0, f"sphinx failed (warnings are errors):\n{build.stderr[-6000:]}"
     index = (html / "index.html").resolve().as_uri()
 
-    front = _dump_dom(chromium, index, tmp_path, "index")
+    front = _dump_dom(index, tmp_path, "index")
     assert "API reference" in front
     links = [unescape(h) for h in re.findall(r'href="([^"]*InternalResidual[^"]*)"', front)]
     page_links = [h for h in links if h.split("#")[0].endswith(f"{CLASS}.html")]
     assert page_links, f"no link to {CLASS}'s page on the front page (links naming it: {links})"
 
     page_url = urljoin(index, page_links[0].split("#")[0])
-    page = _dump_dom(chromium, page_url, tmp_path, "class")
+    page = _dump_dom(page_url, tmp_path, "class")
     assert f'id="{CLASS}"' in page, "the page has no entry for the class"
     text = re.sub(r"<[^>]+>", "", page)
     assert "Internal (floating-base) residual, paper eq. (11)" in text  # its docstring

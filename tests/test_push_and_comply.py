@@ -2,11 +2,7 @@
 replay in a real browser."""
 
 import json
-import os
 import re
-import shutil
-import signal
-import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +15,7 @@ from diagrams.residuals.push_and_comply import PushAndComplyScenario, build_push
 from diagrams.scenarios import scenario_as_dict
 from diagrams.station.conditions import set_ideal_conditions
 from systems.simulation.visualization import read_static_html
+from tests.headless_chromium import requires_chromium, run_chromium
 
 SCENARIOS = Path(push_and_comply.__file__).parent / "scenarios"
 
@@ -190,57 +187,22 @@ def test_replay_is_self_contained(app_output):
     assert any("visible" in tracks or "scale" in tracks for path, tracks in scene.tracks.items() if "effort" in path)
 
 
-def _chromium() -> str | None:
-    return shutil.which("chromium") or shutil.which("chromium-browser")
-
-
-@pytest.mark.skipif(
-    _chromium() is None and not os.environ.get("CI"),
-    reason="Debian's chromium is not installed (make test installs it when run as root; CI always has it)",
-)
+@requires_chromium
 @pytest.mark.slow
 def test_replay_renders_the_robot_in_headless_chromium(app_output, tmp_path):
     """Opens the replay in a real browser, offline, and checks that the robot is drawn."""
     from PIL import Image
 
-    chromium = _chromium()
-    assert chromium, "chromium must be installed in CI (.ci/run runs make test, which installs it)"
     screenshot = tmp_path / "replay.png"
-    # The virtual-time budget must stay shorter than the recorded animation (1.5 s here):
-    # with a budget past the animation's end, headless Chromium 156 waited forever in 4 of 6
-    # launches (measured); with 1 s it finished in 4-20 s in 16 of 16. Each attempt still gets
-    # a fresh profile and 90 s, a hung browser is killed, and its stderr is kept for the report.
-    log_tail = ""
-    for attempt in range(3):
-        command = [
-            chromium,
-            "--headless=new",
-            "--no-sandbox",
-            "--disable-gpu",
-            "--disable-quic",
-            "--disable-dev-shm-usage",
-            "--disable-background-networking",
-            "--disable-component-update",
-            "--no-first-run",
-            "--disable-sync",
-            "--window-size=1280,800",
-            "--virtual-time-budget=1000",
-            f"--user-data-dir={tmp_path / f'profile{attempt}'}",
-            f"--screenshot={screenshot}",
-            (app_output / "internal.html").resolve().as_uri(),
-        ]
-        log = tmp_path / f"chromium{attempt}.log"
-        with log.open("w") as stderr:
-            process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=stderr, start_new_session=True)
-            try:
-                process.wait(timeout=90)
-            except subprocess.TimeoutExpired:
-                os.killpg(process.pid, signal.SIGKILL)
-                process.wait()
-        if screenshot.is_file():
-            break
-        log_tail = "\n".join(log.read_text(errors="replace").splitlines()[-15:])
-    assert screenshot.is_file(), f"chromium wrote no screenshot in 3 attempts; last stderr lines:\n{log_tail}"
+    # The virtual-time budget (headless_chromium.FLAGS) is shorter than the recorded animation
+    # (1.5 s here).
+    run_chromium(
+        ["--window-size=1280,800", f"--screenshot={screenshot}"],
+        (app_output / "internal.html").resolve().as_uri(),
+        tmp_path,
+        "replay",
+        lambda _: screenshot.is_file(),
+    )
     pixels = np.asarray(Image.open(screenshot).convert("RGB")).astype(int)
     # The background and the ground are smooth grey-green gradients; the robot's links are
     # light grey with dark feet, drawn in the middle of the view. Count the pixels of the

@@ -439,7 +439,30 @@ class FixedBaseModel:
         return None, tau
 
 
-class _MomentumResidual(LeafSystem):
+class _ResidualParameters:
+    """The parameters a residual system (or ``ResidualBank``) exposes: its dynamics model
+    (possibly shared), its known-wrench frames and its update period."""
+
+    _model: ResidualModel
+    _frames: tuple[Frame, ...]
+    _period: float
+
+    @property
+    def model(self) -> ResidualModel:
+        """The (possibly shared) dynamics model."""
+        return self._model
+
+    @property
+    def known_wrench_frames(self) -> tuple[Frame, ...]:
+        return self._frames
+
+    @property
+    def period(self) -> float:
+        """The update period T, s."""
+        return self._period
+
+
+class _MomentumResidual(_ResidualParameters, LeafSystem):
     """Common machinery: ports, discrete state, the observer update (see module docstring)."""
 
     def __init__(
@@ -503,20 +526,6 @@ class _MomentumResidual(LeafSystem):
         raise NotImplementedError  # pragma: no cover - abstract
 
     # -- helpers --------------------------------------------------------------------------
-    @property
-    def model(self) -> ResidualModel:
-        """The (possibly shared) dynamics model."""
-        return self._model
-
-    @property
-    def known_wrench_frames(self) -> tuple[Frame, ...]:
-        return self._frames
-
-    @property
-    def period(self) -> float:
-        """The update period T, s."""
-        return self._period
-
     def _checked_input(self, port, context: Context) -> np.ndarray:
         return eval_finite_input(type(self).__name__, port, context)
 
@@ -749,7 +758,7 @@ class ExternalResidual(_MomentumResidual):
         return self._model.base_wrench_to_world(terms, x, residual)
 
 
-class ResidualBank(LeafSystem):
+class ResidualBank(_ResidualParameters, LeafSystem):
     """The classical (eq. 7), internal (eq. 11) and external (eq. 16) residuals of one robot
     in one system: one periodic discrete update computes all three at the sensed state.
 
@@ -827,20 +836,6 @@ class ResidualBank(LeafSystem):
         for name, index in zip(names, self._residual_indices):
             self.DeclareStateOutputPort(name, index)
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._Update)
-
-    @property
-    def model(self) -> ResidualModel:
-        """The dynamics model the three residuals share."""
-        return self._model
-
-    @property
-    def known_wrench_frames(self) -> tuple[Frame, ...]:
-        return self._frames
-
-    @property
-    def period(self) -> float:
-        """The update period T, s."""
-        return self._period
 
     @property
     def residuals(self) -> tuple[ClassicalResidual, InternalResidual, ExternalResidual]:

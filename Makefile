@@ -29,7 +29,7 @@ export MPLBACKEND
 TEST_WORKERS ?= auto
 RUN = LD_PRELOAD="$(TCMALLOC)$${LD_PRELOAD:+ $$LD_PRELOAD}" $(PY)
 
-.PHONY: test-slow test-all docs hawley-settings paper-settings paper-speed robots scenarios demo demo-check contact residuals push-and-comply standing residual-comparison contact-localization model-refinement estimate-from-log base-state-from-log nao-force-observer nao-walk nao-walk-pulled nao-force-guided-walk nao-compliant-arms benchmark time-tests test install clean
+.PHONY: sweep engine-scaling test-slow test-all docs hawley-settings paper-settings paper-speed robots scenarios demo demo-check contact residuals push-and-comply standing residual-comparison contact-localization model-refinement estimate-from-log base-state-from-log nao-force-observer nao-walk nao-walk-pulled nao-force-guided-walk nao-compliant-arms benchmark time-tests test install clean
 
 install: $(STAMP)
 
@@ -40,7 +40,7 @@ $(STAMP): pyproject.toml
 		echo "$(VENV) was made with another Python than $(PYTHON) ($(PYTHON_VERSION)): making it anew"; rm -rf $(VENV); fi
 	@test -x $(PY) || '$(PYTHON_BIN)' -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet ".[test]"
+	$(PY) -m pip install --quiet ".[test,cluster]"
 	@echo "compiling the invariant EKF's steps and the localizer's geometric queries (numba, once; cached beside their source)"
 	@$(PY) -c 'from systems.estimation.base_state_estimator import load_compiled_filter_steps; load_compiled_filter_steps()'
 	@$(PY) -c 'from systems.residuals.geometry_intersection import load_compiled_queries; load_compiled_queries()'
@@ -157,6 +157,17 @@ paper-speed: $(STAMP)
 docs: $(STAMP)
 	$(PY) -m apps.doc_tables
 	$(PY) -m sphinx -b html -E -W --keep-going -q docs docs/_build/html
+
+# The contact study swept over robots, imperfection draws and noise levels (issue 35): a small
+# grid here on Ray (about 20 min on 2 cores; writes out/sweep/ and results/sweep_small.json);
+# ARGS="--cluster HOST:PORT" runs it on a Ray cluster, ARGS="--resume" goes on after a stop.
+sweep: $(STAMP)
+	$(RUN) -m apps.sweep --grid apps/scenarios/sweep_small.yaml --results sweep_small $(ARGS)
+
+# How the studies scale: the same study on the pool and on Ray, the driver's cost, a model of
+# N nodes (about 15 min; run it on an idle machine; writes results/engine_scaling.json).
+engine-scaling: $(STAMP)
+	$(RUN) -m apps.engine_scaling --results engine_scaling $(ARGS)
 
 # The apps' default scenario files (apps/scenarios/*_default.yaml), written from the dataclasses.
 scenarios: $(STAMP)

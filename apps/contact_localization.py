@@ -26,12 +26,16 @@ motion (``diagrams.station.motions``, a motion the calibration never saw).
 Run: ``python -m apps.contact_localization [--scenario FILE] [--scenario-text YAML]
 [--trials N] [--contacts 1|2] [--seed S] [--num-seeds K] [--trials-per-run N] [--model M] [--push-start S]
 [--contact-duration S] [--no-contact-duration S] [--slow-motion-duration S] [--no-noise]
-[--ideal] [--out DIR] [--headless] [--workers W] [--replays R]``.
+[--ideal] [--out DIR] [--headless] [--engine E] [--workers W] [--cluster ADDRESS] [--replays R]``.
 The scenario is a ``ContactLocalizationScenario``; ``--trials``, ``--contacts``, ``--seed``,
 ``--num-seeds``, ``--trials-per-run``, ``--model``, ``--push-start``,
 ``--contact-duration`` (``push_duration``), ``--no-contact-duration``,
 ``--slow-motion-duration`` and ``--no-noise`` override its fields, ``--ideal`` its world;
-``--workers`` and ``--replays`` are how it runs. Trials run in parallel processes ('spawn').
+``--engine``, ``--workers``, ``--cluster`` and ``--replays`` are how it runs: the jobs (chunks of
+``TRIALS_PER_JOB`` trials, the runs without contact, the replays) go to the workers of
+``apps.engine`` (Ray actors on this machine by default, or on a Ray cluster with
+``--cluster``; a process pool with ``--engine pool``); the results do not depend on the
+engine or the number of workers.
 Writes to ``DIR/contact_localization/``: ``metrics.json`` (totals, floors, per-trial
 results, per-link and per-seed tables, the scenario, the wall time by phase),
 ``localizer_inputs.npz`` (per trial the averaged q, external wrench and internal residual
@@ -47,15 +51,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import multiprocessing
-import os
 import time
 from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
-from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
 
+from apps.engine import add_engine_arguments, engine_from_args, open_engine
 from apps.runner import (
     calibration_cache_folder,
     experiment_parser,
@@ -74,28 +76,24 @@ from apps.runner import (
 )
 from diagrams.residuals.contact_localization import (
     MAX_ANGLE_DEG,
-    MAX_FORCE,
-    MIN_FORCE,
     MIN_LOAD_CALIBRATION_TRIALS,
     ContactLocalizationScenario,
     averaged_input_covariances,
     build_contact_localization_diagram,
     contact_localization_metrics,
     cross_fitting_folds,
-    estimate_run,
-    estimator_log,
     floors_for,
     load_model_error,
-    multi_contact_localizer,
-    multi_contact_result,
-    no_contact_result,
-    no_contact_scenario,
-    offline_trial,
     run_schedule,
     sample_study_trials,
-    slow_motion_scenario,
-    trial_result,
     trial_scenario,
+)
+from diagrams.residuals.contact_trials import (
+    MULTI_CONTACT_TRIALS_PER_JOB,
+    TRIALS_PER_JOB,
+    localize_multi_contact,
+    run_no_contact,
+    run_trials,
 )
 from diagrams.residuals.model_refinement import calibration_file, refined_model
 from diagrams.scenarios import load_scenario, scenario_as_yaml
@@ -108,162 +106,6 @@ REPLAY_AFTER_PUSH_S = 0.3
 # ---------------------------------------------------------------------------------------
 # One trial (worker process).
 # ---------------------------------------------------------------------------------------
-
-
-#: Trials a worker process runs per job (at least one run of ``trials_per_run``).
-TRIALS_PER_JOB = 25
-#: Trials per job of the one-or-two-contact localization (after the simulations).
-MULTI_CONTACT_TRIALS_PER_JOB = 25
-
-#: A run is restarted from the standing start after a trial that moved a sole from where it
-#: stood by more than these (m, rad): the base-state estimator takes a foot in contact as
-#: still, so the next trials would measure a robot that slipped, not one standing.
-SOLE_SLIP_RESTART = (0.002, math.radians(0.2))
-
-
-def sole_slip(plant, plant_context, sole_frames: dict, start: dict) -> tuple[float, float]:
-    """The largest displacement (m) and rotation (rad) of the soles from their poses ``start``
-    (frame name -> RigidTransform)."""
-    moved, turned = 0.0, 0.0
-    for name, frame in sole_frames.items():
-        X = start[name].InvertAndCompose(frame.CalcPoseInWorld(plant_context))
-        moved = max(moved, float(np.linalg.norm(X.translation())))
-        turned = max(turned, float(abs(X.rotation().ToAngleAxis().angle())))
-    return moved, turned
-
-
-def run_trials(specs: list[dict], scenario: ContactLocalizationScenario) -> list[dict]:
-    """Simulates the trials ``specs`` (``sample_trials``) of ``scenario`` and returns their
-    results (``trial_result``, with the soles' slip since the standing start), each read at
-    the end of its push (the one-or-two-contact localization comes after all trials,
-    ``localize_multi_contact``).
-
-    How the trials are run:
-
-    * ``trials_per_run`` 1 with ``shared_standing_start`` (the default): the standing start
-      is simulated once and its state saved at ``push_start``; the trials then push one
-      after another, each from that state, restored before its push (time goes on, so each
-      push sees sensor noise of its own).
-    * ``trials_per_run`` 1 otherwise: each trial simulates its own standing start.
-    * ``trials_per_run`` N > 1: N trials one after another in each run, the robot not reset
-      in between (``run_schedule``); a trial after which a sole has slipped
-      (``SOLE_SLIP_RESTART``) ends its run, and the next trials start a new one.
-    """
-    results = []
-    model_corrections = refined_model(scenario)
-    shared_start = scenario.trials_per_run == 1 and scenario.shared_standing_start
-    per_run = len(specs) if shared_start else scenario.trials_per_run
-    schedule = dataclasses.replace(scenario, trial_gap=0.0) if shared_start else scenario
-    remaining = list(specs)
-    while remaining:
-        run_specs = remaining[:per_run]
-        run_scenario = trial_scenario(scenario, run_specs[0])  # the run's noise seed
-        pushes, windows, push_indices = run_schedule(schedule, run_specs)
-        diagram, handles = build_contact_localization_diagram(
-            run_scenario, model_corrections=model_corrections, pushes=pushes
-        )
-        simulator = Simulator(diagram)
-        ApplySimulatorConfig(scenario.simulator_config, simulator)
-        context = simulator.get_mutable_context()
-        handles.station.set_initial_state(context)
-        plant_context = handles.plant.GetMyContextFromRoot(context)
-        soles = handles.station.humanoid.sole_frames
-        start = {name: frame.CalcPoseInWorld(plant_context) for name, frame in soles.items()}
-        simulator.Initialize()
-        standing = None
-        # Offline estimation (``handles.online`` False): the run's replayed segments so far
-        # and the estimators' state after them.
-        segments, resume, standing_end = [], None, None
-        detected_at_start = False  # the detector's flag at the standing start's end
-        if shared_start:
-            simulator.AdvanceTo(scenario.push_start)
-            standing = context.Clone()
-            if handles.online:
-                detector_context = handles.detector.GetMyContextFromRoot(standing)
-                detected_at_start = handles.detector.GetOutputPort("contact_detected").Eval(detector_context)[0] > 0.5
-            else:
-                segments, resume = _estimate_more(handles, segments, resume)
-                standing_end = resume
-                detected_at_start = standing_end.detected
-        done = len(run_specs)
-        for k, (spec, window, indices) in enumerate(zip(run_specs, windows, push_indices)):
-            restored = shared_start and k > 0
-            if restored:
-                context.SetStateAndParametersFrom(standing)  # the standing start; the time goes on
-                window = (window[1], window[1], window[2])
-                segments, resume = [], standing_end
-            wall_start = time.perf_counter()
-            simulator.AdvanceTo(window[2])
-            offline = None
-            if not handles.online:
-                segments, resume = _estimate_more(handles, segments, resume)
-                offline = offline_trial(handles, segments, restored and detected_at_start)
-            result = trial_result(
-                scenario,
-                spec,
-                handles,
-                context,
-                time.perf_counter() - wall_start,
-                push_indices=indices,
-                window=window,
-                restored_at_start=restored,
-                detected_at_start=bool(detected_at_start),
-                offline=offline,
-            )
-            moved, turned = sole_slip(handles.plant, plant_context, soles, start)
-            result["sole_slip_m"], result["sole_slip_deg"] = moved, math.degrees(turned)
-            result["sole_slipped"] = moved > SOLE_SLIP_RESTART[0] or turned > SOLE_SLIP_RESTART[1]
-            result["run_restarted_after"] = result["sole_slipped"] and not shared_start
-            results.append(result)
-            if result["run_restarted_after"]:
-                done = k + 1
-                break
-        remaining = remaining[done:]
-    return results
-
-
-def _estimate_more(handles, segments: list, resume) -> tuple:
-    """Runs the offline estimators (``estimate_run``) on the updates recorded since the
-    last call (the records are then cleared), from the state ``resume`` the last replay
-    ended in. Returns ``segments`` with this one appended (its ``EstimatorLog`` and
-    replay) and its end state."""
-    log = estimator_log(handles)
-    if not log.update_times.size:
-        return segments, resume
-    handles.recorder.clear()
-    replay = estimate_run(handles, log, resume)
-    return [*segments, (log, replay)], replay.end
-
-
-def localize_multi_contact(
-    trials: list[dict],
-    scenario: ContactLocalizationScenario,
-    covariances: tuple[np.ndarray, np.ndarray],
-    load_covariances: tuple[np.ndarray, np.ndarray] | None,
-) -> list[dict]:
-    """The one-or-two-contact localization (``multi_contact_result``) of the ``trials``'
-    averaged inputs (``localizer_inputs``) against their true contacts, whitened with the
-    averaged inputs' noise ``covariances`` and the model error under load
-    ``load_covariances`` (measured on other trials, ``load_model_error``; None: none).
-    Returns one dict per trial, with its ``trial``."""
-    # The diagram owns the plant the localizer reads: both live until the end.
-    diagram, handles = build_contact_localization_diagram(scenario, model_corrections=refined_model(scenario))
-    localizer = multi_contact_localizer(handles, covariances, load_covariances)
-    out = []
-    for trial in trials:
-        contacts = trial.get("contacts", [trial])
-        inputs = trial["localizer_inputs"]
-        result = multi_contact_result(
-            localizer,
-            inputs["q"],
-            inputs["external_wrench_world"],
-            inputs["residual"],
-            [c["body_index"] for c in contacts],
-            np.asarray(trial["true_points_world"]),
-            np.array([c["force_world"] for c in contacts]),
-        )
-        out.append({"trial": trial["trial"], **result})
-    return out
 
 
 def multi_contact_jobs(
@@ -305,20 +147,6 @@ def record_replay(spec: dict, scenario: ContactLocalizationScenario, meshcat, *,
         live=live,
         camera=([1.6, -1.6, 1.2], [0.0, 0.0, 0.7]),
     )
-
-
-def run_no_contact(scenario: ContactLocalizationScenario, kind: str = "no_contact") -> dict:
-    """A run without contact, standing (``kind`` "no_contact", ``no_contact_scenario``) or
-    in slow motion ("slow_motion", ``slow_motion_scenario``): its false detections."""
-    run_scenario = no_contact_scenario(scenario) if kind == "no_contact" else slow_motion_scenario(scenario)
-    diagram, handles = build_contact_localization_diagram(run_scenario, model_corrections=refined_model(scenario))
-    run = simulate(
-        diagram,
-        run_scenario.no_contact_duration,
-        set_initial_state=handles.station.set_initial_state,
-        simulator_config=run_scenario.simulator_config,
-    )
-    return no_contact_result(run_scenario, handles, run.context)
 
 
 def save_trial_replay(spec: dict, scenario: ContactLocalizationScenario, out_dir: Path) -> Path:
@@ -391,9 +219,7 @@ def _parse(argv):
         help="trials simulated one after another in one run (default 1: each from the standing start)",
     )
     parser.add_argument("--model", default=None, help="humanoid with foot F/T sensors (hrp4_like)")
-    parser.add_argument(
-        "--workers", type=positive_int, default=os.cpu_count() or 1, help="parallel processes (default: all cores)"
-    )
+    add_engine_arguments(parser)
     parser.add_argument(
         "--replays", type=non_negative_int, default=3, help="Meshcat replays of the first N trials (default 3)"
     )
@@ -421,7 +247,7 @@ def _parse(argv):
     parser.add_argument("--no-noise", action="store_true", help="ideal sensors")
     args = parser.parse_args(argv)
     if (
-        args.workers < 1
+        (args.workers is not None and args.workers < 1)
         or args.replays < 0
         or (args.trials is not None and args.trials < 1)
         or (args.num_seeds is not None and args.num_seeds < 1)
@@ -436,13 +262,12 @@ def _parse(argv):
     return args
 
 
-def _run_jobs(jobs: list, pool) -> dict:
-    """Runs the jobs (in ``pool``, a process pool, or here when None); returns their results
-    by kind: the "trials" and "multi_contact" jobs' lists joined, in trial order, the
-    "replay" jobs' files, and the others' ("no_contact", "slow_motion", "covariances")."""
+def _run_jobs(jobs: list, engine) -> dict:
+    """Runs the jobs on ``engine`` (``apps.engine``); returns their results by kind: the
+    "trials" and "multi_contact" jobs' lists joined, in trial order, the "replay" jobs'
+    files, and the others' ("no_contact", "slow_motion", "covariances")."""
     outputs_by_kind: dict = {}
-    outputs = map(_job, jobs) if pool is None else pool.imap_unordered(_job, jobs)
-    for done, (kind, value) in enumerate(outputs, 1):
+    for done, (kind, value) in enumerate(engine.imap_unordered(_job, jobs), 1):
         if kind in ("trials", "multi_contact", "replay"):
             outputs_by_kind.setdefault(kind, []).extend(value)
         else:
@@ -483,19 +308,13 @@ def main(argv: list[str] | None = None) -> int:
         # `make install` compiles them, or a fresh clone's first study would spend that in
         # its calibration), then only loaded by the workers.
         load_compiled_filter_steps()
-        # One pool of spawned processes for both passes (one process: here), started first:
-        # the workers import and load the compiled filter while the model is calibrated.
-        pool = None
-        if args.workers > 1:
-            pool = multiprocessing.get_context("spawn").Pool(
-                min(args.workers, _job_count(scenario, args)), initializer=load_compiled_filter_steps
-            )
-        try:
-            return _study(scenario, args, out_dir, start, pool)
-        except BaseException:
-            if pool is not None:
-                pool.terminate()  # a job failed (or Ctrl-C): do not wait for the others
-            raise
+        # One set of workers for both passes, started first: they import and load the
+        # compiled filter while the model is calibrated.
+        choice = engine_from_args(args)
+        if choice.kind == "pool":  # no more processes than jobs
+            choice = dataclasses.replace(choice, workers=min(choice.workers, _job_count(scenario, args)))
+        with open_engine(choice, initializer=load_compiled_filter_steps) as engine:
+            return _study(scenario, args, out_dir, start, engine)
 
     return run_app("contact_localization", body)
 
@@ -513,8 +332,8 @@ def _job_count(scenario: ContactLocalizationScenario, args) -> int:
     )
 
 
-def _study(scenario: ContactLocalizationScenario, args, out_dir: Path, start: float, pool) -> int:
-    """The study of ``main``, run in ``pool`` (None: in this process), from its start time
+def _study(scenario: ContactLocalizationScenario, args, out_dir: Path, start: float, engine) -> int:
+    """The study of ``main``, run on ``engine`` (``apps.engine``), from its start time
     ``start`` (s, ``time.perf_counter``)."""
     specs = sample_study_trials(scenario)
     if scenario.model_refinement == "calibrate":
@@ -542,7 +361,7 @@ def _study(scenario: ContactLocalizationScenario, args, out_dir: Path, start: fl
     if args.headless:
         jobs += [("replay", spec, scenario_yaml, out_dir) for spec in specs[: args.replays]]
     mark = time.perf_counter()
-    no_contact = _run_jobs(jobs, pool)
+    no_contact = _run_jobs(jobs, engine)
     phases["simulations"] = time.perf_counter() - mark
     results = no_contact.pop("trials")
     no_contact.pop("replay", None)  # the files are written
@@ -553,13 +372,10 @@ def _study(scenario: ContactLocalizationScenario, args, out_dir: Path, start: fl
         _, handles = build_contact_localization_diagram(scenario, model_corrections=refined_model(scenario))
         covariances = no_contact.pop("covariances")
         multi_jobs = multi_contact_jobs(results, handles.station.estimator.plant, scenario_yaml, covariances)
-        by_trial = {m.pop("trial"): m for m in _run_jobs(multi_jobs, pool)["multi_contact"]}
+        by_trial = {m.pop("trial"): m for m in _run_jobs(multi_jobs, engine)["multi_contact"]}
         for r in results:
             r.update(by_trial[r["trial"]])
     phases["one_or_two_contact_fits"] = time.perf_counter() - mark
-    if pool is not None:
-        pool.close()
-        pool.join()
     metrics = contact_localization_metrics(
         results, no_contact.get("no_contact"), no_contact.get("slow_motion"), floors_for(scenario)
     )
@@ -572,10 +388,11 @@ def _study(scenario: ContactLocalizationScenario, args, out_dir: Path, start: fl
             "contacts": scenario.contacts,
             "trials_with_a_sole_slip": sum(r["sole_slipped"] for r in results),
             "noise": scenario.noise,
-            "workers": args.workers,
+            "engine": engine.kind,
+            "workers": engine.workers,
             "push_start_s": scenario.push_start,
             "contact_duration_s": scenario.push_duration,
-            "force_range_N": [MIN_FORCE, MAX_FORCE],
+            "force_range_N": list(scenario.force_range),
             "max_angle_from_normal_deg": MAX_ANGLE_DEG,
             "wall_time_s": None,
             "no_contact_run": no_contact.get("no_contact"),

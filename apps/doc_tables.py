@@ -658,6 +658,79 @@ def _readme_speed(data: dict) -> list[str]:
     return [sentence + ' ([BENCHMARKS.md](BENCHMARKS.md), "Speed").']
 
 
+def _interval_text(entry: dict, key: str, scale: float, digits: int) -> str:
+    value, interval = entry.get(key), entry.get(f"{key}_interval")
+    if value is None:
+        return "n/a"
+    text = f"{scale * value:.{digits}f}"
+    if interval:
+        low, high = (scale * v if v is not None and abs(v) != float("inf") else None for v in interval)
+        text += f" [{'-' if low is None else f'{low:.{digits}f}'}, {'-' if high is None else f'{high:.{digits}f}'}]"
+    return text
+
+
+def _sweep(data: dict) -> list[str]:
+    lines = [
+        f"{data['trials']} trials on {data['engine']} with {data['workers']} workers: calibrations "
+        f"{data['calibration_wall_s'] / 60:.1f} min, trials {data['trials_wall_s'] / 60:.1f} min, "
+        f"{data['wall_time_s'] / 60:.1f} min in all.",
+        "",
+        "| robot | imperfection draw | noise (x default) | trials | detected % | right link % [95 % interval] "
+        "| median position error, cm [95 % interval] | median force error % |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for e in data["cells"]:
+        if not e.get("trials"):
+            continue
+        force = e.get("median_force_error_rel")
+        lines.append(
+            f"| {Path(e['robot']).stem} | {e['imperfection_seed']} | {e['noise_scale']:g} | {e['trials']} "
+            f"| {100 * e['detection_rate']:.0f} | {_interval_text(e, 'right_link_rate', 100, 0)} "
+            f"| {_interval_text(e, 'median_position_error_m', 100, 2)} "
+            f"| {'n/a' if force is None else f'{100 * force:.0f}'} |"
+        )
+    return lines
+
+
+def _engine_scaling(data: dict) -> list[str]:
+    lines = [
+        f"The same {data['trials']}-trial contact study (seed {data['seed']}, realistic world, its runs without "
+        f"contact and its one-or-two-contact fits), on a {data['cpu_count']}-core machine:",
+        "",
+        "| engine | workers | wall time | simulations | same per-trial results as the pool |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    for run in data["runs"].values():
+        lines.append(
+            f"| {run['engine']} | {run['workers']} | {run['wall_time_s']:.0f} s "
+            f"| {run['phase_wall_s']['simulations']:.0f} s | {_yes(run['same_results_as_pool'])} |"
+        )
+    d = data["driver"]
+    lines += [
+        "",
+        f"Ray / pool wall time: {data['ray_over_pool']:.3f} (floor <= 1.10: "
+        f"{'met' if data['ray_within_10_percent_of_pool'] else '**not met**'}); two workers against one: "
+        f"{data['speedup_2_workers']:.2f}x.",
+        "",
+        f"The driver: Ray's round trip of an empty job {1e3 * d['ray_round_trip_s']:.2f} ms, a chunk's Parquet file "
+        f"({d['trials_per_job']} trials) {1e3 * d['chunk_write_s']:.2f} ms: one driver absorbs about "
+        f"{d['trials_per_s']:.0f} trials/s.",
+        "",
+        f"The model (per trial {data['trial_s_one_worker']:.2f} s, per calibration "
+        f"{(data['calibration_s_one_worker'] or 0) / 60:.1f} min, one worker; {data['model_workers_per_node']} workers "
+        f"per node) for {data['sweep']['cells']} cells x {data['sweep']['trials_per_cell']} trials:",
+        "",
+        "| nodes | workers | calibrations | trials | wall time | trials/s the driver must absorb |",
+        "| --- | --- | --- | --- | --- | --- |",
+    ]
+    for m in data["model"]:
+        lines.append(
+            f"| {m['nodes']} | {m['workers']} | {m['calibration_phase_s'] / 60:.0f} min "
+            f"| {m['trial_phase_s'] / 3600:.2f} h | {m['wall_s'] / 3600:.2f} h | {m['trials_per_s_needed']:.1f} |"
+        )
+    return lines
+
+
 #: NAME -> the table's lines from the results file's ``data`` (or, for a block with several
 #: ``SOURCES``, from {results file name: its ``data``}).
 RENDERERS: dict[str, Callable[[dict], list[str]]] = {
@@ -686,6 +759,8 @@ RENDERERS: dict[str, Callable[[dict], list[str]]] = {
     "speed": _speed,
     "readme_speed": _readme_speed,
     "test_suite": _test_suite,
+    "sweep_small": _sweep,
+    "engine_scaling": _engine_scaling,
 }
 
 #: The results files of the blocks that do not read ``results/<NAME>.json``: one file (the

@@ -108,9 +108,9 @@ def test_trials_run_one_after_another_each_detected_and_localized_in_its_window(
     """Three pushes in one run (``run_schedule``, 0.4 s apart): each trial's window holds its
     own detection (none carried over from the previous push, no false detection in the
     gap), its localization, and the true point of its own push; the study's runner
-    (``apps.contact_localization.run_trials``) reads the same results from the same run."""
-    from apps.contact_localization import run_trials
+    (``diagrams.residuals.contact_trials.run_trials``) reads the same results from the same run."""
     from diagrams.residuals.contact_localization import run_schedule, sample_trials, trial_result
+    from diagrams.residuals.contact_trials import run_trials
 
     scenario = ContactLocalizationScenario(push_start=0.3, push_duration=0.3, trial_gap=0.4, trials_per_run=3)
     specs = sample_trials("hrp4_like", 3, seed=0)  # an elbow, a shoulder and a hand link
@@ -149,8 +149,8 @@ def test_trials_from_one_shared_standing_start_match_the_trials_run_alone():
     localization and force are those of the same trial run alone (from its own standing
     start) up to round-off, whatever the trials before it did; with noise the pushes see
     noise of their own (they come one after another in time)."""
-    from apps.contact_localization import run_trials
     from diagrams.residuals.contact_localization import sample_trials
+    from diagrams.residuals.contact_trials import run_trials
 
     shared = ContactLocalizationScenario(push_start=0.3, push_duration=0.3, noise=False, multi_contact=False)
     assert shared.shared_standing_start and shared.trials_per_run == 1
@@ -185,8 +185,8 @@ def test_offline_estimation_of_the_trials_equals_the_estimators_in_the_loop(worl
     the standing start, so that every restored trial starts with it on."""
     from dataclasses import replace
 
-    from apps.contact_localization import run_trials
     from diagrams.residuals.contact_localization import sample_trials
+    from diagrams.residuals.contact_trials import run_trials
     from systems.simulation.imperfections import Imperfections
 
     scenario = RealisticScenario(push_start=0.3, push_duration=0.4, multi_contact=False, model_refinement="none")

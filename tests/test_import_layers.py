@@ -10,8 +10,8 @@ functions and ``if`` blocks), for every .py file under models/, systems/, diagra
   -> common, dynamics; residuals -> common, dynamics, simulation; observer -> common,
   locomotion, simulation);
 * diagrams imports no apps (diagrams of different worlds may import each other);
-* an app imports no other app, except the shared runner ``apps.runner``, plots ``apps.common``
-  and the results files ``apps.results``.
+* an app imports no other app, except the shared runner ``apps.runner``, the study engine
+  ``apps.engine``, plots ``apps.common`` and the results files ``apps.results``.
 
 Relative imports are resolved against the importing module's package.
 """
@@ -32,7 +32,7 @@ FORBIDDEN = {
     "diagrams": ("apps",),
     "apps": (),
 }
-SHARED_APP_MODULES = ("apps.common", "apps.results", "apps.runner")
+SHARED_APP_MODULES = ("apps.common", "apps.engine", "apps.results", "apps.runner")
 
 
 def module_name(path: Path, root: Path = ROOT) -> str:

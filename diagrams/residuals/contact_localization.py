@@ -175,12 +175,14 @@ class ContactLocalizationScenario:
             BENCHMARKS.md).
         shared_standing_start: with ``trials_per_run`` 1, the study simulates the standing
             start (the first ``push_start`` seconds) once per job of trials and restores its
-            state before each trial's push (``apps.contact_localization.run_trials``): the
+            state before each trial's push (``diagrams.residuals.contact_trials.run_trials``): the
             same start as simulating it for each trial, at a third less simulated time per
             trial (1 s pushes). The trials' pushes then follow one another in time, so each
             push sees sensor noise of its own; what the trials of one job share is the
             noise of the start. False: each trial simulates its own standing start.
         noise: sensor noise on (systems.simulation.sensors defaults) or off.
+        noise_scale: a factor on every sensor's noise std (1: the defaults; the sweeps'
+            noise level, ``apps.sweep``).
         seed: the sensor noise seed of one run; the study's first seed, from which it
             samples the trials and derives each run's noise seed.
         num_seeds: the study samples its trials from the seeds seed, seed + 1, ...,
@@ -188,6 +190,7 @@ class ContactLocalizationScenario:
             only is not a result).
         trials: the study's number of random contacts (over all its seeds).
         contacts: contacts per trial: 1, or 2 (two links pushed at once; ``sample_trials``).
+        force_range: the pushes' magnitudes are drawn uniformly in [min, max], N.
         multi_contact: the study also localizes each trial's averaged inputs with the
             one-or-two-contact ``MultiContactLocalizer`` (``multi_contact_result``; always
             with ``contacts`` 2): how often it says "more than one contact". Its tests
@@ -242,10 +245,12 @@ class ContactLocalizationScenario:
     trials_per_run: int = 1
     shared_standing_start: bool = True
     noise: bool = True
+    noise_scale: float = 1.0
     seed: int = 0
     num_seeds: int = 5
     trials: int = 1000
     contacts: int = 1
+    force_range: list[float] = field(default_factory=lambda: [MIN_FORCE, MAX_FORCE])
     multi_contact: bool = True
     no_contact_duration: float = 60.0
     slow_motion_duration: float = 60.0
@@ -515,11 +520,17 @@ def _build_with_estimator_recorder(
     return diagram, recorder
 
 
-def sample_trials(model: str, trials: int, seed: int, contacts: int = 1) -> list[dict]:
+def sample_trials(
+    model: str,
+    trials: int,
+    seed: int,
+    contacts: int = 1,
+    force_range: Sequence[float] = (MIN_FORCE, MAX_FORCE),
+) -> list[dict]:
     """Random contacts at the standing pose: link uniform over the candidate links, point
     uniform (by area) on the link's collision surface but not inside another link's
     primitive (the outer surface), direction within 60 deg of the inward normal, magnitude
-    uniform in [5, 40] N; with ``contacts`` = 2, two such contacts on two different links
+    uniform in ``force_range`` (default [5, 40] N); with ``contacts`` = 2, two such contacts on two different links
     (pushed together). Deterministic from ``seed`` (trial i draws from
     ``default_rng([seed, i])``; a two-contact trial's first contact is the one-contact
     trial's); builds the diagram once, does not simulate.
@@ -530,10 +541,12 @@ def sample_trials(model: str, trials: int, seed: int, contacts: int = 1) -> list
     the top level.
 
     Raises:
-        ValueError: ``contacts`` other than 1 or 2.
+        ValueError: ``contacts`` other than 1 or 2, or a ``force_range`` that is not
+            [min, max] with 0 < min <= max, finite.
     """
     if contacts not in (1, 2):
         raise ValueError(f"contacts must be 1 or 2, got {contacts!r}")
+    low, high = check_force_range(force_range)
     _, handles = build_contact_localization_diagram(
         set_ideal_conditions(ContactLocalizationScenario(model=model, noise=False))
     )
@@ -561,7 +574,7 @@ def sample_trials(model: str, trials: int, seed: int, contacts: int = 1) -> list
                 break
         n_W = R_WG[g] @ n_G
         X = X_WB[int(np.searchsorted(geo.bodies, link))]
-        force = rng.uniform(MIN_FORCE, MAX_FORCE) * inward_direction(n_W, rng, MAX_ANGLE_DEG)
+        force = rng.uniform(low, high) * inward_direction(n_W, rng, MAX_ANGLE_DEG)
         return {
             "body": plant.get_body(BodyIndex(int(link))).name(),
             "body_index": int(link),
@@ -581,6 +594,21 @@ def sample_trials(model: str, trials: int, seed: int, contacts: int = 1) -> list
     return specs
 
 
+def check_force_range(force_range: Sequence[float]) -> tuple[float, float]:
+    """(min, max) of a push magnitude range, N.
+
+    Raises:
+        ValueError: not two finite numbers with 0 < min <= max.
+    """
+    try:
+        low, high = (float(f) for f in force_range)
+    except (TypeError, ValueError):
+        raise ValueError(f"force_range must be [min, max] in N, got {force_range!r}") from None
+    if not (math.isfinite(high) and 0.0 < low <= high):
+        raise ValueError(f"force_range must be [min, max] with 0 < min <= max, finite, got {list(force_range)!r}")
+    return low, high
+
+
 def sample_study_trials(scenario: ContactLocalizationScenario) -> list[dict]:
     """The study's ``trials`` random contacts over its ``num_seeds`` seeds (``sample_trials``
     of seed, seed + 1, ...; the trials split as evenly as they go, the first seeds taking
@@ -591,7 +619,8 @@ def sample_study_trials(scenario: ContactLocalizationScenario) -> list[dict]:
     for k in range(scenario.num_seeds):
         count = per_seed + (1 if k < extra else 0)
         seed = scenario.seed + k
-        for spec in sample_trials(scenario.model, count, seed, scenario.contacts) if count else []:
+        trials = sample_trials(scenario.model, count, seed, scenario.contacts, scenario.force_range) if count else []
+        for spec in trials:
             specs.append({**spec, "trial": len(specs), "seed": seed, "trial_of_seed": spec["trial"]})
     return specs
 

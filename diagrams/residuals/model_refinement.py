@@ -93,6 +93,7 @@ class ModelRefinementScenario:
     Attributes:
         model: a humanoid with foot F/T sensors (``hrp4_like``).
         noise, seed: the sensors' noise and its seed.
+        noise_scale: a factor on every sensor's noise std (1: the defaults).
         imperfections: the simulated robot's imperfections (default: realistic, with the
             5 % mass / 10 % CoM / 10 % inertia mismatch the refinement corrects).
         base_state: the sensed base state's source (default: the invariant EKF).
@@ -120,6 +121,7 @@ class ModelRefinementScenario:
 
     model: str = "hrp4_like"
     noise: bool = True
+    noise_scale: float = 1.0
     seed: int = 0
     imperfections: Imperfections = field(default_factory=Imperfections.realistic)
     base_state: str = "invariant_ekf"
@@ -369,6 +371,7 @@ def refinement_scenario_for(scenario: Any) -> ModelRefinementScenario:
     return ModelRefinementScenario(
         model=scenario.model,
         noise=scenario.noise,
+        noise_scale=float(getattr(scenario, "noise_scale", 1.0)),
         seed=scenario.seed + 1,
         imperfections=scenario.imperfections,
         base_state=scenario.base_state,

@@ -193,6 +193,7 @@ def add_humanoid_station(
     imperfections: Imperfections | None = None,
     base_state: str = "truth_plus_noise",
     model_corrections: ModelCorrections | None = None,
+    noise_scale: float = 1.0,
 ) -> HumanoidStation:
     """Adds the station of the module docstring to ``builder``.
 
@@ -204,6 +205,7 @@ def add_humanoid_station(
             "sap" (Drake's convex solver), "similar" or "lagged". Drake's TAMSI solver is
             deprecated and refused; the station's geometry is made for point contact.
         noise, seed: the sensors' noise (defaults of ``systems.simulation.sensors``) and its seed.
+        noise_scale: a factor on every sensor's noise std (``add_sensors``; 1: the defaults).
         imperfections: ``systems.simulation.imperfections.Imperfections``; None or the
             default (ideal) builds exactly the station without them. Friction acts on the
             plant (rated torques: the actuators' effort limits); the sensor groups go to
@@ -313,6 +315,7 @@ def add_humanoid_station(
             plant,
             humanoid,
             noise=noise,
+            noise_scale=noise_scale,
             seed=seed,
             imperfections=imperfections,
             base_estimator=(base_state == "truth_plus_noise"),
@@ -397,7 +400,8 @@ def add_scenario_station(
 ) -> HumanoidStation:
     """``add_humanoid_station`` with an experiment scenario's fields: ``model``,
     ``plant_config``, ``noise``, ``seed``, ``imperfections`` and ``base_state`` (the world,
-    ``diagrams.station.conditions``), and the refined model ``model_corrections``."""
+    ``diagrams.station.conditions``), ``noise_scale`` if it has one, and the refined model
+    ``model_corrections``."""
     return add_humanoid_station(
         builder,
         scenario.model,
@@ -407,6 +411,7 @@ def add_scenario_station(
         imperfections=scenario.imperfections,
         base_state=scenario.base_state,
         model_corrections=model_corrections,
+        noise_scale=getattr(scenario, "noise_scale", 1.0),
     )
 
 
@@ -459,7 +464,7 @@ def _add_invariant_ekf(
     else:
         sides = FSR_SIDES
         seed = sensors.seeds["encoders"] // SEEDS_PER_CALL  # the station's seed
-        noise_std = 0.0 if sensors.encoders.noise.is_zero else FSR_NOISE_STD
+        noise_std = sensors.noise_std_factor * FSR_NOISE_STD
         fsr = builder.AddSystem(FsrArray(plant, humanoid, noise_std=noise_std, seed=SEEDS_PER_CALL * seed + 5))
         fsr.set_name("invariant_ekf_fsr_array")
         builder.Connect(plant.get_contact_results_output_port(), fsr.GetInputPort("contact_results"))

@@ -893,6 +893,8 @@ class SensorHandles:
         ft_frames: the F/T sensor frames in ``ft_wrenches`` order (empty if none).
         ft_sides: the sides ("right", "left", ...) in ``ft_wrenches`` order.
         seeds: the seed of each sensor.
+        noise_std_factor: the factor on the default noise stds of this set (0 without
+            noise, else ``add_sensors``' noise_scale), for sensors added beside it.
     """
 
     encoders: JointEncoders
@@ -907,6 +909,7 @@ class SensorHandles:
     ft_frames: tuple
     ft_sides: tuple
     seeds: dict
+    noise_std_factor: float = 1.0
 
 
 def add_sensors(
@@ -915,6 +918,7 @@ def add_sensors(
     handles: HumanoidHandles,
     *,
     noise: bool = True,
+    noise_scale: float = 1.0,
     seed: int = 0,
     name_prefix: str = "",
     imperfections: Imperfections | None = None,
@@ -939,6 +943,9 @@ def add_sensors(
         plant: a finalized floating-base MultibodyPlant holding the humanoid.
         handles: the humanoid's handles (``models.add_humanoid``).
         noise: False sets every noise std to 0 (outputs equal the truth).
+        noise_scale: a factor on every white noise std (the defaults of this module and
+            the IMU noise densities of ``imperfections``): 1 (default) the documented
+            levels, 2 twice as noisy sensors. Finite, >= 0.
         seed: non-negative integer; sensor i gets seed 16 * seed + offset (SEED_OFFSETS),
             so the defaults of the individual sensors are seed = 0.
         name_prefix: prepended to the added systems' names (e.g. to add two sensor sets,
@@ -970,8 +977,12 @@ def add_sensors(
         seed = check_seed(seed)
     except ValueError as err:
         raise ValueError(f"{who}: {err}") from err
+    if isinstance(noise_scale, (bool, np.bool_)) or not isinstance(noise_scale, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{who}: noise_scale must be a number, got {noise_scale!r}")
+    if not (math.isfinite(noise_scale) and noise_scale >= 0.0):
+        raise ValueError(f"{who}: noise_scale must be finite and >= 0, got {noise_scale!r}")
     seeds = {key: SEEDS_PER_CALL * seed + offset for key, offset in SEED_OFFSETS.items()}
-    on = 1.0 if noise else 0.0
+    on = float(noise_scale) if noise else 0.0
     imp = Imperfections() if imperfections is None else imperfections
     if not isinstance(imp, Imperfections):
         raise ValueError(f"{who}: imperfections must be Imperfections, got {type(imp).__name__}")
@@ -987,10 +998,10 @@ def add_sensors(
         torque_errors = {"scale": scale, "offset": offset}
     gyro_std = on * GYRO_NOISE_STD
     if imp.imu.gyro_noise_density > 0.0:
-        gyro_std = imp.imu.gyro_noise_density / math.sqrt(DEFAULT_PERIOD)
+        gyro_std = noise_scale * imp.imu.gyro_noise_density / math.sqrt(DEFAULT_PERIOD)
     accel_std = on * ACCEL_NOISE_STD
     if imp.imu.accel_noise_density > 0.0:
-        accel_std = imp.imu.accel_noise_density / math.sqrt(DEFAULT_PERIOD)
+        accel_std = noise_scale * imp.imu.accel_noise_density / math.sqrt(DEFAULT_PERIOD)
 
     state_port = plant.get_state_output_port()
     encoders = builder.AddSystem(
@@ -1081,6 +1092,7 @@ def add_sensors(
         ft_frames=() if ft is None else ft.sensor_frames,
         ft_sides=sides,
         seeds=seeds,
+        noise_std_factor=on,
     )
 
 

@@ -181,7 +181,9 @@ class Engine:
                 "runtime_env": {"env_vars": _ray_worker_environment()},
             }
             if self.choice.cluster is None:
-                options["num_cpus"] = self.workers
+                # A new instance on this machine, even where `ray start` left one running
+                # (Ray would connect to it): a cluster is used only when asked for.
+                options.update(address="local", num_cpus=self.workers)
             else:
                 options["address"] = self.choice.cluster
             try:
@@ -214,6 +216,14 @@ class Engine:
                     yield future.result()
         else:
             yield from self._ray_imap(function, jobs)
+
+    def map(self, function: Callable[[Any], Any], jobs: Iterable[Any]) -> list[Any]:
+        """``function(job)`` of every job, in the jobs' order (run as ``imap_unordered``)."""
+        jobs = list(jobs)
+        results: list[Any] = [None] * len(jobs)
+        for index, result in self.imap_unordered(_call_indexed, [(function, i, job) for i, job in enumerate(jobs)]):
+            results[index] = result
+        return results
 
     def _ray_imap(self, function, jobs: list) -> Iterator[Any]:
         ray = self._ray
@@ -265,6 +275,12 @@ def _ray_worker_environment() -> dict[str, str]:
     root = str(Path(__file__).resolve().parents[1])
     path = os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH", "")) if p)
     return {**WORKER_ENVIRONMENT, "PYTHONPATH": path}
+
+
+def _call_indexed(job: tuple[Callable[[Any], Any], int, Any]) -> tuple[int, Any]:
+    """(index, function(job)) of an indexed job (``Engine.map``)."""
+    function, index, payload = job
+    return index, function(payload)
 
 
 def worker_info(job: int) -> dict:

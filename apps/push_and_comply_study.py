@@ -25,26 +25,26 @@ imperfection seeds (model mismatch, friction, sensor errors; each its own calibr
 TALOS (``models/robots/talos.yaml``).
 
 Run: ``python -m apps.push_and_comply_study --study ablation|robots [--worlds ideal realistic]
-[--workers N] [--duration S] [--results-folder DIR] [--out DIR]``. Writes ``results/push_and_comply_<study>.json``
-(``--results-folder``: elsewhere) and prints the table; the calibrations are cached in
-``DIR/calibration_cache/`` as the other apps do.
+[--engine E] [--workers N] [--cluster ADDRESS] [--duration S] [--results-folder DIR] [--out DIR]``
+(the runs go to the workers of ``apps.engine``: Ray actors here by default). Writes
+``results/push_and_comply_<study>.json`` (``--results-folder``: elsewhere) and prints the
+table; the calibrations are cached in ``DIR/calibration_cache/`` as the other apps do.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
-import multiprocessing
 import time
 from pathlib import Path
 
+from apps.engine import add_engine_arguments, engine_from_args, open_engine
 from apps.results import app_command, write_results
 from apps.runner import (
     add_out_argument,
     calibration_cache_folder,
     logged_signals,
     positive_float,
-    positive_int,
     run_app,
     simulate,
     writable_folder,
@@ -189,20 +189,19 @@ def _run(job: tuple[str, str, str]) -> dict:
     return {key: metrics[key] for key in KEPT_METRICS}
 
 
-def run_study(rows: list[dict], cache: Path, workers: int) -> list[dict]:
+def run_study(rows: list[dict], cache: Path, engine) -> list[dict]:
     """Runs every row with both residuals; returns the rows with their ``internal`` and
-    ``classical`` metrics (the scenario replaced by its YAML text)."""
+    ``classical`` metrics (the scenario replaced by its YAML text), on ``engine``
+    (``apps.engine``)."""
     texts = [scenario_as_yaml(row["scenario"]) for row in rows]
     calibrations = sorted({t for t, row in zip(texts, rows) if row["world"] == "realistic"})
     jobs = [(t, kind, str(cache)) for t in texts for kind in ("internal", "classical")]
-    context = multiprocessing.get_context("spawn")
-    with context.Pool(workers) as pool:
-        # One calibration per robot first (rows of the same robot share it through the cache).
-        by_robot = {}
-        for text in calibrations:
-            by_robot.setdefault(_calibration_key(text), text)
-        pool.map(_calibrate, [(text, str(cache)) for text in by_robot.values()])
-        results = pool.map(_run, jobs, chunksize=1)
+    # One calibration per robot first (rows of the same robot share it through the cache).
+    by_robot = {}
+    for text in calibrations:
+        by_robot.setdefault(_calibration_key(text), text)
+    engine.map(_calibrate, [(text, str(cache)) for text in by_robot.values()])
+    results = engine.map(_run, jobs)
     out = []
     for k, (row, text) in enumerate(zip(rows, texts)):
         out.append(
@@ -247,7 +246,7 @@ def _parse(argv):
     )
     parser.add_argument("--study", choices=("ablation", "robots"), required=True)
     parser.add_argument("--worlds", nargs="+", choices=WORLDS, default=list(WORLDS), help="the ablation's worlds")
-    parser.add_argument("--workers", type=positive_int, default=max(1, multiprocessing.cpu_count()))
+    add_engine_arguments(parser)
     parser.add_argument(
         "--duration",
         type=positive_float,
@@ -273,9 +272,11 @@ def main(argv: list[str] | None = None) -> int:
         else:
             rows = robot_scenarios(args.duration)
         start = time.perf_counter()
-        done = run_study(rows, calibration_cache_folder(args), args.workers)
+        with open_engine(engine_from_args(args)) as engine:
+            done = run_study(rows, calibration_cache_folder(args), engine)
+            workers = engine.workers
         print_table(done)
-        data = {"rows": done, "wall_time_s": time.perf_counter() - start, "workers": args.workers}
+        data = {"rows": done, "wall_time_s": time.perf_counter() - start, "workers": workers}
         command = app_command("apps.push_and_comply_study", argv)
         path = write_results(f"push_and_comply_{args.study}", data, command=command, folder=args.results_folder)
         print(f"wrote {path}")

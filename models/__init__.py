@@ -54,7 +54,7 @@ from pydrake.geometry import (
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import CoulombFriction, MultibodyPlant
-from pydrake.multibody.tree import Frame, ModelInstanceIndex, RigidBody, SpatialInertia
+from pydrake.multibody.tree import Frame, ModelInstanceIndex, RigidBody, RotationalInertia, SpatialInertia
 
 from models.description import (
     JOINT_GROUPS,
@@ -347,6 +347,26 @@ def _check_inertias(plant: MultibodyPlant, model_instance: ModelInstanceIndex, w
             )
 
 
+def _description_inertias(description: RobotDescription, where: str) -> dict[str, SpatialInertia]:
+    """The description's ``link_inertias`` as SpatialInertia about each link's origin.
+
+    Raises:
+        RobotDescriptionError: an inertia that is not physically valid (naming the link)."""
+    out = {}
+    for link, (mass, com, (ixx, iyy, izz, ixy, ixz, iyz)) in description.link_inertias.items():
+        try:
+            central = RotationalInertia(ixx, iyy, izz, ixy, ixz, iyz)
+            out[link] = SpatialInertia.MakeFromCentralInertia(mass, np.asarray(com), central)
+        except (RuntimeError, ValueError) as error:
+            raise RobotDescriptionError(
+                f"{where}: link_inertias.{link}: not a physically valid inertia (positive definite, within the "
+                f"triangle inequality): {error}"
+            ) from None
+        if not out[link].IsPhysicallyValid():
+            raise RobotDescriptionError(f"{where}: link_inertias.{link}: not a physically valid inertia")
+    return out
+
+
 def add_humanoid(
     plant: MultibodyPlant,
     name: str | os.PathLike | RobotDescription,
@@ -399,6 +419,7 @@ def add_humanoid(
     where = str(description.source or description.name)
     instance_name = model_instance_name or description.name
     text, kind = _model_text(description, instance_name)
+    link_inertias = {**_description_inertias(description, where), **(link_inertias or {})}
     if link_inertias:
         text = with_link_inertias(text, kind, link_inertias, where)
     parser = Parser(plant)

@@ -62,6 +62,11 @@ The YAML reference (lengths in m, angles in rad, gains in N m/rad and N m s/rad)
       rotor_inertia: {legs: 0.1}    # reflected rotor inertia per group, kg m^2 (default 0)
     joint_limits: {joint: [lower, upper]}      # optional overrides, rad
     joint_damping: {joint: b}                  # optional viscous friction overrides, N m s/rad
+    link_inertias:                  # optional: replace the model file's inertia of these links
+      RShoulderYawLink: {mass: 0.57, com: [0.09, -0.01, 0.0], inertia: [ixx, iyy, izz, ixy, ixz, iyz]}
+                                    # kg; the centre of mass in the link frame, m; the inertia
+                                    # about it in the link's axes, kg m^2 (a URDF <inertial>
+                                    # with rpy 0); for a file whose inertia is wrong
 
 Every error names the file and the field.
 """
@@ -104,6 +109,7 @@ _TOP_LEVEL = {
     "actuators",
     "joint_limits",
     "joint_damping",
+    "link_inertias",
 }
 _FOOT_FIELDS = {
     "sole_frame",
@@ -169,6 +175,9 @@ class RobotDescription:
             adds, kg m^2.
         joint_limits: joint -> (lower, upper), rad.
         joint_damping: joint -> viscous damping, N m s/rad.
+        link_inertias: link -> (mass kg, centre of mass in the link frame m, inertia about it
+            in the link's axes [ixx, iyy, izz, ixy, ixz, iyz] kg m^2), replacing the model
+            file's (``models.add_humanoid``).
     """
 
     name: str
@@ -186,6 +195,7 @@ class RobotDescription:
     rotor_inertia: dict = field(default_factory=dict)
     joint_limits: dict = field(default_factory=dict)
     joint_damping: dict = field(default_factory=dict)
+    link_inertias: dict = field(default_factory=dict)
 
     def joint_names(self) -> tuple[str, ...]:
         """Every group's joints, in JOINT_GROUPS order."""
@@ -397,6 +407,10 @@ def load_robot_description(path: str | os.PathLike) -> RobotDescription:
         str(j): _number(b, f"{where}: joint_damping.{j}", non_negative=True)
         for j, b in _mapping(raw.get("joint_damping"), f"{where}: joint_damping").items()
     }
+    inertias = {
+        str(link): _link_inertia(value, f"{where}: link_inertias.{link}")
+        for link, value in _mapping(raw.get("link_inertias"), f"{where}: link_inertias").items()
+    }
     return RobotDescription(
         name=_string(raw["name"], f"{where}: name"),
         source=path.resolve(),
@@ -413,6 +427,28 @@ def load_robot_description(path: str | os.PathLike) -> RobotDescription:
         rotor_inertia=rotor,
         joint_limits=limits,
         joint_damping=damping,
+        link_inertias=inertias,
+    )
+
+
+def _link_inertia(value, where: str) -> tuple[float, tuple[float, ...], tuple[float, ...]]:
+    """(mass, com, inertia) of a ``link_inertias`` entry; physical validity (positive
+    definite, triangle inequality) is checked when the robot is loaded."""
+    entry = _mapping(value, where)
+    _unknown_keys(entry, {"mass", "com", "inertia"}, where)
+    for key in ("mass", "com", "inertia"):
+        if key not in entry:
+            raise _error(f"{where}.{key}", "missing (required)")
+    mass = _number(entry["mass"], f"{where}.mass", positive=True)
+    com, inertia = entry["com"], entry["inertia"]
+    if not isinstance(com, list) or len(com) != 3:
+        raise _error(f"{where}.com", f"must be [x, y, z] in m, got {com!r}")
+    if not isinstance(inertia, list) or len(inertia) != 6:
+        raise _error(f"{where}.inertia", f"must be [ixx, iyy, izz, ixy, ixz, iyz] in kg m^2, got {inertia!r}")
+    return (
+        mass,
+        tuple(_number(c, f"{where}.com") for c in com),
+        tuple(_number(i, f"{where}.inertia") for i in inertia),
     )
 
 
@@ -482,7 +518,8 @@ DRAKE_CONTACT_MESH_SUFFIXES = (".obj", ".vtk", ".gltf")
 
 
 def mesh_vertices(path: Path) -> np.ndarray:
-    """(V, 3) vertices of an STL (binary or ASCII) or OBJ mesh file, in its own units.
+    """(V, 3) vertices of an STL (binary or ASCII), OBJ or COLLADA (.dae, its scene's node
+    transforms and unit applied) mesh file, in its own units.
 
     Raises:
         RobotDescriptionError: another format, or a file that cannot be read.
@@ -507,8 +544,17 @@ def mesh_vertices(path: Path) -> np.ndarray:
         vertices = [line.split()[1:4] for line in lines if line.startswith("v ")]
         if vertices:
             return np.array(vertices, dtype=float)
+    elif suffix == ".dae":  # COLLADA through coal (assimp), which pin ships: node transforms and units applied
+        import coal
+
+        try:
+            vertices = np.asarray(coal.MeshLoader().load(str(path), np.ones(3)).vertices(), dtype=float)
+        except Exception as error:  # coal raises ValueError or RuntimeError with assimp's message
+            raise RobotDescriptionError(f"cannot read the mesh '{path}': {error}") from error
+        if len(vertices):
+            return vertices
     raise RobotDescriptionError(
-        f"cannot take a bounding box of the mesh '{path}': only STL and OBJ files are read (replace it with "
+        f"cannot take a bounding box of the mesh '{path}': only STL, OBJ and DAE files are read (replace it with "
         "a primitive, or an .obj, in the URDF)"
     )
 

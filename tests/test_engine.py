@@ -39,6 +39,9 @@ def test_local_engines_give_every_result_once(kind):
         workers = engine.worker_process_ids()
     assert [r["job"] for r in results] == list(range(7))
     assert {r["pid"] for r in results} <= set(workers)
+    with open_engine(choose_engine(kind, 2)) as engine:
+        ordered = engine.map(worker_info, [5, 3, 9, 1])
+    assert [r["job"] for r in ordered] == [5, 3, 9, 1]  # map keeps the jobs' order
     if kind == "pool":
         assert all(r["blas_threads"] == WORKER_ENVIRONMENT["OPENBLAS_NUM_THREADS"] for r in results)
         assert len(workers) == 2 and os.getpid() not in workers

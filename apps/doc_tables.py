@@ -676,8 +676,8 @@ def _sweep(data: dict) -> list[str]:
         f"{data['wall_time_s'] / 60:.1f} min in all.",
         "",
         "| robot | imperfection draw | noise (x default) | trials | detected % | right link % [95 % interval] "
-        "| median position error, cm [95 % interval] | median force error % |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+        "| median position error, cm [95 % interval] | median force error % | calibrated / robot mass, kg |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for e in data["cells"]:
         if not e.get("trials"):
@@ -687,9 +687,15 @@ def _sweep(data: dict) -> list[str]:
             f"| {Path(e['robot']).stem} | {e['imperfection_seed']} | {e['noise_scale']:g} | {e['trials']} "
             f"| {100 * e['detection_rate']:.0f} | {_interval_text(e, 'right_link_rate', 100, 0)} "
             f"| {_interval_text(e, 'median_position_error_m', 100, 2)} "
-            f"| {'n/a' if force is None else f'{100 * force:.0f}'} |"
+            f"| {'n/a' if force is None else f'{100 * force:.0f}'} | {_masses(e)} |"
         )
     return lines
+
+
+def _masses(entry: dict) -> str:
+    if entry.get("calibrated_mass_kg") is None:
+        return "n/a"
+    return f"{entry['calibrated_mass_kg']:.2f} / {entry['robot_mass_kg']:.2f}"
 
 
 def _engine_scaling(data: dict) -> list[str]:

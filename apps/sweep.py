@@ -21,7 +21,9 @@ Writes to ``DIR/sweep/``: ``grid.yaml`` (every field), ``trials/`` (the per-tria
 dataset: one row per trial, every input and every result; read it with
 ``pyarrow.parquet.read_table``), ``calibrations/`` (each cell's refined model),
 ``summary.json`` and ``summary.csv`` (per cell: the right-link and detection rates and the
-position and force errors, with 95 % intervals) and ``sweep.png`` (the right-link rate and
+position and force errors, with 95 % intervals, and the calibrated model's total mass
+against the robot's), ``runs.json`` (each invocation's engine and times; the summary adds
+them up) and ``sweep.png`` (the right-link rate and
 the median position error against the mismatch and the noise, one line per robot).
 """
 
@@ -30,6 +32,7 @@ from __future__ import annotations
 import argparse
 import csv
 import io
+import json
 import sys
 import tempfile
 import time
@@ -48,12 +51,14 @@ from diagrams.residuals.contact_sweep import (
     SweepCell,
     SweepGrid,
     calibrate_cell,
+    calibrated_mass,
     cell_needs_calibration,
     cell_scenario,
     cell_summary,
     chunks,
     grid_as_yaml,
     read_trials,
+    robot_mass,
     run_chunk,
     sweep_cells,
     write_atomically,
@@ -112,6 +117,16 @@ def _prepare_folder(folder: Path, grid_text: str, resume: bool) -> None:
         raise ValueError(f"--out: cannot write {folder}: {error.strerror or error}") from None
     if not grid_file.exists():
         write_atomically(grid_file, grid_text.encode())
+
+
+def _log_run(folder: Path, run: dict) -> list[dict]:
+    """Appends ``run`` (one invocation's engine, workers and times) to ``folder/runs.json``
+    (atomically) and returns every run of the sweep."""
+    path = folder / "runs.json"
+    runs = json.loads(path.read_text()) if path.is_file() else []
+    runs.append(run)
+    write_atomically(path, json_text(runs).encode())
+    return runs
 
 
 class _Progress:
@@ -217,9 +232,12 @@ def run_sweep(grid: SweepGrid, folder: Path, engine, *, progress: bool = True, c
     }
 
 
-def summarize(grid: SweepGrid, table: pa.Table) -> list[dict]:
-    """Per cell (grid order): the cell's values and ``cell_summary`` of its rows."""
+def summarize(grid: SweepGrid, table: pa.Table, folder: Path | None = None) -> list[dict]:
+    """Per cell (grid order): the cell's values and ``cell_summary`` of its rows; with the
+    sweep's ``folder``, the calibrated model's total mass and the robot's, kg (a cell whose
+    calibration misreads the weight sees it as a standing external force)."""
     rows = table.to_pylist()
+    masses = {robot: robot_mass(robot) for robot in grid.robots} if folder is not None else {}
     by_cell: dict[str, list[dict]] = {}
     for row in rows:
         by_cell.setdefault(row["cell"], []).append(row)
@@ -228,6 +246,10 @@ def summarize(grid: SweepGrid, table: pa.Table) -> list[dict]:
         cell_rows = by_cell.get(cell.key, [])
         entry = cell.as_row()
         entry.update(cell_summary(cell_rows) if cell_rows else {"trials": 0})
+        calibration = folder / "calibrations" / f"cell-{cell.key}.npz" if folder is not None else None
+        if calibration is not None:
+            entry["robot_mass_kg"] = masses[cell.robot]
+            entry["calibrated_mass_kg"] = calibrated_mass(calibration.read_bytes()) if calibration.is_file() else None
         out.append(entry)
     return out
 
@@ -242,6 +264,8 @@ def _csv_text(summary: list[dict]) -> str:
         "contacts",
         "push_duration_s",
         *SUMMARY_KEYS,
+        "calibrated_mass_kg",
+        "robot_mass_kg",
     ]
     buffer = io.StringIO()
     writer = csv.writer(buffer)
@@ -319,7 +343,7 @@ def plot_sweep(path: Path, grid: SweepGrid, table: pa.Table) -> None:
 def _print_summary(summary: list[dict]) -> None:
     print(
         f"{'robot':>14s} {'imp':>3s} {'mism':>5s} {'noise':>5s} {'c':>1s} {'dur':>4s} {'n':>5s}"
-        f" {'right link [%] (95 % CI)':>26s} {'median pos. err [cm] (95 % CI)':>32s}"
+        f" {'right link [%] (95 % CI)':>26s} {'median pos. err [cm] (95 % CI)':>32s} {'mass: model/robot [kg]':>23s}"
     )
     for e in summary:
         if not e["trials"]:
@@ -331,7 +355,14 @@ def _print_summary(summary: list[dict]) -> None:
             f" {e['noise_scale']:5.2f} {e['contacts']:1d} {e['push_duration_s']:4.2f} {e['trials']:5d}"
             f" {100 * e['right_link_rate']:8.1f} [{100 * low:5.1f}, {100 * high:5.1f}]"
             f" {100 * e['median_position_error_m']:12.2f} [{100 * mlow:5.2f}, {100 * mhigh:6.2f}]"
+            f" {_mass_text(e):>23s}"
         )
+
+
+def _mass_text(entry: dict) -> str:
+    if entry.get("calibrated_mass_kg") is None:
+        return "-"
+    return f"{entry['calibrated_mass_kg']:.2f}/{entry['robot_mass_kg']:.2f}"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -355,9 +386,12 @@ def main(argv: list[str] | None = None) -> int:
                 grid, folder, engine, progress=not args.no_progress, cache=calibration_cache_folder(args)
             )
             workers = engine.workers
+        this_run = {"engine": choice.kind, "workers": workers, "wall_time_s": time.perf_counter() - start, **timings}
+        runs = _log_run(folder, this_run)
         table = read_trials(folder)
-        summary = summarize(grid, table)
+        summary = summarize(grid, table, folder)
         expected = len(sweep_cells(grid)) * grid.trials_per_cell
+        # The figures of the whole sweep: its runs' times added up (a resumed sweep's too).
         report = {
             "grid": grid_text,
             "engine": choice.kind,
@@ -365,8 +399,8 @@ def main(argv: list[str] | None = None) -> int:
             "cluster": choice.cluster,
             "trials": table.num_rows,
             "trials_expected": expected,
-            "wall_time_s": time.perf_counter() - start,
-            **timings,
+            **{key: sum(r[key] for r in runs) for key in ("wall_time_s", "calibration_wall_s", "trials_wall_s")},
+            "runs": runs,
             "cells": summary,
         }
         write_atomically(folder / "summary.json", json_text(report).encode())

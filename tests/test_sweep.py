@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import replace
 from pathlib import Path
@@ -195,6 +196,9 @@ def test_tiny_sweep_resumes_what_is_missing(tmp_path, capsys):
     assert sorted(first["trial"].to_pylist()) == [0, 0, 1, 1, 2, 2, 3, 3]
     for name in ("summary.json", "summary.csv", "sweep.png", "grid.yaml"):
         assert (folder / name).is_file()
+    cells = json.loads((folder / "summary.json").read_text())["cells"]
+    assert [c["robot_mass_kg"] for c in cells] == pytest.approx([39.0, 39.0], abs=0.01)  # hrp4_like's 39 kg
+    assert all(c["calibrated_mass_kg"] is None for c in cells)  # the ideal world calibrates nothing
     summary = (folder / "summary.csv").read_text().splitlines()
     assert len(summary) == 3 and summary[0].startswith("cell,robot,")
     files = sorted((folder / "trials").iterdir())

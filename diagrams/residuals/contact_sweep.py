@@ -429,6 +429,29 @@ def run_chunk(job: tuple[dict, int, list[dict], str, bytes | None]) -> tuple[str
     return cell.key, chunk, [trial_row(cell, chunk, {**r, "worker": worker}) for r in results]
 
 
+def calibrated_mass(data: bytes) -> float:
+    """The total mass of a calibration's refined model (the bytes ``calibrate_cell``
+    returns), kg: against the robot's (``robot_mass``), a calibration that misreads the
+    robot's weight shows as a standing external force of (difference) x g."""
+    from systems.estimation.model_identification import ModelCorrections
+
+    corrections = ModelCorrections.load(_calibration_path(data))
+    return float(sum(M.get_mass() for M in corrections.spatial_inertias.values()))
+
+
+def robot_mass(model: str) -> float:
+    """The total mass of the robot ``model`` as its description gives it (the simulated
+    robot of the realistic world, before the estimators' mismatch), kg."""
+    from pydrake.multibody.plant import MultibodyPlant
+
+    from models import add_humanoid
+
+    plant = MultibodyPlant(time_step=1e-3)
+    handles = add_humanoid(plant, model)
+    plant.Finalize()
+    return float(plant.CalcTotalMass(plant.CreateDefaultContext(), [handles.model_instance]))
+
+
 def _calibration_path(data: bytes) -> Path:
     """A file in this machine's temporary folder holding ``data`` (named by its hash,
     written atomically once)."""

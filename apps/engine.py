@@ -37,6 +37,7 @@ import argparse
 import contextlib
 import importlib.util
 import os
+import sys
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
@@ -241,7 +242,10 @@ class Engine:
                     yield ray.get(ref)
         finally:
             for ref in running:  # the driver stops early (an error, Ctrl-C): drop the rest
-                ray.cancel(ref, force=True)
+                try:
+                    ray.cancel(ref)
+                except Exception:  # noqa: BLE001 (a failed cancel must not hide the first error)
+                    pass
 
     def worker_process_ids(self) -> list[int]:
         """The process ids of the workers (Ray: the actors'; pool: its processes; local:
@@ -306,7 +310,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         choice = engine_from_args(args)
     except ValueError as error:
-        print(f"engine: error: {error}")
+        print(f"engine: error: {error}", file=sys.stderr)
         return 2
     with open_engine(choice) as engine:
         infos = list(engine.imap_unordered(worker_info, range(4 * engine.workers)))

@@ -193,7 +193,7 @@ def run_sweep(grid: SweepGrid, folder: Path, engine, *, progress: bool = True, c
     calibration_s = time.perf_counter() - start
     # Trials: one job per chunk not yet written.
     specs_by_draw: dict[tuple, list[dict]] = {}
-    jobs, total, done_trials, done_right = [], 0, 0, 0
+    jobs, total = [], 0
     finished = read_trials(folder)
     finished_chunks = {(c, k) for c, k in zip(finished["cell"].to_pylist(), finished["chunk"].to_pylist())}
     done_trials = finished.num_rows
@@ -210,7 +210,7 @@ def run_sweep(grid: SweepGrid, folder: Path, engine, *, progress: bool = True, c
                 fields = {f: getattr(cell, f) for f in SweepCell.__dataclass_fields__}
                 jobs.append((fields, k, chunk, texts[cell.key], calibrations[cell.key]))
     print(
-        f"{len(cells)} cell(s), {total} trials in {sum(1 for _ in cells) and len(jobs)} chunk(s) to run"
+        f"{len(cells)} cell(s), {total} trials: {len(jobs)} chunk(s) to run"
         f" ({done_trials} trials already done) on {engine.kind} ({engine.workers} worker(s))",
         flush=True,
     )

@@ -59,6 +59,17 @@ def test_ray_actors_give_every_result_once():
     assert all(r["blas_threads"] == "1" for r in results)  # one BLAS thread per actor
     assert {r["pid"] for r in results} <= set(workers)
     assert len(set(workers)) == 2 and os.getpid() not in workers
+    # A job's error reaches the driver as its own type (run_app reports a ValueError in one line).
+    with open_engine(choose_engine("ray", 2)) as engine:
+        with pytest.raises(ValueError, match="invalid literal"):
+            list(engine.imap_unordered(int, ["1", "x", "2", "3"]))
+
+
+@pytest.mark.parametrize("kind", ["local", "pool"])
+def test_a_failing_job_raises_its_error(kind):
+    with open_engine(choose_engine(kind, 2)) as engine:
+        with pytest.raises(ValueError, match="invalid literal"):
+            list(engine.imap_unordered(int, ["1", "x", "2"]))
 
 
 def test_engine_command_lists_its_workers(capsys):

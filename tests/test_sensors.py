@@ -826,3 +826,22 @@ def test_add_sensors_without_ft_sensors_nao():
         add_sensors(DiagramBuilder(), plant, humanoid, seed=-1)
     with pytest.raises(ValueError, match="add_sensors: handles must be HumanoidHandles"):
         add_sensors(DiagramBuilder(), plant, None)
+
+
+def test_add_sensors_noise_scale_multiplies_every_noise_std():
+    """noise_scale (the sweeps' noise level) multiplies each sensor's white noise std; the
+    same seeds draw the same normalised samples, so every noise sample doubles exactly."""
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=1e-3), builder)
+    humanoid = add_humanoid(plant, "hrp4_like", scene_graph=scene_graph)
+    plant.Finalize()
+    one = add_sensors(builder, plant, humanoid, seed=3)
+    two = add_sensors(builder, plant, humanoid, seed=3, noise_scale=2.0, name_prefix="twice_")
+    assert (one.noise_std_factor, two.noise_std_factor) == (1.0, 2.0)
+    np.testing.assert_allclose(two.encoders.noise.std, 2.0 * one.encoders.noise.std)
+    assert one.encoders.noise.std.max() > 0.0
+    for t in (0.0, 0.0137, 0.5):
+        np.testing.assert_allclose(two.encoders.noise.value(t), 2.0 * one.encoders.noise.value(t))
+    for bad in (-1.0, float("nan"), float("inf"), True, "2"):
+        with pytest.raises(ValueError, match="add_sensors: noise_scale"):
+            add_sensors(DiagramBuilder(), plant, humanoid, noise_scale=bad)

@@ -52,7 +52,13 @@ from pydrake.systems.analysis import Simulator, SimulatorConfig
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
-from diagrams.residuals.study_statistics import CONFIDENCE_LEVEL, proportion_interval, quantile_interval, rate_table
+from diagrams.residuals.study_statistics import (
+    CONFIDENCE_LEVEL,
+    percentile_with_inf,
+    proportion_interval,
+    quantile_interval,
+    rate_table,
+)
 from diagrams.residuals.wiring import add_internal_and_external_residuals
 from diagrams.station.conditions import is_ideal, set_ideal_conditions
 from diagrams.station.humanoid_station import HumanoidStation, add_scenario_station, default_plant_config
@@ -1134,14 +1140,6 @@ def no_contact_result(
     }
 
 
-def _percentile_with_inf(values: np.ndarray, q: float) -> float:
-    """np.percentile of values that may hold inf (a trial without a localization): where it
-    interpolates between two infs the answer is inf, not the NaN (and warning) of inf - inf."""
-    with np.errstate(invalid="ignore"):
-        value = float(np.percentile(values, q))
-    return math.inf if math.isnan(value) else value
-
-
 def _multi_contact_metrics(results: list[dict]) -> dict:
     """The one-or-two-contact localization's totals (``multi_contact_result``), where the
     trials went through it: ``more_than_one_contact_rate`` (trials it said 2 contacts),
@@ -1169,8 +1167,8 @@ def _multi_contact_metrics(results: list[dict]) -> dict:
                 "fit_correct_link_rate": float(np.mean([r["fit_correct_link"] for r in single])),
                 "fit_valid_rate": len(valid) / len(single),
                 "fit_valid_precision": float(np.mean([r["fit_correct_link"] for r in valid])) if valid else None,
-                "fit_median_position_error_m": _percentile_with_inf(positions, 50),
-                "fit_p95_position_error_m": _percentile_with_inf(positions, 95),
+                "fit_median_position_error_m": percentile_with_inf(positions, 50),
+                "fit_p95_position_error_m": percentile_with_inf(positions, 95),
             }
         )
     two = [r for r in checked if "contact_links_right" in r]
@@ -1182,9 +1180,9 @@ def _multi_contact_metrics(results: list[dict]) -> dict:
                 "both_links_right_rate": float(np.mean([r["contact_links_right"] for r in two])),
                 "two_contact_fit_links_right_rate": float(np.mean([r["two_contact_fit_links_right"] for r in two])),
                 "median_contact_position_error_m": float(np.median(positions)),
-                "p95_contact_position_error_m": _percentile_with_inf(positions, 95),
+                "p95_contact_position_error_m": percentile_with_inf(positions, 95),
                 "median_contact_force_error_rel": float(np.median(forces)),
-                "p95_contact_force_error_rel": _percentile_with_inf(forces, 95),
+                "p95_contact_force_error_rel": percentile_with_inf(forces, 95),
             }
         )
     return out
@@ -1318,7 +1316,7 @@ def contact_localization_metrics(
         "valid_rate": float(np.mean([r["status"] == 0 for r in results])) if n else None,
         "ambiguous_rate": float(np.mean([r["status"] == 4 for r in results])) if n else None,
         "median_position_error_m": float(np.median(positions)) if n else None,
-        "p95_position_error_m": _percentile_with_inf(positions, 95) if n else None,
+        "p95_position_error_m": percentile_with_inf(positions, 95) if n else None,
         "median_position_error_correct_link_m": median([r["position_error_m"] for r in results if r["correct_link"]]),
         "median_force_error_rel": median(forces),
         "p95_force_error_rel": float(np.percentile(forces, 95)) if forces else None,

@@ -41,7 +41,12 @@ from diagrams.residuals.contact_localization import (
 )
 from diagrams.residuals.contact_trials import run_trials
 from diagrams.residuals.model_refinement import calibration_file, refined_model
-from diagrams.residuals.study_statistics import CONFIDENCE_LEVEL, proportion_interval, quantile_interval
+from diagrams.residuals.study_statistics import (
+    CONFIDENCE_LEVEL,
+    percentile_with_inf,
+    proportion_interval,
+    quantile_interval,
+)
 from diagrams.scenarios import check_finite_and_signs, load_scenario, scenario_as_yaml
 from diagrams.station.conditions import set_ideal_conditions
 
@@ -101,10 +106,9 @@ class SweepGrid:
                 raise ValueError(f"grid.{name} must name at least one value")
             if len(set(values)) != len(values):
                 raise ValueError(f"grid.{name} repeats a value: {values}")
-        for name in ("imperfection_seeds",):
-            for value in getattr(self, name):
-                if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                    raise ValueError(f"grid.{name} must hold non-negative integers, got {value!r}")
+        for value in self.imperfection_seeds:
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ValueError(f"grid.imperfection_seeds must hold non-negative integers, got {value!r}")
         for name in ("mismatch_scales", "noise_scales"):
             for value in getattr(self, name):
                 if not value >= 0.0:
@@ -295,20 +299,14 @@ def cell_summary(rows: Iterable[dict], level: float = CONFIDENCE_LEVEL) -> dict:
         "detection_rate_interval": list(proportion_interval(detected, n, level)),
         "right_link_rate": right / n,
         "right_link_rate_interval": list(proportion_interval(right, n, level)),
-        "median_position_error_m": float(np.median(errors)),
+        "median_position_error_m": percentile_with_inf(errors, 50),
         "median_position_error_m_interval": list(quantile_interval(errors, 0.5, level)),
-        "p95_position_error_m": float(np.percentile(errors, 95)) if np.isfinite(errors).all() else _p95(errors),
+        "p95_position_error_m": percentile_with_inf(errors, 95),
         "p95_position_error_m_interval": list(quantile_interval(errors, 0.95, level)),
         "median_force_error_rel": float(np.median(forces)) if forces else None,
         "median_force_error_rel_interval": list(quantile_interval(forces, 0.5, level)) if forces else None,
     }
     return out
-
-
-def _p95(values: list[float]) -> float:
-    """The 95th percentile by order statistic (inf allowed, where np.percentile would give NaN)."""
-    x = np.sort(np.asarray(values, dtype=float))
-    return float(x[min(x.size - 1, math.ceil(0.95 * x.size) - 1)])
 
 
 def grid_as_yaml(grid: SweepGrid) -> str:
@@ -459,8 +457,5 @@ def _calibration_path(data: bytes) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{hashlib.sha1(data).hexdigest()}.npz"
     if not path.is_file():
-        handle, temporary = tempfile.mkstemp(dir=folder, suffix=".tmp")
-        with os.fdopen(handle, "wb") as file:
-            file.write(data)
-        os.replace(temporary, path)
+        write_atomically(path, data)
     return path

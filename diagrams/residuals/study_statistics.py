@@ -7,6 +7,7 @@
   (e.g. Conover, "Practical Nonparametric Statistics", 3rd ed., Sec. 3.2): the number of
   samples below the true p-quantile is binomial(n, p), so [x_(j), x_(k)] with j, k from its
   tails covers it with at least the level.
+* ``percentile_with_inf``: np.percentile where a value may be inf (a trial without a result).
 * ``rate_table``: per group (e.g. per pushed link) the trials, the successes and the rate
   with its interval.
 """
@@ -68,6 +69,14 @@ def quantile_interval(values: Sequence[float], p: float, level: float = CONFIDEN
     lower = x[j - 1] if j >= 1 else -math.inf
     upper = x[k - 1] if k <= n else math.inf
     return float(lower), float(upper)
+
+
+def percentile_with_inf(values: np.ndarray, q: float) -> float:
+    """np.percentile of values that may hold inf (a trial without a localization): where it
+    interpolates between two infs the answer is inf, not the NaN (and warning) of inf - inf."""
+    with np.errstate(invalid="ignore"):
+        value = float(np.percentile(values, q))
+    return math.inf if math.isnan(value) else value
 
 
 def rate_table(

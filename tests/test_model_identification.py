@@ -32,6 +32,7 @@ from systems.estimation.model_identification import (
     identify_model_corrections,
     inertial_parameters,
     newton_euler_matrix,
+    stance_base_velocity,
 )
 from systems.simulation.imperfections import (
     ModelMismatch,
@@ -605,3 +606,37 @@ def test_prior_options_are_checked(hrp4):
         IdentificationOptions(torque_offset_prior_std=-1.0).validate()
     with pytest.raises(ValueError, match="coulomb_prior_std"):
         IdentificationOptions(coulomb_prior_std=[1.0, np.nan]).validate()
+
+
+def test_stance_base_velocity_keeps_the_soles_still(hrp4):
+    """A state whose soles are still (v in the null space of both F/T frames' Jacobians):
+    from its joint rates alone, stance_base_velocity gives back its base twist, whatever
+    base twist the log holds, and reports the frames' speed by the log's own twist."""
+    plant, handles = hrp4
+    context = plant.CreateDefaultContext()
+    set_standing_state(plant, context, handles)
+    frames = [handles.ft_sensor_frames["left"], handles.ft_sensor_frames["right"]]
+    rng = np.random.default_rng(3)
+    world = plant.world_frame()
+    q = plant.GetPositions(context).copy()
+    q[7:] += rng.normal(scale=0.05, size=q.size - 7)
+    plant.SetPositions(context, q)
+    J = np.vstack(
+        [
+            plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kV, f, np.zeros(3), world, world)
+            for f in frames
+        ]
+    )
+    null_space = np.linalg.svd(J)[2][np.linalg.matrix_rank(J) :].T
+    v = null_space @ rng.normal(size=null_space.shape[1])
+    assert np.linalg.norm(v[:6]) > 0.1  # the base moves with the joints
+    logged = v.copy()
+    logged[:6] += rng.normal(scale=0.05, size=6)  # e.g. a gyro's noise
+    states = np.vstack((q, q)), np.vstack((v, logged))
+    twist, frame_speed = stance_base_velocity(plant, plant.CreateDefaultContext(), frames, *states)
+    np.testing.assert_allclose(twist, np.vstack((v[:6], v[:6])), atol=1e-10)
+    assert frame_speed[0] < 1e-10 and frame_speed[1] > 0.01
+    with pytest.raises(ValueError, match="at least one frame"):
+        stance_base_velocity(plant, context, [], *states)
+    with pytest.raises(ValueError, match="base_velocity"):
+        IdentificationOptions(base_velocity="imu").validate()

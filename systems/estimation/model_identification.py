@@ -62,7 +62,7 @@ import json
 import math
 import zipfile
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -100,6 +100,8 @@ GAUSS_NEWTON_TOLERANCE = 1e-7
 PINNED_WEIGHT = 1e6
 #: Fewest samples a calibration log may have.
 MIN_LOG_SAMPLES = 20
+#: The sources of the base twist ``IdentificationOptions.base_velocity`` accepts.
+BASE_VELOCITY_SOURCES = ("log", "stance_kinematics")
 
 
 def _skew(x: np.ndarray) -> np.ndarray:
@@ -496,6 +498,15 @@ class IdentificationOptions:
         identify_friction, identify_torque_errors: fit F_c, b and s, o.
         include_joint_damping: the plant's joint damping D qdot is a known model term
             (then b is the friction beyond it; the residuals apply D qdot themselves).
+        base_velocity: the base twist the regression uses: "log" (the log's v[:6], e.g. a
+            base-state estimator's) or "stance_kinematics" (``stance_base_velocity``: the
+            twist that keeps every known-wrench frame still, from the log's base
+            orientation and joint rates; for a calibration standing on both feet). The
+            estimator's angular velocity is the gyro's: its white noise, differentiated,
+            is as large as the base's angular acceleration in a slow calibration, and that
+            noise in the regressor (errors in variables) drives the weakly excited inertial
+            combinations (masses clipped, a robot several percent too heavy); the encoders
+            the stance kinematics use are ~10 times quieter.
         rank_tolerance: relative tolerance |R_ii| > tol |R_00| of the base-parameter rank
             (on the weighted columns scaled by the nominal mass m, m r and m r^2, r the
             radius of gyration about the body origin).
@@ -538,6 +549,7 @@ class IdentificationOptions:
     identify_friction: bool = True
     identify_torque_errors: bool = True
     include_joint_damping: bool = True
+    base_velocity: str = "log"
     rank_tolerance: float = 1e-6
     inertial_prior_std: float = 0.0
     joint_prior_weight: float = 0.0
@@ -564,6 +576,8 @@ class IdentificationOptions:
             value = np.asarray(getattr(self, name), dtype=float)
             if value.ndim > 1 or not np.all(np.isfinite(value)) or np.any(value < 0.0):
                 raise ValueError(f"{who}.{name} must be >= 0 (a scalar or one per joint), got {getattr(self, name)!r}")
+        if self.base_velocity not in BASE_VELOCITY_SOURCES:
+            raise ValueError(f"{who}.base_velocity must be one of {BASE_VELOCITY_SOURCES}, got {self.base_velocity!r}")
         if not isinstance(self.filter_order, int) or not 1 <= self.filter_order <= 10:
             raise ValueError(f"{who}.filter_order must be an integer in 1..10, got {self.filter_order!r}")
         return self
@@ -591,7 +605,9 @@ class ModelCorrections:
             joint below ~2 v_s has a poorly determined Coulomb/viscous split) and the RMS
             of the regression residual of (R3) with the nominal model (``rms_before``) and
             the corrected one (``rms_after``), per row group: ``base_force`` (N), ``base_moment`` (N m),
-            ``joints`` (N m).
+            ``joints`` (N m); with ``base_velocity`` "stance_kinematics", also
+            ``stance_frame_speed_p95`` (m/s, ``stance_base_velocity``'s frame speed by the
+            log's own base twist, 95th percentile: how still the feet were).
     """
 
     spatial_inertias: dict[int, SpatialInertia]
@@ -716,6 +732,42 @@ def _known_wrench_force(plant: MultibodyPlant, context: Context, frames: Sequenc
     return out
 
 
+def stance_base_velocity(
+    plant: MultibodyPlant, context: Context, frames: Sequence[Frame], q: np.ndarray, v: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The base twist [w_WB; v_WBo] (N, 6) that keeps every frame of ``frames`` still (the
+    soles of a robot standing on both feet): the least-squares solution of
+    J_s,base v_base = -J_s,joints qdot over the stacked frame Jacobians (6 per frame), at
+    each sample of q (N, nq) and v (N, nv) (its joint rates; its base twist is not used).
+    Also returns each sample's largest frame speed with the log's own v (N,), m/s (a
+    frame's angular speed times 0.1 m counts as a speed): how still the frames were by the
+    log's own base twist.
+
+    Raises:
+        ValueError: no frames, or frames that do not determine the base twist (fewer than 6
+            independent constraints).
+    """
+    if not frames:
+        raise ValueError("stance_base_velocity: needs at least one frame that stays still (the feet)")
+    world = plant.world_frame()
+    twist = np.empty((q.shape[0], 6))
+    frame_speed = np.empty(q.shape[0])
+    weight = np.array([0.1] * 3 + [1.0] * 3)
+    for k in range(q.shape[0]):
+        plant.SetPositions(context, q[k])
+        J = np.vstack(
+            [
+                plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kV, frame, np.zeros(3), world, world)
+                for frame in frames
+            ]
+        )
+        if k == 0 and np.linalg.matrix_rank(J[:, :6]) < 6:
+            raise ValueError("stance_base_velocity: the frames do not determine the base twist (rank < 6)")
+        twist[k] = np.linalg.lstsq(J[:, :6], -J[:, 6:] @ v[k, 6:], rcond=None)[0]
+        frame_speed[k] = np.max(np.abs((J @ v[k]).reshape(-1, 6) * weight))
+    return twist, frame_speed
+
+
 def _joint_prior_rows(
     options: IdentificationOptions, groups: list[str], act: np.ndarray, n: int, r: int, size: int
 ) -> np.ndarray:
@@ -779,6 +831,12 @@ def identify_model_corrections(
     nominal_inertias = dict(nominal_inertias or {})
     pi_nominal = regressor.parameters(nominal_inertias).reshape(nb, 10)
 
+    stance_speed = None
+    if options.base_velocity == "stance_kinematics":
+        v_stance = np.array(log.v, dtype=float)
+        v_stance[:, :6], frame_speed = stance_base_velocity(plant, regressor.context, frames, log.q, log.v)
+        stance_speed = float(np.percentile(frame_speed, 95))
+        log = replace(log, v=v_stance)
     q, v, vdot, tau_m, W, coulomb_column, viscous_column, keep = _filtered_log(log, options)
     if keep.size * nv < 2 * (4 * nb + 4 * n):
         raise ValueError(f"{who}: too few samples after filtering and decimation ({keep.size}); log a longer motion")
@@ -977,6 +1035,8 @@ def identify_model_corrections(
         "rms_before": rms(residual(pi_nominal, zeros, zeros, zeros, zeros)),
         "rms_after": rms(residual(pi_corrected, coulomb, viscous, torque_scale, torque_offset)),
     }
+    if stance_speed is not None:
+        diagnostics["stance_frame_speed_p95"] = stance_speed
     return ModelCorrections(
         spatial_inertias=corrected,
         coulomb=coulomb,
@@ -1041,6 +1101,7 @@ __all__ = [
     "InertialParameterRegressor",
     "ModelCorrections",
     "base_parameter_map",
+    "stance_base_velocity",
     "central_unit_inertia",
     "identify_model_corrections",
     "inertial_parameters",

@@ -29,6 +29,7 @@ from diagrams.scenarios import check_common_fields
 from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station
 from diagrams.station.plant_config import default_plant_config
 from diagrams.station.standing import default_gains
+from systems.estimation.ekf_settings import STILL_MIN_DURATION
 from systems.locomotion.contact_zmp import MIN_NORMAL_FORCE, ContactZmp
 from systems.locomotion.walking_pattern import NaoWalkingController, WalkingParameters
 from systems.simulation.disturbances import Push, PushSource
@@ -173,6 +174,7 @@ def build_nao_walk_diagram(
         seed=scenario.seed,
         base_state=scenario.base_state,
         imperfections=scenario.imperfections,
+        at_rest_duration=STILL_MIN_DURATION if scenario.standing_start >= STILL_MIN_DURATION else None,
     )
     # The simulated robot (plant, pushes, contact ZMP for the metrics) and the robot's own
     # model (the estimators' plant: the gains and the walking plan, issue 31).

@@ -32,7 +32,12 @@ from diagrams.locomotion.nao_walk import NaoWalkScenario, build_nao_walk_diagram
 from systems.common.topology import floating_base_topology
 from systems.io.robot_log import RobotLog, quaternion_to_rotation
 from systems.locomotion.walking_pattern import WalkingParameters
-from systems.simulation.imperfections import EncoderImperfections, Imperfections, ImuImperfections
+from systems.simulation.imperfections import (
+    REALISTIC_GYRO_BIAS_DEG_S,
+    EncoderImperfections,
+    Imperfections,
+    ImuImperfections,
+)
 
 #: The robot of the test bed: the one with a walking controller.
 ROBOT = "nao_like"
@@ -59,7 +64,7 @@ class WalkingLogSettings:
     rate_hz: float = 99.0
     sampling_jitter_s: float = 0.4e-3
     stamp_noise_s: float = 0.3e-3
-    gyro_bias_deg_s: tuple[float, float, float] = (0.12, -0.08, 0.35)
+    gyro_bias_deg_s: tuple[float, float, float] = REALISTIC_GYRO_BIAS_DEG_S
     seed: int = 0
 
     def check(self) -> None:

@@ -72,6 +72,7 @@ from systems.estimation.base_state_estimator import (
     STANDING_START_VELOCITY_STD,
     ContactHysteresis,
     InvariantEkfBaseStateEstimator,
+    imu_bias_at_rest,
 )
 from systems.estimation.ekf_settings import (
     STILL_GYRO_OFFSET,
@@ -648,10 +649,6 @@ STILL_AVERAGING_TIME = 0.1
 #: (chi-square, 3 dof, above 36), and the threshold, 6 sqrt(3) sigma, far less: noise alone
 #: never reads as motion over a still start of seconds at 1 kHz.
 STILL_NOISE_SIGMAS = 6.0
-#: Floor of the initial gyro bias std, rad/s: Earth's rotation (7.29e-5 rad/s), which the
-#: at-rest mean takes for bias (a still gyro reads it), rounded up. Earth's rotation is far
-#: below what matters here: 0.0042 deg/s turns yaw by 0.05 deg in 12 s.
-STILL_GYRO_BIAS_STD_FLOOR = 1e-4
 
 
 @dataclass
@@ -669,7 +666,7 @@ class AtRestCalibration:
         samples: the window's samples.
         gyro_bias: (3,) rad/s, the window's mean gyro reading; None with "none".
         gyro_bias_std: (3,) rad/s, its standard error (sample std / sqrt(samples), white
-            noise) combined with ``STILL_GYRO_BIAS_STD_FLOOR``; None with "none".
+            noise) combined with ``base_state_estimator.STILL_GYRO_BIAS_STD_FLOOR``; None with "none".
         accel_magnitude_error: m/s^2, |mean specific force| - |g| (the model's gravity),
             the accelerometer's bias along the measured vertical; None with "none".
         accel_bias: (3,) m/s^2, that error along the mean specific force's direction (the
@@ -775,16 +772,9 @@ def at_rest_imu_bias(
     ``settings``' gyro noise density and stillness thresholds, ``first_still_window``):
     from the log's first sample when it starts still, or after the robot has settled.
 
-    What rest makes observable: the true angular velocity is 0 (but for Earth's rotation,
-    7.29e-5 rad/s, taken for bias and below what matters here), so the mean gyro reading is
-    the gyro bias, all three axes, to its standard error; this is the only way to learn the
-    bias about the vertical, to which the EKF is blind while standing on flat ground
-    (``systems.estimation.base_state_estimator``, E11). The accelerometer reads R_WI^T (-g)
-    + b_a: with the tilt unknown, only |mean specific force| - |g| is identifiable, the
-    bias along the measured vertical (to the local gravity's difference from the model's,
-    up to 0.03 m/s^2 over the Earth); the horizontal part of b_a is indistinguishable from a
-    tilt (the tilt taken from the accelerometer itself makes it zero by construction) and
-    stays at 0 (the EKF's level-ground correction observes it later).
+    What rest makes observable (the gyro bias on all three axes, the accelerometer's along
+    the measured vertical): ``systems.estimation.base_state_estimator.imu_bias_at_rest``,
+    which the online station's filter uses too (``at_rest_duration``).
 
     Args:
         gyro, specific_force: (N, 3) rad/s, m/s^2 (IMU frame). joint_velocities: (N, n).
@@ -832,20 +822,21 @@ def at_rest_imu_bias(
         samples = end - start
         source = "detected"
     w = gyro[start : start + samples]
-    gyro_bias = w.mean(axis=0)
-    standard_error = w.std(axis=0, ddof=1) / math.sqrt(samples)
-    f = specific_force[start : start + samples].mean(axis=0)
-    norm = float(np.linalg.norm(f))
-    error = norm - gravity
+    bias, gyro_bias_std, error = imu_bias_at_rest(
+        w.mean(axis=0),
+        w.std(axis=0, ddof=1) / math.sqrt(samples),
+        specific_force[start : start + samples].mean(axis=0),
+        gravity,
+    )
     return AtRestCalibration(
         source,
         start * period,
         (start + samples) * period,
         samples,
-        gyro_bias=gyro_bias,
-        gyro_bias_std=np.hypot(standard_error, STILL_GYRO_BIAS_STD_FLOOR),
+        gyro_bias=bias[:3],
+        gyro_bias_std=gyro_bias_std,
         accel_magnitude_error=error,
-        accel_bias=error * f / norm if norm > 0 else np.zeros(3),
+        accel_bias=bias[3:],
     )
 
 

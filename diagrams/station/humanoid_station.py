@@ -66,6 +66,7 @@ from systems.estimation.base_state_estimator import (
     FootContactFromFsr,
     InvariantEkfBaseStateEstimator,
 )
+from systems.estimation.ekf_settings import STILL_MIN_DURATION
 from systems.estimation.model_identification import CorrectedJointTorque, ModelCorrections
 from systems.residuals.momentum_residuals import ResidualModel
 from systems.simulation.imperfections import (
@@ -194,6 +195,7 @@ def add_humanoid_station(
     base_state: str = "truth_plus_noise",
     model_corrections: ModelCorrections | None = None,
     noise_scale: float = 1.0,
+    at_rest_duration: float | None = STILL_MIN_DURATION,
 ) -> HumanoidStation:
     """Adds the station of the module docstring to ``builder``.
 
@@ -222,6 +224,11 @@ def add_humanoid_station(
             estimators' refined model), and ``measured_torque`` becomes its
             ``CorrectedJointTorque``: the motor torque with the identified offset and scale
             removed and the identified joint friction added. Needs a humanoid.
+        at_rest_duration: s the robot stands still from its start (every station app starts
+            standing): the invariant EKF with bias states (the realistic IMU) measures the
+            IMU bias over it and starts from it (``InvariantEkfBaseStateEstimator``'s
+            ``at_rest_duration``; the gyro bias about the vertical is learned only so).
+            Default ``STILL_MIN_DURATION`` (0.5 s); None for a robot that moves at once.
 
     Raises:
         ValueError: an unknown or unreadable model, a model without a floating base, an
@@ -321,7 +328,9 @@ def add_humanoid_station(
             base_estimator=(base_state == "truth_plus_noise"),
         )
         if base_state == "invariant_ekf":
-            base_state_estimator, foot_contact = _add_invariant_ekf(builder, plant, humanoid, estimator, sensors)
+            base_state_estimator, foot_contact = _add_invariant_ekf(
+                builder, plant, humanoid, estimator, sensors, at_rest_duration
+            )
         sensed_state, measured_torque = sensors.state, sensors.measured_torque
         if model_corrections is not None:
             corrected = builder.AddSystem(CorrectedJointTorque(estimator.plant, model_corrections))
@@ -421,6 +430,7 @@ def _add_invariant_ekf(
     humanoid: HumanoidHandles,
     estimator: EstimatorPlant,
     sensors: SensorHandles,
+    at_rest_duration: float | None,
 ) -> tuple[InvariantEkfBaseStateEstimator, FootContactFromForceTorque | FootContactFromFsr]:
     """The contact-aided invariant EKF as the source of the assembler's base pose and velocity:
     gyro and accelerometer from the IMU, joint positions from the encoders, one contact flag
@@ -494,6 +504,7 @@ def _add_invariant_ekf(
             initial_velocity_std=STANDING_START_VELOCITY_STD,
             estimate_imu_bias=estimate_bias,
             level_ground_tilt_std=LEVEL_GROUND_TILT_STD if estimate_bias else None,
+            at_rest_duration=at_rest_duration if estimate_bias else None,
         )
     )
     estimator.set_name("invariant_ekf_base_state_estimator")

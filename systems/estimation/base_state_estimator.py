@@ -66,10 +66,11 @@ the step Φ = I + A dt + ½ A² dt² + ⅙ A³ dt³ exactly: its bias columns ar
 B dt + A_X B dt²/2 + A_X² B dt³/6. The noise map is blkdiag(Ad_X̄, I_6) and Q_c gains
 σ_bg² I, σ_ba² I. The kinematic H has zero bias columns; the update adds θ⁺ = θ̄ + δ_θ.
 Defaults: the random walks of ``Imperfections.realistic().imu`` (EuRoC's ADIS16448 figures),
-initial bias std 0.1 °/s and 0.05 m/s², the bias estimate starting at 0 (the simulated
-biases start at 0: an IMU calibrated at start-up) or at a given ``initial_imu_bias`` (on a
-log, the bias measured while the robot stands still at its start: ``diagrams.residuals.
-log_estimation.at_rest_imu_bias``).
+initial bias std 0.1 °/s and 0.05 m/s², the bias estimate starting at 0 or at a given
+``initial_imu_bias`` (on a log, the bias measured while the robot stands still at its start:
+``diagrams.residuals.log_estimation.at_rest_imu_bias``); online, a still start of
+``at_rest_duration`` s measures the gyro bias about the vertical (``imu_bias_at_rest``; the
+station's filter, whose realistic IMU has ``Imperfections.realistic()``'s turn-on bias).
 
 Observability (a property of the filter, tested in tests/test_base_state_estimator.py):
 roll, pitch and velocity are observable through gravity and the contact kinematics; yaw
@@ -211,6 +212,39 @@ STANDING_START_ORIENTATION_STD = LEVEL_GROUND_TILT_STD
 STANDING_START_VELOCITY_STD = 0.01
 #: Period of the level-ground corrections (E12), s.
 LEVEL_GROUND_PERIOD = 0.1
+#: Floor of the at-rest gyro bias's std, rad/s: Earth's rotation (7.29e-5 rad/s), which the
+#: at-rest mean takes for bias (a still gyro reads it), rounded up. Earth's rotation is far
+#: below what matters here: 0.0042 deg/s turns yaw by 0.05 deg in 12 s.
+STILL_GYRO_BIAS_STD_FLOOR = 1e-4
+
+
+def imu_bias_at_rest(
+    gyro_mean: np.ndarray,
+    gyro_standard_error: np.ndarray,
+    specific_force_mean: np.ndarray,
+    gravity: float,
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """The IMU bias a still robot's IMU shows, from its readings' means over the still
+    window: ([b_g (rad/s); b_a (m/s^2)] (6), the gyro bias's std (3, rad/s), the
+    accelerometer's magnitude error |f̄| - |g| (m/s^2)).
+
+    At rest the true angular velocity is 0 (but for Earth's rotation, taken for bias), so
+    the mean gyro reading is the gyro bias on all three axes, to its standard error
+    (combined with ``STILL_GYRO_BIAS_STD_FLOOR``): the only way to learn the bias about the
+    vertical, to which the filter is blind while standing on flat ground (E11). The
+    accelerometer reads R_WIᵀ(−g) + b_a: with the tilt unknown only |f̄| − |g| is
+    identifiable, the bias along the measured vertical; its horizontal part is
+    indistinguishable from a tilt and stays 0 (the level-ground correction observes it).
+    """
+    gyro_mean = np.asarray(gyro_mean, dtype=float).reshape(3)
+    f = np.asarray(specific_force_mean, dtype=float).reshape(3)
+    norm = float(np.linalg.norm(f))
+    error = norm - float(gravity)
+    accel_bias = error * f / norm if norm > 0.0 else np.zeros(3)
+    std = np.hypot(np.asarray(gyro_standard_error, dtype=float).reshape(3), STILL_GYRO_BIAS_STD_FLOOR)
+    return np.concatenate((gyro_mean, accel_bias)), std, error
+
+
 #: The level-ground correction (E12) uses a foot whose sole's world normal turned by less
 #: than this rate times level_ground_period since the previous update, rad/s (0.57 °/s): a
 #: robot rocking on its feet (pushed) has no flat sole; over 0.1 s the BMI088's gyro noise
@@ -470,6 +504,32 @@ class ContactAidedInvariantEkf:
         if self._bias:
             b0 = self._b0
             self._P[b0:, b0:] = np.diag(np.repeat(self._initial_bias_std**2, 3))
+
+    def set_gyro_bias_along(self, direction: np.ndarray, value: float, std: float) -> None:
+        """Sets the gyro bias's component along the unit ``direction`` (IMU frame) to
+        ``value`` (rad/s) with variance ``std``² and no correlation with the rest of the
+        state; the components across it keep their estimate and covariance (e.g. the
+        bias about the vertical measured at rest, ``imu_bias_at_rest``)."""
+        if not self._bias:
+            raise ValueError("ContactAidedInvariantEkf.set_gyro_bias_along: the filter has no bias states")
+        n = np.asarray(direction, dtype=float).reshape(3)
+        n = n / np.linalg.norm(n)
+        self._b[:3] += (float(value) - n @ self._b[:3]) * n
+        g = slice(self._b0, self._b0 + 3)
+        across = np.eye(3) - np.outer(n, n)
+        self._P[g, :] = across @ self._P[g, :]
+        self._P[:, g] = self._P[:, g] @ across
+        self._P[g, g] += float(std) ** 2 * np.outer(n, n)
+
+    def rotate_about_vertical(self, angle: float) -> None:
+        """Turns the estimate about the world's vertical through the IMU's position by
+        ``angle`` (rad): R, v and the feet in contact (d_j about p); P is kept (for the
+        fraction of a degree of an at-rest yaw correction)."""
+        c, s_ = math.cos(angle), math.sin(angle)
+        Rz = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
+        self._R = Rz @ self._R
+        self._v = Rz @ self._v
+        self._d = self._p + (self._d - self._p) @ Rz.T
 
     @property
     def num_feet(self) -> int:
@@ -1016,6 +1076,7 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         level_ground_tilt_std: float | None = None,
         level_ground_period: float = LEVEL_GROUND_PERIOD,
         slip_speed: float | None = None,
+        at_rest_duration: float | None = None,
     ):
         """Args:
             plant: a finalized floating-base plant (for forward kinematics and gravity).
@@ -1046,9 +1107,16 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
                 again, when it is re-anchored where it stands (E8). None (default): no test,
                 every flagged foot corrects (the online station's filter). ``SLIP_SPEED``
                 (0.1 m/s) is the logs' default (``EkfSettings.slip_speed``).
+            at_rest_duration: s, the robot stands still for this long from its start (the
+                online counterpart of a log's ``at_rest_imu_bias``, causal): the filter
+                runs and averages the gyro and accelerometer meanwhile; at the window's end
+                its gyro bias about the vertical becomes the mean reading's (its variance
+                the standard error's) and the yaw that bias turned the estimate by over the
+                window is turned back. With bias states only. None (default): no window.
 
         Raises:
-            ValueError: bad plant or frames, bad noise parameters or period.
+            ValueError: bad plant or frames, bad noise parameters or period, an
+                ``at_rest_duration`` without bias states or shorter than two periods.
         """
         super().__init__()
         who = "InvariantEkfBaseStateEstimator"
@@ -1108,6 +1176,15 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         self._slip_speed = None
         if slip_speed is not None:
             self._slip_speed = positive_number(slip_speed, f"{who}: slip_speed")
+        self._rest_steps = 0
+        if at_rest_duration is not None:
+            duration = positive_number(at_rest_duration, f"{who}: at_rest_duration")
+            if not estimate_imu_bias:
+                raise ValueError(f"{who}: at_rest_duration needs estimate_imu_bias (the bias it measures)")
+            self._rest_steps = int(round(duration / self._period))
+            if self._rest_steps < 2:
+                raise ValueError(f"{who}: at_rest_duration {duration} s is shorter than two periods")
+        self._gravity = float(np.linalg.norm(plant.gravity_field().gravity_vector()))
         # The slip test's low-pass gain per update (E13).
         self._slip_alpha = min(1.0, self._period / SLIP_SPEED_TIME_CONSTANT)
         x0 = self._initial_state(initial_base_pose, initial_base_velocity)
@@ -1129,6 +1206,9 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         # world points u_j at the last update (3 K, m), their low-passed velocities w_j (3 K,
         # m/s), flagged at the last update (K), and the updates dropped as a slip (K).
         self._slip_index = self.DeclareDiscreteState(np.zeros(8 * len(frames)))
+        # The at-rest window: [updates seen, sum of the gyro (3), of its squares (3), of the
+        # specific force (3)] (IMU frame; the count stops at the window's length + 1).
+        self._rest_index = self.DeclareDiscreteState(np.zeros(10))
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._Update)
         xd = {self.xd_ticket()}
         # The base pose and velocity (E10), computed once per state for both outputs.
@@ -1192,6 +1272,7 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
             context.SetDiscreteState(index, value)
         context.SetDiscreteState(self._normals_index, np.zeros(3 * len(self._foot_frames)))
         context.SetDiscreteState(self._slip_index, np.zeros(8 * len(self._foot_frames)))
+        context.SetDiscreteState(self._rest_index, np.zeros(10))
 
     @property
     def level_ground_tilt_std(self) -> float | None:
@@ -1224,6 +1305,13 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         flags = eval_finite_input(who, self._contact, context) > 0.5
         core = self._core
         x = context.get_discrete_state(self._filter_index).value()
+        if self._rest_steps:
+            rest = context.get_discrete_state(self._rest_index).value()
+            if rest[0] < self._rest_steps:  # at rest: average the IMU (the filter runs on)
+                discrete_state.set_value(self._rest_index, rest + np.concatenate(([1.0], omega, omega**2, accel)))
+            elif rest[0] == self._rest_steps:  # the window is over
+                discrete_state.set_value(self._rest_index, rest + np.eye(10)[0])
+                x = self._vertical_gyro_bias_from_rest(x, rest)
         step = int(round(context.get_time() / self._period))
         level_ground = self._tilt_std is not None and step % self._level_ground_every == 0
         if flags.any():
@@ -1267,6 +1355,32 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         discrete_state.set_value(self._gyro_index, omega_corrected)
         discrete_state.set_value(self._valid_index, [valid])
         discrete_state.set_value(self._normals_index, world_normals)
+
+    def _vertical_gyro_bias_from_rest(self, x: np.ndarray, rest: np.ndarray) -> np.ndarray:
+        """The filter state ``x`` at the end of the at-rest window whose sums are ``rest``:
+        its gyro bias about the vertical (the measured specific force's direction) set to
+        the mean gyro reading's component (``imu_bias_at_rest``; the only bias the filter
+        cannot observe standing on flat ground, E11), and the yaw the filter integrated from
+        that bias over the window turned back. The horizontal components stay the filter's
+        (gravity and the level ground observe them, and a robot settling on its feet at the
+        start rotates about them: its mean rate is not all bias)."""
+        n = rest[0]
+        gyro_mean = rest[1:4] / n
+        variance = np.maximum(rest[4:7] - n * gyro_mean**2, 0.0) / (n - 1.0)
+        _, gyro_std, _ = imu_bias_at_rest(gyro_mean, np.sqrt(variance / n), rest[7:10] / n, self._gravity)
+        up = rest[7:10] / np.linalg.norm(rest[7:10])  # in I; at rest the specific force is -g
+        core = self._core
+        core.set_state_vector(x)
+        vertical_bias = float(up @ gyro_mean)
+        drift = vertical_bias - float(up @ core.imu_bias_of(x)[:3])  # rad/s integrated as yaw rate
+        core.set_gyro_bias_along(up, vertical_bias, float(np.sqrt(up**2 @ gyro_std**2)))
+        core.rotate_about_vertical(-drift * n * self._period)
+        return core.state_vector()
+
+    @property
+    def at_rest_duration(self) -> float | None:
+        """The at-rest window, s (a whole number of periods); None when off."""
+        return self._rest_steps * self._period if self._rest_steps else None
 
     def _CalcBaseState(self, context: Context, value: AbstractValue) -> None:
         # imu_to_base (E10): [base_pose (7); base_velocity (6)].

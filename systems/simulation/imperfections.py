@@ -40,6 +40,9 @@ from systems.simulation.noise import check_seed
 GROUP_STREAMS = {"torque_sensor": 3, "model_mismatch": 4}
 
 _DEG = math.pi / 180.0
+#: The realistic IMU's gyro turn-on bias per axis (x, y, z of the IMU frame), deg/s: within
+#: the 0.1-0.5 deg/s of real humanoid IMUs, the largest about the vertical.
+REALISTIC_GYRO_BIAS_DEG_S = (0.12, -0.08, 0.35)
 _G = 9.80665  # m/s^2 (standard gravity, for datasheet figures in g)
 
 
@@ -65,10 +68,11 @@ class ImuImperfections:
         gyro_bias_x, gyro_bias_y, gyro_bias_z: the gyro's constant turn-on bias per IMU
             axis, rad/s (any sign), from the start of the run (the bias walk starts there).
             Real humanoid IMUs show 0.1-0.5 deg/s (e.g. the BMI088's zero-rate offset is
-            +-1 deg/s max. after soldering); the log test bed uses 0.35 deg/s about the
-            vertical (``diagrams.locomotion.walking_log``). Realistic: 0 (the online
-            station's filter learns no bias at start: its gyro counts as calibrated at
-            start-up, as a robot's boot-time calibration does).
+            +-1 deg/s max. after soldering). Realistic: ``REALISTIC_GYRO_BIAS_DEG_S``,
+            (0.12, -0.08, 0.35) deg/s, the largest about the vertical, to which the EKF is
+            blind standing on flat ground (the station's filter measures it over the
+            robot's still start, ``InvariantEkfBaseStateEstimator``'s ``at_rest_duration``;
+            the log test bed ``diagrams.locomotion.walking_log`` uses the same values).
     """
 
     gyro_noise_density: float = 0.0
@@ -194,6 +198,9 @@ class Imperfections:
                 gyro_bias_random_walk=1.9393e-5,
                 accel_noise_density=175e-6 * _G,
                 accel_bias_random_walk=3.0e-3,
+                gyro_bias_x=REALISTIC_GYRO_BIAS_DEG_S[0] * _DEG,
+                gyro_bias_y=REALISTIC_GYRO_BIAS_DEG_S[1] * _DEG,
+                gyro_bias_z=REALISTIC_GYRO_BIAS_DEG_S[2] * _DEG,
             ),
             encoders=EncoderImperfections(bits=14),
             friction=FrictionImperfections(coulomb_percent=3.0, viscous_percent=2.0, smoothing_velocity=0.1),

@@ -22,7 +22,7 @@ added one at a time, with both residuals, in the ideal and the realistic world:
 
 ``--study robots``: the project's default in the realistic world on robots drawn with several
 imperfection seeds (model mismatch, friction, sensor errors; each its own calibration) and on
-TALOS (``models/robots/talos.yaml``).
+TALOS and Romeo (``models/robots/talos.yaml``, ``romeo.yaml``).
 
 Run: ``python -m apps.push_and_comply_study --study ablation|robots [--worlds ideal realistic]
 [--engine E] [--workers N] [--cluster ADDRESS] [--duration S] [--results-folder DIR] [--out DIR]``
@@ -85,6 +85,7 @@ ROBOTS = (
     ("hrp4_like robot 19", "hrp4_like", 19, 20),
     ("hrp4_like robot 23", "hrp4_like", 23, 5),
     ("TALOS robot 0", "models/robots/talos.yaml", 0, 0),
+    ("Romeo robot 0", "models/robots/romeo.yaml", 0, 0),
 )
 
 #: The metrics each row keeps (``push_and_comply_metrics``' keys).

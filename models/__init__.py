@@ -54,9 +54,17 @@ from pydrake.geometry import (
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import CoulombFriction, MultibodyPlant
-from pydrake.multibody.tree import Frame, ModelInstanceIndex, RigidBody, RotationalInertia, SpatialInertia
+from pydrake.multibody.tree import (
+    FixedOffsetFrame,
+    Frame,
+    ModelInstanceIndex,
+    RigidBody,
+    RotationalInertia,
+    SpatialInertia,
+)
 
 from models.description import (
+    GAIN_GROUPS,
     JOINT_GROUPS,
     RobotDescription,
     RobotDescriptionError,
@@ -489,11 +497,19 @@ def add_humanoid(
     ]
     if ungrouped:
         raise RobotDescriptionError(f"{where}: joint_groups: joints in no group: {ungrouped}")
-    overrides_by_field = (("joint_limits", description.joint_limits), ("joint_damping", description.joint_damping))
+    rotor_per_joint = {k: v for k, v in description.rotor_inertia.items() if k not in GAIN_GROUPS}
+    overrides_by_field = (
+        ("joint_limits", description.joint_limits),
+        ("joint_damping", description.joint_damping),
+        ("actuators.rotor_inertia", rotor_per_joint),
+    )
     for field_name, overrides in overrides_by_field:
         for j in overrides:
             if j not in grouped:
-                raise RobotDescriptionError(f"{where}: {field_name}.{j}: the robot has no grouped joint named {j!r}")
+                hint = f" nor is it a gain group {GAIN_GROUPS}" if field_name == "actuators.rotor_inertia" else ""
+                raise RobotDescriptionError(
+                    f"{where}: {field_name}.{j}: the robot has no grouped joint named {j!r}{hint}"
+                )
     for j, (lower, upper) in description.joint_limits.items():
         plant.GetJointByName(j, mi).set_position_limits([lower], [upper])
     for j, b in description.joint_damping.items():
@@ -510,14 +526,18 @@ def add_humanoid(
             joint = plant.GetJointByName(j, mi)
             actuated[j] = plant.AddJointActuator(f"{j}_actuator", joint, efforts.get(j, np.inf)).index()
         actuator = plant.get_mutable_joint_actuator(actuated[j])
-        rotor = description.rotor_inertia.get(description.gain_group(j))
+        rotor = rotor_per_joint.get(j, description.rotor_inertia.get(description.gain_group(j)))
         if rotor is not None and actuator.default_rotor_inertia() == 0.0:
             actuator.set_default_rotor_inertia(rotor)
             actuator.set_default_gear_ratio(1.0)
 
-    sole_frames = {
-        s: _get_frame(plant, f.sole_frame, mi, f"{where}: feet.{s}.sole_frame") for s, f in description.feet.items()
-    }
+    sole_frames = {}
+    for s, f in description.feet.items():
+        frame = _get_frame(plant, f.sole_frame, mi, f"{where}: feet.{s}.sole_frame")
+        if f.sole_offset is not None:  # the sole, offset from the named frame (a URDF without one)
+            name = f"{s}_sole_from_{frame.name()}"
+            frame = plant.AddFrame(FixedOffsetFrame(name, frame, RigidTransform(f.sole_offset), mi))
+        sole_frames[s] = frame
     imu = _get_frame(plant, description.imu_frame, mi, f"{where}: imu_frame")
     ft_joints = {}
     for side, foot in description.feet.items():

@@ -20,6 +20,8 @@ The YAML reference (lengths in m, angles in rad, gains in N m/rad and N m s/rad)
     feet:
       left:
         sole_frame: left_sole_link  # frame or body at the sole's centre, x forward, z up
+        sole_offset: [0, 0, -0.035] # optional: the sole is this far (m) from sole_frame, in
+                                    # its axes (a URDF without a sole frame: its ankle link)
         sensing: force_torque       # force_torque | fsr | none
         force_torque_joint: leg_left_sole_fix_joint
                                     # force_torque: the weld whose reaction the sensor measures
@@ -59,7 +61,9 @@ The YAML reference (lengths in m, angles in rad, gains in N m/rad and N m s/rad)
       wrists: [...]                 # arm joints with "wrist" in their name
       hands: [...]
     actuators:                      # optional: for joints the model file gives no actuator
-      rotor_inertia: {legs: 0.1}    # reflected rotor inertia per group, kg m^2 (default 0)
+      rotor_inertia: {legs: 0.1, knee_joint: 0.2}
+                                    # reflected rotor inertia per group or per joint (a joint
+                                    # wins over its group), kg m^2 (default 0)
     joint_limits: {joint: [lower, upper]}      # optional overrides, rad
     joint_damping: {joint: b}                  # optional viscous friction overrides, N m s/rad
     link_inertias:                  # optional: replace the model file's inertia of these links
@@ -120,6 +124,7 @@ _FOOT_FIELDS = {
     "contact_sphere_radius",
     "fsr_positions",
     "remove_collisions",
+    "sole_offset",
 }
 
 
@@ -132,7 +137,10 @@ class FootDescription:
     """One foot of a ``RobotDescription`` (see the module docstring's reference).
 
     Attributes:
-        sole_frame: frame (or body) name at the sole's centre, x forward, z up.
+        sole_frame: frame (or body) name at the sole's centre, x forward, z up (or, with
+            ``sole_offset``, the frame the sole is offset from).
+        sole_offset: (3,) the sole's position in ``sole_frame``'s axes, m, or None (the sole
+            is ``sole_frame`` itself); the loader adds the sole as a frame there.
         sensing: one of FOOT_SENSING.
         force_torque_joint: the F/T weld joint's name (sensing force_torque), else None.
         contact_points: (4, 2) sole-frame (x, y) where spheres are added, m, or None.
@@ -153,6 +161,7 @@ class FootDescription:
     contact_sphere_radius: float
     fsr_positions: np.ndarray | None
     remove_collisions: tuple[str, ...]
+    sole_offset: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -171,8 +180,8 @@ class RobotDescription:
         shoulders: ``left``/``right`` body names, or {} (derived from the arms).
         standing_posture: joint -> angle, rad.
         gains: gain group -> (kp, kd), only the groups the file gives.
-        rotor_inertia: gain group -> reflected rotor inertia for the actuators the loader
-            adds, kg m^2.
+        rotor_inertia: gain group or joint name -> reflected rotor inertia for the
+            actuators the loader adds, kg m^2 (a joint's entry wins over its group's).
         joint_limits: joint -> (lower, upper), rad.
         joint_damping: joint -> viscous damping, N m s/rad.
         link_inertias: link -> (mass kg, centre of mass in the link frame m, inertia about it
@@ -286,6 +295,11 @@ def _foot(raw, where: str) -> FootDescription:
             raise _error(f"{where}.contact_geometries.names", f"must list four geometry names, got {names!r}")
         names = tuple(_string(n, f"{where}.contact_geometries.names") for n in names)
     fsr = raw.get("fsr_positions")
+    offset = raw.get("sole_offset")
+    if offset is not None:
+        if not isinstance(offset, list) or len(offset) != 3:
+            raise _error(f"{where}.sole_offset", f"must be [x, y, z] in m, got {offset!r}")
+        offset = np.array([_number(x, f"{where}.sole_offset") for x in offset])
     remove = raw.get("remove_collisions", []) or []
     if not isinstance(remove, list):
         raise _error(f"{where}.remove_collisions", f"must be a list of body names, got {remove!r}")
@@ -303,6 +317,7 @@ def _foot(raw, where: str) -> FootDescription:
         ),
         fsr_positions=None if fsr is None else _points(fsr, f"{where}.fsr_positions"),
         remove_collisions=tuple(_string(b, f"{where}.remove_collisions") for b in remove),
+        sole_offset=offset,
     )
 
 
@@ -392,10 +407,9 @@ def load_robot_description(path: str | os.PathLike) -> RobotDescription:
     actuators = _mapping(raw.get("actuators"), f"{where}: actuators")
     _unknown_keys(actuators, {"rotor_inertia"}, f"{where}: actuators")
     rotor = {}
-    for group, value in _mapping(actuators.get("rotor_inertia"), f"{where}: actuators.rotor_inertia").items():
-        if group not in GAIN_GROUPS:
-            raise _error(f"{where}: actuators.rotor_inertia.{group}", f"unknown group; valid: {GAIN_GROUPS}")
-        rotor[group] = _number(value, f"{where}: actuators.rotor_inertia.{group}", non_negative=True)
+    for key, value in _mapping(actuators.get("rotor_inertia"), f"{where}: actuators.rotor_inertia").items():
+        # A gain group, or a joint name (checked against the robot's joints by the loader).
+        rotor[str(key)] = _number(value, f"{where}: actuators.rotor_inertia.{key}", non_negative=True)
     limits = {}
     for j, value in _mapping(raw.get("joint_limits"), f"{where}: joint_limits").items():
         lower, upper = _pair(value, f"{where}: joint_limits.{j}")

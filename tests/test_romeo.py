@@ -134,3 +134,76 @@ def test_romeo_stands(tmp_path):
     row = json.loads((tmp_path / "standing" / "romeo.json").read_text())
     assert row["fell"] is False and row["feet_flat"] is True
     assert np.isfinite(row["base_drift_cm"]) and row["base_drift_cm"] < 1.0
+
+
+def _romeo_variant(tmp_path: Path, edit) -> Path:
+    """romeo.yaml with ``edit`` applied, written beside a copy (the model's package:// URI
+    resolves the same)."""
+    raw = yaml.safe_load(ROMEO.read_text())
+    edit(raw)
+    path = tmp_path / "romeo_variant.yaml"
+    path.write_text(yaml.safe_dump(raw, sort_keys=False))
+    return path
+
+
+def _standing_plant(robot):
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=1e-3), builder)
+    handles = add_humanoid(plant, str(robot), scene_graph=scene_graph)
+    plant.Finalize()
+    context = plant.CreateDefaultContext()
+    set_standing_state(plant, context, handles)
+    return plant, context, handles
+
+
+def test_a_sole_offset_from_the_ankle_places_the_sole_where_the_urdf_frame_is(tmp_path):
+    """A URDF without a sole frame (issue 36): ``sole_offset`` places the sole in the ankle
+    link's axes. Romeo's own l_sole/r_sole frames are 0.0684 m below the ankle links' origins
+    (romeo.urdf's fixed sole joints); the offset frame lands on them and the robot stands the
+    same (the soles are its contact frames)."""
+    plant, context, handles = _standing_plant(ROMEO)
+    expected = {s: handles.sole_frames[s].CalcPoseInWorld(context) for s in ("left", "right")}
+    offsets = {}
+    for side in ("left", "right"):
+        ankle = plant.GetBodyByName(f"{side[0]}_ankle")
+        X_AS = handles.sole_frames[side].CalcPose(context, ankle.body_frame())
+        assert np.allclose(X_AS.rotation().matrix(), np.eye(3))
+        offsets[side] = X_AS.translation().tolist()
+
+    def edit(raw):
+        for side in ("left", "right"):
+            foot = raw["feet"][side]
+            foot.update(sole_frame=f"{side[0]}_ankle", sole_offset=offsets[side], sensing="none")
+            foot.pop("force_torque_joint")
+
+    plant2, context2, handles2 = _standing_plant(_romeo_variant(tmp_path, edit))
+    for side in ("left", "right"):
+        frame = handles2.sole_frames[side]
+        assert frame.name() == f"{side}_sole_from_{side[0]}_ankle"
+        X = frame.CalcPoseInWorld(context2)
+        np.testing.assert_allclose(X.translation(), expected[side].translation(), atol=1e-12)
+        np.testing.assert_allclose(X.rotation().matrix(), expected[side].rotation().matrix(), atol=1e-12)
+    np.testing.assert_allclose(plant2.GetPositions(context2), plant.GetPositions(context), atol=1e-12)
+    bad = _romeo_variant(tmp_path, lambda raw: raw["feet"]["left"].update(sole_offset=[0.0, 0.1]))
+    with pytest.raises(RobotDescriptionError, match=r"feet.left.sole_offset: must be \[x, y, z\]"):
+        load_robot_description(bad)
+
+
+def test_rotor_inertia_per_joint_wins_over_its_group(tmp_path):
+    """``actuators.rotor_inertia`` takes joint names as well as groups (hip, knee and ankle
+    motors differ): the knee's own entry, its group's for the other leg joints; a key that
+    is neither a joint nor a group is refused naming it."""
+
+    def edit(raw):
+        raw["actuators"]["rotor_inertia"]["LKneePitch"] = 0.25
+
+    plant, _, _ = _standing_plant(_romeo_variant(tmp_path, edit))
+    rotor = {
+        plant.get_joint_actuator(a).joint().name(): plant.get_joint_actuator(a).default_rotor_inertia()
+        for a in plant.GetJointActuatorIndices()
+    }
+    assert rotor["LKneePitch"] == 0.25 and rotor["RKneePitch"] == 0.1 and rotor["LHipPitch"] == 0.1
+    assert rotor["TrunkYaw"] == 0.1 and rotor["NeckYaw"] == 0.01
+    bad = _romeo_variant(tmp_path, lambda raw: raw["actuators"]["rotor_inertia"].update(Knee=0.2))
+    with pytest.raises(RobotDescriptionError, match=r"actuators.rotor_inertia.Knee: .*nor is it a gain group"):
+        _standing_plant(bad)

@@ -21,7 +21,9 @@ The YAML reference (lengths in m, angles in rad, gains in N m/rad and N m s/rad)
       left:
         sole_frame: left_sole_link  # frame or body at the sole's centre, x forward, z up
         sole_offset: [0, 0, -0.035] # optional: the sole is this far (m) from sole_frame, in
-                                    # its axes (a URDF without a sole frame: its ankle link)
+                                    # its axes (a URDF without a sole frame: its ankle link);
+                                    # or lowest_point: at the contact geometries' lowest point
+                                    # (x, y their centres' mean) in sole_frame's axes
         sensing: force_torque       # force_torque | fsr | none
         force_torque_joint: leg_left_sole_fix_joint
                                     # force_torque: the weld whose reaction the sensor measures
@@ -31,7 +33,10 @@ The YAML reference (lengths in m, angles in rad, gains in N m/rad and N m s/rad)
                                     # front right, rear left, rear right): a small sphere is
                                     # added at each, touching the sole plane. Or, instead,
         # contact_geometries: {body: l_ankle, names: [l_fsr_front_left, ...]}
-                                    # four existing collision geometries, in FSR_ORDER
+                                    # four existing collision geometries, in FSR_ORDER; without
+                                    # names: the body's four spheres (else its four geometries,
+                                    # spheres or boxes), ordered by where they are in the sole
+                                    # frame, the FSRs there unless fsr_positions says otherwise
         contact_sphere_radius: 0.005  # optional (default 0.005)
         fsr_positions: [[...], ...]   # optional (x, y) of the four FSRs in the sole frame
                                     # (default: the contact points / geometries)
@@ -93,6 +98,8 @@ from pydrake.math import RollPitchYaw
 JOINT_GROUPS = ("left_leg", "right_leg", "torso", "head", "left_arm", "right_arm", "left_hand", "right_hand")
 #: Gain groups (``gains``): the joint groups merged by kind, wrists apart.
 GAIN_GROUPS = ("legs", "torso", "head", "arms", "wrists", "hands")
+#: ``sole_offset``'s value that puts the sole at the foot's contact geometries' lowest point.
+SOLE_AT_LOWEST_POINT = "lowest_point"
 FOOT_SENSING = ("force_torque", "fsr", "none")
 COLLISION_MESH_POLICIES = ("keep", "bounding_box")
 SIDES = ("left", "right")
@@ -139,13 +146,17 @@ class FootDescription:
     Attributes:
         sole_frame: frame (or body) name at the sole's centre, x forward, z up (or, with
             ``sole_offset``, the frame the sole is offset from).
-        sole_offset: (3,) the sole's position in ``sole_frame``'s axes, m, or None (the sole
-            is ``sole_frame`` itself); the loader adds the sole as a frame there.
+        sole_offset: (3,) the sole's position in ``sole_frame``'s axes, m,
+            ``SOLE_AT_LOWEST_POINT`` (the contact geometries' lowest point, x and y their
+            centres' mean), or None (the sole is ``sole_frame`` itself); the loader adds the
+            sole as a frame there.
         sensing: one of FOOT_SENSING.
         force_torque_joint: the F/T weld joint's name (sensing force_torque), else None.
         contact_points: (4, 2) sole-frame (x, y) where spheres are added, m, or None.
         contact_geometry_body: the body of ``contact_geometry_names``, or None.
-        contact_geometry_names: four existing collision geometries in FSR_ORDER, or ().
+        contact_geometry_names: four existing collision geometries in FSR_ORDER, or (): the
+            body's own four spheres (else its four geometries), ordered by their positions
+            in the sole frame.
         contact_sphere_radius: m.
         fsr_positions: (4, 2) the FSRs' (x, y) in the sole frame, m, or None (default: the
             contact points, or the contact geometries' positions).
@@ -161,7 +172,7 @@ class FootDescription:
     contact_sphere_radius: float
     fsr_positions: np.ndarray | None
     remove_collisions: tuple[str, ...]
-    sole_offset: np.ndarray | None = None
+    sole_offset: np.ndarray | str | None = None
 
 
 @dataclass(frozen=True)
@@ -291,14 +302,19 @@ def _foot(raw, where: str) -> FootDescription:
         _unknown_keys(geometries, {"body", "names"}, f"{where}.contact_geometries")
         body = _string(geometries.get("body"), f"{where}.contact_geometries.body")
         names = geometries.get("names")
-        if not isinstance(names, list) or len(names) != 4:
+        if names is None:
+            names = ()
+        elif not isinstance(names, list) or len(names) != 4:
             raise _error(f"{where}.contact_geometries.names", f"must list four geometry names, got {names!r}")
         names = tuple(_string(n, f"{where}.contact_geometries.names") for n in names)
     fsr = raw.get("fsr_positions")
     offset = raw.get("sole_offset")
-    if offset is not None:
+    if offset == SOLE_AT_LOWEST_POINT:
+        if geometries is None:
+            raise _error(f"{where}.sole_offset", f"{SOLE_AT_LOWEST_POINT} needs contact_geometries (the points)")
+    elif offset is not None:
         if not isinstance(offset, list) or len(offset) != 3:
-            raise _error(f"{where}.sole_offset", f"must be [x, y, z] in m, got {offset!r}")
+            raise _error(f"{where}.sole_offset", f"must be [x, y, z] in m or {SOLE_AT_LOWEST_POINT!r}, got {offset!r}")
         offset = np.array([_number(x, f"{where}.sole_offset") for x in offset])
     remove = raw.get("remove_collisions", []) or []
     if not isinstance(remove, list):
@@ -673,6 +689,7 @@ __all__ = [
     "COLLISION_MESH_POLICIES",
     "FOOT_SENSING",
     "GAIN_GROUPS",
+    "SOLE_AT_LOWEST_POINT",
     "JOINT_GROUPS",
     "FootDescription",
     "RobotDescription",

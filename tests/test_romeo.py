@@ -207,3 +207,53 @@ def test_rotor_inertia_per_joint_wins_over_its_group(tmp_path):
     bad = _romeo_variant(tmp_path, lambda raw: raw["actuators"]["rotor_inertia"].update(Knee=0.2))
     with pytest.raises(RobotDescriptionError, match=r"actuators.rotor_inertia.Knee: .*nor is it a gain group"):
         _standing_plant(bad)
+
+
+def test_standing_explains_a_foot_box_in_the_ground_and_gains_the_stability_cap_lowered(tmp_path, capsys):
+    """``apps.standing`` explains a robot that cannot stand (issue 36). A new user's first
+    try at a URDF without sole frames: the soles put at the ankle links' origins (6.8 cm
+    above Romeo's real soles) and the ankles' collision boxes kept: the robot starts with
+    the boxes in the ground, and the run says which touched it first, at 0 s, and how deep.
+    Without the description's rotor inertia the explicit PD's stability cap lowers the light
+    ankle-roll gains, and the metrics name those joints."""
+    from pydrake.systems.analysis import Simulator
+
+    from diagrams.station.standing import StandingScenario, build_standing_diagram, gains_and_caps, standing_run_metrics
+    from diagrams.station.standing import set_initial_state as set_standing
+
+    def keep_boxes(raw):
+        for side in ("left", "right"):
+            foot = raw["feet"][side]
+            foot.update(sole_frame=f"{side[0]}_ankle", sensing="none")
+            for key in ("remove_collisions", "force_torque_joint"):
+                foot.pop(key)
+
+    robot = _romeo_variant(tmp_path, keep_boxes)
+    diagram, handles = build_standing_diagram(str(robot))
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    set_standing(diagram, context, handles)
+    simulator.Initialize()
+    simulator.AdvanceTo(0.05)
+    row = standing_run_metrics(StandingScenario(duration=0.05, settle_time=0.0), handles, context, 1.0)
+    first = row["first_unexpected_contact"]
+    assert first is not None and first.startswith(("l_ankle/", "r_ankle/")) and " at 0.000 s " in first
+    depth_mm = float(first.split("(")[1].split(" mm")[0])
+    assert 50.0 < depth_mm < 80.0  # the box's bottom, at the real sole, 68 mm under the ankle
+    assert row["stability_capped_gains"] == {}
+
+    from apps import standing as stand
+
+    args = ["--robot", str(robot), "--duration", "0.3", "--no-meshcat", "--out", str(tmp_path)]
+    status = stand.main(args)
+    printed = capsys.readouterr().out
+    assert status in (0, 1)
+    assert "romeo: l_ankle/" in printed or "romeo: r_ankle/" in printed
+    assert "touched the ground first, at 0.000 s" in printed
+
+    plant, _, romeo = _standing_plant(ROMEO)
+    assert gains_and_caps(plant, romeo)[2] == {}
+    plant, _, bare = _standing_plant(_romeo_variant(tmp_path, lambda raw: raw.pop("actuators")))
+    capped = gains_and_caps(plant, bare)[2]
+    assert {"LAnkleRoll", "RAnkleRoll"} <= set(capped)
+    assert all(cap < scaled for scaled, cap in capped.values())

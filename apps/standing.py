@@ -32,6 +32,7 @@ from apps.runner import (
     write_metrics,
 )
 from diagrams.station.standing import (
+    KD_STABILITY_MARGIN,
     StandingScenario,
     build_standing_diagram,
     check_standing_scenario,
@@ -132,6 +133,21 @@ def main(argv=None) -> int:
             if "replay" in r:
                 print(f"replay: {r['replay']}")
         fell = [r["model"] for r in rows if r["fell"]]
+        for r in rows:
+            if not r["fell"] and r["feet_flat"]:
+                continue
+            # Why: which part touched the ground besides the feet, and gains the cap lowered.
+            if r["first_unexpected_contact"] is not None:
+                print(f"{r['model']}: {r['first_unexpected_contact']}")
+            if r["stability_capped_gains"]:
+                joints = ", ".join(
+                    f"{j} (kd {g['kd_scaled']:.3g} -> {g['kd_cap']:.3g})"
+                    for j, g in r["stability_capped_gains"].items()
+                )
+                print(
+                    f"{r['model']}: the PD's stability cap (kd dt <= {KD_STABILITY_MARGIN} H_ii) lowered the gains of "
+                    f"{joints}: give the description a rotor inertia for them (actuators.rotor_inertia) or gains"
+                )
         if fell:
             print(f"FELL: {', '.join(fell)}", file=sys.stderr)
             return 1

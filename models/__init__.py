@@ -54,9 +54,17 @@ from pydrake.geometry import (
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import CoulombFriction, MultibodyPlant
-from pydrake.multibody.tree import Frame, ModelInstanceIndex, RigidBody, RotationalInertia, SpatialInertia
+from pydrake.multibody.tree import (
+    FixedOffsetFrame,
+    Frame,
+    ModelInstanceIndex,
+    RigidBody,
+    RotationalInertia,
+    SpatialInertia,
+)
 
 from models.description import (
+    GAIN_GROUPS,
     JOINT_GROUPS,
     RobotDescription,
     RobotDescriptionError,
@@ -489,11 +497,19 @@ def add_humanoid(
     ]
     if ungrouped:
         raise RobotDescriptionError(f"{where}: joint_groups: joints in no group: {ungrouped}")
-    overrides_by_field = (("joint_limits", description.joint_limits), ("joint_damping", description.joint_damping))
+    rotor_per_joint = {k: v for k, v in description.rotor_inertia.items() if k not in GAIN_GROUPS}
+    overrides_by_field = (
+        ("joint_limits", description.joint_limits),
+        ("joint_damping", description.joint_damping),
+        ("actuators.rotor_inertia", rotor_per_joint),
+    )
     for field_name, overrides in overrides_by_field:
         for j in overrides:
             if j not in grouped:
-                raise RobotDescriptionError(f"{where}: {field_name}.{j}: the robot has no grouped joint named {j!r}")
+                hint = f" nor is it a gain group {GAIN_GROUPS}" if field_name == "actuators.rotor_inertia" else ""
+                raise RobotDescriptionError(
+                    f"{where}: {field_name}.{j}: the robot has no grouped joint named {j!r}{hint}"
+                )
     for j, (lower, upper) in description.joint_limits.items():
         plant.GetJointByName(j, mi).set_position_limits([lower], [upper])
     for j, b in description.joint_damping.items():
@@ -510,14 +526,28 @@ def add_humanoid(
             joint = plant.GetJointByName(j, mi)
             actuated[j] = plant.AddJointActuator(f"{j}_actuator", joint, efforts.get(j, np.inf)).index()
         actuator = plant.get_mutable_joint_actuator(actuated[j])
-        rotor = description.rotor_inertia.get(description.gain_group(j))
+        rotor = rotor_per_joint.get(j, description.rotor_inertia.get(description.gain_group(j)))
         if rotor is not None and actuator.default_rotor_inertia() == 0.0:
             actuator.set_default_rotor_inertia(rotor)
             actuator.set_default_gear_ratio(1.0)
 
-    sole_frames = {
-        s: _get_frame(plant, f.sole_frame, mi, f"{where}: feet.{s}.sole_frame") for s, f in description.feet.items()
-    }
+    registered = plant.geometry_source_is_registered()
+    inspector = scene_graph.model_inspector() if (registered and scene_graph is not None) else None
+    sole_frames = {}
+    for s, f in description.feet.items():
+        frame = _get_frame(plant, f.sole_frame, mi, f"{where}: feet.{s}.sole_frame")
+        if isinstance(f.sole_offset, str):  # SOLE_AT_LOWEST_POINT: where the foot's geometries touch
+            field_where = f"{where}: feet.{s}"
+            if inspector is None:
+                raise RobotDescriptionError(f"{field_where}.sole_offset: {f.sole_offset} needs the plant's SceneGraph")
+            ids = _contact_geometry_ids(plant, inspector, f, mi, field_where)
+            centres, lowest = _geometry_points_in_frame(inspector, ids, frame, field_where)
+            offset = [float(centres[:, 0].mean()), float(centres[:, 1].mean()), lowest]
+            frame = plant.AddFrame(FixedOffsetFrame(f"{s}_sole_at_lowest_point", frame, RigidTransform(offset), mi))
+        elif f.sole_offset is not None:  # the sole, offset from the named frame (a URDF without one)
+            name = f"{s}_sole_from_{frame.name()}"
+            frame = plant.AddFrame(FixedOffsetFrame(name, frame, RigidTransform(f.sole_offset), mi))
+        sole_frames[s] = frame
     imu = _get_frame(plant, description.imu_frame, mi, f"{where}: imu_frame")
     ft_joints = {}
     for side, foot in description.feet.items():
@@ -544,7 +574,6 @@ def add_humanoid(
             shoulders[side] = plant.GetJointByName(groups[f"{side}_arm"][0], mi).child_body()
 
     bodies = [plant.get_body(i) for i in plant.GetBodyIndices(mi)]
-    registered = plant.geometry_source_is_registered()
     fsr_geometries, fsr_positions = {}, {}
     mass = sum(b.default_mass() for b in bodies if np.isfinite(b.default_mass()))
     for side, foot in description.feet.items():
@@ -564,28 +593,29 @@ def add_humanoid(
             fsr_positions[side] = foot.contact_points if foot.fsr_positions is None else foot.fsr_positions
             continue
         body = _get_body(plant, foot.contact_geometry_body, mi, f"{field_where}.contact_geometries.body")
-        if registered:
+        where_they_are = None
+        if inspector is not None:
+            ids = _contact_geometry_ids(plant, inspector, foot, mi, field_where)
+            centres, _ = _geometry_points_in_frame(inspector, ids, sole_frames[side], field_where)
+            if not foot.contact_geometry_names:  # the body's own four: in FSR_ORDER by position
+                order = _fsr_order(centres[:, :2])
+                ids, centres = [ids[k] for k in order], centres[order]
+            fsr_geometries[side] = tuple(ids)
+            where_they_are = centres[:, :2]
+        elif registered:
             ids = plant.GetCollisionGeometriesForBody(body)
-            if scene_graph is not None:
-                inspector = scene_graph.model_inspector()
-                by_name = {inspector.GetName(g).split("::")[-1]: g for g in ids}
-                missing = [w for w in foot.contact_geometry_names if w not in by_name]
-                if missing:
-                    raise RobotDescriptionError(
-                        f"{field_where}.contact_geometries.names: body {body.name()!r} has no collision geometry "
-                        f"named {missing}"
-                    )
-                fsr_geometries[side] = tuple(by_name[w] for w in foot.contact_geometry_names)
-            else:
-                if len(ids) < 4:
-                    raise RobotDescriptionError(f"{field_where}: foot {body.name()!r} has < 4 collision geometries")
-                fsr_geometries[side] = tuple(ids[:4])
-        if foot.fsr_positions is None:
+            if len(ids) < 4:
+                raise RobotDescriptionError(f"{field_where}: foot {body.name()!r} has < 4 collision geometries")
+            fsr_geometries[side] = tuple(ids[:4])
+        if foot.fsr_positions is not None:
+            fsr_positions[side] = foot.fsr_positions
+        elif where_they_are is not None:
+            fsr_positions[side] = where_they_are
+        else:
             raise RobotDescriptionError(
-                f"{field_where}.fsr_positions: needed with contact_geometries (the four points' (x, y) in the "
-                "sole frame)"
+                f"{field_where}.fsr_positions: needed with contact_geometries when the plant has no SceneGraph "
+                "(the four points' (x, y) in the sole frame)"
             )
-        fsr_positions[side] = foot.fsr_positions
     collision = {}
     if registered:
         collision = {b.name(): tuple(plant.GetCollisionGeometriesForBody(b)) for b in bodies}
@@ -613,6 +643,63 @@ def add_humanoid(
         description=description,
         foot_sensing={s: f.sensing for s, f in description.feet.items()},
     )
+
+
+def _contact_geometry_ids(plant: MultibodyPlant, inspector, foot, mi: ModelInstanceIndex, where: str) -> list:
+    """A foot's four contact geometries (``contact_geometries``): the named ones in
+    FSR_ORDER, or the body's own: its four spheres, else its four collision geometries (in
+    the plant's order)."""
+    body = _get_body(plant, foot.contact_geometry_body, mi, f"{where}.contact_geometries.body")
+    ids = list(plant.GetCollisionGeometriesForBody(body))
+    by_name = {inspector.GetName(g).split("::")[-1]: g for g in ids}
+    if foot.contact_geometry_names:
+        missing = [w for w in foot.contact_geometry_names if w not in by_name]
+        if missing:
+            raise RobotDescriptionError(
+                f"{where}.contact_geometries.names: body {body.name()!r} has no collision geometry named {missing}"
+            )
+        return [by_name[w] for w in foot.contact_geometry_names]
+    spheres = [g for g in ids if isinstance(inspector.GetShape(g), Sphere)]
+    if len(spheres) == 4:  # a foot's contact spheres (beside, e.g., its box)
+        return spheres
+    if len(ids) != 4:
+        raise RobotDescriptionError(
+            f"{where}.contact_geometries: body {body.name()!r} has {len(ids)} collision geometries "
+            f"({sorted(by_name)}) of which {len(spheres)} spheres, neither four: name the four it touches "
+            "the ground with (names: [...])"
+        )
+    return ids
+
+
+def _geometry_points_in_frame(inspector, ids: list, frame: Frame, where: str) -> tuple[np.ndarray, float]:
+    """The geometries' centres in ``frame``'s axes (N, 3), m, and their lowest point's z
+    there, m (spheres and boxes; ``frame`` on the geometries' body)."""
+    X_FB = frame.GetFixedPoseInBodyFrame().inverse()
+    centres, lowest = [], np.inf
+    for g in ids:
+        X_FG = X_FB @ inspector.GetPoseInFrame(g)
+        shape = inspector.GetShape(g)
+        centres.append(X_FG.translation())
+        if isinstance(shape, Sphere):
+            lowest = min(lowest, X_FG.translation()[2] - shape.radius())
+        elif isinstance(shape, Box):
+            half = 0.5 * np.array([shape.width(), shape.depth(), shape.height()])
+            corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * half
+            lowest = min(lowest, float(np.min((X_FG.rotation().matrix() @ corners.T)[2] + X_FG.translation()[2])))
+        else:
+            raise RobotDescriptionError(
+                f"{where}.contact_geometries: {inspector.GetName(g)!r} is a {type(shape).__name__}; the foot's "
+                "contact geometries must be spheres or boxes"
+            )
+    return np.array(centres), float(lowest)
+
+
+def _fsr_order(xy: np.ndarray) -> np.ndarray:
+    """Indices of four (x, y) points in FSR_ORDER: the two with the larger x are the front,
+    of each pair the one with the larger y is the left."""
+    by_x = np.argsort(-xy[:, 0], kind="stable")
+    pairs = [by_x[:2], by_x[2:]]  # front, rear
+    return np.concatenate([p[np.argsort(-xy[p, 1], kind="stable")] for p in pairs])
 
 
 #: Ground contact material. Stiff enough that the combined (harmonic-mean) point-contact

@@ -20,6 +20,10 @@ The YAML reference (lengths in m, angles in rad, gains in N m/rad and N m s/rad)
     feet:
       left:
         sole_frame: left_sole_link  # frame or body at the sole's centre, x forward, z up
+        sole_offset: [0, 0, -0.035] # optional: the sole is this far (m) from sole_frame, in
+                                    # its axes (a URDF without a sole frame: its ankle link);
+                                    # or lowest_point: at the contact geometries' lowest point
+                                    # (x, y their centres' mean) in sole_frame's axes
         sensing: force_torque       # force_torque | fsr | none
         force_torque_joint: leg_left_sole_fix_joint
                                     # force_torque: the weld whose reaction the sensor measures
@@ -29,7 +33,10 @@ The YAML reference (lengths in m, angles in rad, gains in N m/rad and N m s/rad)
                                     # front right, rear left, rear right): a small sphere is
                                     # added at each, touching the sole plane. Or, instead,
         # contact_geometries: {body: l_ankle, names: [l_fsr_front_left, ...]}
-                                    # four existing collision geometries, in FSR_ORDER
+                                    # four existing collision geometries, in FSR_ORDER; without
+                                    # names: the body's four spheres (else its four geometries,
+                                    # spheres or boxes), ordered by where they are in the sole
+                                    # frame, the FSRs there unless fsr_positions says otherwise
         contact_sphere_radius: 0.005  # optional (default 0.005)
         fsr_positions: [[...], ...]   # optional (x, y) of the four FSRs in the sole frame
                                     # (default: the contact points / geometries)
@@ -59,7 +66,9 @@ The YAML reference (lengths in m, angles in rad, gains in N m/rad and N m s/rad)
       wrists: [...]                 # arm joints with "wrist" in their name
       hands: [...]
     actuators:                      # optional: for joints the model file gives no actuator
-      rotor_inertia: {legs: 0.1}    # reflected rotor inertia per group, kg m^2 (default 0)
+      rotor_inertia: {legs: 0.1, knee_joint: 0.2}
+                                    # reflected rotor inertia per group or per joint (a joint
+                                    # wins over its group), kg m^2 (default 0)
     joint_limits: {joint: [lower, upper]}      # optional overrides, rad
     joint_damping: {joint: b}                  # optional viscous friction overrides, N m s/rad
     link_inertias:                  # optional: replace the model file's inertia of these links
@@ -89,6 +98,8 @@ from pydrake.math import RollPitchYaw
 JOINT_GROUPS = ("left_leg", "right_leg", "torso", "head", "left_arm", "right_arm", "left_hand", "right_hand")
 #: Gain groups (``gains``): the joint groups merged by kind, wrists apart.
 GAIN_GROUPS = ("legs", "torso", "head", "arms", "wrists", "hands")
+#: ``sole_offset``'s value that puts the sole at the foot's contact geometries' lowest point.
+SOLE_AT_LOWEST_POINT = "lowest_point"
 FOOT_SENSING = ("force_torque", "fsr", "none")
 COLLISION_MESH_POLICIES = ("keep", "bounding_box")
 SIDES = ("left", "right")
@@ -120,6 +131,7 @@ _FOOT_FIELDS = {
     "contact_sphere_radius",
     "fsr_positions",
     "remove_collisions",
+    "sole_offset",
 }
 
 
@@ -132,12 +144,19 @@ class FootDescription:
     """One foot of a ``RobotDescription`` (see the module docstring's reference).
 
     Attributes:
-        sole_frame: frame (or body) name at the sole's centre, x forward, z up.
+        sole_frame: frame (or body) name at the sole's centre, x forward, z up (or, with
+            ``sole_offset``, the frame the sole is offset from).
+        sole_offset: (3,) the sole's position in ``sole_frame``'s axes, m,
+            ``SOLE_AT_LOWEST_POINT`` (the contact geometries' lowest point, x and y their
+            centres' mean), or None (the sole is ``sole_frame`` itself); the loader adds the
+            sole as a frame there.
         sensing: one of FOOT_SENSING.
         force_torque_joint: the F/T weld joint's name (sensing force_torque), else None.
         contact_points: (4, 2) sole-frame (x, y) where spheres are added, m, or None.
         contact_geometry_body: the body of ``contact_geometry_names``, or None.
-        contact_geometry_names: four existing collision geometries in FSR_ORDER, or ().
+        contact_geometry_names: four existing collision geometries in FSR_ORDER, or (): the
+            body's own four spheres (else its four geometries), ordered by their positions
+            in the sole frame.
         contact_sphere_radius: m.
         fsr_positions: (4, 2) the FSRs' (x, y) in the sole frame, m, or None (default: the
             contact points, or the contact geometries' positions).
@@ -153,6 +172,7 @@ class FootDescription:
     contact_sphere_radius: float
     fsr_positions: np.ndarray | None
     remove_collisions: tuple[str, ...]
+    sole_offset: np.ndarray | str | None = None
 
 
 @dataclass(frozen=True)
@@ -171,8 +191,8 @@ class RobotDescription:
         shoulders: ``left``/``right`` body names, or {} (derived from the arms).
         standing_posture: joint -> angle, rad.
         gains: gain group -> (kp, kd), only the groups the file gives.
-        rotor_inertia: gain group -> reflected rotor inertia for the actuators the loader
-            adds, kg m^2.
+        rotor_inertia: gain group or joint name -> reflected rotor inertia for the
+            actuators the loader adds, kg m^2 (a joint's entry wins over its group's).
         joint_limits: joint -> (lower, upper), rad.
         joint_damping: joint -> viscous damping, N m s/rad.
         link_inertias: link -> (mass kg, centre of mass in the link frame m, inertia about it
@@ -282,10 +302,20 @@ def _foot(raw, where: str) -> FootDescription:
         _unknown_keys(geometries, {"body", "names"}, f"{where}.contact_geometries")
         body = _string(geometries.get("body"), f"{where}.contact_geometries.body")
         names = geometries.get("names")
-        if not isinstance(names, list) or len(names) != 4:
+        if names is None:
+            names = ()
+        elif not isinstance(names, list) or len(names) != 4:
             raise _error(f"{where}.contact_geometries.names", f"must list four geometry names, got {names!r}")
         names = tuple(_string(n, f"{where}.contact_geometries.names") for n in names)
     fsr = raw.get("fsr_positions")
+    offset = raw.get("sole_offset")
+    if offset == SOLE_AT_LOWEST_POINT:
+        if geometries is None:
+            raise _error(f"{where}.sole_offset", f"{SOLE_AT_LOWEST_POINT} needs contact_geometries (the points)")
+    elif offset is not None:
+        if not isinstance(offset, list) or len(offset) != 3:
+            raise _error(f"{where}.sole_offset", f"must be [x, y, z] in m or {SOLE_AT_LOWEST_POINT!r}, got {offset!r}")
+        offset = np.array([_number(x, f"{where}.sole_offset") for x in offset])
     remove = raw.get("remove_collisions", []) or []
     if not isinstance(remove, list):
         raise _error(f"{where}.remove_collisions", f"must be a list of body names, got {remove!r}")
@@ -303,6 +333,7 @@ def _foot(raw, where: str) -> FootDescription:
         ),
         fsr_positions=None if fsr is None else _points(fsr, f"{where}.fsr_positions"),
         remove_collisions=tuple(_string(b, f"{where}.remove_collisions") for b in remove),
+        sole_offset=offset,
     )
 
 
@@ -392,10 +423,9 @@ def load_robot_description(path: str | os.PathLike) -> RobotDescription:
     actuators = _mapping(raw.get("actuators"), f"{where}: actuators")
     _unknown_keys(actuators, {"rotor_inertia"}, f"{where}: actuators")
     rotor = {}
-    for group, value in _mapping(actuators.get("rotor_inertia"), f"{where}: actuators.rotor_inertia").items():
-        if group not in GAIN_GROUPS:
-            raise _error(f"{where}: actuators.rotor_inertia.{group}", f"unknown group; valid: {GAIN_GROUPS}")
-        rotor[group] = _number(value, f"{where}: actuators.rotor_inertia.{group}", non_negative=True)
+    for key, value in _mapping(actuators.get("rotor_inertia"), f"{where}: actuators.rotor_inertia").items():
+        # A gain group, or a joint name (checked against the robot's joints by the loader).
+        rotor[str(key)] = _number(value, f"{where}: actuators.rotor_inertia.{key}", non_negative=True)
     limits = {}
     for j, value in _mapping(raw.get("joint_limits"), f"{where}: joint_limits").items():
         lower, upper = _pair(value, f"{where}: joint_limits.{j}")
@@ -659,6 +689,7 @@ __all__ = [
     "COLLISION_MESH_POLICIES",
     "FOOT_SENSING",
     "GAIN_GROUPS",
+    "SOLE_AT_LOWEST_POINT",
     "JOINT_GROUPS",
     "FootDescription",
     "RobotDescription",

@@ -296,3 +296,51 @@ def test_a_model_with_a_non_physical_link_inertia_is_refused_naming_the_link(tmp
     plant, scene_graph = _plant()
     with pytest.raises(RobotDescriptionError, match=message):
         add_humanoid(plant, _write(tmp_path, raw), scene_graph=scene_graph)
+
+
+FEET = ("left", "right")
+
+
+def test_a_foot_reuses_its_bodys_own_contact_geometries_and_its_sole_sits_at_their_lowest_point(tmp_path):
+    """A vendor URDF's feet carry their own contact spheres and no sole frame (issue 36):
+    ``contact_geometries: {body: ...}`` without names takes the body's four collision
+    geometries, in FSR_ORDER by where they are, with the FSR positions where they are; and
+    ``sole_offset: lowest_point`` puts the sole at their lowest point. On hrp4_like (whose
+    description names its four spheres and gives a sole frame and the FSR positions) the
+    same feet result from the body alone: the same geometries in the same order, the sole
+    frame at the same pose, the FSRs at the same (x, y)."""
+
+    def load(raw):
+        plant, scene_graph = _plant()
+        handles = add_humanoid(plant, str(_write(tmp_path, raw)), scene_graph=scene_graph)
+        plant.Finalize()
+        context = plant.CreateDefaultContext()
+        set_standing_state(plant, context, handles)
+        names = {s: [scene_graph.model_inspector().GetName(g) for g in handles.fsr_geometries[s]] for s in FEET}
+        return plant, context, handles, names
+
+    raw = _builtin_raw("hrp4_like", tmp_path)
+    plant, context, named, named_geometries = load(raw)
+    for side in ("left", "right"):
+        foot = raw["feet"][side]
+        foot["sole_frame"] = foot["contact_geometries"]["body"]  # the body, not the sole frame
+        foot["sole_offset"] = "lowest_point"
+        foot["contact_geometries"].pop("names")
+        foot.pop("fsr_positions")
+    plant2, context2, by_body, geometries = load(raw)
+    assert geometries == named_geometries
+    for side in ("left", "right"):
+        assert by_body.sole_frames[side].name() == f"{side}_sole_at_lowest_point"
+        X, X2 = (h.sole_frames[side].CalcPoseInWorld(c) for h, c in ((named, context), (by_body, context2)))
+        np.testing.assert_allclose(X2.GetAsMatrix4(), X.GetAsMatrix4(), atol=1e-12)
+        np.testing.assert_allclose(by_body.fsr_positions[side], named.fsr_positions[side], atol=1e-12)
+    np.testing.assert_allclose(plant2.GetPositions(context2), plant.GetPositions(context), atol=1e-12)
+
+    raw["feet"]["left"]["contact_geometries"]["body"] = "L_KNEE_P_LINK"
+    with pytest.raises(RobotDescriptionError, match=r"feet.left.contact_geometries: body 'L_KNEE_P_LINK' has \d+ "):
+        load(raw)
+    raw = _builtin_raw("hrp4_like", tmp_path)
+    raw["feet"]["left"].update(sole_offset="lowest_point", contact_points=[[0, 0]] * 4)
+    raw["feet"]["left"].pop("contact_geometries")
+    with pytest.raises(RobotDescriptionError, match="sole_offset: lowest_point needs contact_geometries"):
+        load_robot_description(_write(tmp_path, raw))

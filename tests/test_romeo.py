@@ -134,3 +134,126 @@ def test_romeo_stands(tmp_path):
     row = json.loads((tmp_path / "standing" / "romeo.json").read_text())
     assert row["fell"] is False and row["feet_flat"] is True
     assert np.isfinite(row["base_drift_cm"]) and row["base_drift_cm"] < 1.0
+
+
+def _romeo_variant(tmp_path: Path, edit) -> Path:
+    """romeo.yaml with ``edit`` applied, written beside a copy (the model's package:// URI
+    resolves the same)."""
+    raw = yaml.safe_load(ROMEO.read_text())
+    edit(raw)
+    path = tmp_path / "romeo_variant.yaml"
+    path.write_text(yaml.safe_dump(raw, sort_keys=False))
+    return path
+
+
+def _standing_plant(robot):
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=1e-3), builder)
+    handles = add_humanoid(plant, str(robot), scene_graph=scene_graph)
+    plant.Finalize()
+    context = plant.CreateDefaultContext()
+    set_standing_state(plant, context, handles)
+    return plant, context, handles
+
+
+def test_a_sole_offset_from_the_ankle_places_the_sole_where_the_urdf_frame_is(tmp_path):
+    """A URDF without a sole frame (issue 36): ``sole_offset`` places the sole in the ankle
+    link's axes. Romeo's own l_sole/r_sole frames are 0.0684 m below the ankle links' origins
+    (romeo.urdf's fixed sole joints); the offset frame lands on them and the robot stands the
+    same (the soles are its contact frames)."""
+    plant, context, handles = _standing_plant(ROMEO)
+    expected = {s: handles.sole_frames[s].CalcPoseInWorld(context) for s in ("left", "right")}
+    offsets = {}
+    for side in ("left", "right"):
+        ankle = plant.GetBodyByName(f"{side[0]}_ankle")
+        X_AS = handles.sole_frames[side].CalcPose(context, ankle.body_frame())
+        assert np.allclose(X_AS.rotation().matrix(), np.eye(3))
+        offsets[side] = X_AS.translation().tolist()
+
+    def edit(raw):
+        for side in ("left", "right"):
+            foot = raw["feet"][side]
+            foot.update(sole_frame=f"{side[0]}_ankle", sole_offset=offsets[side], sensing="none")
+            foot.pop("force_torque_joint")
+
+    plant2, context2, handles2 = _standing_plant(_romeo_variant(tmp_path, edit))
+    for side in ("left", "right"):
+        frame = handles2.sole_frames[side]
+        assert frame.name() == f"{side}_sole_from_{side[0]}_ankle"
+        X = frame.CalcPoseInWorld(context2)
+        np.testing.assert_allclose(X.translation(), expected[side].translation(), atol=1e-12)
+        np.testing.assert_allclose(X.rotation().matrix(), expected[side].rotation().matrix(), atol=1e-12)
+    np.testing.assert_allclose(plant2.GetPositions(context2), plant.GetPositions(context), atol=1e-12)
+    bad = _romeo_variant(tmp_path, lambda raw: raw["feet"]["left"].update(sole_offset=[0.0, 0.1]))
+    with pytest.raises(RobotDescriptionError, match=r"feet.left.sole_offset: must be \[x, y, z\]"):
+        load_robot_description(bad)
+
+
+def test_rotor_inertia_per_joint_wins_over_its_group(tmp_path):
+    """``actuators.rotor_inertia`` takes joint names as well as groups (hip, knee and ankle
+    motors differ): the knee's own entry, its group's for the other leg joints; a key that
+    is neither a joint nor a group is refused naming it."""
+
+    def edit(raw):
+        raw["actuators"]["rotor_inertia"]["LKneePitch"] = 0.25
+
+    plant, _, _ = _standing_plant(_romeo_variant(tmp_path, edit))
+    rotor = {
+        plant.get_joint_actuator(a).joint().name(): plant.get_joint_actuator(a).default_rotor_inertia()
+        for a in plant.GetJointActuatorIndices()
+    }
+    assert rotor["LKneePitch"] == 0.25 and rotor["RKneePitch"] == 0.1 and rotor["LHipPitch"] == 0.1
+    assert rotor["TrunkYaw"] == 0.1 and rotor["NeckYaw"] == 0.01
+    bad = _romeo_variant(tmp_path, lambda raw: raw["actuators"]["rotor_inertia"].update(Knee=0.2))
+    with pytest.raises(RobotDescriptionError, match=r"actuators.rotor_inertia.Knee: .*nor is it a gain group"):
+        _standing_plant(bad)
+
+
+def test_standing_explains_a_foot_box_in_the_ground_and_gains_the_stability_cap_lowered(tmp_path, capsys):
+    """``apps.standing`` explains a robot that cannot stand (issue 36). A new user's first
+    try at a URDF without sole frames: the soles put at the ankle links' origins (6.8 cm
+    above Romeo's real soles) and the ankles' collision boxes kept: the robot starts with
+    the boxes in the ground, and the run says which touched it first, at 0 s, and how deep.
+    Without the description's rotor inertia the explicit PD's stability cap lowers the light
+    ankle-roll gains, and the metrics name those joints."""
+    from pydrake.systems.analysis import Simulator
+
+    from diagrams.station.standing import StandingScenario, build_standing_diagram, gains_and_caps, standing_run_metrics
+    from diagrams.station.standing import set_initial_state as set_standing
+
+    def keep_boxes(raw):
+        for side in ("left", "right"):
+            foot = raw["feet"][side]
+            foot.update(sole_frame=f"{side[0]}_ankle", sensing="none")
+            for key in ("remove_collisions", "force_torque_joint"):
+                foot.pop(key)
+
+    robot = _romeo_variant(tmp_path, keep_boxes)
+    diagram, handles = build_standing_diagram(str(robot))
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    set_standing(diagram, context, handles)
+    simulator.Initialize()
+    simulator.AdvanceTo(0.05)
+    row = standing_run_metrics(StandingScenario(duration=0.05, settle_time=0.0), handles, context, 1.0)
+    first = row["first_unexpected_contact"]
+    assert first is not None and first.startswith(("l_ankle/", "r_ankle/")) and " at 0.000 s " in first
+    depth_mm = float(first.split("(")[1].split(" mm")[0])
+    assert 50.0 < depth_mm < 80.0  # the box's bottom, at the real sole, 68 mm under the ankle
+    assert row["stability_capped_gains"] == {}
+
+    from apps import standing as stand
+
+    args = ["--robot", str(robot), "--duration", "0.3", "--no-meshcat", "--out", str(tmp_path)]
+    status = stand.main(args)
+    printed = capsys.readouterr().out
+    assert status in (0, 1)
+    assert "romeo: l_ankle/" in printed or "romeo: r_ankle/" in printed
+    assert "touched the ground first, at 0.000 s" in printed
+
+    plant, _, romeo = _standing_plant(ROMEO)
+    assert gains_and_caps(plant, romeo)[2] == {}
+    plant, _, bare = _standing_plant(_romeo_variant(tmp_path, lambda raw: raw.pop("actuators")))
+    capped = gains_and_caps(plant, bare)[2]
+    assert {"LAnkleRoll", "RAnkleRoll"} <= set(capped)
+    assert all(cap < scaled for scaled, cap in capped.values())

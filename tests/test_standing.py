@@ -10,7 +10,12 @@ import pytest
 from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.analysis import Simulator
 
-from diagrams.station.standing import build_standing_diagram, set_initial_state, standing_metrics
+from diagrams.station.standing import (
+    build_standing_diagram,
+    first_unexpected_contact,
+    set_initial_state,
+    standing_metrics,
+)
 from models import MODEL_NAMES
 
 DURATION = 10.0  # s
@@ -56,6 +61,8 @@ def test_stands_still_with_feet_flat(model_name):
     )
     q_nominal = np.array(list(handles.humanoid.nominal_posture.values()))
     assert np.max(np.abs(q_joints - q_nominal)) < np.radians(3.0)
+    # Nothing but the feet's contact geometries touched the ground.
+    assert first_unexpected_contact(handles, context) is None
 
 
 def test_metrics_detect_a_fall():
@@ -69,3 +76,8 @@ def test_metrics_detect_a_fall():
     m = standing_metrics(handles, context, settle_time=SETTLE)
     assert m.fell
     assert not m.feet_flat or m.base_drift_m > 0.01
+    # The fall is explained: the collapsing robot put another part of it on the ground.
+    first = first_unexpected_contact(handles, context)
+    assert first is not None and "touched the ground first, at" in first
+    time = float(first.split(" at ")[1].split(" s")[0])
+    assert 0.0 < time < 2.0

@@ -42,6 +42,7 @@ from models import (
     set_standing_state,
 )
 from systems.common.contact_results import robot_point_contacts
+from systems.simulation.contact_monitor import FirstUnexpectedContact
 from systems.simulation.pd_gravity import PdGravityController, joint_vector_from_names
 
 #: hrp4_like's PD gains per gain group: (kp [N m/rad], kd [N m s/rad]), the reference that
@@ -97,6 +98,10 @@ class StandingHandles:
         state_logger: VectorLogSink of the plant state [q; v].
         q_desired: the constant desired joint positions (v[6:] order), rad.
         meshcat_visualizer: the MeshcatVisualizer, or None.
+        first_contact: the ``FirstUnexpectedContact`` monitor of every robot collision
+            geometry but the feet's contact geometries, or None (the robot has none).
+        capped_gains: the joints whose default gains the stability cap lowered, {joint: (kd
+            scaled, kd cap)} N m s/rad ({} with given gains).
     """
 
     plant: MultibodyPlant
@@ -106,6 +111,8 @@ class StandingHandles:
     state_logger: VectorLogSink
     q_desired: np.ndarray
     meshcat_visualizer: MeshcatVisualizer | None = None
+    first_contact: FirstUnexpectedContact | None = None
+    capped_gains: dict = field(default_factory=dict)
 
 
 def standing_size(plant: MultibodyPlant, humanoid: HumanoidHandles) -> tuple[float, float]:
@@ -136,7 +143,14 @@ def size_ratios(plant: MultibodyPlant, humanoid: HumanoidHandles) -> tuple[float
 
 
 def default_gains(plant: MultibodyPlant, humanoid: HumanoidHandles) -> tuple[np.ndarray, np.ndarray]:
-    """Per-joint default (kp, kd) arrays in v[6:] order for a humanoid.
+    """Per-joint default (kp, kd) arrays in v[6:] order for a humanoid (``gains_and_caps``)."""
+    kp, kd, _ = gains_and_caps(plant, humanoid)
+    return kp, kd
+
+
+def gains_and_caps(plant: MultibodyPlant, humanoid: HumanoidHandles) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Per-joint default (kp, kd) arrays in v[6:] order for a humanoid, and the joints whose
+    gains the stability cap lowered: {joint: (kd scaled, kd cap)}, N m s/rad.
 
     The description's ``gains`` where it gives them (every built-in model gives all).
     Other groups scale hrp4_like's (``REFERENCE_GAINS``) by the robot's gravitational
@@ -157,7 +171,7 @@ def default_gains(plant: MultibodyPlant, humanoid: HumanoidHandles) -> tuple[np.
         set_standing_state(plant, context, humanoid)
         table.update({g: (scale * REFERENCE_GAINS[g][0], scale * REFERENCE_GAINS[g][1]) for g in missing})
         inertia = np.diag(plant.CalcMassMatrix(context))
-    kp, kd = {}, {}
+    kp, kd, capped = {}, {}, {}
     dt = plant.time_step() if plant.time_step() > 0.0 else 1e-3
     for group in ("legs", "torso", "head", "arms", "hands"):
         for j in humanoid.joint_groups[group]:
@@ -167,8 +181,9 @@ def default_gains(plant: MultibodyPlant, humanoid: HumanoidHandles) -> tuple[np.
                 index = plant.GetJointByName(j, humanoid.model_instance).velocity_start()
                 limit = KD_STABILITY_MARGIN * inertia[index] / dt
                 if kd[j] > limit:
+                    capped[j] = (float(kd[j]), float(limit))
                     kp[j], kd[j] = kp[j] * limit / kd[j], limit
-    return (joint_vector_from_names(plant, kp), joint_vector_from_names(plant, kd))
+    return joint_vector_from_names(plant, kp), joint_vector_from_names(plant, kd), capped
 
 
 def build_standing_diagram(
@@ -210,7 +225,9 @@ def build_standing_diagram(
     add_ground(plant)
     plant.Finalize()
 
-    kp_default, kd_default = default_gains(plant, humanoid)
+    kp_default, kd_default, capped = gains_and_caps(plant, humanoid)
+    if kp is not None or kd is not None:
+        capped = {}
     controller = builder.AddSystem(
         PdGravityController(plant, kp_default if kp is None else kp, kd_default if kd is None else kd)
     )
@@ -223,12 +240,29 @@ def build_standing_diagram(
     builder.Connect(controller.get_output_port(), plant.get_actuation_input_port())
     logger = LogVectorOutput(plant.get_state_output_port(), builder, state_log_period)
     logger.set_name("state_logger")
+    # Every robot collision geometry but the feet's contact geometries: which touched the
+    # ground first explains a fall.
+    feet = {g for ids in humanoid.fsr_geometries.values() for g in ids}
+    inspector = scene_graph.model_inspector()
+    watched = {
+        g: f"{body}/{inspector.GetName(g).split('::')[-1]}"
+        for body, ids in humanoid.collision_geometries.items()
+        for g in ids
+        if g not in feet
+    }
+    monitor = None
+    if watched:
+        monitor = builder.AddSystem(FirstUnexpectedContact(watched, plant.time_step()))
+        monitor.set_name("first_unexpected_contact")
+        builder.Connect(plant.get_contact_results_output_port(), monitor.get_input_port())
     visualizer = None
     if meshcat is not None:
         visualizer = MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)
     diagram = builder.Build()
     diagram.set_name(f"standing_{model_name}")
-    return diagram, StandingHandles(plant, scene_graph, humanoid, controller, logger, q_desired, visualizer)
+    return diagram, StandingHandles(
+        plant, scene_graph, humanoid, controller, logger, q_desired, visualizer, monitor, capped
+    )
 
 
 def set_initial_state(diagram: Diagram, context: Context, handles: StandingHandles) -> None:
@@ -353,7 +387,18 @@ def standing_run_metrics(
         sphere_forces_N={k: v.tolist() for k, v in metrics.sphere_forces_N.items()},
         feet_flat=metrics.feet_flat,
         fell=metrics.fell,
+        first_unexpected_contact=first_unexpected_contact(handles, context),
+        stability_capped_gains={j: {"kd_scaled": a, "kd_cap": b} for j, (a, b) in handles.capped_gains.items()},
     )
+
+
+def first_unexpected_contact(handles: StandingHandles, context: Context) -> str | None:
+    """Which robot geometry other than the feet's contact geometries touched the ground
+    first, when and how deep (``FirstUnexpectedContact.describe``), or None."""
+    monitor = handles.first_contact
+    if monitor is None:
+        return None
+    return monitor.describe(monitor.get_output_port().Eval(monitor.GetMyContextFromRoot(context)))
 
 
 __all__ = [
@@ -364,7 +409,9 @@ __all__ = [
     "build_standing_diagram",
     "check_standing_scenario",
     "default_gains",
+    "first_unexpected_contact",
     "foot_sphere_normal_forces",
+    "gains_and_caps",
     "set_initial_state",
     "standing_metrics",
     "standing_run_metrics",

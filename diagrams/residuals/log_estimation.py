@@ -774,7 +774,7 @@ def at_rest_imu_bias(
 
     What rest makes observable (the gyro bias on all three axes, the accelerometer's along
     the measured vertical): ``systems.estimation.base_state_estimator.imu_bias_at_rest``,
-    which the online station's filter uses too (``at_rest_duration``).
+    whose floor and vertical part the online station's filter uses too (``at_rest_duration``).
 
     Args:
         gyro, specific_force: (N, 3) rad/s, m/s^2 (IMU frame). joint_velocities: (N, n).

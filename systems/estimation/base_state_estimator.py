@@ -522,14 +522,13 @@ class ContactAidedInvariantEkf:
         self._P[g, g] += float(std) ** 2 * np.outer(n, n)
 
     def rotate_about_vertical(self, angle: float) -> None:
-        """Turns the estimate about the world's vertical through the IMU's position by
-        ``angle`` (rad): R, v and the feet in contact (d_j about p); P is kept (for the
-        fraction of a degree of an at-rest yaw correction)."""
-        c, s_ = math.cos(angle), math.sin(angle)
-        Rz = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
-        self._R = Rz @ self._R
-        self._v = Rz @ self._v
-        self._d = self._p + (self._d - self._p) @ Rz.T
+        """Turns the estimate about the world's vertical (against gravity) through the IMU's
+        position by ``angle`` (rad): R, v and the feet in contact (d_j about p); P is kept
+        (for the fraction of a degree of an at-rest yaw correction)."""
+        turn = so3_exp(-angle * self._g / np.linalg.norm(self._g))
+        self._R = turn @ self._R
+        self._v = turn @ self._v
+        self._d = self._p + (self._d - self._p) @ turn.T
 
     @property
     def num_feet(self) -> int:
@@ -1184,7 +1183,6 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
             self._rest_steps = int(round(duration / self._period))
             if self._rest_steps < 2:
                 raise ValueError(f"{who}: at_rest_duration {duration} s is shorter than two periods")
-        self._gravity = float(np.linalg.norm(plant.gravity_field().gravity_vector()))
         # The slip test's low-pass gain per update (E13).
         self._slip_alpha = min(1.0, self._period / SLIP_SPEED_TIME_CONSTANT)
         x0 = self._initial_state(initial_base_pose, initial_base_velocity)
@@ -1359,7 +1357,7 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
     def _vertical_gyro_bias_from_rest(self, x: np.ndarray, rest: np.ndarray) -> np.ndarray:
         """The filter state ``x`` at the end of the at-rest window whose sums are ``rest``:
         its gyro bias about the vertical (the measured specific force's direction) set to
-        the mean gyro reading's component (``imu_bias_at_rest``; the only bias the filter
+        the mean gyro reading's component (as ``imu_bias_at_rest``; the only bias the filter
         cannot observe standing on flat ground, E11), and the yaw the filter integrated from
         that bias over the window turned back. The horizontal components stay the filter's
         (gravity and the level ground observe them, and a robot settling on its feet at the
@@ -1367,13 +1365,13 @@ class InvariantEkfBaseStateEstimator(LeafSystem):
         n = rest[0]
         gyro_mean = rest[1:4] / n
         variance = np.maximum(rest[4:7] - n * gyro_mean**2, 0.0) / (n - 1.0)
-        _, gyro_std, _ = imu_bias_at_rest(gyro_mean, np.sqrt(variance / n), rest[7:10] / n, self._gravity)
         up = rest[7:10] / np.linalg.norm(rest[7:10])  # in I; at rest the specific force is -g
         core = self._core
         core.set_state_vector(x)
         vertical_bias = float(up @ gyro_mean)
         drift = vertical_bias - float(up @ core.imu_bias_of(x)[:3])  # rad/s integrated as yaw rate
-        core.set_gyro_bias_along(up, vertical_bias, float(np.sqrt(up**2 @ gyro_std**2)))
+        standard_error = math.sqrt(float(up**2 @ variance) / n)
+        core.set_gyro_bias_along(up, vertical_bias, math.hypot(standard_error, STILL_GYRO_BIAS_STD_FLOOR))
         core.rotate_about_vertical(-drift * n * self._period)
         return core.state_vector()
 

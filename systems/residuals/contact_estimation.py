@@ -34,7 +34,7 @@ from pydrake.common.containers import namedview
 from pydrake.common.value import AbstractValue
 from pydrake.geometry import SceneGraph, SceneGraphInspector
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable, RigidBody
+from pydrake.multibody.tree import BodyIndex, Frame, JacobianWrtVariable, RigidBody
 from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem, ValueProducer
 from scipy.stats import chi2
 
@@ -51,6 +51,7 @@ from systems.residuals.geometry_intersection import (
     outward_normals,
     signed_distances,
 )
+from systems.residuals.momentum_residuals import check_wrench_frames
 from systems.simulation import sensors as _sensors
 
 DEFAULT_PERIOD = 1e-3  # s
@@ -119,6 +120,43 @@ class _SensedConfiguration:
 
     def base_pose(self) -> np.ndarray:
         return self.topology.base_frame.CalcPoseInWorld(self.context).GetAsMatrix34()
+
+
+def _unknown_frames(plant: MultibodyPlant, frames: Sequence, who: str) -> tuple[Frame, ...]:
+    """``check_wrench_frames`` for unknown wrench frames, its message prefixed by ``who``."""
+    try:
+        return check_wrench_frames(plant, frames, "unknown wrench frame")
+    except ValueError as error:
+        raise ValueError(f"{who}: {error}") from None
+
+
+def unknown_wrench_columns(kin: _SensedConfiguration, frames: Sequence[Frame]) -> np.ndarray:
+    """(6 + n, 6 m) map of m unknown wrenches at known frames (the feet of a robot without
+    foot F/T sensors: the ground's wrench on each sole) into the stacked residuals, at the
+    positions last set on ``kin``.
+
+    A wrench w_F = [m_F (about F's origin); f] (world, N m and N) at frame F contributes
+    T_F w_F = [[I, skew(p_F)]; [0, I]; J^fb_F^T] w_F to [r_ext (moment about the world
+    origin; force); r_int]: the world wrench [m_F + p_F x f; f] to the external residual
+    (eq. 16) and J^fb_F^T w_F to the internal one (eq. 12; J^fb_F = J_j - J_b M_bb^-1 M_bj
+    of F's spatial Jacobian [angular; translational]). Eq. (10) subtracts these with
+    measured w_F; without F/T sensors they stay unknowns of the fit.
+    """
+    plant = kin.plant
+    world = plant.world_frame()
+    T = np.zeros((6 + kin.n, 6 * len(frames)))
+    if not frames:
+        return T
+    E = kin.elimination()
+    for i, frame in enumerate(frames):
+        m, f = slice(6 * i, 6 * i + 3), slice(6 * i + 3, 6 * i + 6)
+        p_F = frame.CalcPoseInWorld(kin.context).translation()
+        J = plant.CalcJacobianSpatialVelocity(kin.context, JacobianWrtVariable.kV, frame, np.zeros(3), world, world)
+        T[:3, m] = np.eye(3)
+        T[:3, f] = skew(p_F)
+        T[3:6, f] = np.eye(3)
+        T[6:, 6 * i : 6 * i + 6] = (J[:, 6:] - J[:, :6] @ E).T
+    return T
 
 
 def _bounding_radii(geometry: RobotGeometry) -> np.ndarray:
@@ -222,6 +260,11 @@ class ContactForceEstimator(LeafSystem):
       suggests weighting the residuals by their different noise, Sec. V) and Tikhonov
       damping: f = (A^T W^2 A + damping^2 I)^-1 A^T W^2 b; with damping 0 the minimum-norm
       weighted pseudo-inverse (W A)^# W b.
+
+      Without foot F/T sensors (``unknown_wrench_frames``: the soles), eq. (10) has no
+      measured wrench to subtract and the residuals carry the ground's wrenches too: they
+      join the unknowns, A = [A_forces, T_F1 .. T_Fm] (``unknown_wrench_columns``), solved
+      for in the same least squares: 3 k + 6 m unknowns from 6 + n rows.
     * ``"classical"``, eq. (15): f = [J_1^T .. J_k^T]^# r with J_c the Jacobian of model
       (8) (base velocity = F0's twist in F0), i.e. J_c^T f = [R^T (p_c - p_F0) x f; R^T f;
       J_j,c^T f], weights ``classical_weight`` (nv), same damping.
@@ -243,6 +286,9 @@ class ContactForceEstimator(LeafSystem):
             the residuals exactly; large when the assumed points are wrong). 0 in mode
             ``"external"``.
 
+        ``unknown_wrenches_world`` (only with ``unknown_wrench_frames``): 6 m, the wrench
+            [moment about the frame's origin, N m; force, N] (world) at each frame.
+
     Args:
         plant: finalized floating-base plant (free joint coordinates first).
         mode: "external", "stacked" or "classical".
@@ -252,9 +298,13 @@ class ContactForceEstimator(LeafSystem):
         external_weight, internal_weight, classical_weight: per-residual weights (scalar or
             per entry), dimensionless relative weights; e.g. 1 / noise std.
         damping: Tikhonov damping, >= 0 (N m per N units of the weighted rows).
+        unknown_wrench_frames: frames (or names) whose wrenches are unknowns of the fit
+            (mode "stacked" only): the soles of a robot without foot F/T sensors, whose
+            residuals were computed without ``known_wrench_frames``.
 
     Raises:
-        ValueError: unknown mode, unknown body or world body, wrong sizes, negative weights.
+        ValueError: unknown mode, unknown body, frame or world body, wrong sizes, negative
+            weights, unknown wrench frames in a mode other than "stacked".
     """
 
     MODES = ("external", "stacked", "classical")
@@ -270,6 +320,7 @@ class ContactForceEstimator(LeafSystem):
         internal_weight=1.0,
         classical_weight=1.0,
         damping: float = 0.0,
+        unknown_wrench_frames: Sequence = (),
     ):
         super().__init__()
         who = self._who = "ContactForceEstimator"
@@ -277,6 +328,12 @@ class ContactForceEstimator(LeafSystem):
             raise ValueError(f"{who}: unknown mode {mode!r}; choose one of {self.MODES}")
         self._mode = mode
         self._kin = _SensedConfiguration(plant, who)
+        self._unknown_frames = _unknown_frames(plant, unknown_wrench_frames, who)
+        if self._unknown_frames and mode != "stacked":
+            raise ValueError(
+                f"{who}: unknown_wrench_frames need mode 'stacked' (eq. 20 with the feet's wrenches as "
+                f"unknowns), got mode {mode!r}"
+            )
         nq, nv, n = self._kin.nq, self._kin.nv, self._kin.n
         self._damping = float(damping)
         if not math.isfinite(self._damping) or self._damping < 0.0:
@@ -321,14 +378,24 @@ class ContactForceEstimator(LeafSystem):
             self._residual_port = self.DeclareVectorInputPort("residual", nv)
         if mode != "external" and self._points is None:
             self._points_port = self.DeclareVectorInputPort("contact_points", 4 * k)
-        # One solve per input change, shared by both outputs: [f (3 k); fit error].
+        # One solve per input change, shared by the outputs: [f (3 k); unknown wrenches (6 m);
+        # fit error].
+        size = 3 * k + 6 * len(self._unknown_frames) + 1
         self._solution = self.DeclareCacheEntry(
             "forces and fit error",
-            ValueProducer(allocate=lambda: AbstractValue.Make(np.zeros(3 * k + 1)), calc=self._CalcSolution),
+            ValueProducer(allocate=lambda: AbstractValue.Make(np.zeros(size)), calc=self._CalcSolution),
             prerequisites_of_calc={self.all_input_ports_ticket()},
         )
-        self.DeclareVectorOutputPort("contact_forces_world", 3 * k, self._CalcForces, {self.all_input_ports_ticket()})
-        self.DeclareVectorOutputPort("fit_error", 1, self._CalcFitError, {self.all_input_ports_ticket()})
+        inputs = {self.all_input_ports_ticket()}
+        self.DeclareVectorOutputPort("contact_forces_world", 3 * k, self._CalcForces, inputs)
+        self.DeclareVectorOutputPort("fit_error", 1, self._CalcFitError, inputs)
+        if self._unknown_frames:
+            self.DeclareVectorOutputPort(
+                "unknown_wrenches_world",
+                6 * len(self._unknown_frames),
+                lambda c, o: o.SetFromVector(self._solution.Eval(c)[3 * k : -1]),
+                inputs,
+            )
 
     @property
     def mode(self) -> str:
@@ -337,6 +404,11 @@ class ContactForceEstimator(LeafSystem):
     @property
     def num_contacts(self) -> int:
         return self._k
+
+    @property
+    def unknown_wrench_frames(self) -> tuple[Frame, ...]:
+        """The frames whose wrenches are unknowns of the fit (() with foot F/T sensors)."""
+        return self._unknown_frames
 
     def _contact_points(self, context: Context) -> list[tuple[RigidBody, np.ndarray]]:
         if self._points is not None:
@@ -360,9 +432,9 @@ class ContactForceEstimator(LeafSystem):
     def system_matrix(
         self, q: np.ndarray, points: Sequence[tuple[RigidBody, np.ndarray]]
     ) -> tuple[np.ndarray, np.ndarray]:
-        """(A, w): the linear map from the stacked forces [f_1; ..; f_k] (world) to the
-        residuals this mode reads, and the row weights. Mode "stacked": (6 + n) rows;
-        "classical": nv rows."""
+        """(A, w): the linear map from the stacked forces [f_1; ..; f_k] (world), then the
+        unknown wrenches (6 per ``unknown_wrench_frames``), to the residuals this mode
+        reads, and the row weights. Mode "stacked": (6 + n) rows; "classical": nv rows."""
         kin = self._kin
         kin.set_positions(q)
         k = len(points)
@@ -376,6 +448,7 @@ class ContactForceEstimator(LeafSystem):
                 A[:3, 3 * c : 3 * c + 3] = skew(p_W)
                 A[3:6, 3 * c : 3 * c + 3] = np.eye(3)
                 A[6:, 3 * c : 3 * c + 3] = (J[:, 6:] - J[:, :6] @ E).T
+            A = np.concatenate((A, unknown_wrench_columns(kin, self._unknown_frames)), axis=1)
             return A, np.concatenate((self._w_ext, self._w_int))
         # classical, model (8)
         X_WF0 = kin.base_pose()
@@ -418,7 +491,7 @@ class ContactForceEstimator(LeafSystem):
         value.set_value(np.concatenate((f, [fit])))
 
     def _CalcForces(self, context: Context, output: BasicVector) -> None:
-        output.SetFromVector(self._solution.Eval(context)[:-1])
+        output.SetFromVector(self._solution.Eval(context)[: 3 * self._k])
 
     def _CalcFitError(self, context: Context, output: BasicVector) -> None:
         output.SetFromVector(self._solution.Eval(context)[-1:])
@@ -519,6 +592,18 @@ class ContactDetector(LeafSystem):
     ``on_samples`` consecutive updates, and OFF when both stay below chi2.isf(p_off, dof)
     for ``release_time`` seconds.
 
+    Without foot F/T sensors (``unknown_wrench_frames``: the soles, m of them), the
+    residuals carry the ground's wrenches, which change with every shift of weight; a test
+    of the residuals' size would fire all the time. One joint test replaces both:
+
+        s_int = ||(I - C C^+) z||^2,  z = [L_f^-1 r_ext,f; L_int^-1 r_int],
+        C = [L_f^-1 T_F,f; L_int^-1 T_F,int]   (3 + n - 6 m dof)
+
+    the whitened force and internal residuals with every wrench the m frames could carry
+    (``unknown_wrench_columns``, evaluated at the sensed q) projected out: what no ground
+    wrench explains. It is reported as s_int (s_ext is 0 and not tested), and the input
+    ``state`` gives q.
+
     Defaults from the sensor noise: when the covariances are not given they come from
     ``predicted_residual_covariances`` with the default noise of ``systems.simulation.sensors`` and
     the residual gains; p_on = 1e-9 per update and per test (about one false alarm in
@@ -531,6 +616,7 @@ class ContactDetector(LeafSystem):
     Inputs:
         ``external_wrench_world`` (6): ExternalResidual's output (the force part is used).
         ``residual`` (n): InternalResidual's output.
+        ``state`` (nq + nv, only with ``unknown_wrench_frames``): the sensed [q; v].
     State (discrete): [detected (0/1), detection time (s, -1 before the first detection),
         consecutive samples above, time since both went below (s), s_ext, s_int].
 
@@ -557,6 +643,9 @@ class ContactDetector(LeafSystem):
         startup_time: s, no detection before this time (the estimators' start-up: the
             residuals start at 0 and a base-state estimator converges over its first steps).
             Default 0.
+        unknown_wrench_frames: frames (or names) whose wrenches are unknown (the soles of a
+            robot without foot F/T sensors; the residuals computed without
+            ``known_wrench_frames``): the joint test above. Needs ``use_internal``.
     """
 
     def __init__(
@@ -577,11 +666,25 @@ class ContactDetector(LeafSystem):
         use_external: bool = True,
         use_internal: bool = True,
         startup_time: float = 0.0,
+        unknown_wrench_frames: Sequence = (),
     ):
         super().__init__()
         who = self._who = "ContactDetector"
-        kin = _SensedConfiguration(plant, who)
+        self._kin = kin = _SensedConfiguration(plant, who)
         n = kin.n
+        self._unknown_frames = _unknown_frames(plant, unknown_wrench_frames, who)
+        if self._unknown_frames:
+            if known_wrench_frames:
+                raise ValueError(f"{who}: a frame's wrench is either known (F/T) or unknown; give one of the two")
+            if not use_internal:
+                raise ValueError(f"{who}: unknown_wrench_frames need use_internal (the joint test)")
+            use_external = False
+        joint_dof = 3 + n - 6 * len(self._unknown_frames)
+        if joint_dof < 1:
+            raise ValueError(
+                f"{who}: {len(self._unknown_frames)} unknown wrenches (6 each) leave no degree of freedom in the "
+                f"3 + {n} force and internal residual rows"
+            )
         if not (use_external or use_internal):
             raise ValueError(f"{who}: at least one of use_external, use_internal must be True")
         for name, p in (
@@ -618,11 +721,13 @@ class ContactDetector(LeafSystem):
         self._L_int = self._whitener(covariance_internal, n, "covariance_internal")
         self._L_ext = self._whitener(covariance_external_force, 3, "covariance_external_force")
         self._use = (bool(use_external), bool(use_internal))
-        self._on = (chi2.isf(false_alarm_probability, 3), chi2.isf(false_alarm_probability, n))
-        self._off = (chi2.isf(release_probability, 3), chi2.isf(release_probability, n))
+        dof_int = joint_dof if self._unknown_frames else n
+        self._on = (chi2.isf(false_alarm_probability, 3), chi2.isf(false_alarm_probability, dof_int))
+        self._off = (chi2.isf(release_probability, 3), chi2.isf(release_probability, dof_int))
 
         self._wrench_port = self.DeclareVectorInputPort("external_wrench_world", 6)
         self._residual_port = self.DeclareVectorInputPort("residual", n)
+        self._state_port = self.DeclareVectorInputPort("state", kin.nq + kin.nv) if self._unknown_frames else None
         self._state_index = self.DeclareDiscreteState(np.array([0.0, -1.0, 0.0, 0.0, 0.0, 0.0]))  # _DetectorState
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._Update)
         xd = {self.xd_ticket()}
@@ -661,18 +766,55 @@ class ContactDetector(LeafSystem):
         """The chi-square thresholds: {"on": (ext, int), "off": (ext, int)}."""
         return {"on": self._on, "off": self._off}
 
-    def statistics(self, wrench: np.ndarray, residual: np.ndarray) -> tuple[float, float]:
-        """(s_ext, s_int) of the class docstring."""
+    @property
+    def unknown_wrench_frames(self) -> tuple[Frame, ...]:
+        """The frames whose wrenches are unknown (() with foot F/T sensors)."""
+        return self._unknown_frames
+
+    def statistics(self, wrench: np.ndarray, residual: np.ndarray, q: np.ndarray | None = None) -> tuple[float, float]:
+        """(s_ext, s_int) of the class docstring (``q``, the sensed positions, is needed
+        with ``unknown_wrench_frames`` only)."""
         z_ext = self._L_ext @ np.asarray(wrench)[3:]
         z_int = self._L_int @ np.asarray(residual)
+        if self._unknown_frames:
+            return 0.0, self._joint_statistic(self._required_q(q), z_ext, z_int)
         return float(z_ext @ z_ext), float(z_int @ z_int)
 
-    def statistics_of_samples(self, wrenches: np.ndarray, residuals: np.ndarray) -> np.ndarray:
-        """(N, 2) [s_ext, s_int] of N samples of the inputs ((N, 6) and (N, n)) at once:
-        ``statistics`` of each, to rounding."""
+    def statistics_of_samples(
+        self, wrenches: np.ndarray, residuals: np.ndarray, positions: np.ndarray | None = None
+    ) -> np.ndarray:
+        """(N, 2) [s_ext, s_int] of N samples of the inputs ((N, 6) and (N, n); with
+        ``unknown_wrench_frames`` also the positions (N, nq)) at once: ``statistics`` of
+        each, to rounding."""
         z_ext = np.asarray(wrenches)[:, 3:] @ self._L_ext.T
         z_int = np.asarray(residuals) @ self._L_int.T
+        if self._unknown_frames:
+            if positions is None or np.shape(positions) != (len(z_ext), self._kin.nq):
+                raise ValueError(f"{self._who}: with unknown_wrench_frames the samples' positions (N, nq) are needed")
+            joint = [
+                self._joint_statistic(q, a, b) for q, a, b in zip(np.asarray(positions, dtype=float), z_ext, z_int)
+            ]
+            return np.stack((np.zeros(len(z_ext)), np.array(joint, dtype=float).reshape(-1)), axis=1)
         return np.stack((np.einsum("ij,ij->i", z_ext, z_ext), np.einsum("ij,ij->i", z_int, z_int)), axis=1)
+
+    def _required_q(self, q) -> np.ndarray:
+        if q is None:
+            raise ValueError(f"{self._who}: with unknown_wrench_frames the statistics need the sensed positions q")
+        q = np.asarray(q, dtype=float)
+        if q.shape != (self._kin.nq,):
+            raise ValueError(f"{self._who}: q must have shape ({self._kin.nq},), got {q.shape}")
+        return q
+
+    def _joint_statistic(self, q: np.ndarray, z_ext: np.ndarray, z_int: np.ndarray) -> float:
+        """The joint test's statistic (class docstring) of the whitened force and internal
+        residuals at positions q."""
+        self._kin.set_positions(q)
+        T = unknown_wrench_columns(self._kin, self._unknown_frames)
+        C = np.concatenate((self._L_ext @ T[3:6], self._L_int @ T[6:]))
+        z = np.concatenate((z_ext, z_int))
+        Q, _ = np.linalg.qr(C)
+        e = z - Q @ (Q.T @ z)
+        return float(e @ e)
 
     def _s(self, context: Context) -> _DetectorState:
         return _DetectorState(context.get_discrete_state(self._state_index).get_value())
@@ -680,8 +822,11 @@ class ContactDetector(LeafSystem):
     def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
         w = eval_finite_input(self._who, self._wrench_port, context)
         r = eval_finite_input(self._who, self._residual_port, context)
+        q = None
+        if self._state_port is not None:
+            q = eval_finite_input(self._who, self._state_port, context)[: self._kin.nq]
         state = self.advance(
-            context.get_discrete_state(self._state_index).get_value(), self.statistics(w, r), context.get_time()
+            context.get_discrete_state(self._state_index).get_value(), self.statistics(w, r, q), context.get_time()
         )
         discrete_state.set_value(self._state_index, state)
 

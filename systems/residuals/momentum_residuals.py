@@ -339,29 +339,34 @@ class ResidualModel:
         return np.array((mx + (py * fz - pz * fy), my + (pz * fx - px * fz), mz + (px * fy - py * fx), fx, fy, fz))
 
 
-def check_wrench_frames(plant: MultibodyPlant, frames: Sequence[Frame | str]) -> tuple[Frame, ...]:
-    """Resolves frame names and checks that each frame is on a moving body of the plant.
+def check_wrench_frames(
+    plant: MultibodyPlant, frames: Sequence[Frame | str], what: str = "known wrench frame"
+) -> tuple[Frame, ...]:
+    """Resolves frame names and checks that each frame is on a moving body of the plant,
+    and named once (``what`` names the frames in the messages).
 
     Raises:
-        ValueError: an unknown frame name, a frame of another plant, or a frame fixed to
-            the world.
+        ValueError: an unknown frame name, a frame of another plant, a frame fixed to the
+            world, or a frame given twice.
     """
     resolved = []
     for frame in frames:
         if isinstance(frame, str):
             if not plant.HasFrameNamed(frame):
-                raise ValueError(f"known wrench frame '{frame}' is not a frame of the plant")
+                raise ValueError(f"{what} '{frame}' is not a frame of the plant")
             frame = plant.GetFrameByName(frame)
         if not isinstance(frame, Frame):
-            raise ValueError(f"known wrench frames must be Frame objects or names, got {type(frame).__name__}")
+            raise ValueError(f"{what}s must be Frame objects or names, got {type(frame).__name__}")
         if (
             int(frame.index()) >= plant.num_frames()
             or plant.get_frame(frame.index()).name() != frame.name()
             or (plant.get_frame(frame.index()).body().name() != frame.body().name())
         ):
-            raise ValueError(f"known wrench frame '{frame.name()}' does not belong to this plant")
+            raise ValueError(f"{what} '{frame.name()}' does not belong to this plant")
         if frame.body().index() == plant.world_body().index():
-            raise ValueError(f"known wrench frame '{frame.name()}' is fixed to the world, not to the robot")
+            raise ValueError(f"{what} '{frame.name()}' is fixed to the world, not to the robot")
+        if any(frame.index() == other.index() for other in resolved):
+            raise ValueError(f"{what} '{frame.name()}' is given twice")
         resolved.append(frame)
     return tuple(resolved)
 

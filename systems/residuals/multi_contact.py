@@ -94,6 +94,16 @@ the covariances are right. With alpha = ``false_alarm`` and L joints on a stop:
 * else 1 contact. ``p_value_one`` = chi2.sf(s_1, dof_1) is the calibrated confidence of a
   single-contact result.
 
+Robots without foot F/T sensors (``unknown_wrench_frames``: the soles): eq. (10) has no
+measured wrench to subtract, and the residuals carry the ground's wrenches w_F at known
+places. They are nuisance unknowns, handled as the stops' reactions: their whitened
+columns T_F (``systems.residuals.contact_estimation.unknown_wrench_columns``) are projected
+out of every row (P removes them with the stops' columns), so every search and test above
+runs unchanged on what no ground wrench can explain, with 6 fewer degrees of freedom per
+frame; the final refits estimate them (``ContactFit.unknown_wrenches``). A contact force
+whose effect a ground wrench can also produce (on a leg, part of its effect) is seen only
+through the rest of it: legs are harder than arms here.
+
 Conventions (as ``systems.residuals.contact_estimation``): ``wrench_W`` = the external
 residual = [moment about the WORLD origin, N m; force, N], world frame; ``residual`` = the
 internal residual, n = nv - 6 joint efforts in the plant's v[6:] order, N m; a point force
@@ -117,7 +127,13 @@ from scipy.stats import f as f_distribution
 
 from systems.common.checks import check_plant, positive_number
 from systems.common.topology import rigid_link_of_bodies, same_rigid_link
-from systems.residuals.contact_estimation import _JointStops, _SensedConfiguration, candidate_geometry
+from systems.residuals.contact_estimation import (
+    _JointStops,
+    _SensedConfiguration,
+    _unknown_frames,
+    candidate_geometry,
+    unknown_wrench_columns,
+)
 from systems.residuals.geometry_intersection import (
     BOX,
     CAPSULE,
@@ -197,7 +213,8 @@ class ContactFit:
         points_W: (k, 3) contact points, world.
         forces_W: (k, 3) forces, world.
         statistic: the whitened squared misfit s_k (inf when no candidate was feasible).
-        dof: its chi-square degrees of freedom, 6 + n - 5 k - (stop reactions engaged).
+        dof: its chi-square degrees of freedom, 6 + n - 5 k - (stop reactions engaged) - 6
+            per unknown wrench frame.
         runner_up_statistic: s_k of the runner-up: the best fit with another link (k = 1),
             the link pair of the next largest evidence (k = 2).
         runner_up_body_indices: those links (() if none).
@@ -213,6 +230,9 @@ class ContactFit:
             pair is the one of the largest evidence, not always of the least misfit. nan for
             k = 1.
         runner_up_log_evidence: the runner-up pair's (``runner_up_body_indices``) for k = 2.
+        unknown_wrenches: (m, 6) the wrenches at the localizer's ``unknown_wrench_frames``
+            in this fit, [moment about the frame's origin, N m; force, N], world ((0, 6)
+            without such frames).
     """
 
     body_indices: tuple[int, ...]
@@ -228,6 +248,7 @@ class ContactFit:
     force_std: np.ndarray = field(default_factory=lambda: np.zeros(0))
     log_evidence: float = math.nan
     runner_up_log_evidence: float = math.nan
+    unknown_wrenches: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
 
     @property
     def p_value(self) -> float:
@@ -243,11 +264,12 @@ class MultiContactResult:
         num_contacts: 0, 1 or 2 (module docstring's model selection).
         body_indices: the links of the chosen model's contacts (plant BodyIndex).
         points_W: (num_contacts, 3), world. forces_W: (num_contacts, 3), world.
-        statistic_zero: s_0 = ||P W b||^2 (no contact; P removes the stop columns).
+        statistic_zero: s_0 = ||P W b||^2 (no contact; P removes the stop columns and the
+            unknown wrenches' columns).
         statistic_one, statistic_two: s_1, s_2 (nan when not computed: s_1 with 0 contacts,
             s_2 when one contact explains the residuals or ``max_contacts`` is 1).
-        dof_one, dof_two: their degrees of freedom (without a fit: 6 + n - 5 k - L, L
-            joints on a stop).
+        dof_one, dof_two: their degrees of freedom (without a fit: 6 + n - 5 k - L - 6 m, L
+            joints on a stop, m unknown wrench frames).
         p_value_one: chi2.sf(s_1, dof_1), the single-contact fit's calibrated confidence
             (nan when not computed).
         one, two: the fits themselves (None when not computed).
@@ -659,6 +681,7 @@ class _Pose:
     limited: np.ndarray  # (L,) joint indices
     signs: np.ndarray  # (L,) their stops' signs
     stops: np.ndarray  # (rows, L) whitened stop columns times the stops' signs
+    unknown: np.ndarray  # (rows, 6 m) whitened columns of the unknown wrenches
     dense: _Points | None = None
     search: _Points | None = None  # the pair search's points, by link
     pairs: dict | None = None  # ``_pair_precomputation`` of the search points, once needed
@@ -732,10 +755,13 @@ class MultiContactLocalizer:
             residual's force (its inputs' ``wrench_W[3:]``). Measured on pushes of known
             force (``diagrams.residuals.contact_localization.load_model_error``); default
             None: no such term.
+        unknown_wrench_frames: frames (or names) whose wrenches are unknowns (module
+            docstring): the soles of a robot without foot F/T sensors, whose residuals were
+            computed without ``known_wrench_frames``. Default () (F/T sensors measure them).
 
     Raises:
-        ValueError: a bad plant, scene graph, body, covariance (shape, NaN, asymmetric, not
-            positive definite) or setting.
+        ValueError: a bad plant, scene graph, body, frame, covariance (shape, NaN,
+            asymmetric, not positive definite) or setting.
     """
 
     def __init__(
@@ -763,11 +789,13 @@ class MultiContactLocalizer:
         load_covariance_internal=None,
         max_link_pairs: int = 100,
         contact_prior: str = "link",
+        unknown_wrench_frames: Sequence = (),
     ):
         who = self._who = "MultiContactLocalizer"
         check_plant(plant, who)
         self._kin = kin = _SensedConfiguration(plant, who)
         self._plant = plant
+        self._unknown_frames = _unknown_frames(plant, unknown_wrench_frames, who)
         self._geometry, self._bodies = candidate_geometry(
             plant, scene_graph, bodies, exclude_bodies, who, skip_unsupported_shapes
         )
@@ -775,6 +803,13 @@ class MultiContactLocalizer:
         self._rigid_link = rigid_link_of_bodies(plant)  # welded bodies are one link
         self._n = n = kin.n
         self._rows = 6 + n
+        # Degrees of freedom of the rows after the unknown wrenches are projected out.
+        self._free_rows = self._rows - 6 * len(self._unknown_frames)
+        if self._free_rows < 11:
+            raise ValueError(
+                f"{who}: {len(self._unknown_frames)} unknown wrenches leave {self._free_rows} of the {self._rows} "
+                f"residual rows, fewer than two contacts need"
+            )
         default_ext = np.array([DEFAULT_EXTERNAL_MOMENT_STD] * 3 + [DEFAULT_EXTERNAL_FORCE_STD] * 3)
         self._L_ext_inv = self._whitener(covariance_external, 6, "covariance_external", default_ext)
         self._L_int_inv = self._whitener(
@@ -906,6 +941,11 @@ class MultiContactLocalizer:
     def false_alarm(self) -> float:
         return self._alpha
 
+    @property
+    def unknown_wrench_frames(self) -> tuple:
+        """The frames whose wrenches are unknowns (() with foot F/T sensors)."""
+        return self._unknown_frames
+
     def grid_size(self, dense: bool = True) -> int:
         """Number of grid points (all primitives, before the outer-surface test)."""
         return len((self._dense_grid if dense else self._coarse_grid)["prim"])
@@ -961,10 +1001,10 @@ class MultiContactLocalizer:
             raise ValueError(f"{self._who}: two contacts need at least two candidate links")
         pose, bt, bp = self._prepare(q, wrench_W, residual)
         L = len(pose.limited)
-        dof1, dof2 = self._rows - 5 - L, self._rows - 10 - L
+        dof1, dof2 = self._free_rows - 5 - L, self._free_rows - 10 - L
         s0 = float(bp @ bp)
         nan = math.nan
-        if s0 <= chi2.isf(self._alpha, self._rows - L):
+        if s0 <= chi2.isf(self._alpha, self._free_rows - L):
             return MultiContactResult(0, (), np.zeros((0, 3)), np.zeros((0, 3)), s0, nan, nan, dof1, dof2, nan)
         one = self._fit_one(pose, bt, bp)
         s1, dof1, two, s2, chosen = one.statistic, one.dof, None, nan, one
@@ -1061,13 +1101,15 @@ class MultiContactLocalizer:
         limited, signs = self.limited_joints(q)
         stops = np.zeros((rows, len(limited)))
         stops[6:] = self._L_int_inv[:, limited] * signs
+        U = unknown_wrench_columns(kin, self._unknown_frames)
+        unknown = np.concatenate((self._L_ext_inv @ U[:6], self._L_int_inv @ U[6:]))
         P = np.eye(rows)
-        if len(limited):
-            Qs, _ = np.linalg.qr(stops)
+        if len(limited) or unknown.shape[1]:
+            Qs, _ = np.linalg.qr(np.concatenate((unknown, stops), axis=1))
             P -= Qs @ Qs.T
         Tp = P @ Tw
         R_WG, p_WG = geo.world_poses(X_WB)
-        pose = _Pose(key, X_WB, R_WG, p_WG, Tw, Tp, P, limited, signs, stops)
+        pose = _Pose(key, X_WB, R_WG, p_WG, Tw, Tp, P, limited, signs, stops, unknown)
         pose.dense = self._outer_points(pose, self._dense_grid)
         self._pose_cache = pose
         return pose
@@ -1212,24 +1254,29 @@ class MultiContactLocalizer:
         e = A @ x - bp
         return float(e @ e), forces
 
-    def _final_fit(self, pose: _Pose, bt: np.ndarray, cand: _Candidate) -> tuple[np.ndarray, np.ndarray, float]:
-        """(forces (k, 3), stop torques (L,), misfit) at given points with sign-constrained
-        stop reactions (non-negative least squares after eliminating the forces); misfit inf
-        when a force pulls."""
+    def _final_fit(
+        self, pose: _Pose, bt: np.ndarray, cand: _Candidate
+    ) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
+        """(forces (k, 3), stop torques (L,), misfit, unknown wrenches (m, 6)) at given
+        points with sign-constrained stop reactions (non-negative least squares after
+        eliminating the forces and the free unknown wrenches); misfit inf when a force
+        pulls."""
         A = np.concatenate(list(self._point_columns(pose, cand.slots, cand.points, projected=False)), axis=1)
-        S = pose.stops
+        S, U = pose.stops, pose.unknown
+        k3 = A.shape[1]
+        AU = np.concatenate((A, U), axis=1)  # the free unknowns: forces, then the wrenches
         mu = np.zeros(S.shape[1])
         if S.shape[1]:
-            Qa, _ = np.linalg.qr(A)
+            Qa, _ = np.linalg.qr(AU)
             mu, _ = nnls(S - Qa @ (Qa.T @ S), bt - Qa @ (Qa.T @ bt))
         rhs = bt - S @ mu
-        x, *_ = np.linalg.lstsq(A, rhs, rcond=None)
-        e = A @ x - rhs
-        forces = x.reshape(-1, 3)
+        x, *_ = np.linalg.lstsq(AU, rhs, rcond=None)
+        e = AU @ x - rhs
+        forces = x[:k3].reshape(-1, 3)
         misfit = float(e @ e)
         if np.any(np.einsum("ij,ij->i", forces, cand.normals) > 0.0):
             misfit = math.inf
-        return forces, pose.signs * mu, misfit
+        return forces, pose.signs * mu, misfit, x[k3:].reshape(-1, 6)
 
     def _uncertainty(self, pose: _Pose, bp: np.ndarray, cand: _Candidate) -> tuple[np.ndarray, np.ndarray]:
         """1-sigma (Cramer-Rao) position (m, along the surface) and force (N) uncertainty of
@@ -1368,19 +1415,19 @@ class MultiContactLocalizer:
         the largest evidence, ``_log_evidence``) and the runner-up."""
         finals = []
         for cand in cands:
-            forces, stop, s = self._final_fit(pose, bt, cand)
+            forces, stop, s, unknown = self._final_fit(pose, bt, cand)
             evidence = self._log_evidence(pose, bp, cand, s) if by_evidence and math.isfinite(s) else math.nan
-            finals.append((s, float(np.linalg.norm(stop)), cand, forces, stop, evidence))
+            finals.append((s, float(np.linalg.norm(stop)), cand, forces, stop, evidence, unknown))
         scale = max(float(bp @ bp), 1.0)
         finals.sort(key=lambda t: (round(t[0] / scale, 12), round(t[1], 9)))
         if by_evidence:
             finals.sort(key=lambda t: -t[5] if math.isfinite(t[5]) else math.inf)  # stable: ties keep that order
         limited = tuple(int(j) for j in pose.limited)
         if not finals or not math.isfinite(finals[0][0]):
-            dof = self._rows - 5 * k - len(limited)
+            dof = self._free_rows - 5 * k - len(limited)
             return ContactFit((), np.zeros((0, 3)), np.zeros((0, 3)), math.inf, dof, limited_joints=limited)
-        s, _, cand, forces, stop, evidence = finals[0]
-        dof = self._rows - 5 * k - int(np.count_nonzero(stop))  # the stops engaged are fitted too
+        s, _, cand, forces, stop, evidence, unknown = finals[0]
+        dof = self._free_rows - 5 * k - int(np.count_nonzero(stop))  # the stops engaged are fitted too
         point_std, force_std = self._uncertainty(pose, bp, cand)
         bodies = self._geometry.bodies
         runner = finals[1] if len(finals) > 1 else None
@@ -1398,6 +1445,7 @@ class MultiContactLocalizer:
             force_std,
             evidence,
             runner[5] if runner else math.nan,
+            unknown,
         )
 
     def _log_evidence(self, pose: _Pose, bp: np.ndarray, cand: _Candidate, misfit: float) -> float:

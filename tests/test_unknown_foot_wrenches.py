@@ -1,0 +1,254 @@
+"""Contact estimation on a humanoid without foot F/T sensors: the ground's wrenches on the
+soles are unknowns of the estimators (``unknown_wrench_frames``), not measurements.
+
+The residuals fed to the estimators are built here independently of their code: a wrench
+on a sole enters through Drake's own force machinery (``CalcGeneralizedForces`` of an
+applied spatial force), a point push through Drake's Jacobians and mass matrix
+(``tests/test_multi_contact.py``'s ``_exact_residuals``), both with the floating-base
+elimination tau_int = tau_j - (M_bb^-1 M_bj)^T tau_b of eq. (12).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pydrake.multibody.math import SpatialForce
+from pydrake.multibody.tree import BodyIndex, MultibodyForces
+from scipy.stats import chi2
+
+from systems.residuals.contact_estimation import (
+    ContactDetector,
+    ContactForceEstimator,
+    _SensedConfiguration,
+    unknown_wrench_columns,
+)
+from systems.residuals.multi_contact import MultiContactLocalizer
+from tests.test_multi_contact import _exact_residuals, _limb, _sample_contact
+
+SOLE_FRAMES = ("l_sole_frame", "r_sole_frame")
+SOLES = ("l_sole", "r_sole")
+#: A standing robot's ground wrenches, [moment about the sole frame; force], world: about
+#: half of hrp4_like's 39 kg on each foot, with moments and shear of a robot shifting its
+#: weight.
+STANDING_WRENCHES = np.array([3.0, -6.0, 0.5, 8.0, -5.0, 200.0, -4.0, -5.0, -0.3, -6.0, 4.0, 180.0])
+
+
+@pytest.fixture(scope="module")
+def hrp4(hrp4_moved):
+    plant, scene_graph, _, context = hrp4_moved
+    return plant, scene_graph, context
+
+
+def _ground_residuals(plant, context, wrenches: np.ndarray) -> np.ndarray:
+    """[r_ext; r_int] of wrenches [m_F; f] (world, moment about each sole frame's origin)
+    on the soles, from Drake's generalized forces of applied spatial forces."""
+    external = np.zeros(6)
+    forces = MultibodyForces(plant)
+    forces.SetZero()
+    for name, w in zip(SOLE_FRAMES, wrenches.reshape(-1, 6)):
+        frame = plant.GetFrameByName(name)
+        body = frame.body()
+        p_WF = frame.CalcPoseInWorld(context).translation()
+        p_WB = plant.EvalBodyPoseInWorld(context, body).translation()
+        # Applied at the sole frame's origin (offset from the body's origin, world).
+        body.AddInForce(context, p_WF - p_WB, SpatialForce(w[:3], w[3:]), plant.world_frame(), forces)
+        external += np.concatenate((w[:3] + np.cross(p_WF, w[3:]), w[3:]))
+    tau = plant.CalcGeneralizedForces(context, forces)
+    M = plant.CalcMassMatrix(context)
+    E = np.linalg.solve(M[:6, :6], M[:6, 6:])
+    return np.concatenate((external, tau[6:] - E.T @ tau[:6]))
+
+
+def _columns(plant, context) -> np.ndarray:
+    kin = _SensedConfiguration(plant, "test")
+    kin.set_positions(plant.GetPositions(context))
+    return unknown_wrench_columns(kin, [plant.GetFrameByName(n) for n in SOLE_FRAMES])
+
+
+def test_unknown_wrench_columns_match_drakes_generalized_forces(hrp4):
+    plant, _, context = hrp4
+    T = _columns(plant, context)
+    assert T.shape == (plant.num_velocities(), 12)
+    rng = np.random.default_rng(11)
+    for w in (STANDING_WRENCHES, rng.normal(size=12) * 30.0):
+        expected = _ground_residuals(plant, context, w)
+        np.testing.assert_allclose(T @ w, expected, atol=1e-9 * np.abs(expected).max())
+
+
+def _arm_push(plant, context, localizer, seed: int):
+    rng = np.random.default_rng(seed)
+    return _sample_contact(plant, context, localizer, rng, "R_WRIST_Y_LINK")
+
+
+@pytest.fixture(scope="module")
+def localizer(hrp4):
+    plant, scene_graph, _ = hrp4
+    return MultiContactLocalizer(plant, scene_graph, exclude_bodies=SOLES, unknown_wrench_frames=SOLE_FRAMES)
+
+
+def test_force_estimator_recovers_push_and_ground_wrenches(hrp4, localizer):
+    plant, _, context = hrp4
+    body, p_B, p_W, f_W = _arm_push(plant, context, localizer, 1)
+    wrench, tau = _exact_residuals(plant, context, [(body, p_B, p_W, f_W)])
+    b = np.concatenate((wrench, tau)) + _ground_residuals(plant, context, STANDING_WRENCHES)
+    dut = ContactForceEstimator(plant, "stacked", [(body, p_B)], unknown_wrench_frames=SOLE_FRAMES)
+    assert [f.name() for f in dut.unknown_wrench_frames] == list(SOLE_FRAMES)
+    ctx = dut.CreateDefaultContext()
+    state = np.concatenate((plant.GetPositions(context), np.zeros(plant.num_velocities())))
+    dut.GetInputPort("state").FixValue(ctx, state)
+    dut.GetInputPort("external_wrench_world").FixValue(ctx, b[:6])
+    dut.GetInputPort("residual").FixValue(ctx, b[6:])
+    np.testing.assert_allclose(dut.GetOutputPort("contact_forces_world").Eval(ctx), f_W, atol=1e-8)
+    np.testing.assert_allclose(dut.GetOutputPort("unknown_wrenches_world").Eval(ctx), STANDING_WRENCHES, atol=1e-7)
+    assert dut.GetOutputPort("fit_error").Eval(ctx)[0] < 1e-8
+    # Without the ground's wrenches among the unknowns the same residuals are no push on
+    # the wrist: the fit misses by tens of N and N m, its force by more than the push.
+    blind = ContactForceEstimator(plant, "stacked", [(body, p_B)])
+    ctx = blind.CreateDefaultContext()
+    blind.GetInputPort("state").FixValue(ctx, state)
+    blind.GetInputPort("external_wrench_world").FixValue(ctx, b[:6])
+    blind.GetInputPort("residual").FixValue(ctx, b[6:])
+    assert blind.GetOutputPort("fit_error").Eval(ctx)[0] > 10.0
+    assert np.linalg.norm(blind.GetOutputPort("contact_forces_world").Eval(ctx) - f_W) > np.linalg.norm(f_W)
+
+
+def test_force_estimator_refuses_unknown_wrenches_it_cannot_use(hrp4):
+    plant, _, _ = hrp4
+    with pytest.raises(ValueError, match="need mode 'stacked'"):
+        ContactForceEstimator(plant, "external", unknown_wrench_frames=SOLE_FRAMES)
+    with pytest.raises(ValueError, match="'l_heel' is not a frame of the plant"):
+        ContactForceEstimator(plant, "stacked", unknown_wrench_frames=["l_heel"])
+    with pytest.raises(ValueError, match="twice"):
+        ContactForceEstimator(plant, "stacked", unknown_wrench_frames=["l_sole_frame", "l_sole_frame"])
+
+
+def _detector(plant, context, **kwargs) -> ContactDetector:
+    return ContactDetector(
+        plant,
+        nominal_positions=plant.GetPositions(context),
+        unknown_wrench_frames=SOLE_FRAMES,
+        **kwargs,
+    )
+
+
+def test_detector_ignores_any_ground_wrench_and_sees_a_small_push(hrp4, localizer):
+    plant, _, context = hrp4
+    dut = _detector(plant, context)
+    q = plant.GetPositions(context)
+    n = plant.num_velocities() - 6
+    on = dut.thresholds["on"][1]
+    assert on == pytest.approx(chi2.isf(1e-9, 3 + n - 12))
+    rng = np.random.default_rng(2)
+    for w in (STANDING_WRENCHES, 3.0 * STANDING_WRENCHES + 50.0 * rng.normal(size=12)):
+        b = _ground_residuals(plant, context, w)
+        s_ext, s_int = dut.statistics(b[:6], b[6:], q)
+        assert s_ext == 0.0 and s_int < 1e-12 * on
+    # A 5 N push on the wrist, on top of the standing wrenches, is far above the threshold.
+    body, p_B, p_W, f_W = _arm_push(plant, context, localizer, 3)
+    push = 5.0 * f_W / np.linalg.norm(f_W)
+    wrench, tau = _exact_residuals(plant, context, [(body, p_B, p_W, push)])
+    b = np.concatenate((wrench, tau)) + _ground_residuals(plant, context, STANDING_WRENCHES)
+    assert dut.statistics(b[:6], b[6:], q)[1] > 10.0 * on
+    # The system reads q from its state port and switches on.
+    ctx = dut.CreateDefaultContext()
+    dut.GetInputPort("state").FixValue(ctx, np.concatenate((q, np.zeros(plant.num_velocities()))))
+    dut.GetInputPort("external_wrench_world").FixValue(ctx, b[:6])
+    dut.GetInputPort("residual").FixValue(ctx, b[6:])
+    ctx.SetTime(0.0)
+    update = dut.EvalUniquePeriodicDiscreteUpdate(ctx)
+    ctx.SetDiscreteState(update)
+    assert dut.GetOutputPort("contact_detected").Eval(ctx)[0] == 1.0
+
+
+def test_detector_statistic_is_chi_square_under_noise(hrp4):
+    """Sensor-like noise of the detector's own covariances on top of changing ground
+    wrenches: the statistic has the chi-square's mean and variance with 3 + n - 12 dof."""
+    plant, _, context = hrp4
+    n = plant.num_velocities() - 6
+    rng = np.random.default_rng(4)
+    A = rng.normal(size=(n, n)) * 0.002
+    cov_int = A @ A.T + 0.003**2 * np.eye(n)
+    cov_f = np.diag([0.2, 0.3, 0.25]) ** 2
+    dut = _detector(plant, context, covariance_internal=cov_int, covariance_external_force=cov_f)
+    q = plant.GetPositions(context)
+    count = 2000
+    wrenches = np.zeros((count, 6))
+    residuals = np.zeros((count, n))
+    for k in range(count):
+        b = _ground_residuals(plant, context, STANDING_WRENCHES + 20.0 * rng.normal(size=12))
+        wrenches[k] = b[:6]
+        wrenches[k, 3:] += rng.multivariate_normal(np.zeros(3), cov_f)
+        residuals[k] = b[6:] + rng.multivariate_normal(np.zeros(n), cov_int)
+    s = dut.statistics_of_samples(wrenches, residuals, np.tile(q, (count, 1)))[:, 1]
+    dof = 3 + n - 12
+    assert abs(s.mean() - dof) < 5.0 * np.sqrt(2.0 * dof / count)
+    assert abs(s.var() / (2.0 * dof) - 1.0) < 0.15
+    np.testing.assert_allclose(s[:5], [dut.statistics(wrenches[k], residuals[k], q)[1] for k in range(5)])
+    with pytest.raises(ValueError, match="positions"):
+        dut.statistics_of_samples(wrenches, residuals)
+
+
+def test_detector_refuses_known_and_unknown_wrenches_together(hrp4):
+    plant, _, context = hrp4
+    with pytest.raises(ValueError, match="either known"):
+        _detector(plant, context, known_wrench_frames=[plant.GetFrameByName("l_sole_frame")])
+    with pytest.raises(ValueError, match="use_internal"):
+        _detector(plant, context, use_internal=False)
+
+
+def test_localizer_finds_arm_and_torso_pushes_exactly_with_unknown_ground_wrenches(hrp4, localizer):
+    """Noise-free: every push on an arm or the torso is found on its link at its point,
+    with its force and both feet's wrenches, whatever the ground carries."""
+    plant, _, context = hrp4
+    q = plant.GetPositions(context)
+    rng = np.random.default_rng(21)
+    found = 0
+    while found < 12:
+        contact = _sample_contact(plant, context, localizer, rng)
+        if "leg" in _limb(contact[0].name()):
+            continue
+        wrench, tau = _exact_residuals(plant, context, [contact])
+        ground = STANDING_WRENCHES + 30.0 * rng.normal(size=12)
+        b = np.concatenate((wrench, tau)) + _ground_residuals(plant, context, ground)
+        fit = localizer.fit_one(q, b[:6], b[6:])
+        assert fit.body_indices == (int(contact[0].index()),), contact[0].name()
+        np.testing.assert_allclose(fit.points_W[0], contact[2], atol=1e-6)
+        np.testing.assert_allclose(fit.forces_W[0], contact[3], atol=1e-6)
+        np.testing.assert_allclose(fit.unknown_wrenches.reshape(-1), ground, atol=1e-5)
+        assert fit.dof == plant.num_velocities() - 5 - 12 - np.count_nonzero(fit.stop_torques)
+        result = localizer.localize(q, b[:6], b[6:], max_contacts=1)
+        assert result.num_contacts == 1 and result.valid
+        found += 1
+
+
+def test_localizer_says_a_push_on_a_stance_leg_cannot_be_placed(hrp4, localizer):
+    """A push on a stance leg's shank reaches the residuals that no ground wrench explains
+    only through the joints between it and the sole (the two ankle joints): fewer equations
+    than a contact's 5 unknowns. The fit is exact on more than one link, and the result is
+    not valid: it never claims a link."""
+    plant, _, context = hrp4
+    q = plant.GetPositions(context)
+    rng = np.random.default_rng(8)
+    for name in ("L_KNEE_P_LINK", "R_KNEE_P_LINK"):
+        contact = _sample_contact(plant, context, localizer, rng, name)
+        wrench, tau = _exact_residuals(plant, context, [contact])
+        b = np.concatenate((wrench, tau)) + _ground_residuals(plant, context, STANDING_WRENCHES)
+        result = localizer.localize(q, b[:6], b[6:], max_contacts=1)
+        assert result.num_contacts == 1
+        assert not result.valid
+        assert result.one.statistic < 1e-9 and result.one.runner_up_statistic < 1e-6
+        # The same push seen with the ground's wrenches measured (F/T) is placed exactly.
+        with_ft = MultiContactLocalizer(plant, hrp4[1], exclude_bodies=SOLES)
+        fit = with_ft.fit_one(q, wrench, tau)
+        assert fit.body_indices == (int(contact[0].index()),)
+        np.testing.assert_allclose(fit.points_W[0], contact[2], atol=1e-6)
+
+
+def test_localizer_refuses_too_many_unknown_wrenches(hrp4):
+    plant, scene_graph, _ = hrp4
+    with pytest.raises(ValueError, match="not a frame of the plant"):
+        MultiContactLocalizer(plant, scene_graph, unknown_wrench_frames=["nowhere"])
+    # 7 wrenches (42 unknowns) leave 40 - 42 < 11 of hrp4_like's 40 rows.
+    body_frames = [plant.get_body(BodyIndex(i)).body_frame() for i in range(1, plant.num_bodies())]
+    with pytest.raises(ValueError, match="fewer than two contacts need"):
+        MultiContactLocalizer(plant, scene_graph, unknown_wrench_frames=body_frames[:7])

@@ -17,8 +17,12 @@ from pydrake.multibody.tree import BodyIndex, MultibodyForces
 from scipy.stats import chi2
 
 from systems.residuals.contact_estimation import (
+    AMBIGUOUS,
+    NO_INTERSECTION,
+    VALID,
     ContactDetector,
     ContactForceEstimator,
+    ContactLocalizer,
     _SensedConfiguration,
     unknown_wrench_columns,
 )
@@ -84,6 +88,12 @@ def _arm_push(plant, context, localizer, seed: int):
 def localizer(hrp4):
     plant, scene_graph, _ = hrp4
     return MultiContactLocalizer(plant, scene_graph, exclude_bodies=SOLES, unknown_wrench_frames=SOLE_FRAMES)
+
+
+@pytest.fixture(scope="module")
+def line_localizer(hrp4):
+    plant, scene_graph, _ = hrp4
+    return ContactLocalizer(plant, scene_graph, exclude_bodies=SOLES, unknown_wrench_frames=SOLE_FRAMES)
 
 
 def test_force_estimator_recovers_push_and_ground_wrenches(hrp4, localizer):
@@ -221,15 +231,15 @@ def test_localizer_finds_arm_and_torso_pushes_exactly_with_unknown_ground_wrench
         found += 1
 
 
-def test_localizer_says_a_push_on_a_stance_leg_cannot_be_placed(hrp4, localizer):
+def test_localizers_never_claim_a_push_on_a_stance_leg(hrp4, localizer, line_localizer):
     """A push on a stance leg's shank reaches the residuals that no ground wrench explains
     only through the joints between it and the sole (the two ankle joints): fewer equations
-    than a contact's 5 unknowns. The fit is exact on more than one link, and the result is
-    not valid: it never claims a link."""
+    than a contact's 5 unknowns. The fit is exact on more than one link, and neither
+    localizer's result is valid: they never claim a link."""
     plant, _, context = hrp4
     q = plant.GetPositions(context)
     rng = np.random.default_rng(8)
-    for name in ("L_KNEE_P_LINK", "R_KNEE_P_LINK"):
+    for name in ("L_KNEE_P_LINK", "R_KNEE_P_LINK", "R_HIP_P_LINK"):
         contact = _sample_contact(plant, context, localizer, rng, name)
         wrench, tau = _exact_residuals(plant, context, [contact])
         b = np.concatenate((wrench, tau)) + _ground_residuals(plant, context, STANDING_WRENCHES)
@@ -237,6 +247,7 @@ def test_localizer_says_a_push_on_a_stance_leg_cannot_be_placed(hrp4, localizer)
         assert result.num_contacts == 1
         assert not result.valid
         assert result.one.statistic < 1e-9 and result.one.runner_up_statistic < 1e-6
+        assert line_localizer.localize(q, b[:6], b[6:]).status in (AMBIGUOUS, NO_INTERSECTION), name
         # The same push seen with the ground's wrenches measured (F/T) is placed exactly.
         with_ft = MultiContactLocalizer(plant, hrp4[1], exclude_bodies=SOLES)
         fit = with_ft.fit_one(q, wrench, tau)
@@ -252,3 +263,57 @@ def test_localizer_refuses_too_many_unknown_wrenches(hrp4):
     body_frames = [plant.get_body(BodyIndex(i)).body_frame() for i in range(1, plant.num_bodies())]
     with pytest.raises(ValueError, match="fewer than two contacts need"):
         MultiContactLocalizer(plant, scene_graph, unknown_wrench_frames=body_frames[:7])
+
+
+def test_line_localizer_finds_arm_and_torso_pushes_exactly_with_unknown_ground_wrenches(
+    hrp4, localizer, line_localizer
+):
+    """Eq. (22) on each link's own wrench, the ground's projected out: noise-free pushes on
+    the arms and the torso come out VALID on their link, at their point, with their force."""
+    plant, _, context = hrp4
+    q = plant.GetPositions(context)
+    rng = np.random.default_rng(22)
+    found = ambiguous = 0
+    while found < 12:
+        contact = _sample_contact(plant, context, localizer, rng)
+        if "leg" in _limb(contact[0].name()):
+            continue
+        wrench, tau = _exact_residuals(plant, context, [contact])
+        b = np.concatenate((wrench, tau)) + _ground_residuals(
+            plant, context, STANDING_WRENCHES + 30.0 * rng.normal(size=12)
+        )
+        result = line_localizer.localize(q, b[:6], b[6:])
+        # AMBIGUOUS when another link could explain the residuals about as well: a hand on
+        # its stop moves with its wrist (as with F/T sensors), and a free wrench on the
+        # next link may miss by less than the 0.01 N m margin (its extra joint's torque).
+        assert result.status in (VALID, AMBIGUOUS), (contact[0].name(), result.reason)
+        ambiguous += result.status == AMBIGUOUS
+        assert line_localizer.same_link(result.body_index, int(contact[0].index()))
+        np.testing.assert_allclose(result.point_W, contact[2], atol=1e-6)
+        np.testing.assert_allclose(result.force_W, contact[3], atol=1e-6)
+        assert result.score < 1e-6
+        found += 1
+    assert ambiguous <= 4  # seed 22: three wrist/hand pairs on a stop, one shoulder
+    # Without the unknown wrenches the same residuals put the body weight on the line.
+    blind = ContactLocalizer(plant, hrp4[1], exclude_bodies=SOLES)
+    assert np.linalg.norm(blind.localize(q, b[:6], b[6:]).force_W) > 300.0
+
+
+def test_line_localizer_system_with_unknown_wrenches(hrp4, localizer, line_localizer):
+    """The LeafSystem: one update with a detected contact gives localize's answer."""
+    plant, _, context = hrp4
+    q = plant.GetPositions(context)
+    contact = _arm_push(plant, context, localizer, 5)
+    wrench, tau = _exact_residuals(plant, context, [contact])
+    b = np.concatenate((wrench, tau)) + _ground_residuals(plant, context, STANDING_WRENCHES)
+    ctx = line_localizer.CreateDefaultContext()
+    line_localizer.GetInputPort("state").FixValue(ctx, np.concatenate((q, np.zeros(plant.num_velocities()))))
+    line_localizer.GetInputPort("external_wrench_world").FixValue(ctx, b[:6])
+    line_localizer.GetInputPort("residual").FixValue(ctx, b[6:])
+    line_localizer.GetInputPort("contact_detected").FixValue(ctx, [1.0])
+    ctx.SetDiscreteState(line_localizer.EvalUniquePeriodicDiscreteUpdate(ctx))
+    assert line_localizer.GetOutputPort("valid").Eval(ctx)[0] == 1.0
+    assert line_localizer.same_link(
+        int(line_localizer.GetOutputPort("contact_body").Eval(ctx)[0]), int(contact[0].index())
+    )
+    np.testing.assert_allclose(line_localizer.GetOutputPort("contact_force_world").Eval(ctx), contact[3], atol=1e-6)

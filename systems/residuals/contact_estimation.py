@@ -36,6 +36,7 @@ from pydrake.geometry import SceneGraph, SceneGraphInspector
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import BodyIndex, Frame, JacobianWrtVariable, RigidBody
 from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem, ValueProducer
+from scipy.optimize import nnls
 from scipy.stats import chi2
 
 from systems.common.checks import eval_finite_input, positive_number, resolve_body
@@ -980,6 +981,23 @@ class ContactLocalizer(LeafSystem):
        leaves it, so its row is informative) and then by that first entry; a tie is
        reported AMBIGUOUS with both links (a hand pressed into its stop moves with its
        wrist as one body: no residual can tell them apart).
+    Without foot F/T sensors (``unknown_wrench_frames``: the soles), r_ext also carries
+    the ground's wrenches and its line of action is not the contact's. Steps 1-3 then run
+    per link B instead, on the rows W [r_ext; r_int] (W = diag(external_weights,
+    score_weights)) with the ground wrenches (``unknown_wrench_columns``) as free unknowns
+    and the stops' reactions as sign-constrained ones (non-negative least squares): B's
+    wrench [m_B; f] (moment about B's origin; its map T_B = [[I, skew(p_B)]; [0, I];
+    J^fb_B^T]) fitted with them; eq. (22) on that wrench, p_B + (f x m_B) / |f|^2 + s f /
+    |f|; the first entry into B's own primitives; and the score, the weighted misfit of the
+    point force at that entry (f_c refitted with the same unknowns). f_hat is the best
+    link's f_c; ties go to the least stop torque, then to the first entry. A link's
+    free-wrench misfit bounds every score a point force on it could reach (its line may
+    miss it under noise), so the runner-up is the best of the other links' scores AND
+    free-wrench misfits: the answer is VALID only when no other link could explain the
+    residuals about as well. On a stance leg most of a push looks like a change of the
+    ground's wrench (only the joints between the link and its sole see the rest), and the
+    base and the other leg links explain it too: such pushes come out AMBIGUOUS.
+
     4. Status: NO_CONTACT when ``contact_detected`` is 0; FORCE_TOO_SMALL when |f_hat| <
        ``min_force``; NO_INTERSECTION without candidates; AMBIGUOUS when another link's
        best score is within ``ambiguity_margin`` of the best (bodies joined by welds are
@@ -1036,6 +1054,11 @@ class ContactLocalizer(LeafSystem):
             joint is (the paper's fit).
         score_weights: n weights (default 1): e.g. 1 / internal residual noise std.
         skip_unsupported_shapes: ignore meshes etc. instead of raising.
+        unknown_wrench_frames: frames (or names) whose wrenches are unknown (the soles of a
+            robot without foot F/T sensors, the residuals computed without
+            ``known_wrench_frames``): the per-link mode above. Default ().
+        external_weights: 6 weights of the external residual's rows [moment; force] in that
+            mode (default 1; e.g. 1 / its noise std).
     """
 
     def __init__(
@@ -1056,10 +1079,14 @@ class ContactLocalizer(LeafSystem):
         limit_margin: float | None = 0.01,
         score_weights=1.0,
         skip_unsupported_shapes: bool = False,
+        unknown_wrench_frames: Sequence = (),
+        external_weights=1.0,
     ):
         super().__init__()
         who = self._who = "ContactLocalizer"
         self._kin = kin = _SensedConfiguration(plant, who)
+        self._unknown_frames = _unknown_frames(plant, unknown_wrench_frames, who)
+        self._external_w = _weights(external_weights, 6, f"{who}: external_weights")
         self._geometry, self._bodies = candidate_geometry(
             plant, scene_graph, bodies, exclude_bodies, who, skip_unsupported_shapes
         )
@@ -1158,6 +1185,8 @@ class ContactLocalizer(LeafSystem):
         distance, never below the tolerance); convex hulls are never skipped. The numbers
         of the primitives queried are those of querying all (row by row)."""
         wrench_W = np.asarray(wrench_W, dtype=float)
+        if self._unknown_frames:
+            return self._localize_per_link(np.asarray(q, dtype=float), wrench_W, np.asarray(residual, dtype=float))
         m, f = wrench_W[:3], wrench_W[3:]
         f2 = float(f @ f)
         if not f2 >= self._min_force**2:
@@ -1169,36 +1198,9 @@ class ContactLocalizer(LeafSystem):
         kin.set_positions(np.asarray(q, dtype=float))
         X_WB = np.array([kin.body_pose(b) for b in self._bodies])
         R_WG, p_WG = geo.world_poses(X_WB)
-        o_G = np.einsum("gji,gj->gi", R_WG, p0 - p_WG)
-        d_G = np.einsum("gji,j->gi", R_WG, d)
-        off_line = (p_WG - p0) - np.outer((p_WG - p0) @ d, d)
-        near = np.flatnonzero(np.einsum("gi,gi->g", off_line, off_line) <= self._bounding_radius2)
-        l_in, hit = np.full(len(geo), np.inf), np.zeros(len(geo), dtype=bool)
-        l_in[near], _, hit[near] = line_intersections(
-            o_G[near], d_G[near], geo.kinds[near], geo.params[near], geo.planes[near]
-        )
-        index = np.flatnonzero(hit & np.isfinite(l_in))
-        if index.size:
-            pts_G = o_G[index] + l_in[index, None] * d_G[index]
-            normals = outward_normals(pts_G, geo.kinds[index], geo.params[index], geo.planes[index])
-            inward = np.einsum("ij,ij->i", normals, d_G[index]) < -1e-9  # f . n < 0
-            index = index[inward]
-        if index.size:
-            pts_W = p0 + l_in[index, None] * d
-            # Buried in another link's primitive?  (m, g) signed distances, of the primitives
-            # of other links whose bounding sphere holds one of the points.
-            rel = pts_W[:, None, :] - p_WG[None, :, :]
-            holds = np.einsum("mgi,mgi->mg", rel, rel) <= self._bounding_radius2
-            near = np.flatnonzero((holds & ~self._same_body[index]).any(axis=0))
-            sd = np.full(holds.shape, np.inf)
-            if near.size:
-                local = np.einsum("gji,mgj->mgi", R_WG[near], rel[:, near])
-                sd[:, near] = signed_distances(local, geo.kinds[near], geo.params[near], geo.planes[near])
-            sd[self._same_body[index]] = np.inf
-            index = index[sd.min(axis=1) >= -self._tolerance]
+        index, l_in, pts_W = self._line_entries(p0, d, R_WG, p_WG, np.arange(len(geo)))
         if index.size == 0:
             return LocalizationResult(NO_INTERSECTION, force_W=f.copy(), line_point_W=p0)
-        pts_W = p0 + l_in[index, None] * d
         body_of = geo.body_indices[index]
         r = np.asarray(residual, dtype=float)
         limited, stop_sign = self.limited_joints(q)
@@ -1220,14 +1222,14 @@ class ContactLocalizer(LeafSystem):
             scores[rows] = float(np.linalg.norm(self._score_w * misfit))
         # Ties (within rounding) go to the link that needs the least stop torque, then to the
         # first entry along f.
-        order = np.lexsort((l_in[index], np.round(reactions, 12), np.round(scores, 12)))
+        order = np.lexsort((l_in, np.round(reactions, 12), np.round(scores, 12)))
         best = order[0]
         link_of = self._rigid_link[body_of]
         other = np.flatnonzero(link_of[order] != link_of[best])  # the runner-up is on another rigid link
         runner = order[other[0]] if other.size else None
         runner_up = float(scores[runner]) if runner is not None else math.inf
         status = AMBIGUOUS if runner_up - scores[best] < self._margin else VALID
-        candidates = [(int(body_of[i]), pts_W[i].copy(), float(scores[i]), float(l_in[index[i]])) for i in order]
+        candidates = [(int(body_of[i]), pts_W[i].copy(), float(scores[i]), float(l_in[i])) for i in order]
         return LocalizationResult(
             status,
             int(body_of[best]),
@@ -1241,6 +1243,132 @@ class ContactLocalizer(LeafSystem):
             runner_up_point_W=pts_W[runner].copy() if runner is not None else np.zeros(3),
             limited_joints=tuple(int(k) for k in limited),
         )
+
+    def _line_entries(
+        self, p0: np.ndarray, d: np.ndarray, R_WG: np.ndarray, p_WG: np.ndarray, prims: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Step 2 for the line p0 + l d (d a unit vector) and the primitives ``prims``:
+        (primitive indices, l, points (world)) of the entries (f . n < 0) not buried deeper
+        than ``surface_tolerance`` in another link's primitive."""
+        geo = self._geometry
+        o_G = np.einsum("gji,gj->gi", R_WG[prims], p0 - p_WG[prims])
+        d_G = np.einsum("gji,j->gi", R_WG[prims], d)
+        off_line = (p_WG[prims] - p0) - np.outer((p_WG[prims] - p0) @ d, d)
+        near = np.flatnonzero(np.einsum("gi,gi->g", off_line, off_line) <= self._bounding_radius2[prims])
+        l_in, hit = np.full(len(prims), np.inf), np.zeros(len(prims), dtype=bool)
+        g = prims[near]
+        l_in[near], _, hit[near] = line_intersections(o_G[near], d_G[near], geo.kinds[g], geo.params[g], geo.planes[g])
+        keep = np.flatnonzero(hit & np.isfinite(l_in))
+        if keep.size:
+            g = prims[keep]
+            pts_G = o_G[keep] + l_in[keep, None] * d_G[keep]
+            normals = outward_normals(pts_G, geo.kinds[g], geo.params[g], geo.planes[g])
+            keep = keep[np.einsum("ij,ij->i", normals, d_G[keep]) < -1e-9]  # f . n < 0
+        index, l_in = prims[keep], l_in[keep]
+        if index.size:
+            pts_W = p0 + l_in[:, None] * d
+            # Buried in another link's primitive?  (m, g) signed distances, of the primitives
+            # of other links whose bounding sphere holds one of the points.
+            rel = pts_W[:, None, :] - p_WG[None, :, :]
+            holds = np.einsum("mgi,mgi->mg", rel, rel) <= self._bounding_radius2
+            near = np.flatnonzero((holds & ~self._same_body[index]).any(axis=0))
+            sd = np.full(holds.shape, np.inf)
+            if near.size:
+                local = np.einsum("gji,mgj->mgi", R_WG[near], rel[:, near])
+                sd[:, near] = signed_distances(local, geo.kinds[near], geo.params[near], geo.planes[near])
+            sd[self._same_body[index]] = np.inf
+            outer = sd.min(axis=1) >= -self._tolerance
+            index, l_in = index[outer], l_in[outer]
+        return index, l_in, p0 + l_in[:, None] * d
+
+    def _localize_per_link(self, q: np.ndarray, wrench_W: np.ndarray, residual: np.ndarray) -> LocalizationResult:
+        """``localize`` with unknown ground wrenches (the class docstring's per-link mode)."""
+        kin, geo = self._kin, self._geometry
+        kin.set_positions(q)
+        X_WB = np.array([kin.body_pose(b) for b in self._bodies])
+        R_WG, p_WG = geo.world_poses(X_WB)
+        E = kin.elimination()
+        world = kin.plant.world_frame()
+        n = self._n
+        w = np.concatenate((self._external_w, self._score_w))
+        limited, signs = self.limited_joints(q)
+        stops = np.zeros((6 + n, len(limited)))
+        stops[6 + limited, np.arange(len(limited))] = w[6 + limited] * signs
+        ground = w[:, None] * unknown_wrench_columns(kin, self._unknown_frames)
+        b = w * np.concatenate((wrench_W, residual))
+
+        def fit(columns: np.ndarray) -> tuple[np.ndarray, float, float]:
+            """(the columns' coefficients, weighted misfit, stop torque) with the ground
+            wrenches free and the stops' reactions of their signs."""
+            free = np.concatenate((columns, ground), axis=1)
+            mu = np.zeros(len(limited))
+            if len(limited):
+                Qf, _ = np.linalg.qr(free)
+                mu, _ = nnls(stops - Qf @ (Qf.T @ stops), b - Qf @ (Qf.T @ b))
+            rhs = b - stops @ mu
+            x = np.linalg.lstsq(free, rhs, rcond=None)[0]
+            return x[: columns.shape[1]], float(np.linalg.norm(free @ x - rhs)), float(np.linalg.norm(mu))
+
+        best_force = np.zeros(3)
+        rows = []  # (score, stop torque, l, body index, point, force, line point)
+        rivals = []  # (free-wrench misfit, body index, B's origin)
+        for slot, body in enumerate(self._bodies):
+            X = X_WB[slot]
+            J = kin.plant.CalcJacobianSpatialVelocity(
+                kin.context, JacobianWrtVariable.kV, body.body_frame(), np.zeros(3), world, world
+            )
+            T = np.zeros((6 + n, 6))
+            T[:3, :3] = np.eye(3)
+            T[:3, 3:] = skew(X[:, 3])
+            T[3:6, 3:] = np.eye(3)
+            T[6:] = (J[:, 6:] - J[:, :6] @ E).T
+            T *= w[:, None]
+            wrench, misfit, _ = fit(T)
+            rivals.append((misfit, int(body.index()), X[:, 3].copy()))
+            m, f = wrench[:3], wrench[3:]
+            f2 = float(f @ f)
+            if f2 > float(best_force @ best_force):
+                best_force = f
+            if not f2 >= self._min_force**2:
+                continue
+            d = f / math.sqrt(f2)
+            p_line = X[:, 3] + cross(f, m) / f2  # eq. (22) on the link's own wrench
+            index, l_in, pts_W = self._line_entries(p_line, d, R_WG, p_WG, np.flatnonzero(geo.slot == slot))
+            if index.size == 0:
+                continue
+            first = int(np.argmin(l_in))
+            point = pts_W[first]
+            f_c, score, stop = fit(T[:, :3] @ skew(point - X[:, 3]) + T[:, 3:])  # the point force's columns
+            line_point = p_line - (p_line @ d) * d
+            rows.append((score, stop, float(l_in[first]), int(body.index()), point, f_c, line_point))
+        if not rows:
+            status = FORCE_TOO_SMALL if not float(best_force @ best_force) >= self._min_force**2 else NO_INTERSECTION
+            return LocalizationResult(status, force_W=best_force.copy(), limited_joints=tuple(int(k) for k in limited))
+        rows.sort(key=lambda row: (round(row[0], 12), round(row[1], 9), row[2]))
+        best = rows[0]
+        link = self._rigid_link[best[3]]
+        others = [(row[0], row[3], row[4]) for row in rows if self._rigid_link[row[3]] != link]
+        others += [rival for rival in rivals if self._rigid_link[rival[1]] != link]
+        runner = min(others, key=lambda other: other[0]) if others else None
+        runner_up = runner[0] if runner is not None else math.inf
+        return LocalizationResult(
+            AMBIGUOUS if runner_up - best[0] < self._margin else VALID,
+            best[3],
+            best[4].copy(),
+            best[5].copy(),
+            best[0],
+            runner_up,
+            best[6].copy(),
+            [(row[3], row[4].copy(), row[0], row[2]) for row in rows],
+            runner_up_body_index=runner[1] if runner is not None else -1,
+            runner_up_point_W=runner[2].copy() if runner is not None else np.zeros(3),
+            limited_joints=tuple(int(k) for k in limited),
+        )
+
+    @property
+    def unknown_wrench_frames(self) -> tuple[Frame, ...]:
+        """The frames whose wrenches are unknown (() with foot F/T sensors)."""
+        return self._unknown_frames
 
     def localization_inputs(self, context: Context) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(q, external wrench in world, internal residual) that the localizer's current

@@ -465,6 +465,15 @@ def _print_summary(metrics: dict) -> None:
                 low, high = row["interval"]
                 counts = f"{row['successes']:4d} / {row['trials']:<4d} {100 * row['rate']:5.1f} %"
                 print(f"    seed {row['group']:>8s} {counts}  [{100 * low:.1f}, {100 * high:.1f}]")
+    if metrics.get("per_region") and not two:
+        print("  per body region: trials, detection, right link (eq. 22 / stacked fit), median position error:")
+        for row in metrics["per_region"]:
+            fit = row.get("fit_correct_link_rate")
+            fit_text = "" if fit is None else f" / {100 * fit:5.1f} %"
+            print(
+                f"    {row['region']:6s} {row['trials']:5d}  {100 * row['detection_rate']:5.1f} %"
+                f"  {100 * row['correct_link_rate']:5.1f} %{fit_text}  {100 * row['median_position_error_m']:.2f} cm"
+            )
     worst = [row for row in metrics.get("per_link", []) if row["rate"] < 1.0]
     if worst:
         what = "found (two contacts, this link among them)" if two else "eq. (22) localizer's right-link"

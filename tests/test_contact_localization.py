@@ -81,11 +81,23 @@ def test_push_detected_and_localized_without_noise():
     assert np.linalg.norm(estimate.force_W - f_W) < 5e-3 * 12.0
 
 
-def test_rejects_model_without_ft_sensors_and_sole_push():
-    with pytest.raises(ValueError, match="F/T"):
-        build_contact_localization_diagram(ContactLocalizationScenario(model="nao_like"))
-    with pytest.raises(ValueError, match="below an F/T sensor"):
+def test_feet_without_ft_sensors_are_unknowns_and_feet_are_never_pushed():
+    """A robot without foot F/T sensors (nao_like, FSRs only) gets its soles as the
+    estimators' unknown wrench frames, its whole feet excluded; a push on a foot is refused
+    either way (it is part of the ground's wrench, or below an F/T sensor)."""
+    _, handles = build_contact_localization_diagram(ContactLocalizationScenario(model="nao_like"))
+    assert [f.name() for f in handles.station.estimator.unknown_wrench_frames] == ["l_sole_frame", "r_sole_frame"]
+    assert [f.name() for f in handles.detector.unknown_wrench_frames] == ["l_sole_frame", "r_sole_frame"]
+    assert [f.name() for f in handles.localizer.unknown_wrench_frames] == ["l_sole_frame", "r_sole_frame"]
+    assert not handles.station.known_wrench_frames
+    with pytest.raises(ValueError, match="part of a foot"):
         build_contact_localization_diagram(ContactLocalizationScenario(push_body="r_sole", push_force=(0, 0, -5)))
+    with pytest.raises(ValueError, match="part of a foot"):
+        build_contact_localization_diagram(
+            ContactLocalizationScenario(
+                model="models/robots/hrp4_like_no_ft.yaml", push_body="R_ANKLE_R_LINK", push_force=(0, 0, -5)
+            )
+        )
 
 
 def test_study_trials_split_over_seeds_and_match_each_seeds_own_draw():

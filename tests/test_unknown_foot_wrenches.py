@@ -149,18 +149,21 @@ def test_detector_ignores_any_ground_wrench_and_sees_a_small_push(hrp4, localize
     on = dut.thresholds["on"][1]
     assert on == pytest.approx(chi2.isf(1e-9, 3 + n - 12))
     rng = np.random.default_rng(2)
+    columns = dut.unknown_columns(q)  # a robot at rest: the filtered columns are these
     for w in (STANDING_WRENCHES, 3.0 * STANDING_WRENCHES + 50.0 * rng.normal(size=12)):
         b = _ground_residuals(plant, context, w)
-        s_ext, s_int = dut.statistics(b[:6], b[6:], q)
+        s_ext, s_int = dut.statistics(b[:6], b[6:], columns)
         assert s_ext == 0.0 and s_int < 1e-12 * on
     # A 5 N push on the wrist, on top of the standing wrenches, is far above the threshold.
     body, p_B, p_W, f_W = _arm_push(plant, context, localizer, 3)
     push = 5.0 * f_W / np.linalg.norm(f_W)
     wrench, tau = _exact_residuals(plant, context, [(body, p_B, p_W, push)])
     b = np.concatenate((wrench, tau)) + _ground_residuals(plant, context, STANDING_WRENCHES)
-    assert dut.statistics(b[:6], b[6:], q)[1] > 10.0 * on
-    # The system reads q from its state port and switches on.
+    assert dut.statistics(b[:6], b[6:], columns)[1] > 10.0 * on
+    # The system reads q from its state port and switches on (its filtered columns those
+    # of a robot standing there for long).
     ctx = dut.CreateDefaultContext()
+    ctx.SetDiscreteState(np.concatenate(([0.0, -1.0, 0.0, 0.0, 0.0, 0.0], columns.ravel())))
     dut.GetInputPort("state").FixValue(ctx, np.concatenate((q, np.zeros(plant.num_velocities()))))
     dut.GetInputPort("external_wrench_world").FixValue(ctx, b[:6])
     dut.GetInputPort("residual").FixValue(ctx, b[6:])
@@ -189,13 +192,64 @@ def test_detector_statistic_is_chi_square_under_noise(hrp4):
         wrenches[k] = b[:6]
         wrenches[k, 3:] += rng.multivariate_normal(np.zeros(3), cov_f)
         residuals[k] = b[6:] + rng.multivariate_normal(np.zeros(n), cov_int)
-    s = dut.statistics_of_samples(wrenches, residuals, np.tile(q, (count, 1)))[:, 1]
+    columns = np.tile(dut.unknown_columns(q), (count, 1, 1))
+    s = dut.statistics_of_samples(wrenches, residuals, columns)[:, 1]
     dof = 3 + n - 12
     assert abs(s.mean() - dof) < 5.0 * np.sqrt(2.0 * dof / count)
     assert abs(s.var() / (2.0 * dof) - 1.0) < 0.15
-    np.testing.assert_allclose(s[:5], [dut.statistics(wrenches[k], residuals[k], q)[1] for k in range(5)])
-    with pytest.raises(ValueError, match="positions"):
+    np.testing.assert_allclose(s[:5], [dut.statistics(wrenches[k], residuals[k], columns[k])[1] for k in range(5)])
+    with pytest.raises(ValueError, match="filtered columns"):
         dut.statistics_of_samples(wrenches, residuals)
+
+
+def test_detector_filters_the_columns_as_the_residuals_filter_the_ground_wrench(hrp4):
+    """A robot moving its arms and torso while standing: the residuals are the first-order
+    filter of J(q(t))^T w (eqs. 11, 16; r_k = (1 - K T) r_k-1 + K T J_k^T w), not J(q)^T w.
+    Projecting out the columns at the current q leaves their lag, J-dot^T w / K with w the
+    robot's weight, far above the threshold; the detector's filtered columns leave none,
+    and its system update reproduces ``filtered_columns``."""
+    plant, _, context = hrp4
+    dut = _detector(plant, context)
+    K, T = 35.0, 1e-3
+    q0 = plant.GetPositions(context)
+    n = plant.num_velocities() - 6
+    rng = np.random.default_rng(5)
+    amplitude = np.zeros(q0.size)
+    amplitude[7 + 12 :] = 0.3  # the torso, head and arms (v[6:] order: the legs first)
+    phase = rng.uniform(0.0, 2.0 * np.pi, q0.size)
+    times = np.arange(600) * T
+    positions = q0 + amplitude * np.sin(2.0 * np.pi * 0.5 * times[:, None] + phase)
+    kin = _SensedConfiguration(plant, "test")
+    frames = [plant.GetFrameByName(f) for f in SOLE_FRAMES]
+    residual = np.zeros(6 + n)
+    residuals = np.zeros((len(times), 6 + n))
+    for k, q in enumerate(positions):
+        kin.set_positions(q)
+        residual = (1.0 - K * T) * residual + K * T * (unknown_wrench_columns(kin, frames) @ STANDING_WRENCHES)
+        residuals[k] = residual
+    late = np.vstack((np.zeros((1, 6 + n)), residuals[:-1]))  # update k reads residual k - 1
+    used, end = dut.filtered_columns(np.zeros(dut.unknown_columns(q0).size), positions)
+    filtered = dut.statistics_of_samples(late[:, :6], late[:, 6:], used)[100:, 1]
+    instantaneous = np.array(
+        [dut.statistics(late[k, :6], late[k, 6:], dut.unknown_columns(positions[k - 1]))[1] for k in range(100, 600)]
+    )
+    on = dut.thresholds["on"][1]
+    assert filtered.max() < 1e-6 * on
+    assert instantaneous.max() > 10.0 * on
+    # The system: the same filter in its state, update by update.
+    ctx = dut.CreateDefaultContext()
+    velocity = np.zeros(plant.num_velocities())
+    for k in range(50):
+        dut.GetInputPort("state").FixValue(ctx, np.concatenate((positions[k], velocity)))
+        dut.GetInputPort("external_wrench_world").FixValue(ctx, late[k, :6])
+        dut.GetInputPort("residual").FixValue(ctx, late[k, 6:])
+        ctx.SetTime(times[k])
+        ctx.SetDiscreteState(dut.EvalUniquePeriodicDiscreteUpdate(ctx))
+    np.testing.assert_allclose(
+        ctx.get_discrete_state_vector().CopyToVector()[6:],
+        dut.filtered_columns(np.zeros(end.size), positions[:50])[1].ravel(),
+    )
+    assert dut.GetOutputPort("contact_detected").Eval(ctx)[0] == 0.0
 
 
 def test_detector_refuses_known_and_unknown_wrenches_together(hrp4):

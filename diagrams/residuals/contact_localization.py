@@ -63,6 +63,8 @@ from diagrams.residuals.wiring import add_internal_and_external_residuals
 from diagrams.station.conditions import is_ideal, set_ideal_conditions
 from diagrams.station.humanoid_station import HumanoidStation, add_scenario_station, default_plant_config
 from diagrams.station.motions import SlowMotion, slow_whole_body_motion
+from diagrams.station.standing import foot_sphere_normal_forces
+from models import is_humanoid, robot_description
 from systems.estimation.model_identification import ModelCorrections
 from systems.io.update_recorder import UpdateRecorder
 from systems.residuals.contact_estimation import (
@@ -72,6 +74,7 @@ from systems.residuals.contact_estimation import (
     LocalizationResult,
     _SensedConfiguration,
     candidate_geometry,
+    unknown_wrench_columns,
 )
 from systems.residuals.geometry_intersection import inward_direction, sample_surface, surface_areas
 from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual, ResidualModel
@@ -143,12 +146,39 @@ TWO_CONTACT_FLOORS = {
 }
 
 
+#: Issue 36's floors for one contact on a robot without foot F/T sensors (the ground's
+#: wrenches unknowns of the estimators), per body region (``REGIONS``), in both worlds.
+NO_FOOT_FT_FLOORS = {
+    "detection_rate": (">=", 0.99),
+    "false_detections": ("<=", 0),
+    "correct_link_rate_arms": (">=", 0.90),
+    "correct_link_rate_torso": (">=", 0.90),
+    "correct_link_rate_legs": (">=", 0.70),
+    "fit_correct_link_rate_arms": (">=", 0.90),
+    "fit_correct_link_rate_torso": (">=", 0.90),
+    "fit_correct_link_rate_legs": (">=", 0.70),
+    "median_position_error_m": ("<=", 0.02),
+    "fit_median_position_error_m": ("<=", 0.02),
+    "foot_normal_force_rms_error_of_weight": ("<=", 0.05),
+}
+
+
+def lacks_foot_ft_sensors(model: str) -> bool:
+    """Whether the humanoid ``model`` (a built-in name or a robot description) has a foot
+    without an F/T sensor (False for anything else)."""
+    if not is_humanoid(model):
+        return False
+    return any(foot.sensing != "force_torque" for foot in robot_description(model).feet.values())
+
+
 def floors_for(scenario: "ContactLocalizationScenario") -> dict:
-    """``TWO_CONTACT_FLOORS`` for two contacts; else ``FLOORS`` in the ideal world,
-    ``REALISTIC_FLOORS`` otherwise (any imperfection, the EKF base state or a refined
-    model)."""
+    """``TWO_CONTACT_FLOORS`` for two contacts; ``NO_FOOT_FT_FLOORS`` on a robot without
+    foot F/T sensors; else ``FLOORS`` in the ideal world, ``REALISTIC_FLOORS`` otherwise
+    (any imperfection, the EKF base state or a refined model)."""
     if scenario.contacts == 2:
         return TWO_CONTACT_FLOORS
+    if lacks_foot_ft_sensors(scenario.model):
+        return NO_FOOT_FT_FLOORS
     return FLOORS if is_ideal(scenario) else REALISTIC_FLOORS
 
 
@@ -323,11 +353,6 @@ def scenario_push(scenario: ContactLocalizationScenario) -> Push:
     )
 
 
-def sole_bodies(station: HumanoidStation) -> tuple[str, ...]:
-    """Names of the links outboard of the F/T sensors (the soles)."""
-    return tuple(j.child_body().name() for j in (station.humanoid.ft_sensor_joints or {}).values())
-
-
 def build_contact_localization_diagram(
     scenario: ContactLocalizationScenario,
     meshcat: Meshcat | None = None,
@@ -361,10 +386,9 @@ def build_contact_localization_diagram(
         raise ValueError("a Meshcat replay draws the estimate as it comes: build it with online=True")
     builder = DiagramBuilder()
     station = add_scenario_station(builder, scenario, model_corrections)
-    if station.humanoid is None or not station.known_wrench_frames:
-        raise ValueError(
-            f"the contact study needs a humanoid with foot F/T sensors (hrp4_like), got {scenario.model!r}"
-        )
+    estimator = station.estimator
+    if station.humanoid is None or not (station.known_wrench_frames or estimator.unknown_wrench_frames):
+        raise ValueError(f"the contact study needs a humanoid (a robot description with feet), got {scenario.model!r}")
     plant = station.plant
     if scenario.motion is None:
         reference = builder.AddSystem(ConstantVectorSource(station.q_hold))
@@ -372,22 +396,25 @@ def build_contact_localization_diagram(
         reference = builder.AddSystem(slow_whole_body_motion(station, scenario.motion))
     reference.set_name("posture_reference")
     builder.Connect(reference.get_output_port(), station.desired_position)
-    excluded = sole_bodies(station)
+    excluded = estimator.excluded_bodies
 
     if pushes is None:
         pushes = [] if scenario.push_body is None else [scenario_push(scenario)]
     pushes = list(pushes)
     for push in pushes:
         if push.body_name in excluded:
-            raise ValueError(f"push body {push.body_name!r} is below an F/T sensor: invisible to the residuals")
+            raise ValueError(
+                f"push body {push.body_name!r} is part of a foot (below an F/T sensor, or a sole whose ground "
+                "wrench is unknown): its push is part of the ground's wrench, invisible to the residuals"
+            )
     push_source = builder.AddSystem(PushSource(plant, pushes))
     push_source.set_name("push_source")
     builder.Connect(push_source.GetOutputPort("applied_spatial_forces"), plant.get_applied_spatial_force_input_port())
     builder.Connect(plant.get_state_output_port(), push_source.GetInputPort("state"))
 
     frames = station.known_wrench_frames
+    unknown = estimator.unknown_wrench_frames  # the soles without F/T sensors
     # Every estimator knows the robot through the estimators' plant alone.
-    estimator = station.estimator
     if online:
         internal, external = add_internal_and_external_residuals(
             builder, station, scenario.internal_gain, scenario.external_gain, scenario.period
@@ -418,6 +445,7 @@ def build_contact_localization_diagram(
         period=scenario.period,
         startup_time=scenario.detector_startup_time,
         release_probability=scenario.detector_release_probability,
+        unknown_wrench_frames=unknown,
         **covariances,
     )
     detector.set_name("contact_detector")
@@ -428,6 +456,7 @@ def build_contact_localization_diagram(
         period=scenario.period,
         localization_period=scenario.localization_period,
         settle_time=scenario.settle_time,
+        unknown_wrench_frames=unknown,
     )
     localizer.set_name("contact_localizer")
     handles = {
@@ -449,6 +478,8 @@ def build_contact_localization_diagram(
     builder.AddSystem(localizer)
     builder.Connect(external.GetOutputPort("external_wrench_world"), detector.GetInputPort("external_wrench_world"))
     builder.Connect(internal.GetOutputPort("residual"), detector.GetInputPort("residual"))
+    if unknown:
+        builder.Connect(station.sensed_state, detector.GetInputPort("state"))
     builder.Connect(station.sensed_state, localizer.GetInputPort("state"))
     builder.Connect(external.GetOutputPort("external_wrench_world"), localizer.GetInputPort("external_wrench_world"))
     builder.Connect(internal.GetOutputPort("residual"), localizer.GetInputPort("residual"))
@@ -507,23 +538,56 @@ def _build_with_estimator_recorder(
     """Builds the diagram with the estimators' inputs recorded instead of the estimators:
     an ``UpdateRecorder`` updated when they would be, reading what they would read (the
     sensed state, the motor torque the internal residual reads, the F/T wrenches)."""
-    recorder = builder.AddSystem(
-        UpdateRecorder(
-            {
-                "state": station.sensed_state.size(),
-                "torque": station.measured_torque.size(),
-                "wrenches": station.known_wrenches.size(),
-            },
-            period,
-        )
-    )
+    sizes = {"state": station.sensed_state.size(), "torque": station.measured_torque.size()}
+    if station.known_wrenches is not None:  # the F/T wrenches (none without F/T sensors)
+        sizes["wrenches"] = station.known_wrenches.size()
+    recorder = builder.AddSystem(UpdateRecorder(sizes, period))
     recorder.set_name("estimator_input_recorder")
     builder.Connect(station.sensed_state, recorder.GetInputPort("state"))
     builder.Connect(station.measured_torque, recorder.GetInputPort("torque"))
-    builder.Connect(station.known_wrenches, recorder.GetInputPort("wrenches"))
+    if station.known_wrenches is not None:
+        builder.Connect(station.known_wrenches, recorder.GetInputPort("wrenches"))
     diagram = builder.Build()
     diagram.set_name("contact_localization_sensing")
     return diagram, recorder
+
+
+#: Body regions of the study's per-region table (``body_regions``).
+REGIONS = ("arms", "torso", "legs")
+_GROUP_REGIONS = {
+    "left_arm": "arms",
+    "right_arm": "arms",
+    "left_hand": "arms",
+    "right_hand": "arms",
+    "torso": "torso",
+    "head": "torso",
+    "left_leg": "legs",
+    "right_leg": "legs",
+}
+
+
+def body_regions(plant: MultibodyPlant, humanoid) -> dict[str, str]:
+    """Body name -> "arms", "torso" or "legs": the joint group (``HumanoidHandles.
+    joint_groups``) of the first grouped joint inboard of the body (hands count as arms,
+    the head as torso); the base and bodies inboard of every grouped joint are "torso"."""
+    group_of = {
+        j: _GROUP_REGIONS[g] for g, joints in humanoid.joint_groups.items() if g in _GROUP_REGIONS for j in joints
+    }
+    inboard = {}
+    for index in plant.GetJointIndices():
+        joint = plant.get_joint(index)
+        inboard[int(joint.child_body().index())] = joint
+    regions = {}
+    for b in range(plant.num_bodies()):
+        body, region = plant.get_body(BodyIndex(b)), "torso"
+        joint = inboard.get(b)
+        while joint is not None:
+            if joint.name() in group_of:
+                region = group_of[joint.name()]
+                break
+            joint = inboard.get(int(joint.parent_body().index()))
+        regions[body.name()] = region
+    return regions
 
 
 def sample_trials(
@@ -542,9 +606,9 @@ def sample_trials(
     trial's); builds the diagram once, does not simulate.
 
     Returns one dict per trial: ``trial``, ``noise_seed``, ``contacts`` (one dict per
-    contact: ``body``, ``body_index``, ``geometry``, ``point_body`` (m, body frame),
-    ``point_world_nominal`` (m), ``force_world`` (N)), and the first contact's fields at
-    the top level.
+    contact: ``body``, ``body_index``, ``region`` (``body_regions``), ``geometry``,
+    ``point_body`` (m, body frame), ``point_world_nominal`` (m), ``force_world`` (N)), and
+    the first contact's fields at the top level.
 
     Raises:
         ValueError: ``contacts`` other than 1 or 2, or a ``force_range`` that is not
@@ -566,6 +630,7 @@ def sample_trials(
     R_WG, p_WG = geo.world_poses(X_WB)
     areas = surface_areas(geo.kinds, geo.params)
     links = np.unique(geo.body_indices)
+    regions = body_regions(plant, handles.station.humanoid)
 
     def draw(rng: np.random.Generator, other_than: int | None) -> dict:
         for _ in range(1000):
@@ -581,9 +646,11 @@ def sample_trials(
         n_W = R_WG[g] @ n_G
         X = X_WB[int(np.searchsorted(geo.bodies, link))]
         force = rng.uniform(low, high) * inward_direction(n_W, rng, MAX_ANGLE_DEG)
+        name = plant.get_body(BodyIndex(int(link))).name()
         return {
-            "body": plant.get_body(BodyIndex(int(link))).name(),
+            "body": name,
             "body_index": int(link),
+            "region": regions[name],
             "geometry": geo.names[g],
             "point_body": (X[:, :3].T @ (p_W - X[:, 3])).tolist(),
             "point_world_nominal": p_W.tolist(),
@@ -699,6 +766,10 @@ def averaged_input_covariances(
     (model error: averaging does not remove it) plus their sample covariance Sigma scaled
     to the variance of a mean over T = push_duration - settle_time (a first-order residual
     of gain K, driven by white noise, has var(mean over T) = Sigma 2 / (K T) for T >> 1/K).
+    On a robot without foot F/T sensors the residuals carry the ground's wrenches, which
+    are unknowns of the fit, not model error: mu is the mean after each sample's
+    least-squares ground wrenches (at the run's mean posture) are taken out (Sigma stays
+    the raw residuals', whose sway of the ground wrenches the fit's projection removes).
     """
     calibration = dataclasses.replace(
         scenario, push_body=None, motion=None, seed=(scenario.seed * 100003 + 99971) % (2**31 - 1)
@@ -714,13 +785,20 @@ def averaged_input_covariances(
     inputs = estimator_log(handles)
     replay = estimate_run(handles, inputs)
     keep = inputs.log_times >= AVERAGED_NOISE_STARTUP_S
+    raw = np.concatenate((replay.external_wrench_world, replay.internal), axis=1)[keep]
+    unexplained = raw
+    unknown = handles.station.estimator.unknown_wrench_frames
+    if unknown:
+        kin = _SensedConfiguration(handles.station.estimator.plant, "averaged_input_covariances")
+        q = inputs.state[keep, : kin.nq].mean(axis=0)
+        q[:4] /= np.linalg.norm(q[:4])
+        kin.set_positions(q)
+        U = unknown_wrench_columns(kin, unknown)
+        unexplained = raw - (U @ np.linalg.lstsq(U, raw.T, rcond=None)[0]).T
     blocks = []
-    for values, gain in (
-        (replay.external_wrench_world, scenario.external_gain),
-        (replay.internal, scenario.internal_gain),
-    ):
-        x = values[keep].T
-        mean = x.mean(axis=1)
+    for rows, gain in ((slice(0, 6), scenario.external_gain), (slice(6, None), scenario.internal_gain)):
+        x = raw[:, rows].T
+        mean = unexplained[:, rows].mean(axis=0)
         averaging = max(scenario.push_duration - scenario.settle_time, scenario.period)
         blocks.append(np.outer(mean, mean) + np.cov(x) * min(1.0, 2.0 / (gain * averaging)))
     return blocks[0], blocks[1]
@@ -734,9 +812,12 @@ def multi_contact_localizer(
     """The study's one-or-two-contact localizer on the estimators' plant of ``handles`` (keep
     them alive with it), the soles excluded, with the averaged inputs' ``covariances``
     (``averaged_input_covariances``) and, if given, the model error under load
-    (``load_model_error``)."""
-    load_ext, load_int = (None, None) if load_covariances is None else load_covariances
+    (``load_model_error``). On a robot without foot F/T sensors the soles' ground wrenches
+    are its unknowns, and the load model is left out: it scales with the external
+    residual's force, there the robot's weight as much as the push."""
     estimator = handles.station.estimator
+    unknown = estimator.unknown_wrench_frames
+    load_ext, load_int = (None, None) if load_covariances is None or unknown else load_covariances
     return MultiContactLocalizer(
         estimator.plant,
         estimator.scene_graph,
@@ -745,6 +826,7 @@ def multi_contact_localizer(
         covariance_internal=covariances[1],
         load_covariance_external=load_ext,
         load_covariance_internal=load_int,
+        unknown_wrench_frames=unknown,
     )
 
 
@@ -883,7 +965,7 @@ def estimator_log(handles: ContactLocalizationHandles) -> EstimatorLog:
         log_times=np.append(times[1:], times[-1] + period) if times.size else times,
         state=recorder.values("state"),
         torque=recorder.values("torque"),
-        wrenches=recorder.values("wrenches"),
+        wrenches=recorder.values("wrenches") if "wrenches" in recorder.names else np.zeros((times.size, 0)),
     )
 
 
@@ -1055,7 +1137,38 @@ def trial_result(
         q, wrench, residual = offline.localization_inputs
     result["localizer_inputs"] = {"q": q, "external_wrench_world": wrench, "residual": residual}
     result["true_points_world"] = true_points.tolist()
+    if handles.station.estimator.unknown_wrench_frames:
+        # The ground's normal force on each sole without F/T sensors (sides sorted, as the
+        # estimators' unknown wrench frames), at the push's end: what the fits estimate.
+        plant, humanoid = handles.plant, handles.station.humanoid
+        plant_context = plant.GetMyContextFromRoot(context)
+        sides = [s for s in sorted(humanoid.sole_frames) if s not in humanoid.ft_sensor_joints]
+        forces = foot_sphere_normal_forces(plant, plant_context, humanoid)
+        result["true_foot_normal_forces_N"] = [float(np.sum(forces[s])) for s in sides]
+        result["robot_weight_N"] = float(
+            plant.CalcTotalMass(plant_context) * -plant.gravity_field().gravity_vector()[2]
+        )
     return result
+
+
+def _not_localized(contacts: int) -> dict:
+    """``multi_contact_result`` of a trial without inputs to localize: no contact found."""
+    out = {
+        "contacts_estimated": 0,
+        "p_value_one": None,
+        "estimated_contact_bodies": [],
+        "estimated_contact_body_names": [],
+    }
+    if contacts == 1:
+        out.update(fit_correct_link=False, fit_valid=False, fit_position_error_m=None)
+    else:
+        out.update(
+            contact_position_errors_m=[math.inf, math.inf],
+            contact_force_errors_rel=[math.inf, math.inf],
+            two_contact_fit_links_right=False,
+            contact_links_right=False,
+        )
+    return out
 
 
 def multi_contact_result(
@@ -1076,6 +1189,8 @@ def multi_contact_result(
     contacts, ``contact_links_right`` (two contacts reported, on the two true
     links) and the position and force errors of the two-contact fit's contacts matched to
     the true ones (the pairing with the smaller total position error)."""
+    if not np.any(q):  # the trial was never localized (no detection): its inputs are zeros
+        return _not_localized(len(true_bodies))
     estimate = multi_contact.localize(q, wrench_W, residual, max_contacts=2)
     out = {
         "contacts_estimated": int(estimate.num_contacts),
@@ -1083,6 +1198,9 @@ def multi_contact_result(
         "estimated_contact_bodies": [int(b) for b in estimate.body_indices],
         "estimated_contact_body_names": [multi_contact.body_name(b) for b in estimate.body_indices],
     }
+    if estimate.one is not None and estimate.one.unknown_wrenches.size:
+        # The ground's normal force on each sole of the single-contact fit (world z).
+        out["foot_normal_forces_N"] = [float(w[5]) for w in estimate.one.unknown_wrenches]
     if len(true_bodies) == 1:
         one = estimate.num_contacts == 1
         out["fit_correct_link"] = bool(one and multi_contact.same_link(estimate.body_indices[0], true_bodies[0]))
@@ -1278,6 +1396,51 @@ def _intervals_and_tables(results: list[dict], detected: list, valid: list, posi
     }
 
 
+def _region_table(results: list[dict]) -> list[dict]:
+    """Per body region (``REGIONS``, of the first contact): trials, detection rate, the
+    eq. (22) localizer's right-link rate and median position error (inf counted for a
+    trial without localization), and the stacked fit's where it ran."""
+    table = []
+    for region in REGIONS:
+        rows = [r for r in results if r.get("region") == region]
+        if not rows:
+            continue
+        positions = [math.inf if r["position_error_m"] is None else r["position_error_m"] for r in rows]
+        entry = {
+            "region": region,
+            "trials": len(rows),
+            "detection_rate": float(np.mean([r["detected"] for r in rows])),
+            "correct_link_rate": float(np.mean([r["correct_link"] for r in rows])),
+            "median_position_error_m": float(np.median(positions)),
+        }
+        fits = [r for r in rows if "fit_correct_link" in r]
+        if fits:
+            entry["fit_correct_link_rate"] = float(np.mean([r["fit_correct_link"] for r in fits]))
+            entry["fit_median_position_error_m"] = float(
+                np.median([math.inf if r["fit_position_error_m"] is None else r["fit_position_error_m"] for r in fits])
+            )
+        table.append(entry)
+    return table
+
+
+def _foot_force_metrics(results: list[dict]) -> dict:
+    """Without foot F/T sensors: the RMS error of the stacked fit's ground normal force per
+    sole against the simulator's, over the detected trials, N and as a fraction of the
+    robot's weight ({} when no trial has both)."""
+    errors, weights = [], []
+    for r in results:
+        if r["detected"] and "foot_normal_forces_N" in r and "true_foot_normal_forces_N" in r:
+            errors.extend(np.subtract(r["foot_normal_forces_N"], r["true_foot_normal_forces_N"]).tolist())
+            weights.append(r["robot_weight_N"])
+    if not errors:
+        return {}
+    rms = float(np.sqrt(np.mean(np.square(errors))))
+    return {
+        "foot_normal_force_rms_error_N": rms,
+        "foot_normal_force_rms_error_of_weight": rms / float(np.mean(weights)),
+    }
+
+
 def contact_localization_metrics(
     results: list[dict], no_contact: dict | None, slow_motion: dict | None = None, floors: dict | None = None
 ) -> dict:
@@ -1336,6 +1499,12 @@ def contact_localization_metrics(
     }
     valid = [r for r in results if r["status"] == 0]
     metrics["valid_precision"] = float(np.mean([r["correct_link"] for r in valid])) if valid else None
+    metrics["per_region"] = _region_table(results)
+    for row in metrics["per_region"]:  # flat, for the floors
+        for key in ("correct_link_rate", "fit_correct_link_rate"):
+            if key in row:
+                metrics[f"{key}_{row['region']}"] = row[key]
+    metrics.update(_foot_force_metrics(results))
     metrics.update(_multi_contact_metrics(results))
     metrics.update(_intervals_and_tables(results, detected, valid, positions, forces))
     checks = {}

@@ -35,7 +35,7 @@ from models import (
     set_standing_state,
     with_link_inertias,
 )
-from systems.common.topology import FloatingBaseTopology, floating_base_topology
+from systems.common.topology import FloatingBaseTopology, floating_base_topology, rigid_link_of_bodies
 
 
 @dataclass
@@ -49,7 +49,11 @@ class EstimatorPlant:
         humanoid: its handles (frames, joint groups) for a humanoid; None for a model file.
         topology: its floating-base topology (joints in v[6:] order).
         ft_frames: the foot F/T sensor frames, sides sorted (left, right) as the station's.
-        excluded_bodies: the links below the F/T sensors (never localized).
+        excluded_bodies: the links below the F/T sensors, and the whole feet without them
+            (never localized: a push there is part of the ground's wrench).
+        unknown_wrench_frames: the sole frames of the feet without F/T sensors, sides
+            sorted: the ground's wrench there is an unknown of the estimators
+            (``unknown_wrench_frames`` of the detector, force estimator and localizers).
         standing_state: [q; v] standing (a humanoid) or at the posture held in space (a
             model file): the detector's nominal configuration.
         link_inertias: {link name: M_BBo_B} where this model differs from the description
@@ -65,6 +69,7 @@ class EstimatorPlant:
     excluded_bodies: tuple[str, ...]
     standing_state: np.ndarray
     link_inertias: dict = field(default_factory=dict)
+    unknown_wrench_frames: tuple = ()
     _kinematics: object = field(default=None, init=False, repr=False, compare=False)
 
     def frame_rotations(self, frames: Sequence[Frame], q: np.ndarray) -> np.ndarray:
@@ -120,12 +125,21 @@ def build_estimator_plant(
     plant.Finalize()
     topology = floating_base_topology(plant)  # clear ValueError for a model without a floating base
     context = plant.CreateDefaultContext()
-    ft_frames, excluded = (), ()
+    ft_frames, excluded, unknown = (), (), ()
     if humanoid is not None:
         set_standing_state(plant, context, humanoid)
         sides = sorted(humanoid.ft_sensor_joints)
         ft_frames = tuple(humanoid.ft_sensor_frames[s] for s in sides)
         excluded = tuple(humanoid.ft_sensor_joints[s].child_body().name() for s in sides)
+        unknown = tuple(humanoid.sole_frames[s] for s in sorted(humanoid.sole_frames) if s not in sides)
+        link_of = rigid_link_of_bodies(plant)
+        for frame in unknown:
+            foot = link_of[int(frame.body().index())]
+            excluded += tuple(
+                plant.get_body(BodyIndex(b)).name()
+                for b in range(plant.num_bodies())
+                if link_of[b] == foot and plant.get_body(BodyIndex(b)).name() not in excluded
+            )
     else:
         set_posture_inside_limits(plant, context, topology)
     return EstimatorPlant(
@@ -138,6 +152,7 @@ def build_estimator_plant(
         excluded_bodies=excluded,
         standing_state=plant.GetPositionsAndVelocities(context),
         link_inertias=link_inertias,
+        unknown_wrench_frames=unknown,
     )
 
 

@@ -63,6 +63,11 @@ class UpdateRecorder(LeafSystem):
         """(N,) the times of the updates recorded so far, s."""
         return np.array(self._times)
 
+    @property
+    def names(self) -> tuple[str, ...]:
+        """The recorded inputs' names."""
+        return tuple(self._values)
+
     def values(self, name: str) -> np.ndarray:
         """(N, size) input ``name`` at each recorded update."""
         if name not in self._values:

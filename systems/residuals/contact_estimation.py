@@ -160,6 +160,15 @@ def unknown_wrench_columns(kin: _SensedConfiguration, frames: Sequence[Frame]) -
     return T
 
 
+def _skews(r: np.ndarray) -> np.ndarray:
+    """(m, 3, 3) skew matrices of (m, 3) vectors: skew(r) f = r x f."""
+    S = np.zeros((len(r), 3, 3))
+    S[:, 0, 1], S[:, 0, 2] = -r[:, 2], r[:, 1]
+    S[:, 1, 0], S[:, 1, 2] = r[:, 2], -r[:, 0]
+    S[:, 2, 0], S[:, 2, 1] = -r[:, 1], r[:, 0]
+    return S
+
+
 def _bounding_radii(geometry: RobotGeometry) -> np.ndarray:
     """(g,) the radius of each primitive's bounding sphere about its frame's origin, m:
     a sphere's radius, a box's half diagonal, a cylinder's hypot(radius, half length), a
@@ -598,12 +607,18 @@ class ContactDetector(LeafSystem):
     of the residuals' size would fire all the time. One joint test replaces both:
 
         s_int = ||(I - C C^+) z||^2,  z = [L_f^-1 r_ext,f; L_int^-1 r_int],
-        C = [L_f^-1 T_F,f; L_int^-1 T_F,int]   (3 + n - 6 m dof)
+        C = [L_f^-1 Tbar_F,f; L_int^-1 Tbar_F,int]   (3 + n - 6 m dof)
 
     the whitened force and internal residuals with every wrench the m frames could carry
-    (``unknown_wrench_columns``, evaluated at the sensed q) projected out: what no ground
-    wrench explains. It is reported as s_int (s_ext is 0 and not tested), and the input
-    ``state`` gives q.
+    projected out: what no ground wrench explains. It is reported as s_int (s_ext is 0 and
+    not tested). Tbar_F are the frames' columns (``unknown_wrench_columns``) at the sensed
+    q (input ``state``) passed through the residuals' own first-order filter, Tbar_k =
+    (1 - K T) Tbar_k-1 + K T T_F(q_k) (K the external or internal gain, rows alike, from 0
+    as the residuals): the residuals see J^T w through that filter, and with w of a few
+    hundred N the lag of the instantaneous columns would be more than the noise as soon
+    as the robot moves (J-dot^T w / K: 2 N and 0.05 N m in a slow whole-body motion of
+    hrp4_like). Exact for ground wrenches constant over 1/K; a change of w itself stays
+    in the span.
 
     Defaults from the sensor noise: when the covariances are not given they come from
     ``predicted_residual_covariances`` with the default noise of ``systems.simulation.sensors`` and
@@ -619,7 +634,8 @@ class ContactDetector(LeafSystem):
         ``residual`` (n): InternalResidual's output.
         ``state`` (nq + nv, only with ``unknown_wrench_frames``): the sensed [q; v].
     State (discrete): [detected (0/1), detection time (s, -1 before the first detection),
-        consecutive samples above, time since both went below (s), s_ext, s_int].
+        consecutive samples above, time since both went below (s), s_ext, s_int], then
+        with ``unknown_wrench_frames`` the filtered columns Tbar ((3 + n) x 6 m, row-major).
 
     Outputs:
         ``contact_detected`` (1): 1.0 in contact, else 0.0.
@@ -681,6 +697,7 @@ class ContactDetector(LeafSystem):
                 raise ValueError(f"{who}: unknown_wrench_frames need use_internal (the joint test)")
             use_external = False
         joint_dof = 3 + n - 6 * len(self._unknown_frames)
+        self._column_shape = (3 + n, 6 * len(self._unknown_frames))
         if joint_dof < 1:
             raise ValueError(
                 f"{who}: {len(self._unknown_frames)} unknown wrenches (6 each) leave no degree of freedom in the "
@@ -729,7 +746,16 @@ class ContactDetector(LeafSystem):
         self._wrench_port = self.DeclareVectorInputPort("external_wrench_world", 6)
         self._residual_port = self.DeclareVectorInputPort("residual", n)
         self._state_port = self.DeclareVectorInputPort("state", kin.nq + kin.nv) if self._unknown_frames else None
-        self._state_index = self.DeclareDiscreteState(np.array([0.0, -1.0, 0.0, 0.0, 0.0, 0.0]))  # _DetectorState
+        # The filters' factors K T of the columns' rows (force rows: external; joints: internal).
+        self._column_gain = (
+            np.concatenate((np.full(3, float(external_gain)), np.full(n, float(internal_gain)))) * self._period
+        )
+        if self._unknown_frames and not np.all((self._column_gain > 0.0) & (self._column_gain < 1.0)):
+            raise ValueError(f"{who}: the residual gains times the period must be in (0, 1) to filter the columns")
+        columns0 = np.zeros(self._column_shape[0] * self._column_shape[1] if self._unknown_frames else 0)
+        self._state_index = self.DeclareDiscreteState(
+            np.concatenate(([0.0, -1.0, 0.0, 0.0, 0.0, 0.0], columns0))  # _DetectorState, Tbar
+        )
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._Update)
         xd = {self.xd_ticket()}
         self.DeclareVectorOutputPort("contact_detected", 1, lambda c, o: o.SetFromVector([self._s(c).detected]), xd)
@@ -772,64 +798,94 @@ class ContactDetector(LeafSystem):
         """The frames whose wrenches are unknown (() with foot F/T sensors)."""
         return self._unknown_frames
 
-    def statistics(self, wrench: np.ndarray, residual: np.ndarray, q: np.ndarray | None = None) -> tuple[float, float]:
-        """(s_ext, s_int) of the class docstring (``q``, the sensed positions, is needed
-        with ``unknown_wrench_frames`` only)."""
+    def statistics(
+        self, wrench: np.ndarray, residual: np.ndarray, columns: np.ndarray | None = None
+    ) -> tuple[float, float]:
+        """(s_ext, s_int) of the class docstring; with ``unknown_wrench_frames`` the
+        filtered columns Tbar ((3 + n) x 6 m) are needed (``unknown_columns`` at q for a
+        robot at rest, ``filtered_columns`` along a motion)."""
         z_ext = self._L_ext @ np.asarray(wrench)[3:]
         z_int = self._L_int @ np.asarray(residual)
         if self._unknown_frames:
-            return 0.0, self._joint_statistic(self._required_q(q), z_ext, z_int)
+            return 0.0, self._joint_statistic(self._checked_columns(columns), z_ext, z_int)
         return float(z_ext @ z_ext), float(z_int @ z_int)
 
     def statistics_of_samples(
-        self, wrenches: np.ndarray, residuals: np.ndarray, positions: np.ndarray | None = None
+        self, wrenches: np.ndarray, residuals: np.ndarray, columns: np.ndarray | None = None
     ) -> np.ndarray:
         """(N, 2) [s_ext, s_int] of N samples of the inputs ((N, 6) and (N, n); with
-        ``unknown_wrench_frames`` also the positions (N, nq)) at once: ``statistics`` of
-        each, to rounding."""
+        ``unknown_wrench_frames`` also their filtered columns (N, 3 + n, 6 m),
+        ``filtered_columns``) at once: ``statistics`` of each, to rounding."""
         z_ext = np.asarray(wrenches)[:, 3:] @ self._L_ext.T
         z_int = np.asarray(residuals) @ self._L_int.T
         if self._unknown_frames:
-            if positions is None or np.shape(positions) != (len(z_ext), self._kin.nq):
-                raise ValueError(f"{self._who}: with unknown_wrench_frames the samples' positions (N, nq) are needed")
-            joint = [
-                self._joint_statistic(q, a, b) for q, a, b in zip(np.asarray(positions, dtype=float), z_ext, z_int)
-            ]
+            if columns is None or np.shape(columns) != (len(z_ext), *self._column_shape):
+                raise ValueError(
+                    f"{self._who}: with unknown_wrench_frames the samples' filtered columns "
+                    f"(N, {self._column_shape[0]}, {self._column_shape[1]}) are needed"
+                )
+            joint = [self._joint_statistic(C, a, b) for C, a, b in zip(columns, z_ext, z_int)]
             return np.stack((np.zeros(len(z_ext)), np.array(joint, dtype=float).reshape(-1)), axis=1)
         return np.stack((np.einsum("ij,ij->i", z_ext, z_ext), np.einsum("ij,ij->i", z_int, z_int)), axis=1)
 
-    def _required_q(self, q) -> np.ndarray:
-        if q is None:
-            raise ValueError(f"{self._who}: with unknown_wrench_frames the statistics need the sensed positions q")
+    def unknown_columns(self, q: np.ndarray) -> np.ndarray:
+        """((3 + n), 6 m) the unknown wrenches' columns at positions q (force and internal
+        rows of ``unknown_wrench_columns``): the filtered columns of a robot at rest."""
         q = np.asarray(q, dtype=float)
         if q.shape != (self._kin.nq,):
             raise ValueError(f"{self._who}: q must have shape ({self._kin.nq},), got {q.shape}")
-        return q
-
-    def _joint_statistic(self, q: np.ndarray, z_ext: np.ndarray, z_int: np.ndarray) -> float:
-        """The joint test's statistic (class docstring) of the whitened force and internal
-        residuals at positions q."""
         self._kin.set_positions(q)
-        T = unknown_wrench_columns(self._kin, self._unknown_frames)
-        C = np.concatenate((self._L_ext @ T[3:6], self._L_int @ T[6:]))
+        return unknown_wrench_columns(self._kin, self._unknown_frames)[3:]
+
+    def filtered_columns(self, start: np.ndarray, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The filtered columns along N updates (class docstring), without a Context
+        (``systems.residuals.offline``): from ``start`` (Tbar before the first update, as
+        the state holds it; zeros at the start) and the positions q_k the updates read
+        ((N, nq)), (the Tbar each update's test uses (N, 3 + n, 6 m): the value before
+        it, Tbar_k-1; Tbar after the last update)."""
+        positions = np.asarray(positions, dtype=float)
+        current = np.asarray(start, dtype=float).reshape(self._column_shape)
+        gain = self._column_gain[:, None]
+        used = np.empty((len(positions), *self._column_shape))
+        for k, q in enumerate(positions):
+            used[k] = current
+            current = (1.0 - gain) * current + gain * self.unknown_columns(q)
+        return used, current
+
+    def _checked_columns(self, columns) -> np.ndarray:
+        if columns is None or np.shape(columns) != self._column_shape:
+            raise ValueError(
+                f"{self._who}: with unknown_wrench_frames the statistics need the filtered columns "
+                f"({self._column_shape[0]}, {self._column_shape[1]})"
+            )
+        return np.asarray(columns, dtype=float)
+
+    def _joint_statistic(self, columns: np.ndarray, z_ext: np.ndarray, z_int: np.ndarray) -> float:
+        """The joint test's statistic (class docstring) of the whitened force and internal
+        residuals with the filtered columns ``columns`` ((3 + n) x 6 m)."""
+        C = np.concatenate((self._L_ext @ columns[:3], self._L_int @ columns[3:]))
         z = np.concatenate((z_ext, z_int))
+        if not np.any(C):
+            return float(z @ z)  # the first update: the filter, as the residuals, starts at 0
         Q, _ = np.linalg.qr(C)
         e = z - Q @ (Q.T @ z)
         return float(e @ e)
 
     def _s(self, context: Context) -> _DetectorState:
-        return _DetectorState(context.get_discrete_state(self._state_index).get_value())
+        return _DetectorState(context.get_discrete_state(self._state_index).get_value()[:6])
 
     def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
         w = eval_finite_input(self._who, self._wrench_port, context)
         r = eval_finite_input(self._who, self._residual_port, context)
-        q = None
-        if self._state_port is not None:
-            q = eval_finite_input(self._who, self._state_port, context)[: self._kin.nq]
-        state = self.advance(
-            context.get_discrete_state(self._state_index).get_value(), self.statistics(w, r, q), context.get_time()
-        )
-        discrete_state.set_value(self._state_index, state)
+        stored = context.get_discrete_state(self._state_index).get_value()
+        if self._state_port is None:
+            discrete_state.set_value(self._state_index, self.advance(stored, self.statistics(w, r), context.get_time()))
+            return
+        q = eval_finite_input(self._who, self._state_port, context)[: self._kin.nq]
+        columns = stored[6:].reshape(self._column_shape)
+        state = self.advance(stored[:6], self.statistics(w, r, columns), context.get_time())
+        _, after = self.filtered_columns(stored[6:], q[None])
+        discrete_state.set_value(self._state_index, np.concatenate((state, after.ravel())))
 
     def advance(self, state: Sequence[float], s: tuple[float, float], t: float) -> list[float]:
         """One update without a Context (``systems.residuals.offline`` replays logs with
@@ -1247,13 +1303,17 @@ class ContactLocalizer(LeafSystem):
     def _line_entries(
         self, p0: np.ndarray, d: np.ndarray, R_WG: np.ndarray, p_WG: np.ndarray, prims: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Step 2 for the line p0 + l d (d a unit vector) and the primitives ``prims``:
-        (primitive indices, l, points (world)) of the entries (f . n < 0) not buried deeper
-        than ``surface_tolerance`` in another link's primitive."""
+        """Step 2 for lines p0 + l d (d unit vectors; one line (3,) for every primitive of
+        ``prims``, or one per primitive (len(prims), 3)): (primitive indices, l, points
+        (world)) of the entries (f . n < 0) not buried deeper than ``surface_tolerance`` in
+        another link's primitive."""
         geo = self._geometry
+        p0 = np.broadcast_to(p0, (len(prims), 3))
+        d = np.broadcast_to(d, (len(prims), 3))
         o_G = np.einsum("gji,gj->gi", R_WG[prims], p0 - p_WG[prims])
-        d_G = np.einsum("gji,j->gi", R_WG[prims], d)
-        off_line = (p_WG[prims] - p0) - np.outer((p_WG[prims] - p0) @ d, d)
+        d_G = np.einsum("gji,gj->gi", R_WG[prims], d)
+        rel = p_WG[prims] - p0
+        off_line = rel - np.einsum("gi,gi->g", rel, d)[:, None] * d
         near = np.flatnonzero(np.einsum("gi,gi->g", off_line, off_line) <= self._bounding_radius2[prims])
         l_in, hit = np.full(len(prims), np.inf), np.zeros(len(prims), dtype=bool)
         g = prims[near]
@@ -1265,8 +1325,8 @@ class ContactLocalizer(LeafSystem):
             normals = outward_normals(pts_G, geo.kinds[g], geo.params[g], geo.planes[g])
             keep = keep[np.einsum("ij,ij->i", normals, d_G[keep]) < -1e-9]  # f . n < 0
         index, l_in = prims[keep], l_in[keep]
+        pts_W = p0[keep] + l_in[:, None] * d[keep]
         if index.size:
-            pts_W = p0 + l_in[:, None] * d
             # Buried in another link's primitive?  (m, g) signed distances, of the primitives
             # of other links whose bounding sphere holds one of the points.
             rel = pts_W[:, None, :] - p_WG[None, :, :]
@@ -1278,77 +1338,109 @@ class ContactLocalizer(LeafSystem):
                 sd[:, near] = signed_distances(local, geo.kinds[near], geo.params[near], geo.planes[near])
             sd[self._same_body[index]] = np.inf
             outer = sd.min(axis=1) >= -self._tolerance
-            index, l_in = index[outer], l_in[outer]
-        return index, l_in, p0 + l_in[:, None] * d
+            index, l_in, pts_W = index[outer], l_in[outer], pts_W[outer]
+        return index, l_in, pts_W
 
     def _localize_per_link(self, q: np.ndarray, wrench_W: np.ndarray, residual: np.ndarray) -> LocalizationResult:
-        """``localize`` with unknown ground wrenches (the class docstring's per-link mode)."""
+        """``localize`` with unknown ground wrenches (the class docstring's per-link mode),
+        for every link at once: the ground's and the stops' columns (shared by all links)
+        projected out, then each link's few unknowns; the stops' sign constraints by
+        non-negative least squares only for the links whose free fit breaks them."""
         kin, geo = self._kin, self._geometry
         kin.set_positions(q)
         X_WB = np.array([kin.body_pose(b) for b in self._bodies])
         R_WG, p_WG = geo.world_poses(X_WB)
         E = kin.elimination()
         world = kin.plant.world_frame()
-        n = self._n
+        n, B = self._n, len(self._bodies)
         w = np.concatenate((self._external_w, self._score_w))
         limited, signs = self.limited_joints(q)
-        stops = np.zeros((6 + n, len(limited)))
-        stops[6 + limited, np.arange(len(limited))] = w[6 + limited] * signs
-        ground = w[:, None] * unknown_wrench_columns(kin, self._unknown_frames)
+        L = len(limited)
+        stops = np.zeros((6 + n, L))
+        stops[6 + limited, np.arange(L)] = w[6 + limited] * signs
+        shared = np.concatenate((w[:, None] * unknown_wrench_columns(kin, self._unknown_frames), stops), axis=1)
+        Q, R = np.linalg.qr(shared)
         b = w * np.concatenate((wrench_W, residual))
-
-        def fit(columns: np.ndarray) -> tuple[np.ndarray, float, float]:
-            """(the columns' coefficients, weighted misfit, stop torque) with the ground
-            wrenches free and the stops' reactions of their signs."""
-            free = np.concatenate((columns, ground), axis=1)
-            mu = np.zeros(len(limited))
-            if len(limited):
-                Qf, _ = np.linalg.qr(free)
-                mu, _ = nnls(stops - Qf @ (Qf.T @ stops), b - Qf @ (Qf.T @ b))
-            rhs = b - stops @ mu
-            x = np.linalg.lstsq(free, rhs, rcond=None)[0]
-            return x[: columns.shape[1]], float(np.linalg.norm(free @ x - rhs)), float(np.linalg.norm(mu))
-
-        best_force = np.zeros(3)
-        rows = []  # (score, stop torque, l, body index, point, force, line point)
-        rivals = []  # (free-wrench misfit, body index, B's origin)
+        # T_B of every link (rows x 6, weighted): [[I, skew(p_B)]; [0, I]; J^fb_B^T].
+        T = np.zeros((B, 6 + n, 6))
+        T[:, :3, :3] = np.eye(3)
+        T[:, :3, 3:] = _skews(X_WB[:, :, 3])
+        T[:, 3:6, 3:] = np.eye(3)
         for slot, body in enumerate(self._bodies):
-            X = X_WB[slot]
             J = kin.plant.CalcJacobianSpatialVelocity(
                 kin.context, JacobianWrtVariable.kV, body.body_frame(), np.zeros(3), world, world
             )
-            T = np.zeros((6 + n, 6))
-            T[:3, :3] = np.eye(3)
-            T[:3, 3:] = skew(X[:, 3])
-            T[3:6, 3:] = np.eye(3)
-            T[6:] = (J[:, 6:] - J[:, :6] @ E).T
-            T *= w[:, None]
-            wrench, misfit, _ = fit(T)
-            rivals.append((misfit, int(body.index()), X[:, 3].copy()))
-            m, f = wrench[:3], wrench[3:]
-            f2 = float(f @ f)
-            if f2 > float(best_force @ best_force):
-                best_force = f
-            if not f2 >= self._min_force**2:
-                continue
-            d = f / math.sqrt(f2)
-            p_line = X[:, 3] + cross(f, m) / f2  # eq. (22) on the link's own wrench
-            index, l_in, pts_W = self._line_entries(p_line, d, R_WG, p_WG, np.flatnonzero(geo.slot == slot))
-            if index.size == 0:
-                continue
-            first = int(np.argmin(l_in))
-            point = pts_W[first]
-            f_c, score, stop = fit(T[:, :3] @ skew(point - X[:, 3]) + T[:, 3:])  # the point force's columns
-            line_point = p_line - (p_line @ d) * d
-            rows.append((score, stop, float(l_in[first]), int(body.index()), point, f_c, line_point))
+            T[slot, 6:] = (J[:, 6:] - J[:, :6] @ E).T
+        T *= w[:, None]
+
+        def fit(columns: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            """For (B, rows, c) columns: (coefficients (B, c), weighted misfits (B,), stop
+            torques (B,)) with the ground wrenches free and the stops' reactions of their
+            signs."""
+            Cp = columns - Q @ (Q.T @ columns)
+            x = np.einsum("bcr,r->bc", np.linalg.pinv(Cp, rcond=1e-10), b)  # minimum norm where degenerate
+            rest = b - np.einsum("brc,bc->br", columns, x)
+            shared_x = np.linalg.solve(R, (rest @ Q).T).T  # (B, 12 + L): ground, then stops
+            misfit = np.linalg.norm(rest - shared_x @ shared.T, axis=1)
+            mu = shared_x[:, shared.shape[1] - L :]
+            stop = np.linalg.norm(mu, axis=1)
+            pulls = np.any(mu < -1e-9 * max(1.0, float(np.linalg.norm(b))), axis=1)  # beyond rounding
+            for k in np.flatnonzero(pulls):  # a stop pulls: constrain its sign
+                free = np.concatenate((columns[k], shared[:, : shared.shape[1] - L]), axis=1)
+                Qf, _ = np.linalg.qr(free)
+                mu_k, _ = nnls(stops - Qf @ (Qf.T @ stops), b - Qf @ (Qf.T @ b))
+                rhs = b - stops @ mu_k
+                y = np.linalg.lstsq(free, rhs, rcond=None)[0]
+                x[k], misfit[k], stop[k] = y[: columns.shape[2]], np.linalg.norm(free @ y - rhs), np.linalg.norm(mu_k)
+            return x, misfit, stop
+
+        wrenches, free_misfit, _ = fit(T)
+        m, f = wrenches[:, :3], wrenches[:, 3:]
+        f2 = np.einsum("bi,bi->b", f, f)
+        best_force = f[int(np.argmax(f2))] if B else np.zeros(3)
+        strong = f2 >= self._min_force**2
+        safe = np.where(strong, f2, 1.0)
+        d = f / np.sqrt(safe)[:, None]
+        p_line = X_WB[:, :, 3] + np.cross(f, m) / safe[:, None]  # eq. (22) on each link's own wrench
+        prims = np.flatnonzero(strong[geo.slot])
+        index, l_in, pts_W = self._line_entries(p_line[geo.slot[prims]], d[geo.slot[prims]], R_WG, p_WG, prims)
+        # Each link's first entry.
+        first = {}
+        for i in np.argsort(l_in, kind="stable"):
+            first.setdefault(int(geo.slot[index[i]]), i)
+        slots = np.array(sorted(first), dtype=int)
+        rows = []  # (score, stop torque, l, body index, point, force, line point)
+        if slots.size:
+            chosen = np.array([first[s] for s in slots])
+            points = pts_W[chosen]
+            r_B = points - X_WB[slots, :, 3]
+            columns = T[slots, :, :3] @ _skews(r_B) + T[slots, :, 3:]  # the point forces' columns
+            forces, scores, stops_needed = fit(columns)
+            for k, slot in enumerate(slots):
+                line_point = p_line[slot] - (p_line[slot] @ d[slot]) * d[slot]
+                rows.append(
+                    (
+                        float(scores[k]),
+                        float(stops_needed[k]),
+                        float(l_in[chosen[k]]),
+                        int(self._bodies[slot].index()),
+                        points[k],
+                        forces[k],
+                        line_point,
+                    )
+                )
         if not rows:
-            status = FORCE_TOO_SMALL if not float(best_force @ best_force) >= self._min_force**2 else NO_INTERSECTION
+            status = FORCE_TOO_SMALL if not strong.any() else NO_INTERSECTION
             return LocalizationResult(status, force_W=best_force.copy(), limited_joints=tuple(int(k) for k in limited))
         rows.sort(key=lambda row: (round(row[0], 12), round(row[1], 9), row[2]))
         best = rows[0]
         link = self._rigid_link[best[3]]
         others = [(row[0], row[3], row[4]) for row in rows if self._rigid_link[row[3]] != link]
-        others += [rival for rival in rivals if self._rigid_link[rival[1]] != link]
+        others += [
+            (float(free_misfit[slot]), int(body.index()), X_WB[slot, :, 3].copy())
+            for slot, body in enumerate(self._bodies)
+            if self._rigid_link[int(body.index())] != link
+        ]
         runner = min(others, key=lambda other: other[0]) if others else None
         runner_up = runner[0] if runner is not None else math.inf
         return LocalizationResult(

@@ -130,6 +130,7 @@ from systems.common.topology import rigid_link_of_bodies, same_rigid_link
 from systems.residuals.contact_estimation import (
     _JointStops,
     _SensedConfiguration,
+    _skews,
     _unknown_frames,
     candidate_geometry,
     unknown_wrench_columns,
@@ -475,15 +476,6 @@ def _bounding_radius(kind: int, params: np.ndarray, planes: np.ndarray) -> float
     )
     reach = np.concatenate((np.abs(l_out[hit]), np.abs(l_back[hit])))
     return 1.05 * float(reach.max()) + 1e-3 if reach.size else math.inf
-
-
-def _skews(r: np.ndarray) -> np.ndarray:
-    """(m, 3, 3) skew matrices of (m, 3) vectors: skew(r) f = r x f."""
-    S = np.zeros((len(r), 3, 3))
-    S[:, 0, 1], S[:, 0, 2] = -r[:, 2], r[:, 1]
-    S[:, 1, 0], S[:, 1, 2] = r[:, 2], -r[:, 0]
-    S[:, 2, 0], S[:, 2, 1] = -r[:, 1], r[:, 0]
-    return S
 
 
 def _zero_pitch_solve(H: np.ndarray, g: np.ndarray) -> np.ndarray:

@@ -519,8 +519,13 @@ def replay_contact_estimation(
         detector_state = detector.CreateDefaultContext().get_discrete_state_vector().CopyToVector()
     else:
         detector_state = np.array(start.detector, dtype=float)
-    statistics = detector.statistics_of_samples(late_external, late_internal)
+    columns = end_columns = None
+    if detector.unknown_wrench_frames:  # the ground's wrenches: columns filtered as the residuals
+        columns, end_columns = detector.filtered_columns(detector_state[6:], state[:, : plant.num_positions()])
+    statistics = detector.statistics_of_samples(late_external, late_internal, columns)
     detected, detector_state = detector.replay(detector_state, statistics, times)
+    if end_columns is not None:
+        detector_state[6:] = end_columns.ravel().tolist()
     localization = None
     localizer_end = None
     if localizer is not None:

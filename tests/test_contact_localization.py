@@ -266,3 +266,50 @@ def test_two_contact_tables_count_both_links():
         {"true": "B + C", "estimated": "C (one contact)", "count": 1},
     ]
     assert tables["intervals"]["both_links_right_rate"][0] < 1 / 3 < tables["intervals"]["both_links_right_rate"][1]
+
+
+def test_study_trials_on_a_robot_without_foot_ft_sensors():
+    """hrp4_like with its F/T sensors ignored (``sensing: none``), the ideal world with
+    sensor noise, pushes on an arm and on the torso: each detected, found on its link
+    within 1 cm with its force within 5 % by the eq. (22) localizer (per link, the ground's
+    wrenches unknowns) and by the stacked fit, whose sole normal forces are within 5 % of
+    the robot's weight of the simulator's; a push on a stance shank is never claimed."""
+    from diagrams.residuals.contact_localization import body_regions, multi_contact_result, sample_trials
+    from diagrams.residuals.contact_trials import run_trials
+    from systems.residuals.multi_contact import MultiContactLocalizer
+
+    robot = "models/robots/hrp4_like_no_ft.yaml"
+    scenario = ContactLocalizationScenario(model=robot, seed=9, no_contact_duration=0.0, slow_motion_duration=0.0)
+    specs = sample_trials(robot, 40, 9)
+    chosen = [next(s for s in specs if s["region"] == r) for r in ("arms", "torso")]
+    chosen.append(next(s for s in specs if s["body"] in ("L_KNEE_P_LINK", "R_KNEE_P_LINK")))
+    results = run_trials(chosen, scenario)
+    _, handles = build_contact_localization_diagram(scenario)
+    estimator = handles.station.estimator
+    assert body_regions(estimator.plant, estimator.humanoid)["R_KNEE_P_LINK"] == "legs"
+    fit = MultiContactLocalizer(
+        estimator.plant,
+        estimator.scene_graph,
+        exclude_bodies=estimator.excluded_bodies,
+        unknown_wrench_frames=estimator.unknown_wrench_frames,
+    )
+    for spec, result in zip(chosen, results):
+        assert result["detected"], spec["body"]
+        inputs = result["localizer_inputs"]
+        stacked = multi_contact_result(
+            fit,
+            inputs["q"],
+            inputs["external_wrench_world"],
+            inputs["residual"],
+            [spec["body_index"]],
+            np.asarray(result["true_points_world"]),
+            np.array([spec["force_world"]]),
+        )
+        if spec["region"] == "legs":
+            assert result["status"] != VALID and not stacked["fit_valid"], spec["body"]
+            continue
+        assert result["correct_link"] and result["position_error_m"] < 0.01, spec["body"]
+        assert result["force_error_rel"] < 0.05
+        assert stacked["fit_correct_link"] and stacked["fit_position_error_m"] < 0.01
+        error = np.subtract(stacked["foot_normal_forces_N"], result["true_foot_normal_forces_N"])
+        assert np.max(np.abs(error)) < 0.05 * result["robot_weight_N"]

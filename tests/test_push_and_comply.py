@@ -101,6 +101,14 @@ def test_the_scenario_uses_sap_and_deprecated_tamsi_is_refused():
         )
 
 
+def test_a_robot_without_foot_ft_sensors_is_refused_not_toppled():
+    """Without foot F/T sensors the residual carries the ground's wrench (measured: the
+    ideal world's robot collapsed to 54 deg knees in both runs): refused with the reason."""
+    scenario = set_ideal_conditions(PushAndComplyScenario(model="models/robots/hrp4_like_no_ft.yaml"))
+    with pytest.raises(ValueError, match="needs foot F/T sensors.*comply with its own weight"):
+        build_push_and_comply_diagram(scenario, "internal")
+
+
 def test_residual_follows_the_true_effort_in_the_loop(short_runs):
     _, runs = short_runs
     s = runs["internal"]["signals"]

@@ -245,7 +245,8 @@ def build_push_and_comply_diagram(
     (the scenario's refined model, see ``model_refinement``) go to the station.
 
     Raises:
-        ValueError: an unknown residual kind, model or joint group; bad scenario values.
+        ValueError: an unknown residual kind, model or joint group; a robot without foot F/T
+            sensors; bad scenario values.
     """
     if residual_kind not in RESIDUAL_KINDS:
         raise ValueError(f"unknown residual '{residual_kind}'; choose one of {RESIDUAL_KINDS}")
@@ -262,6 +263,13 @@ def build_push_and_comply_diagram(
     plant, humanoid = station.plant, station.humanoid
     if humanoid is None:
         raise ValueError("push-and-comply needs one of the humanoid models (its shoulders and joint groups)")
+    if station.estimator.unknown_wrench_frames:
+        raise ValueError(
+            f"push-and-comply needs foot F/T sensors: {scenario.model!r} has a foot without one (its "
+            "description's feet.*.sensing), so the residual driving the admittance carries the ground's changing "
+            "wrench on that sole with the push, and the robot would comply with its own weight (the contact "
+            "study estimates that wrench as an unknown; the admittance does not yet)"
+        )
     # The residual and the admittance know the robot through the estimators' plant only.
     model, model_humanoid = station.estimator.plant, station.estimator.humanoid
 

@@ -737,15 +737,23 @@ def _engine_scaling(data: dict) -> list[str]:
     return lines
 
 
+#: The sensing comparison's studies: (results file, robot, foot sensing).
+SENSING_STUDIES = (
+    ("contact_study_sensing_ft", "hrp4_like", "F/T"),
+    ("contact_study_sensing_none", "hrp4_like", "none"),
+    ("contact_study_sensing_none_talos", "TALOS", "none"),
+)
+
+
 def _sensing_comparison(sources: dict[str, dict]) -> list[str]:
-    """Issue 36's table: the same single-contact study with the feet's F/T sensors and with
-    none (the ground's wrenches unknowns), per body region."""
+    """Issue 36's table: single-contact studies with the feet's F/T sensors and with none
+    (the ground's wrenches unknowns), per body region."""
     lines = [
-        "| foot sensing | region | trials | detected | right link, eq. (22) / stacked fit "
+        "| robot | foot sensing | region | trials | detected | right link, eq. (22) / stacked fit "
         "| median position error, eq. (22) / fit | sole normal force error (RMS, of weight) |",
-        "| --- | --- | --- | --- | --- | --- | --- |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
-    for name, label in (("contact_study_sensing_ft", "F/T"), ("contact_study_sensing_none", "none")):
+    for name, robot, sensing in SENSING_STUDIES:
         data = sources[name]
         rms = data.get("foot_normal_force_rms_error_of_weight")
         force = "measured" if rms is None else f"{100 * rms:.1f} %"
@@ -753,17 +761,17 @@ def _sensing_comparison(sources: dict[str, dict]) -> list[str]:
             fit = row.get("fit_correct_link_rate")
             fit_position = row.get("fit_median_position_error_m")
             lines.append(
-                f"| {label} | {row['region']} | {row['trials']} | {100 * row['detection_rate']:.1f} % "
+                f"| {robot} | {sensing} | {row['region']} | {row['trials']} | {100 * row['detection_rate']:.1f} % "
                 f"| {100 * row['correct_link_rate']:.1f} / {'n/a' if fit is None else f'{100 * fit:.1f}'} % "
                 f"| {100 * row['median_position_error_m']:.2f} / "
                 f"{'n/a' if fit_position is None else f'{100 * fit_position:.2f}'} cm | {force} |"
             )
-    for name, label in (("contact_study_sensing_ft", "F/T"), ("contact_study_sensing_none", "none")):
+    lines.append("")
+    for name, robot, sensing in SENSING_STUDIES:
         data = sources[name]
-        lines.append("")
         lines.append(
-            f"{label}: {data['trials']} trials (seeds {data['seeds'][0]}-{data['seeds'][-1]}), false detections "
-            f"{data['false_detections']} in {data['no_contact_run_s']:g} s standing and "
+            f"- {robot}, {sensing}: {data['trials']} trials (seeds {data['seeds'][0]}-{data['seeds'][-1]}), "
+            f"false detections {data['false_detections']} in {data['no_contact_run_s']:g} s standing and "
             f"{data['slow_motion_run_s']:g} s of slow whole-body motion; wall time {data['wall_time_s'] / 60:.1f} min."
         )
     return lines
@@ -810,7 +818,7 @@ SOURCES: dict[str, tuple[str, ...]] = {
     "base_state_from_log_readme": ("base_state_from_log",),
     "speed": ("benchmark", "contact_study_single", "contact_study_two", "test_suite"),
     "readme_speed": ("benchmark",),
-    "sensing_comparison": ("contact_study_sensing_ft", "contact_study_sensing_none"),
+    "sensing_comparison": tuple(name for name, _, _ in SENSING_STUDIES),
 }
 
 

@@ -313,3 +313,71 @@ def test_study_trials_on_a_robot_without_foot_ft_sensors():
         assert stacked["fit_correct_link"] and stacked["fit_position_error_m"] < 0.01
         error = np.subtract(stacked["foot_normal_forces_N"], result["true_foot_normal_forces_N"])
         assert np.max(np.abs(error)) < 0.05 * result["robot_weight_N"]
+
+
+def test_floors_follow_the_robots_foot_sensing():
+    """Issue 36's per-region floors for a robot without foot F/T sensors, in either world;
+    the F/T robot keeps the study's own."""
+    from diagrams.residuals.contact_localization import (
+        FLOORS,
+        NO_FOOT_FT_FLOORS,
+        REALISTIC_FLOORS,
+        floors_for,
+        lacks_foot_ft_sensors,
+    )
+
+    assert lacks_foot_ft_sensors("models/robots/hrp4_like_no_ft.yaml") and lacks_foot_ft_sensors("nao_like")
+    assert not lacks_foot_ft_sensors("hrp4_like") and not lacks_foot_ft_sensors("models/robots/talos.yaml")
+    assert floors_for(ContactLocalizationScenario(model="models/robots/hrp4_like_no_ft.yaml")) is NO_FOOT_FT_FLOORS
+    assert floors_for(RealisticScenario(model="nao_like")) is NO_FOOT_FT_FLOORS
+    assert floors_for(ContactLocalizationScenario()) is FLOORS
+    assert floors_for(RealisticScenario()) is REALISTIC_FLOORS
+
+
+def test_metrics_per_region_and_sole_forces_count_what_they_say():
+    """Hand-made trials: the per-region table's rates and medians, the flat keys the floors
+    read, and the sole normal force RMS (over the detected trials, of the weight)."""
+    from diagrams.residuals.contact_localization import NO_FOOT_FT_FLOORS, contact_localization_metrics
+
+    def trial(k, region, detected, right, position, feet=None):
+        r = {
+            "trial": k,
+            "body": f"{region}_{k}",
+            "region": region,
+            "detected": detected,
+            "detection_delay_s": 0.001 if detected else None,
+            "false_detections_before_push": 0,
+            "status": 0 if right else 4,
+            "status_reason": "valid" if right else "ambiguous",
+            "estimated_body": f"{region}_{k}" if right else "waist",
+            "correct_link": right,
+            "position_error_m": position,
+            "force_error_rel": 0.01 if detected else None,
+            "angle_error_deg": 1.0 if detected else None,
+            "localizer_update_s": 1e-3,
+            "fit_correct_link": right,
+            "fit_valid": right,
+            "fit_position_error_m": position,
+        }
+        if feet is not None:
+            r.update(foot_normal_forces_N=feet[0], true_foot_normal_forces_N=feet[1], robot_weight_N=400.0)
+        return r
+
+    results = [
+        trial(0, "arms", True, True, 0.002, ([200.0, 200.0], [203.0, 197.0])),
+        trial(1, "arms", True, True, 0.004, ([210.0, 190.0], [206.0, 194.0])),
+        trial(2, "legs", True, False, 0.3, ([150.0, 250.0], [100.0, 300.0])),
+        trial(3, "legs", False, False, None, ([0.0, 0.0], [200.0, 200.0])),  # undetected: not counted
+        trial(4, "torso", True, True, 0.001),
+    ]
+    m = contact_localization_metrics(results, None, None, NO_FOOT_FT_FLOORS)
+    rows = {row["region"]: row for row in m["per_region"]}
+    assert [row["region"] for row in m["per_region"]] == ["arms", "torso", "legs"]
+    assert rows["arms"]["correct_link_rate"] == 1.0 and rows["arms"]["median_position_error_m"] == pytest.approx(0.003)
+    assert rows["legs"]["detection_rate"] == 0.5 and rows["legs"]["correct_link_rate"] == 0.0
+    assert rows["legs"]["median_position_error_m"] == float("inf")
+    assert m["correct_link_rate_legs"] == 0.0 and m["fit_correct_link_rate_torso"] == 1.0
+    rms = np.sqrt(np.mean(np.square([-3.0, 3.0, 4.0, -4.0, 50.0, -50.0])))
+    assert m["foot_normal_force_rms_error_N"] == pytest.approx(rms)
+    assert m["foot_normal_force_rms_error_of_weight"] == pytest.approx(rms / 400.0)
+    assert m["meets_floors"]["correct_link_rate_legs"] is False and m["meets_floors"]["correct_link_rate_arms"]

@@ -446,6 +446,7 @@ def _print_summary(metrics: dict) -> None:
         "two_contact_fit_links_right_rate",
         "p95_contact_position_error_m",
         "p95_contact_force_error_rel",
+        "foot_normal_force_rms_error_of_weight",
     )
     for key in (k for k in extra if k not in metrics["floors"]):
         if metrics.get(key) is not None:
@@ -466,13 +467,19 @@ def _print_summary(metrics: dict) -> None:
                 counts = f"{row['successes']:4d} / {row['trials']:<4d} {100 * row['rate']:5.1f} %"
                 print(f"    seed {row['group']:>8s} {counts}  [{100 * low:.1f}, {100 * high:.1f}]")
     if metrics.get("per_region") and not two:
-        print("  per body region: trials, detection, right link (eq. 22 / stacked fit), median position error:")
+        print(
+            "  per body region: trials, detection, right link (eq. 22 / stacked fit), median position error"
+            " (, sole normal force RMS error of the weight):"
+        )
         for row in metrics["per_region"]:
             fit = row.get("fit_correct_link_rate")
             fit_text = "" if fit is None else f" / {100 * fit:5.1f} %"
+            sole = row.get("foot_normal_force_rms_error_of_weight")
+            sole_text = "" if sole is None else f"  {100 * sole:.1f} %"
             print(
                 f"    {row['region']:6s} {row['trials']:5d}  {100 * row['detection_rate']:5.1f} %"
                 f"  {100 * row['correct_link_rate']:5.1f} %{fit_text}  {100 * row['median_position_error_m']:.2f} cm"
+                f"{sole_text}"
             )
     worst = [row for row in metrics.get("per_link", []) if row["rate"] < 1.0]
     if worst:

@@ -67,6 +67,7 @@ from diagrams.station.standing import foot_sphere_normal_forces
 from models import is_humanoid, robot_description
 from systems.estimation.model_identification import ModelCorrections
 from systems.io.update_recorder import UpdateRecorder
+from systems.observer.fsr_sensing import FSR_SIDES, FsrArray
 from systems.residuals.contact_estimation import (
     ContactDetector,
     ContactLocalizer,
@@ -159,7 +160,7 @@ NO_FOOT_FT_FLOORS = {
     "fit_correct_link_rate_legs": (">=", 0.70),
     "median_position_error_m": ("<=", 0.02),
     "fit_median_position_error_m": ("<=", 0.02),
-    "foot_normal_force_rms_error_of_weight": ("<=", 0.05),
+    "foot_normal_force_rms_error_valid_of_weight": ("<=", 0.05),
 }
 
 
@@ -541,12 +542,22 @@ def _build_with_estimator_recorder(
     sizes = {"state": station.sensed_state.size(), "torque": station.measured_torque.size()}
     if station.known_wrenches is not None:  # the F/T wrenches (none without F/T sensors)
         sizes["wrenches"] = station.known_wrenches.size()
+    truth = None
+    if station.estimator.unknown_wrench_frames:
+        # Ground truth for the metrics only (never an estimator's input): the normal force
+        # on each foot contact sphere, from the simulator's contact results.
+        truth = builder.AddSystem(FsrArray(station.plant, station.humanoid, noise_std=0.0))
+        truth.set_name("true_sole_forces")
+        builder.Connect(station.plant.get_contact_results_output_port(), truth.GetInputPort("contact_results"))
+        sizes["true_fsr_forces"] = truth.GetOutputPort("true_fsr_forces").size()
     recorder = builder.AddSystem(UpdateRecorder(sizes, period))
     recorder.set_name("estimator_input_recorder")
     builder.Connect(station.sensed_state, recorder.GetInputPort("state"))
     builder.Connect(station.measured_torque, recorder.GetInputPort("torque"))
     if station.known_wrenches is not None:
         builder.Connect(station.known_wrenches, recorder.GetInputPort("wrenches"))
+    if truth is not None:
+        builder.Connect(truth.GetOutputPort("true_fsr_forces"), recorder.GetInputPort("true_fsr_forces"))
     diagram = builder.Build()
     diagram.set_name("contact_localization_sensing")
     return diagram, recorder
@@ -944,13 +955,17 @@ class EstimatorLog:
     """The estimators' inputs at every update of a run built with ``online=False``, in the
     order the updates ran: their times (N,), s, the times the online systems' outputs of
     each update would be logged (the next update's), and per update the sensed state
-    [q; v], the motor torque the internal residual reads and the F/T wrenches in world."""
+    [q; v], the motor torque the internal residual reads and the F/T wrenches in world.
+    On a robot without foot F/T sensors also the simulator's normal force on each foot
+    contact sphere (``FSR_NAMES`` order, N): ground truth for the metrics, which no
+    estimator reads ((N, 0) otherwise)."""
 
     update_times: np.ndarray
     log_times: np.ndarray
     state: np.ndarray
     torque: np.ndarray
     wrenches: np.ndarray
+    true_fsr_forces: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
 
 def estimator_log(handles: ContactLocalizationHandles) -> EstimatorLog:
@@ -966,6 +981,9 @@ def estimator_log(handles: ContactLocalizationHandles) -> EstimatorLog:
         state=recorder.values("state"),
         torque=recorder.values("torque"),
         wrenches=recorder.values("wrenches") if "wrenches" in recorder.names else np.zeros((times.size, 0)),
+        true_fsr_forces=recorder.values("true_fsr_forces")
+        if "true_fsr_forces" in recorder.names
+        else np.zeros((times.size, 0)),
     )
 
 
@@ -1005,6 +1023,7 @@ class OfflineTrial:
     estimate: LocalizationResult
     localization_inputs: tuple[np.ndarray, np.ndarray, np.ndarray]
     last_inputs: tuple[np.ndarray, np.ndarray, np.ndarray]
+    true_fsr_forces: np.ndarray | None = None
 
 
 def offline_trial(
@@ -1027,6 +1046,13 @@ def offline_trial(
     log, last = segments[-1]
     localizer = handles.localizer
     end = last.end.localizer
+    truth = None
+    forces = np.concatenate([log.true_fsr_forces for log, _ in segments])
+    if forces.size:
+        # The truth over the window the localizer's means average (else the last update).
+        start = localizer.averaging_start(end[0])
+        inside = update_times >= start if start is not None else np.zeros(update_times.size, dtype=bool)
+        truth = forces[inside].mean(axis=0) if inside.any() else forces[-1]
     return OfflineTrial(
         log_times=times,
         detected=detected.astype(float),
@@ -1034,6 +1060,7 @@ def offline_trial(
         estimate=localizer.unpack(end[3]),
         localization_inputs=localizer.split_localized(end[2]),
         last_inputs=(log.state[-1], last.external_wrench_world[-1], last.internal[-1]),
+        true_fsr_forces=truth,
     )
 
 
@@ -1139,11 +1166,17 @@ def trial_result(
     result["true_points_world"] = true_points.tolist()
     if handles.station.estimator.unknown_wrench_frames:
         # The ground's normal force on each sole without F/T sensors (sides sorted, as the
-        # estimators' unknown wrench frames), at the push's end: what the fits estimate.
+        # estimators' unknown wrench frames): what the fits estimate. Averaged over the
+        # window the localizer's means average when the estimators ran offline, else at
+        # the push's end.
         plant, humanoid = handles.plant, handles.station.humanoid
         plant_context = plant.GetMyContextFromRoot(context)
         sides = [s for s in sorted(humanoid.sole_frames) if s not in humanoid.ft_sensor_joints]
-        forces = foot_sphere_normal_forces(plant, plant_context, humanoid)
+        if offline is not None and offline.true_fsr_forces is not None:
+            per_sphere = offline.true_fsr_forces.reshape(len(FSR_SIDES), -1)
+            forces = {side: per_sphere[FSR_SIDES.index(side)] for side in sides}
+        else:
+            forces = foot_sphere_normal_forces(plant, plant_context, humanoid)
         result["true_foot_normal_forces_N"] = [float(np.sum(forces[s])) for s in sides]
         result["robot_weight_N"] = float(
             plant.CalcTotalMass(plant_context) * -plant.gravity_field().gravity_vector()[2]
@@ -1413,6 +1446,9 @@ def _region_table(results: list[dict]) -> list[dict]:
             "correct_link_rate": float(np.mean([r["correct_link"] for r in rows])),
             "median_position_error_m": float(np.median(positions)),
         }
+        sole_forces = _sole_force_rms(rows)
+        if sole_forces is not None:
+            entry["foot_normal_force_rms_error_of_weight"] = sole_forces[1]
         fits = [r for r in rows if "fit_correct_link" in r]
         if fits:
             entry["fit_correct_link_rate"] = float(np.mean([r["fit_correct_link"] for r in fits]))
@@ -1423,22 +1459,35 @@ def _region_table(results: list[dict]) -> list[dict]:
     return table
 
 
-def _foot_force_metrics(results: list[dict]) -> dict:
-    """Without foot F/T sensors: the RMS error of the stacked fit's ground normal force per
-    sole against the simulator's, over the detected trials, N and as a fraction of the
-    robot's weight ({} when no trial has both)."""
+def _sole_force_rms(results: list[dict]) -> tuple[float, float] | None:
+    """(RMS error N, the same of the robot's weight) of the stacked fit's ground normal
+    force per sole against the simulator's, over the detected ``results`` that have both
+    (None when none has)."""
     errors, weights = [], []
     for r in results:
         if r["detected"] and "foot_normal_forces_N" in r and "true_foot_normal_forces_N" in r:
             errors.extend(np.subtract(r["foot_normal_forces_N"], r["true_foot_normal_forces_N"]).tolist())
             weights.append(r["robot_weight_N"])
     if not errors:
-        return {}
+        return None
     rms = float(np.sqrt(np.mean(np.square(errors))))
-    return {
-        "foot_normal_force_rms_error_N": rms,
-        "foot_normal_force_rms_error_of_weight": rms / float(np.mean(weights)),
-    }
+    return rms, rms / float(np.mean(weights))
+
+
+def _foot_force_metrics(results: list[dict]) -> dict:
+    """Without foot F/T sensors: the sole normal force RMS error (``_sole_force_rms``) over
+    the detected trials, and over those whose stacked fit is valid (the fit's own claim that
+    the residuals tell the contact from the ground's wrenches; a push on a stance leg is
+    not, and its fit may trade the push for the ground's wrench). {} without such trials."""
+    every = _sole_force_rms(results)
+    if every is None:
+        return {}
+    out = {"foot_normal_force_rms_error_N": every[0], "foot_normal_force_rms_error_of_weight": every[1]}
+    valid = _sole_force_rms([r for r in results if r.get("fit_valid")])
+    if valid is not None:
+        out["foot_normal_force_rms_error_valid_N"] = valid[0]
+        out["foot_normal_force_rms_error_valid_of_weight"] = valid[1]
+    return out
 
 
 def contact_localization_metrics(

@@ -1477,6 +1477,15 @@ class ContactLocalizer(LeafSystem):
         q[:4] /= np.linalg.norm(q[:4])
         return q, means[:6], means[6 : 6 + n]
 
+    def averaging_start(self, averaging: np.ndarray) -> float | None:
+        """The time (s) from which the means of the averaging state ``averaging`` (the
+        first group of ``initial_state``'s layout) average the inputs, or None when they do
+        not (no contact, or not settled yet)."""
+        avg = _Averaging(np.asarray(averaging, dtype=float))
+        if avg.active < 0.5 or avg.count < 1.0:
+            return None
+        return float(avg.onset + self._settle_time)
+
     def estimate(self, context: Context) -> LocalizationResult:
         """The localization stored in ``context``'s state (without candidates)."""
         return self.unpack(self._r(context))

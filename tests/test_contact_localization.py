@@ -380,7 +380,7 @@ def test_metrics_per_region_and_sole_forces_count_what_they_say():
     rms = np.sqrt(np.mean(np.square([-3.0, 3.0, 4.0, -4.0, 50.0, -50.0])))
     assert m["foot_normal_force_rms_error_N"] == pytest.approx(rms)
     assert m["foot_normal_force_rms_error_of_weight"] == pytest.approx(rms / 400.0)
-    # Over the valid fits only (the leg push's fit is not): the arms' two trials.
+    # Over the eq. (22) localizer's valid results only (not the leg push's): the arms' two.
     assert m["foot_normal_force_rms_error_valid_N"] == pytest.approx(np.sqrt(np.mean(np.square([3.0, 3.0, 4.0, 4.0]))))
     assert rows["legs"]["foot_normal_force_rms_error_of_weight"] == pytest.approx(50.0 / 400.0)
     assert "foot_normal_force_rms_error_of_weight" not in rows["torso"]

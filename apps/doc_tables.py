@@ -750,29 +750,66 @@ def _sensing_comparison(sources: dict[str, dict]) -> list[str]:
     (the ground's wrenches unknowns), per body region."""
     lines = [
         "| robot | foot sensing | region | trials | detected | right link, eq. (22) / stacked fit "
-        "| median position error, eq. (22) / fit | sole normal force error (RMS, of weight) |",
+        "| median position error, eq. (22) / fit | sole normal force error (RMS, of the weight) |",
         "| --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for name, robot, sensing in SENSING_STUDIES:
         data = sources[name]
-        rms = data.get("foot_normal_force_rms_error_of_weight")
-        force = "measured" if rms is None else f"{100 * rms:.1f} %"
         for row in data["per_region"]:
             fit = row.get("fit_correct_link_rate")
             fit_position = row.get("fit_median_position_error_m")
+            sole = row.get("foot_normal_force_rms_error_of_weight")
             lines.append(
                 f"| {robot} | {sensing} | {row['region']} | {row['trials']} | {100 * row['detection_rate']:.1f} % "
                 f"| {100 * row['correct_link_rate']:.1f} / {'n/a' if fit is None else f'{100 * fit:.1f}'} % "
                 f"| {100 * row['median_position_error_m']:.2f} / "
-                f"{'n/a' if fit_position is None else f'{100 * fit_position:.2f}'} cm | {force} |"
+                f"{'n/a' if fit_position is None else f'{100 * fit_position:.2f}'} cm "
+                f"| {'measured (F/T)' if sole is None else f'{100 * sole:.1f} %'} |"
             )
     lines.append("")
     for name, robot, sensing in SENSING_STUDIES:
         data = sources[name]
+        text = (
+            f"- {robot}, {sensing}: {data['trials']} trials (seeds {data['seeds'][0]}-{data['seeds'][-1]}), false "
+            f"detections {data['false_detections']} in {data['no_contact_run_s']:g} s standing and "
+            f"{data['slow_motion_run_s']:g} s of slow whole-body motion; valid results "
+            f"{100 * data['valid_rate']:.1f} %, of which right {100 * data['valid_precision']:.1f} %"
+        )
+        valid = data.get("foot_normal_force_rms_error_valid_of_weight")
+        if valid is not None:
+            text += f"; sole normal force RMS error over the valid ones {100 * valid:.2f} % of the weight"
+        lines.append(text + f"; wall time {data['wall_time_s'] / 60:.1f} min.")
+    return lines
+
+
+def _floors_table(data: dict) -> list[str]:
+    """A study's floors as its results file judges them: metric, value, floor, met."""
+    units = (("_of_weight", 100.0, "% of the weight"), ("_rate", 100.0, "%"), ("precision", 100.0, "%"))
+    units += (("_rel", 100.0, "%"), ("_m", 100.0, "cm"), ("_ms", 1.0, "ms"), ("_s", 1000.0, "ms"))
+    units += (("_deg", 1.0, "deg"),)
+
+    def unit_of(key: str) -> tuple[float, str]:
+        for part, scale, unit in units:
+            if key.endswith(part) or (part in ("_rate", "precision") and part in key):
+                return scale, unit
+        return 1.0, ""
+
+    lines = [
+        f"{data.get('model')}: {data.get('trials')} trials, {data.get('contacts', 1)} contact(s) each",
+        "",
+        "| metric | value | floor | met |",
+        "| --- | --- | --- | --- |",
+    ]
+    met = data.get("meets_floors", {})
+    for key, text in data.get("floors", {}).items():
+        scale, unit = unit_of(key)
+        value = data.get(key)
+        shown = "n/a" if value is None else f"{scale * value:.4g} {unit}".strip()
+        op, floor = text.split()
+        checked = met.get(key)
         lines.append(
-            f"- {robot}, {sensing}: {data['trials']} trials (seeds {data['seeds'][0]}-{data['seeds'][-1]}), "
-            f"false detections {data['false_detections']} in {data['no_contact_run_s']:g} s standing and "
-            f"{data['slow_motion_run_s']:g} s of slow whole-body motion; wall time {data['wall_time_s'] / 60:.1f} min."
+            f"| {key} | {shown} | {f'{op} {scale * float(floor):g} {unit}'.strip()} | "
+            f"{'not judged' if checked is None else ('yes' if checked else '**no**')} |"
         )
     return lines
 
@@ -808,6 +845,7 @@ RENDERERS: dict[str, Callable[[dict], list[str]]] = {
     "sweep_small": _sweep,
     "engine_scaling": _engine_scaling,
     "sensing_comparison": _sensing_comparison,
+    **{name: _floors_table for name, _, _ in SENSING_STUDIES},
 }
 
 #: The results files of the blocks that do not read ``results/<NAME>.json``: one file (the

@@ -579,9 +579,9 @@ _GROUP_REGIONS = {
 
 
 def body_regions(plant: MultibodyPlant, humanoid) -> dict[str, str]:
-    """Body name -> "arms", "torso" or "legs": the joint group (``HumanoidHandles.
-    joint_groups``) of the first grouped joint inboard of the body (hands count as arms,
-    the head as torso); the base and bodies inboard of every grouped joint are "torso"."""
+    """Body name -> "arms", "torso" or "legs", from the joint group of the first grouped
+    joint inboard of the body (``HumanoidHandles.joint_groups``; hands count as arms, the
+    head as torso); the base and bodies inboard of every grouped joint are "torso"."""
     group_of = {
         j: _GROUP_REGIONS[g] for g, joints in humanoid.joint_groups.items() if g in _GROUP_REGIONS for j in joints
     }
@@ -1480,9 +1480,9 @@ def _foot_force_metrics(results: list[dict]) -> dict:
     the detected trials, and over those whose eq. (22) localization is VALID: the
     localizer's claim that the residuals tell the contact from the ground's wrenches. A
     push on a stance leg is not told from them, and its fit may trade the push for the
-    ground's wrench (errors of kilonewtons); the eq. (22) localizer's per-link rivals never
-    call one valid, while the stacked fit's own ``valid`` did for 9 of 238 (the ideal
-    world's study). {} without such trials."""
+    ground's wrench (errors of kilonewtons); the eq. (22) localizer's per-link rivals do
+    not call one valid, while the stacked fit's own ``valid`` sometimes does (its
+    runner-up comes from the refitted links only). {} without such trials."""
     every = _sole_force_rms(results)
     if every is None:
         return {}

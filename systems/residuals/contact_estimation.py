@@ -616,9 +616,9 @@ class ContactDetector(LeafSystem):
     (1 - K T) Tbar_k-1 + K T T_F(q_k) (K the external or internal gain, rows alike, from 0
     as the residuals): the residuals see J^T w through that filter, and with w of a few
     hundred N the lag of the instantaneous columns would be more than the noise as soon
-    as the robot moves (J-dot^T w / K: 2 N and 0.05 N m in a slow whole-body motion of
-    hrp4_like). Exact for ground wrenches constant over 1/K; a change of w itself stays
-    in the span.
+    as the robot moves (J-dot^T w / K; ``tests/test_unknown_foot_wrenches.py`` moves the
+    arms and torso of a standing hrp4_like). Exact for ground wrenches constant over 1/K;
+    a change of w itself stays in the span.
 
     Defaults from the sensor noise: when the covariances are not given they come from
     ``predicted_residual_covariances`` with the default noise of ``systems.simulation.sensors`` and
@@ -1037,6 +1037,12 @@ class ContactLocalizer(LeafSystem):
        leaves it, so its row is informative) and then by that first entry; a tie is
        reported AMBIGUOUS with both links (a hand pressed into its stop moves with its
        wrist as one body: no residual can tell them apart).
+    4. Status: NO_CONTACT when ``contact_detected`` is 0; FORCE_TOO_SMALL when |f_hat| <
+       ``min_force``; NO_INTERSECTION without candidates; AMBIGUOUS when another link's
+       best score is within ``ambiguity_margin`` of the best (bodies joined by welds are
+       one rigid link: ``systems.common.topology.rigid_link_of_bodies``); else VALID. Degenerate inputs
+       never raise (only NaN/inf inputs do, as everywhere in this package).
+
     Without foot F/T sensors (``unknown_wrench_frames``: the soles), r_ext also carries
     the ground's wrenches and its line of action is not the contact's. Steps 1-3 then run
     per link B instead, on the rows W [r_ext; r_int] (W = diag(external_weights,
@@ -1053,12 +1059,6 @@ class ContactLocalizer(LeafSystem):
     residuals about as well. On a stance leg most of a push looks like a change of the
     ground's wrench (only the joints between the link and its sole see the rest), and the
     base and the other leg links explain it too: such pushes come out AMBIGUOUS.
-
-    4. Status: NO_CONTACT when ``contact_detected`` is 0; FORCE_TOO_SMALL when |f_hat| <
-       ``min_force``; NO_INTERSECTION without candidates; AMBIGUOUS when another link's
-       best score is within ``ambiguity_margin`` of the best (bodies joined by welds are
-       one rigid link: ``systems.common.topology.rigid_link_of_bodies``); else VALID. Degenerate inputs
-       never raise (only NaN/inf inputs do, as everywhere in this package).
 
     Averaging: after the contact has been detected for ``settle_time`` (the residuals'
     first-order rise, a few 1/K), the localizer averages its inputs (residuals and state)

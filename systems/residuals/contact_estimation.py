@@ -1378,7 +1378,7 @@ class ContactLocalizer(LeafSystem):
             torques (B,)) with the ground wrenches free and the stops' reactions of their
             signs."""
             Cp = columns - Q @ (Q.T @ columns)
-            x = np.einsum("bcr,r->bc", np.linalg.pinv(Cp, rcond=1e-10), b)  # minimum norm where degenerate
+            x = np.einsum("bcr,r->bc", np.linalg.pinv(Cp, rtol=1e-10), b)  # minimum norm where degenerate
             rest = b - np.einsum("brc,bc->br", columns, x)
             shared_x = np.linalg.solve(R, (rest @ Q).T).T  # (B, 12 + L): ground, then stops
             misfit = np.linalg.norm(rest - shared_x @ shared.T, axis=1)

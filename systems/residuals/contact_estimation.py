@@ -131,35 +131,6 @@ def _unknown_frames(plant: MultibodyPlant, frames: Sequence, who: str) -> tuple[
         raise ValueError(f"{who}: {error}") from None
 
 
-def unknown_wrench_columns(kin: _SensedConfiguration, frames: Sequence[Frame]) -> np.ndarray:
-    """(6 + n, 6 m) map of m unknown wrenches at known frames (the feet of a robot without
-    foot F/T sensors: the ground's wrench on each sole) into the stacked residuals, at the
-    positions last set on ``kin``.
-
-    A wrench w_F = [m_F (about F's origin); f] (world, N m and N) at frame F contributes
-    T_F w_F = [[I, skew(p_F)]; [0, I]; J^fb_F^T] w_F to [r_ext (moment about the world
-    origin; force); r_int]: the world wrench [m_F + p_F x f; f] to the external residual
-    (eq. 16) and J^fb_F^T w_F to the internal one (eq. 12; J^fb_F = J_j - J_b M_bb^-1 M_bj
-    of F's spatial Jacobian [angular; translational]). Eq. (10) subtracts these with
-    measured w_F; without F/T sensors they stay unknowns of the fit.
-    """
-    plant = kin.plant
-    world = plant.world_frame()
-    T = np.zeros((6 + kin.n, 6 * len(frames)))
-    if not frames:
-        return T
-    E = kin.elimination()
-    for i, frame in enumerate(frames):
-        m, f = slice(6 * i, 6 * i + 3), slice(6 * i + 3, 6 * i + 6)
-        p_F = frame.CalcPoseInWorld(kin.context).translation()
-        J = plant.CalcJacobianSpatialVelocity(kin.context, JacobianWrtVariable.kV, frame, np.zeros(3), world, world)
-        T[:3, m] = np.eye(3)
-        T[:3, f] = skew(p_F)
-        T[3:6, f] = np.eye(3)
-        T[6:, 6 * i : 6 * i + 6] = (J[:, 6:] - J[:, :6] @ E).T
-    return T
-
-
 def _skews(r: np.ndarray) -> np.ndarray:
     """(m, 3, 3) skew matrices of (m, 3) vectors: skew(r) f = r x f."""
     S = np.zeros((len(r), 3, 3))
@@ -167,6 +138,41 @@ def _skews(r: np.ndarray) -> np.ndarray:
     S[:, 1, 0], S[:, 1, 2] = r[:, 2], -r[:, 0]
     S[:, 2, 0], S[:, 2, 1] = -r[:, 1], r[:, 0]
     return S
+
+
+def wrench_maps(kin: _SensedConfiguration, frames: Sequence[Frame]) -> np.ndarray:
+    """(m, 6 + n, 6): for each frame F, the map T_F of a wrench w_F = [m_F (about F's
+    origin); f] (world, N m and N) into the stacked residuals [r_ext (moment about the
+    world origin; force); r_int], at the positions last set on ``kin``:
+
+        T_F = [[I, skew(p_F)]; [0, I]; J^fb_F^T]
+
+    (the world wrench [m_F + p_F x f; f] to the external residual, eq. 16, and J^fb_F^T w_F
+    to the internal one, eq. 12; J^fb_F = J_j - J_b M_bb^-1 M_bj of F's spatial Jacobian
+    [angular; translational])."""
+    plant = kin.plant
+    world = plant.world_frame()
+    T = np.zeros((len(frames), 6 + kin.n, 6))
+    if not frames:
+        return T
+    E = kin.elimination()
+    p_F = np.array([frame.CalcPoseInWorld(kin.context).translation() for frame in frames])
+    T[:, :3, :3] = np.eye(3)
+    T[:, :3, 3:] = _skews(p_F)
+    T[:, 3:6, 3:] = np.eye(3)
+    for i, frame in enumerate(frames):
+        J = plant.CalcJacobianSpatialVelocity(kin.context, JacobianWrtVariable.kV, frame, np.zeros(3), world, world)
+        T[i, 6:] = (J[:, 6:] - J[:, :6] @ E).T
+    return T
+
+
+def unknown_wrench_columns(kin: _SensedConfiguration, frames: Sequence[Frame]) -> np.ndarray:
+    """(6 + n, 6 m) map of m unknown wrenches at known frames (the feet of a robot without
+    foot F/T sensors: the ground's wrench on each sole) into the stacked residuals, at the
+    positions last set on ``kin``: the ``wrench_maps`` side by side. Eq. (10) subtracts
+    these with measured wrenches; without F/T sensors they stay unknowns of the fit.
+    """
+    return np.concatenate(list(wrench_maps(kin, frames)), axis=1) if frames else np.zeros((6 + kin.n, 0))
 
 
 def _bounding_radii(geometry: RobotGeometry) -> np.ndarray:
@@ -807,7 +813,7 @@ class ContactDetector(LeafSystem):
         z_ext = self._L_ext @ np.asarray(wrench)[3:]
         z_int = self._L_int @ np.asarray(residual)
         if self._unknown_frames:
-            return 0.0, self._joint_statistic(self._checked_columns(columns), z_ext, z_int)
+            return 0.0, float(self._joint_statistics(self._checked_columns(columns)[None], z_ext[None], z_int[None])[0])
         return float(z_ext @ z_ext), float(z_int @ z_int)
 
     def statistics_of_samples(
@@ -824,8 +830,8 @@ class ContactDetector(LeafSystem):
                     f"{self._who}: with unknown_wrench_frames the samples' filtered columns "
                     f"(N, {self._column_shape[0]}, {self._column_shape[1]}) are needed"
                 )
-            joint = [self._joint_statistic(C, a, b) for C, a, b in zip(columns, z_ext, z_int)]
-            return np.stack((np.zeros(len(z_ext)), np.array(joint, dtype=float).reshape(-1)), axis=1)
+            joint = self._joint_statistics(np.asarray(columns, dtype=float), z_ext, z_int)
+            return np.stack((np.zeros(len(z_ext)), joint), axis=1)
         return np.stack((np.einsum("ij,ij->i", z_ext, z_ext), np.einsum("ij,ij->i", z_int, z_int)), axis=1)
 
     def unknown_columns(self, q: np.ndarray) -> np.ndarray:
@@ -860,16 +866,21 @@ class ContactDetector(LeafSystem):
             )
         return np.asarray(columns, dtype=float)
 
-    def _joint_statistic(self, columns: np.ndarray, z_ext: np.ndarray, z_int: np.ndarray) -> float:
-        """The joint test's statistic (class docstring) of the whitened force and internal
-        residuals with the filtered columns ``columns`` ((3 + n) x 6 m)."""
-        C = np.concatenate((self._L_ext @ columns[:3], self._L_int @ columns[3:]))
-        z = np.concatenate((z_ext, z_int))
-        if not np.any(C):
-            return float(z @ z)  # the first update: the filter, as the residuals, starts at 0
-        Q, _ = np.linalg.qr(C)
-        e = z - Q @ (Q.T @ z)
-        return float(e @ e)
+    def _joint_statistics(self, columns: np.ndarray, z_ext: np.ndarray, z_int: np.ndarray) -> np.ndarray:
+        """(N,) the joint test's statistics (class docstring) of N samples of the whitened
+        force (N, 3) and internal (N, n) residuals with their filtered columns (N, 3 + n,
+        6 m), all at once."""
+        C = np.concatenate((self._L_ext @ columns[:, :3], self._L_int @ columns[:, 3:]), axis=1)
+        z = np.concatenate((z_ext, z_int), axis=1)
+        # The first update's columns are 0 (the filter, as the residuals, starts at 0):
+        # nothing to project out there.
+        started = np.any(C != 0.0, axis=(1, 2))
+        e = z.copy()
+        if started.any():
+            Q = np.linalg.qr(C[started]).Q
+            zs = z[started]
+            e[started] = zs - np.einsum("nrc,nc->nr", Q, np.einsum("nrc,nr->nc", Q, zs))
+        return np.einsum("nr,nr->n", e, e)
 
     def _s(self, context: Context) -> _DetectorState:
         return _DetectorState(context.get_discrete_state(self._state_index).get_value()[:6])
@@ -1350,8 +1361,6 @@ class ContactLocalizer(LeafSystem):
         kin.set_positions(q)
         X_WB = np.array([kin.body_pose(b) for b in self._bodies])
         R_WG, p_WG = geo.world_poses(X_WB)
-        E = kin.elimination()
-        world = kin.plant.world_frame()
         n, B = self._n, len(self._bodies)
         w = np.concatenate((self._external_w, self._score_w))
         limited, signs = self.limited_joints(q)
@@ -1361,17 +1370,7 @@ class ContactLocalizer(LeafSystem):
         shared = np.concatenate((w[:, None] * unknown_wrench_columns(kin, self._unknown_frames), stops), axis=1)
         Q, R = np.linalg.qr(shared)
         b = w * np.concatenate((wrench_W, residual))
-        # T_B of every link (rows x 6, weighted): [[I, skew(p_B)]; [0, I]; J^fb_B^T].
-        T = np.zeros((B, 6 + n, 6))
-        T[:, :3, :3] = np.eye(3)
-        T[:, :3, 3:] = _skews(X_WB[:, :, 3])
-        T[:, 3:6, 3:] = np.eye(3)
-        for slot, body in enumerate(self._bodies):
-            J = kin.plant.CalcJacobianSpatialVelocity(
-                kin.context, JacobianWrtVariable.kV, body.body_frame(), np.zeros(3), world, world
-            )
-            T[slot, 6:] = (J[:, 6:] - J[:, :6] @ E).T
-        T *= w[:, None]
+        T = wrench_maps(kin, [body.body_frame() for body in self._bodies]) * w[:, None]  # weighted T_B
 
         def fit(columns: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             """For (B, rows, c) columns: (coefficients (B, c), weighted misfits (B,), stop

@@ -120,7 +120,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from pydrake.geometry import SceneGraph, SceneGraphInspector
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable, RigidBody
+from pydrake.multibody.tree import BodyIndex, RigidBody
 from scipy.optimize import linprog, nnls
 from scipy.stats import chi2
 from scipy.stats import f as f_distribution
@@ -134,6 +134,7 @@ from systems.residuals.contact_estimation import (
     _unknown_frames,
     candidate_geometry,
     unknown_wrench_columns,
+    wrench_maps,
 )
 from systems.residuals.geometry_intersection import (
     BOX,
@@ -1073,22 +1074,12 @@ class MultiContactLocalizer:
         key = q.tobytes()
         if self._pose_cache is not None and self._pose_cache.key == key:
             return self._pose_cache
-        kin, geo, plant = self._kin, self._geometry, self._plant
+        kin, geo = self._kin, self._geometry
         kin.set_positions(q)
-        E = kin.elimination()
-        world = plant.world_frame()
-        B, rows = len(self._bodies), self._rows
+        rows = self._rows
         X_WB = np.array([kin.body_pose(b) for b in self._bodies])
         # T_B: link wrench [m_B (about its origin); f] -> [r_ext; r_int] (module docstring).
-        T = np.zeros((B, rows, 6))
-        T[:, :3, :3] = np.eye(3)
-        T[:, :3, 3:] = _skews(X_WB[:, :, 3])
-        T[:, 3:6, 3:] = np.eye(3)
-        for s, body in enumerate(self._bodies):
-            J = plant.CalcJacobianSpatialVelocity(
-                kin.context, JacobianWrtVariable.kV, body.body_frame(), np.zeros(3), world, world
-            )
-            T[s, 6:, :] = (J[:, 6:] - J[:, :6] @ E).T  # J^fb of the origin, [angular; translational]
+        T = wrench_maps(kin, [body.body_frame() for body in self._bodies])
         Tw = np.concatenate((self._L_ext_inv @ T[:, :6], self._L_int_inv @ T[:, 6:]), axis=1)
         limited, signs = self.limited_joints(q)
         stops = np.zeros((rows, len(limited)))

@@ -40,6 +40,8 @@ The YAML reference (lengths in m, angles in rad, gains in N m/rad and N m s/rad)
         contact_sphere_radius: 0.005  # optional (default 0.005)
         fsr_positions: [[...], ...]   # optional (x, y) of the four FSRs in the sole frame
                                     # (default: the contact points / geometries)
+        fsr_range: 25.0             # optional, sensing fsr: each FSR's upper range, N
+                                    # (default 25, Nao's); readings clip there
         remove_collisions: [leg_left_6_link]
                                     # optional, URDF only: bodies whose collision geometries
                                     # are dropped (the foot touches the ground at its spheres)
@@ -130,6 +132,7 @@ _FOOT_FIELDS = {
     "contact_geometries",
     "contact_sphere_radius",
     "fsr_positions",
+    "fsr_range",
     "remove_collisions",
     "sole_offset",
 }
@@ -161,6 +164,8 @@ class FootDescription:
         fsr_positions: (4, 2) the FSRs' (x, y) in the sole frame, m, or None (default: the
             contact points, or the contact geometries' positions).
         remove_collisions: bodies whose collision geometries are dropped (URDF only).
+        fsr_range: each FSR's upper range, N (sensing fsr), or None (Nao's 25 N,
+            ``systems.observer.fsr_sensing.FSR_SATURATION``).
     """
 
     sole_frame: str
@@ -173,6 +178,7 @@ class FootDescription:
     fsr_positions: np.ndarray | None
     remove_collisions: tuple[str, ...]
     sole_offset: np.ndarray | str | None = None
+    fsr_range: float | None = None
 
 
 @dataclass(frozen=True)
@@ -316,6 +322,11 @@ def _foot(raw, where: str) -> FootDescription:
         if not isinstance(offset, list) or len(offset) != 3:
             raise _error(f"{where}.sole_offset", f"must be [x, y, z] in m or {SOLE_AT_LOWEST_POINT!r}, got {offset!r}")
         offset = np.array([_number(x, f"{where}.sole_offset") for x in offset])
+    fsr_range = raw.get("fsr_range")
+    if fsr_range is not None:
+        if sensing != "fsr":
+            raise _error(f"{where}.fsr_range", f"given, but sensing is {sensing!r}, not 'fsr'")
+        fsr_range = _number(fsr_range, f"{where}.fsr_range", positive=True)
     remove = raw.get("remove_collisions", []) or []
     if not isinstance(remove, list):
         raise _error(f"{where}.remove_collisions", f"must be a list of body names, got {remove!r}")
@@ -334,6 +345,7 @@ def _foot(raw, where: str) -> FootDescription:
         fsr_positions=None if fsr is None else _points(fsr, f"{where}.fsr_positions"),
         remove_collisions=tuple(_string(b, f"{where}.remove_collisions") for b in remove),
         sole_offset=offset,
+        fsr_range=fsr_range,
     )
 
 

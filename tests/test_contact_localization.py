@@ -10,7 +10,7 @@ from pydrake.systems.analysis import Simulator
 from diagrams.residuals.contact_localization import ContactLocalizationScenario as RealisticScenario
 from diagrams.residuals.contact_localization import build_contact_localization_diagram
 from diagrams.station.conditions import set_ideal_conditions
-from systems.residuals.contact_estimation import VALID
+from systems.residuals.contact_estimation import ALL_WRENCH_COMPONENTS, SOLE_SHEAR_AND_YAW, VALID
 
 
 def ContactLocalizationScenario(**fields) -> RealisticScenario:
@@ -82,13 +82,24 @@ def test_push_detected_and_localized_without_noise():
 
 
 def test_feet_without_ft_sensors_are_unknowns_and_feet_are_never_pushed():
-    """A robot without foot F/T sensors (nao_like, FSRs only) gets its soles as the
-    estimators' unknown wrench frames, its whole feet excluded; a push on a foot is refused
-    either way (it is part of the ground's wrench, or below an F/T sensor)."""
+    """A robot without foot F/T sensors gets its soles as the estimators' unknown wrench
+    frames, its whole feet excluded: whole wrenches without sensing (hrp4_like_no_ft), the
+    shear and yaw moment with FSRs (nao_like), whose normal forces and centres of pressure
+    are then known wrenches at the soles. A push on a foot is refused either way (it is part
+    of the ground's wrench, or below an F/T sensor)."""
+    soles = ["l_sole_frame", "r_sole_frame"]
     _, handles = build_contact_localization_diagram(ContactLocalizationScenario(model="nao_like"))
-    assert [f.name() for f in handles.station.estimator.unknown_wrench_frames] == ["l_sole_frame", "r_sole_frame"]
-    assert [f.name() for f in handles.detector.unknown_wrench_frames] == ["l_sole_frame", "r_sole_frame"]
-    assert [f.name() for f in handles.localizer.unknown_wrench_frames] == ["l_sole_frame", "r_sole_frame"]
+    assert [f.name() for f in handles.station.estimator.unknown_wrench_frames] == soles
+    assert handles.station.estimator.unknown_wrench_components == (SOLE_SHEAR_AND_YAW, SOLE_SHEAR_AND_YAW)
+    assert [f.name() for f in handles.detector.unknown_wrench_frames] == soles
+    assert [f.name() for f in handles.localizer.unknown_wrench_frames] == soles
+    assert [f.name() for f in handles.station.known_wrench_frames] == soles
+    assert handles.station.known_wrenches.size() == 12
+    _, handles = build_contact_localization_diagram(
+        ContactLocalizationScenario(model="models/robots/hrp4_like_no_ft.yaml")
+    )
+    assert [f.name() for f in handles.detector.unknown_wrench_frames] == soles
+    assert handles.station.estimator.unknown_wrench_components == (ALL_WRENCH_COMPONENTS, ALL_WRENCH_COMPONENTS)
     assert not handles.station.known_wrench_frames
     with pytest.raises(ValueError, match="part of a foot"):
         build_contact_localization_diagram(ContactLocalizationScenario(push_body="r_sole", push_force=(0, 0, -5)))
@@ -316,10 +327,12 @@ def test_study_trials_on_a_robot_without_foot_ft_sensors():
 
 
 def test_floors_follow_the_robots_foot_sensing():
-    """Issue 36's per-region floors for a robot without foot F/T sensors, in either world;
-    the F/T robot keeps the study's own."""
+    """Issue 36's per-region floors for a robot without foot F/T sensors, in either world
+    (without the sole force floor where FSRs measure the forces); the F/T robot keeps the
+    study's own."""
     from diagrams.residuals.contact_localization import (
         FLOORS,
+        FSR_FEET_FLOORS,
         NO_FOOT_FT_FLOORS,
         REALISTIC_FLOORS,
         floors_for,
@@ -329,7 +342,9 @@ def test_floors_follow_the_robots_foot_sensing():
     assert lacks_foot_ft_sensors("models/robots/hrp4_like_no_ft.yaml") and lacks_foot_ft_sensors("nao_like")
     assert not lacks_foot_ft_sensors("hrp4_like") and not lacks_foot_ft_sensors("models/robots/talos.yaml")
     assert floors_for(ContactLocalizationScenario(model="models/robots/hrp4_like_no_ft.yaml")) is NO_FOOT_FT_FLOORS
-    assert floors_for(RealisticScenario(model="nao_like")) is NO_FOOT_FT_FLOORS
+    assert floors_for(RealisticScenario(model="nao_like")) is FSR_FEET_FLOORS
+    assert "foot_normal_force_rms_error_valid_of_weight" not in FSR_FEET_FLOORS
+    assert FSR_FEET_FLOORS.items() < NO_FOOT_FT_FLOORS.items()
     assert floors_for(ContactLocalizationScenario()) is FLOORS
     assert floors_for(RealisticScenario()) is REALISTIC_FLOORS
 

@@ -80,6 +80,14 @@ def _builtin_raw(name: str, tmp_path: Path) -> dict:
         (lambda r: r["standing_posture"].update(L_KNEE_P="bent"), r"standing_posture.L_KNEE_P: must be a finite"),
         (lambda r: r.update(gains={"legs": [3000.0, -1.0]}), r"gains.legs\[1\] \(kd\): must be >= 0"),
         (lambda r: r.update(joint_limits={"L_KNEE_P": [1.0, 0.0]}), "joint_limits.L_KNEE_P: lower 1.0 must be < upper"),
+        (
+            lambda r: r["feet"]["left"].update(fsr_range=100.0),
+            "feet.left.fsr_range: given, but sensing is 'force_torque'",
+        ),
+        (
+            lambda r: r["feet"]["left"].update(sensing="fsr", fsr_range=-1.0, force_torque_joint=None),
+            "feet.left.fsr_range: must be > 0",
+        ),
     ],
 )
 def test_a_bad_description_file_names_the_field(tmp_path, edit, message):

@@ -774,13 +774,13 @@ def test_standing_sensed_state_and_torque_are_truth_without_noise(hrp4_standing)
     u = plant.get_net_actuation_output_port().Eval(pctx)
     tau = _eval(sensors.measured_torque, sensors.torque_sensor, context)
     np.testing.assert_array_equal(tau, (plant.MakeActuationMatrix() @ u)[6:])
-    assert sensors.seeds == {"encoders": 0, "torque": 1, "ft": 2, "imu": 3, "base": 4}
+    assert sensors.seeds == {"encoders": 0, "torque": 1, "ft": 2, "imu": 3, "base": 4, "fsr": 5}
 
 
 def test_standing_noisy_sensors_differ_by_noise_only(hrp4_standing):
     s = hrp4_standing
     context, quiet, noisy = s["context"], s["sensors"], s["noisy"]
-    assert len(set(noisy.seeds.values())) == 5
+    assert len(set(noisy.seeds.values())) == 6
     assert set(noisy.seeds.values()).isdisjoint(quiet.seeds.values())
     d_state = _eval(noisy.state, noisy.assembler, context) - _eval(quiet.state, quiet.assembler, context)
     assert 0 < np.abs(d_state).max() < 0.02

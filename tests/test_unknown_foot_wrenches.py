@@ -16,9 +16,11 @@ from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.tree import BodyIndex, MultibodyForces
 from scipy.stats import chi2
 
+from systems.observer.fsr_sensing import FsrSoleWrenches
 from systems.residuals.contact_estimation import (
     AMBIGUOUS,
     NO_INTERSECTION,
+    SOLE_SHEAR_AND_YAW,
     VALID,
     ContactDetector,
     ContactForceEstimator,
@@ -254,7 +256,7 @@ def test_detector_filters_the_columns_as_the_residuals_filter_the_ground_wrench(
 
 def test_detector_refuses_known_and_unknown_wrenches_together(hrp4):
     plant, _, context = hrp4
-    with pytest.raises(ValueError, match="either known"):
+    with pytest.raises(ValueError, match="'l_sole_frame' is both known and wholly unknown"):
         _detector(plant, context, known_wrench_frames=[plant.GetFrameByName("l_sole_frame")])
     with pytest.raises(ValueError, match="use_internal"):
         _detector(plant, context, use_internal=False)
@@ -371,3 +373,181 @@ def test_line_localizer_system_with_unknown_wrenches(hrp4, localizer, line_local
         int(line_localizer.GetOutputPort("contact_body").Eval(ctx)[0]), int(contact[0].index())
     )
     np.testing.assert_allclose(line_localizer.GetOutputPort("contact_force_world").Eval(ctx), contact[3], atol=1e-6)
+
+
+# ---------------------------------------------------------------------------------------
+# Soles with FSRs: their normal force and centre of pressure are measured (known wrenches),
+# their shear and yaw moment unknowns (SOLE_SHEAR_AND_YAW).
+# ---------------------------------------------------------------------------------------
+
+FSR_COMPONENTS = (SOLE_SHEAR_AND_YAW, SOLE_SHEAR_AND_YAW)
+
+
+def _sole_rotation(plant, context, name: str) -> np.ndarray:
+    return plant.GetFrameByName(name).CalcPoseInWorld(context).rotation().matrix()
+
+
+def _fsr_part(plant, context, wrenches: np.ndarray) -> np.ndarray:
+    """What the soles' FSRs measure of ground wrenches [m_F; f] (world): in each sole's axes
+    the normal force f_z and the moments m_x, m_y (the others 0), back in world."""
+    out = np.zeros_like(wrenches)
+    for i, name in enumerate(SOLE_FRAMES):
+        R = _sole_rotation(plant, context, name)
+        local = np.concatenate((R.T @ wrenches[6 * i : 6 * i + 3], R.T @ wrenches[6 * i + 3 : 6 * i + 6]))
+        local[list(SOLE_SHEAR_AND_YAW)] = 0.0
+        out[6 * i : 6 * i + 6] = np.concatenate((R @ local[:3], R @ local[3:]))
+    return out
+
+
+def test_fsr_sole_wrenches_are_the_fsrs_normal_forces_at_their_points(hrp4_moved):
+    """The wrench ``FsrSoleWrenches`` gives each sole, mapped into the residuals, equals
+    Drake's generalized forces of the readings applied as forces along the sole's normal
+    at the FSRs' points (the sole's posture tilted by the moved legs)."""
+    plant, _, handles, context = hrp4_moved
+    dut = FsrSoleWrenches(plant, handles)
+    readings = np.array([31.0, 12.5, 44.0, 20.0, 5.0, 61.0, 17.5, 28.0])
+    ctx = dut.CreateDefaultContext()
+    dut.GetInputPort("fsr_forces").FixValue(ctx, readings)
+    dut.GetInputPort("state").FixValue(
+        ctx, np.concatenate((plant.GetPositions(context), np.zeros(plant.num_velocities())))
+    )
+    wrenches = dut.GetOutputPort("wrenches").Eval(ctx)
+    forces = MultibodyForces(plant)
+    forces.SetZero()
+    external = np.zeros(6)
+    for side, frame_name, values in zip(("left", "right"), SOLE_FRAMES, readings.reshape(2, 4)):
+        frame = plant.GetFrameByName(frame_name)
+        X_WS = frame.CalcPoseInWorld(context)
+        body = frame.body()
+        p_WB = plant.EvalBodyPoseInWorld(context, body).translation()
+        normal = X_WS.rotation().matrix()[:, 2]
+        for (x, y), value in zip(handles.fsr_positions[side], values):
+            p_WP = X_WS @ np.array([x, y, 0.0])
+            body.AddInForce(
+                context, p_WP - p_WB, SpatialForce(np.zeros(3), value * normal), plant.world_frame(), forces
+            )
+            external += np.concatenate((np.cross(p_WP, value * normal), value * normal))
+    tau = plant.CalcGeneralizedForces(context, forces)
+    M = plant.CalcMassMatrix(context)
+    expected = np.concatenate((external, tau[6:] - np.linalg.solve(M[:6, :6], M[:6, 6:]).T @ tau[:6]))
+    np.testing.assert_allclose(_columns(plant, context) @ wrenches, expected, atol=1e-9 * np.abs(expected).max())
+    # Only f_z, m_x and m_y in each sole's axes: the FSRs see no shear and no yaw moment.
+    for i, name in enumerate(SOLE_FRAMES):
+        R = _sole_rotation(plant, context, name)
+        local = np.concatenate((R.T @ wrenches[6 * i : 6 * i + 3], R.T @ wrenches[6 * i + 3 : 6 * i + 6]))
+        np.testing.assert_allclose(local[list(SOLE_SHEAR_AND_YAW)], 0.0, atol=1e-9)
+        assert local[5] == pytest.approx(readings[4 * i : 4 * i + 4].sum())
+    with pytest.raises(ValueError, match="sides must be distinct"):
+        FsrSoleWrenches(plant, handles, sides=("left", "left"))
+
+
+def test_force_estimator_recovers_push_and_sole_shear_with_fsr_soles(hrp4, localizer):
+    """The residuals after eq. (10) subtracted the FSRs' wrenches: the push on the wrist
+    and each sole's unmeasured shear and yaw moment come out exactly."""
+    plant, _, context = hrp4
+    body, p_B, p_W, f_W = _arm_push(plant, context, localizer, 1)
+    wrench, tau = _exact_residuals(plant, context, [(body, p_B, p_W, f_W)])
+    unmeasured = STANDING_WRENCHES - _fsr_part(plant, context, STANDING_WRENCHES)
+    b = np.concatenate((wrench, tau)) + _ground_residuals(plant, context, unmeasured)
+    dut = ContactForceEstimator(
+        plant, "stacked", [(body, p_B)], unknown_wrench_frames=SOLE_FRAMES, unknown_wrench_components=FSR_COMPONENTS
+    )
+    ctx = dut.CreateDefaultContext()
+    dut.GetInputPort("state").FixValue(
+        ctx, np.concatenate((plant.GetPositions(context), np.zeros(plant.num_velocities())))
+    )
+    dut.GetInputPort("external_wrench_world").FixValue(ctx, b[:6])
+    dut.GetInputPort("residual").FixValue(ctx, b[6:])
+    np.testing.assert_allclose(dut.GetOutputPort("contact_forces_world").Eval(ctx), f_W, atol=1e-8)
+    np.testing.assert_allclose(dut.GetOutputPort("unknown_wrenches_world").Eval(ctx), unmeasured, atol=1e-7)
+    assert dut.GetOutputPort("fit_error").Eval(ctx)[0] < 1e-8
+    with pytest.raises(ValueError, match="distinct indices 0-5"):
+        ContactForceEstimator(
+            plant, "stacked", unknown_wrench_frames=SOLE_FRAMES, unknown_wrench_components=[(2, 3, 9)] * 2
+        )
+    with pytest.raises(ValueError, match="1 entries for 2 unknown wrench frames"):
+        ContactForceEstimator(
+            plant, "stacked", unknown_wrench_frames=SOLE_FRAMES, unknown_wrench_components=[(2, 3, 4)]
+        )
+
+
+def test_detector_with_fsr_soles_tests_what_shear_and_yaw_cannot_explain(hrp4, localizer):
+    """3 + n - 6 degrees of freedom; any shear and yaw moment at the soles leaves the
+    statistic at 0, an unmeasured normal force (an FSR that reads nothing) and a 5 N push do
+    not. The soles may be known frames too (the FSRs' wrench)."""
+    plant, _, context = hrp4
+    dut = _detector(plant, context, unknown_wrench_components=FSR_COMPONENTS, known_wrench_frames=SOLE_FRAMES)
+    n = plant.num_velocities() - 6
+    on = dut.thresholds["on"][1]
+    assert on == pytest.approx(chi2.isf(1e-9, 3 + n - 6))
+    columns = dut.unknown_columns(plant.GetPositions(context))
+    assert columns.shape == (3 + n, 6)
+    unmeasured = STANDING_WRENCHES - _fsr_part(plant, context, STANDING_WRENCHES)
+    b = _ground_residuals(plant, context, unmeasured)
+    assert dut.statistics(b[:6], b[6:], columns)[1] < 1e-12 * on
+    b = _ground_residuals(plant, context, STANDING_WRENCHES)  # the normal forces not subtracted
+    assert dut.statistics(b[:6], b[6:], columns)[1] > 10.0 * on
+    body, p_B, p_W, f_W = _arm_push(plant, context, localizer, 3)
+    wrench, tau = _exact_residuals(plant, context, [(body, p_B, p_W, 5.0 * f_W / np.linalg.norm(f_W))])
+    b = np.concatenate((wrench, tau)) + _ground_residuals(plant, context, unmeasured)
+    assert dut.statistics(b[:6], b[6:], columns)[1] > 10.0 * on
+
+
+def test_localizers_place_stance_leg_pushes_with_fsr_soles(hrp4, localizer):
+    """The pushes of ``test_localizers_never_claim_a_push_on_a_stance_leg``, with the soles'
+    normal forces and centres of pressure measured: only shear and yaw (3 unknowns per
+    sole) stay free, every leg joint sees the push again, and the stacked fit places each
+    on its link, at its point, with its force, and calls it valid."""
+    plant, scene_graph, context = hrp4
+    q = plant.GetPositions(context)
+    fsr = MultiContactLocalizer(
+        plant,
+        scene_graph,
+        exclude_bodies=SOLES,
+        unknown_wrench_frames=SOLE_FRAMES,
+        unknown_wrench_components=FSR_COMPONENTS,
+    )
+    assert fsr.partly_known_wrenches and not localizer.partly_known_wrenches
+    rng = np.random.default_rng(8)
+    for name in ("L_KNEE_P_LINK", "R_KNEE_P_LINK", "R_HIP_P_LINK"):
+        contact = _sample_contact(plant, context, localizer, rng, name)
+        wrench, tau = _exact_residuals(plant, context, [contact])
+        unmeasured = STANDING_WRENCHES - _fsr_part(plant, context, STANDING_WRENCHES)
+        b = np.concatenate((wrench, tau)) + _ground_residuals(plant, context, unmeasured)
+        result = fsr.localize(q, b[:6], b[6:], max_contacts=1)
+        assert result.num_contacts == 1 and result.valid, name
+        assert result.body_indices == (int(contact[0].index()),), name
+        np.testing.assert_allclose(result.one.points_W[0], contact[2], atol=1e-6)
+        np.testing.assert_allclose(result.one.forces_W[0], contact[3], atol=1e-6)
+        np.testing.assert_allclose(result.one.unknown_wrenches.reshape(-1), unmeasured, atol=1e-5)
+
+
+def test_a_standing_robot_with_fsr_feet_measures_its_weight_at_the_soles():
+    """hrp4_like with FSR feet (``models/robots/hrp4_like_fsr.yaml``) in the study's
+    diagram: the station's known wrenches are the soles' FSR wrenches (the description's
+    500 N range), which carry the robot's weight while it stands, and the detector, testing
+    what the soles' shear and yaw cannot explain, stays off."""
+    from pydrake.systems.analysis import Simulator
+
+    from diagrams.residuals.contact_localization import ContactLocalizationScenario, build_contact_localization_diagram
+    from diagrams.station.conditions import set_ideal_conditions
+
+    scenario = ContactLocalizationScenario(model="models/robots/hrp4_like_fsr.yaml")
+    set_ideal_conditions(scenario)
+    diagram, handles = build_contact_localization_diagram(scenario, online=True)
+    station = handles.station
+    np.testing.assert_array_equal(station.sensors.fsr_array.saturation, np.full(8, 500.0))
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    station.set_initial_state(context)
+    simulator.AdvanceTo(0.5)
+    port = station.known_wrenches
+    wrenches = port.Eval(port.get_system().GetMyContextFromRoot(context)).reshape(2, 6)
+    plant_context = station.plant.GetMyContextFromRoot(context)
+    weight = station.plant.CalcTotalMass(plant_context) * 9.81
+    assert wrenches[:, 5].sum() == pytest.approx(weight, rel=0.01)
+    assert np.all(wrenches[:, 5] > 0.3 * weight)
+    assert (
+        handles.detector.GetOutputPort("contact_detected").Eval(handles.detector.GetMyContextFromRoot(context))[0]
+        == 0.0
+    )

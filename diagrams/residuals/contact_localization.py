@@ -74,9 +74,9 @@ from systems.residuals.contact_estimation import (
     ContactLocalizer,
     GatedEstimate,
     LocalizationResult,
+    UnknownWrenches,
     _SensedConfiguration,
     candidate_geometry,
-    unknown_wrench_columns,
 )
 from systems.residuals.geometry_intersection import inward_direction, sample_surface, surface_areas
 from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual, ResidualModel
@@ -164,6 +164,10 @@ NO_FOOT_FT_FLOORS = {
     "foot_normal_force_rms_error_valid_of_weight": ("<=", 0.05),
 }
 
+#: ``NO_FOOT_FT_FLOORS`` for a robot whose feet have FSRs: their normal forces are measured,
+#: not estimated, so the sole force floor has nothing to judge.
+FSR_FEET_FLOORS = {k: v for k, v in NO_FOOT_FT_FLOORS.items() if not k.startswith("foot_normal_force")}
+
 
 def lacks_foot_ft_sensors(model: str) -> bool:
     """Whether the humanoid ``model`` (a built-in name or a robot description) has a foot
@@ -173,14 +177,23 @@ def lacks_foot_ft_sensors(model: str) -> bool:
     return any(foot.sensing != "force_torque" for foot in robot_description(model).feet.values())
 
 
+def has_fsr_feet(model: str) -> bool:
+    """Whether the humanoid ``model`` has a foot with FSRs (``sensing: fsr``): their normal
+    forces are measurements, not estimates of the study (False for anything else)."""
+    if not is_humanoid(model):
+        return False
+    return any(foot.sensing == "fsr" for foot in robot_description(model).feet.values())
+
+
 def floors_for(scenario: "ContactLocalizationScenario") -> dict:
     """``TWO_CONTACT_FLOORS`` for two contacts; ``NO_FOOT_FT_FLOORS`` on a robot without
-    foot F/T sensors; else ``FLOORS`` in the ideal world, ``REALISTIC_FLOORS`` otherwise
-    (any imperfection, the EKF base state or a refined model)."""
+    foot F/T sensors (``FSR_FEET_FLOORS`` where FSRs measure the sole forces); else ``FLOORS``
+    in the ideal world, ``REALISTIC_FLOORS`` otherwise (any imperfection, the EKF base state
+    or a refined model)."""
     if scenario.contacts == 2:
         return TWO_CONTACT_FLOORS
     if lacks_foot_ft_sensors(scenario.model):
-        return NO_FOOT_FT_FLOORS
+        return FSR_FEET_FLOORS if has_fsr_feet(scenario.model) else NO_FOOT_FT_FLOORS
     return FLOORS if is_ideal(scenario) else REALISTIC_FLOORS
 
 
@@ -448,6 +461,7 @@ def build_contact_localization_diagram(
         startup_time=scenario.detector_startup_time,
         release_probability=scenario.detector_release_probability,
         unknown_wrench_frames=unknown,
+        unknown_wrench_components=estimator.unknown_wrench_components,
         **covariances,
     )
     detector.set_name("contact_detector")
@@ -459,6 +473,7 @@ def build_contact_localization_diagram(
         localization_period=scenario.localization_period,
         settle_time=scenario.settle_time,
         unknown_wrench_frames=unknown,
+        unknown_wrench_components=estimator.unknown_wrench_components,
     )
     localizer.set_name("contact_localizer")
     handles = {
@@ -799,13 +814,19 @@ def averaged_input_covariances(
     keep = inputs.log_times >= AVERAGED_NOISE_STARTUP_S
     raw = np.concatenate((replay.external_wrench_world, replay.internal), axis=1)[keep]
     unexplained = raw
-    unknown = handles.station.estimator.unknown_wrench_frames
-    if unknown:
-        kin = _SensedConfiguration(handles.station.estimator.plant, "averaged_input_covariances")
+    estimator = handles.station.estimator
+    if estimator.unknown_wrench_frames:
+        kin = _SensedConfiguration(estimator.plant, "averaged_input_covariances")
         q = inputs.state[keep, : kin.nq].mean(axis=0)
         q[:4] /= np.linalg.norm(q[:4])
         kin.set_positions(q)
-        U = unknown_wrench_columns(kin, unknown)
+        unknown = UnknownWrenches(
+            estimator.plant,
+            estimator.unknown_wrench_frames,
+            estimator.unknown_wrench_components,
+            "averaged_input_covariances",
+        )
+        U = unknown.columns(kin)
         unexplained = raw - (U @ np.linalg.lstsq(U, raw.T, rcond=None)[0]).T
     blocks = []
     for rows, gain in ((slice(0, 6), scenario.external_gain), (slice(6, None), scenario.internal_gain)):
@@ -839,6 +860,7 @@ def multi_contact_localizer(
         load_covariance_external=load_ext,
         load_covariance_internal=load_int,
         unknown_wrench_frames=unknown,
+        unknown_wrench_components=estimator.unknown_wrench_components,
     )
 
 
@@ -1165,9 +1187,9 @@ def trial_result(
         q, wrench, residual = offline.localization_inputs
     result["localizer_inputs"] = {"q": q, "external_wrench_world": wrench, "residual": residual}
     result["true_points_world"] = true_points.tolist()
-    if handles.station.estimator.unknown_wrench_frames:
-        # The ground's normal force on each sole without F/T sensors (sides sorted, as the
-        # estimators' unknown wrench frames): what the fits estimate. Averaged over the
+    if handles.station.estimator.unknown_wrench_frames and not handles.station.estimator.fsr_sides:
+        # The ground's normal force on each sole without F/T sensors or FSRs (sides sorted,
+        # as the estimators' unknown wrench frames): what the fits estimate (FSRs measure it). Averaged over the
         # window the localizer's means average when the estimators ran offline, else at
         # the push's end.
         plant, humanoid = handles.plant, handles.station.humanoid
@@ -1232,8 +1254,9 @@ def multi_contact_result(
         "estimated_contact_bodies": [int(b) for b in estimate.body_indices],
         "estimated_contact_body_names": [multi_contact.body_name(b) for b in estimate.body_indices],
     }
-    if estimate.one is not None and estimate.one.unknown_wrenches.size:
-        # The ground's normal force on each sole of the single-contact fit (world z).
+    if estimate.one is not None and estimate.one.unknown_wrenches.size and not multi_contact.partly_known_wrenches:
+        # The ground's normal force on each sole of the single-contact fit (world z; FSRs
+        # measure it where the soles' wrenches are partly known).
         out["foot_normal_forces_N"] = [float(w[5]) for w in estimate.one.unknown_wrenches]
     if len(true_bodies) == 1:
         one = estimate.num_contacts == 1

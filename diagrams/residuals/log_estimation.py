@@ -1321,8 +1321,8 @@ def simulate_push_log(
     )
     builder = DiagramBuilder()
     station = add_humanoid_station(builder, robot, noise=noise, seed=seed, base_state=base_state)
-    if not station.known_wrench_frames:
-        raise ValueError(f"simulate_push_log: {robot!r} has no foot F/T sensors")
+    if not station.known_wrench_frames or station.estimator.unknown_wrench_frames:
+        raise ValueError(f"simulate_push_log: {robot!r} has a foot without an F/T sensor")
     unavailable = localization_unavailable(station.estimator)
     if unavailable is not None:
         raise ValueError(f"simulate_push_log: {robot!r} cannot be localized on: {unavailable}")

@@ -193,7 +193,7 @@ def build_refinement_diagram(
     scenario.validate()
     builder = DiagramBuilder()
     station = add_scenario_station(builder, scenario, corrections)
-    if station.humanoid is None or not station.known_wrench_frames:
+    if station.humanoid is None or not station.known_wrench_frames or station.estimator.unknown_wrench_frames:
         raise ValueError(
             f"model refinement needs a humanoid with foot F/T sensors (hrp4_like), got {scenario.model!r}: "
             "run with --ideal, or set model_refinement: none"

@@ -36,6 +36,7 @@ from models import (
     with_link_inertias,
 )
 from systems.common.topology import FloatingBaseTopology, floating_base_topology, rigid_link_of_bodies
+from systems.residuals.contact_estimation import ALL_WRENCH_COMPONENTS, SOLE_SHEAR_AND_YAW
 
 
 @dataclass
@@ -54,6 +55,12 @@ class EstimatorPlant:
         unknown_wrench_frames: the sole frames of the feet without F/T sensors, sides
             sorted: the ground's wrench there is an unknown of the estimators
             (``unknown_wrench_frames`` of the detector, force estimator and localizers).
+        unknown_wrench_components: per unknown wrench frame, its unknown components
+            (``unknown_wrench_components`` of the estimators): all six on a foot with
+            ``sensing: none``; the shear and yaw moment (``SOLE_SHEAR_AND_YAW``) on a foot
+            with FSRs, whose normal force and centre of pressure are known wrenches.
+        fsr_sides, fsr_frames: the feet with FSRs (sides sorted) and their sole frames: the
+            frames of the known wrenches ``FsrSoleWrenches`` gives, after the F/T frames.
         standing_state: [q; v] standing (a humanoid) or at the posture held in space (a
             model file): the detector's nominal configuration.
         link_inertias: {link name: M_BBo_B} where this model differs from the description
@@ -70,6 +77,9 @@ class EstimatorPlant:
     standing_state: np.ndarray
     link_inertias: dict = field(default_factory=dict)
     unknown_wrench_frames: tuple = ()
+    unknown_wrench_components: tuple = ()
+    fsr_sides: tuple = ()
+    fsr_frames: tuple = ()
     _kinematics: object = field(default=None, init=False, repr=False, compare=False)
 
     def frame_rotations(self, frames: Sequence[Frame], q: np.ndarray) -> np.ndarray:
@@ -82,6 +92,12 @@ class EstimatorPlant:
 
             self._kinematics = PinocchioFloatingBaseDynamics(self.plant)
         return self._kinematics.frame_rotations_of_samples(np.asarray(q, dtype=float), frames)
+
+    @property
+    def known_wrench_frames(self) -> tuple:
+        """The frames of the measured wrenches eq. (10) subtracts: the F/T sensors' frames,
+        then the soles with FSRs (their normal force and centre of pressure)."""
+        return tuple(self.ft_frames) + tuple(self.fsr_frames)
 
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -125,13 +141,16 @@ def build_estimator_plant(
     plant.Finalize()
     topology = floating_base_topology(plant)  # clear ValueError for a model without a floating base
     context = plant.CreateDefaultContext()
-    ft_frames, excluded, unknown = (), (), ()
+    ft_frames, excluded, unknown, components, fsr_sides = (), (), (), (), ()
     if humanoid is not None:
         set_standing_state(plant, context, humanoid)
         sides = sorted(humanoid.ft_sensor_joints)
         ft_frames = tuple(humanoid.ft_sensor_frames[s] for s in sides)
         excluded = tuple(humanoid.ft_sensor_joints[s].child_body().name() for s in sides)
-        unknown = tuple(humanoid.sole_frames[s] for s in sorted(humanoid.sole_frames) if s not in sides)
+        unknown_sides = [s for s in sorted(humanoid.sole_frames) if s not in sides]
+        unknown = tuple(humanoid.sole_frames[s] for s in unknown_sides)
+        fsr_sides = tuple(s for s in unknown_sides if humanoid.foot_sensing.get(s) == "fsr")
+        components = tuple(SOLE_SHEAR_AND_YAW if s in fsr_sides else ALL_WRENCH_COMPONENTS for s in unknown_sides)
         link_of = rigid_link_of_bodies(plant)
         for frame in unknown:
             foot = link_of[int(frame.body().index())]
@@ -153,6 +172,9 @@ def build_estimator_plant(
         standing_state=plant.GetPositionsAndVelocities(context),
         link_inertias=link_inertias,
         unknown_wrench_frames=unknown,
+        unknown_wrench_components=components,
+        fsr_sides=fsr_sides,
+        fsr_frames=tuple(humanoid.sole_frames[s] for s in fsr_sides),
     )
 
 

@@ -12,7 +12,7 @@ default ("truth_plus_noise") from the stand-in ``systems.simulation.sensors.Base
 (the true base state plus white noise); "invariant_ekf" replaces it with the contact-aided
 invariant EKF ``systems.estimation.base_state_estimator.InvariantEkfBaseStateEstimator`` fed by
 the station's IMU, encoders and foot contact from the ankle F/T sensors (hrp4_like) or, on a
-robot without them, from its four foot FSRs per foot (nao_like: an ``FsrArray`` added for it),
+robot without them, from its four foot FSRs per foot (nao_like: the sensors' ``FsrArray``),
 with IMU bias states when the simulated IMU has a bias random walk.
 
 ``model_corrections`` (a model refined from a calibration log, ``systems.estimation.
@@ -37,7 +37,7 @@ import numpy as np
 from pydrake.geometry import SceneGraph
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.framework import Context, DiagramBuilder, InputPort, OutputPort
-from pydrake.systems.primitives import MatrixGain, ZeroOrderHold
+from pydrake.systems.primitives import MatrixGain, Multiplexer, ZeroOrderHold
 
 from diagrams.station.estimator_plant import (
     EstimatorPlant,
@@ -341,6 +341,8 @@ def add_humanoid_station(
         if len(estimator.ft_frames) != len(sensors.ft_frames):
             raise ValueError("the estimators' plant and the simulated robot have different F/T sensors")
         known_frames, known_wrenches = estimator.ft_frames, sensors.ft_wrenches
+        if estimator.fsr_sides:
+            known_frames, known_wrenches = _add_fsr_sole_wrenches(builder, estimator, sensors)
     else:
         sensors = None
         sensed_state = plant.get_state_output_port()
@@ -439,7 +441,7 @@ def _add_invariant_ekf(
     weight, off below ``CONTACT_OFF_WEIGHT_FRACTION``, 5 %; ``ContactHysteresis``): from the
     F/T sensors when the robot has them (hrp4_like, ``FootContactFromForceTorque``), else
     from the sum of each foot's four FSRs (nao_like, ``FootContactFromFsr``). The FSRs are
-    an ``FsrArray`` added here, with the noise and seed (16 seed + 5) that
+    the sensors' ``FsrArray`` (``add_sensors``), with the noise and seed (16 seed + 5) that
     ``diagrams.observer.nao_sensing`` gives its own, so both read the same sensors. The
     filter estimates the IMU biases (its default random walks, ``Imperfections.realistic()``'s)
     when the simulated IMU has a bias random walk, and is the bias-free filter otherwise (the
@@ -452,8 +454,7 @@ def _add_invariant_ekf(
     ``STANDING_START_VELOCITY_STD``) rather than the generic one. The FSRs are sensors of
     the simulated ``plant`` (``humanoid``: its handles); the filter, the contact flags' weight
     threshold and the filter's start are the estimators' (``estimator``)."""
-    from systems.observer.fsr_sensing import FSR_NOISE_STD, FSR_SIDES, FsrArray
-    from systems.simulation.sensors import SEEDS_PER_CALL
+    from systems.observer.fsr_sensing import FSR_SIDES
 
     model = estimator.plant
     mass = model.CalcTotalMass(model.CreateDefaultContext(), [estimator.humanoid.model_instance])
@@ -473,11 +474,7 @@ def _add_invariant_ekf(
         builder.Connect(sensors.ft_wrenches, contact.GetInputPort("wrenches"))
     else:
         sides = FSR_SIDES
-        seed = sensors.seeds["encoders"] // SEEDS_PER_CALL  # the station's seed
-        noise_std = sensors.noise_std_factor * FSR_NOISE_STD
-        fsr = builder.AddSystem(FsrArray(plant, humanoid, noise_std=noise_std, seed=SEEDS_PER_CALL * seed + 5))
-        fsr.set_name("invariant_ekf_fsr_array")
-        builder.Connect(plant.get_contact_results_output_port(), fsr.GetInputPort("contact_results"))
+        fsr = sensors.fsr_array  # the feet's FSRs (sensing: fsr; the station refuses the EKF without them)
         contact = builder.AddSystem(
             FootContactFromFsr(
                 weight,
@@ -515,6 +512,29 @@ def _add_invariant_ekf(
     builder.Connect(estimator.GetOutputPort("base_pose"), sensors.assembler.GetInputPort("base_pose"))
     builder.Connect(estimator.GetOutputPort("base_velocity"), sensors.assembler.GetInputPort("base_velocity"))
     return estimator, contact
+
+
+def _add_fsr_sole_wrenches(
+    builder: DiagramBuilder, estimator: EstimatorPlant, sensors: SensorHandles
+) -> tuple[tuple, OutputPort]:
+    """The known wrenches of a robot with FSR feet: the F/T sensors' (if any), then each FSR
+    sole's normal force and centre of pressure (``FsrSoleWrenches``, from the estimators'
+    model and the sensed state); returns (their frames, one port of all of them)."""
+    from systems.observer.fsr_sensing import FsrSoleWrenches
+
+    if sensors.fsr_forces is None:
+        raise ValueError("the estimators' plant has FSR feet but the simulated robot has no FSRs")
+    soles = builder.AddSystem(FsrSoleWrenches(estimator.plant, estimator.humanoid, estimator.fsr_sides))
+    soles.set_name("fsr_sole_wrenches")
+    builder.Connect(sensors.fsr_forces, soles.GetInputPort("fsr_forces"))
+    builder.Connect(sensors.state, soles.GetInputPort("state"))
+    if sensors.ft_wrenches is None:
+        return estimator.fsr_frames, soles.GetOutputPort("wrenches")
+    both = builder.AddSystem(Multiplexer([6 * len(estimator.ft_frames), 6 * len(estimator.fsr_frames)]))
+    both.set_name("known_wrenches")
+    builder.Connect(sensors.ft_wrenches, both.get_input_port(0))
+    builder.Connect(soles.GetOutputPort("wrenches"), both.get_input_port(1))
+    return estimator.known_wrench_frames, both.get_output_port()
 
 
 def _load(plant: MultibodyPlant, scene_graph: SceneGraph, model: str) -> HumanoidHandles | None:

@@ -92,8 +92,8 @@ class FsrArray(LeafSystem):
         plant: the finalized plant holding the humanoid.
         handles: the humanoid's handles (``fsr_geometries``: the sphere GeometryIds).
         noise_std: N, scalar or 8 entries (default ``FSR_NOISE_STD``); 0 for an ideal sensor.
-        saturation: the sensors' upper range, N (default 25 N, Nao); readings are clipped
-            to [0, saturation].
+        saturation: the sensors' upper range, N (default 25 N, Nao), scalar or 8 entries;
+            readings are clipped to [0, saturation].
         period: noise sample-and-hold period, s.
         seed: noise seed (non-negative integer).
 
@@ -132,10 +132,13 @@ class FsrArray(LeafSystem):
             period, seed = check_period(period), check_seed(seed)
         except ValueError as err:
             raise ValueError(f"{who}: {err}") from err
-        saturation = float(saturation)
-        if not (np.isfinite(saturation) and saturation > 0.0):
-            raise ValueError(f"{who}: saturation must be a positive number of newtons, got {saturation}")
-        self._saturation = saturation
+        saturation = np.asarray(saturation, dtype=float)
+        positive = np.isfinite(saturation).all() and (saturation > 0.0).all()
+        if saturation.shape not in ((), (len(ids),)) or not positive:
+            raise ValueError(
+                f"{who}: saturation must be a positive number of newtons or {len(ids)} of them, got {saturation}"
+            )
+        self._saturation = float(saturation) if saturation.shape == () else saturation
         self._noise = SampledNoise(len(ids), std, period, seed)
         self._contact = self.DeclareAbstractInputPort("contact_results", AbstractValue.Make(ContactResults()))
         self.DeclareVectorOutputPort("fsr_forces", len(ids), self._CalcFsrForces)
@@ -370,8 +373,81 @@ class ImuComAcceleration(_KinematicsSystem):
         output.SetFromVector(R_WS @ f_S + self._g_W)
 
 
+class FsrSoleWrenches(_KinematicsSystem):
+    """The wrench the FSRs of each sole measure: the ground's normal force and its centre of
+    pressure, as a wrench at the sole frame, for the estimators' eq. (10) (the known
+    wrenches of a foot without F/T sensor; its shear and yaw moment stay unknowns,
+    ``systems.residuals.contact_estimation.SOLE_SHEAR_AND_YAW``).
+
+    With n = R_WS e_z the sole's normal and p_i = R_WS [x_i, y_i, 0] the FSRs' positions
+    from the sole frame's origin (world), the readings F_i give
+
+        f = (sum_i F_i) n,   m = sum_i p_i x (F_i n)
+
+    i.e. the normal force f_z and the moments m_x, m_y about the sole's axes; its m_z, f_x
+    and f_y are 0. Exact for a flat foot whose contact forces act at the FSRs (a shear
+    force in the sole plane adds only m_z and f_x, f_y about the sole's origin).
+
+    Inputs:
+        fsr_forces: (8) N, order ``FSR_NAMES`` (``FsrArray``'s output).
+        state: the sensed [q; v] of ``plant`` (the sole's orientation).
+
+    Outputs:
+        wrenches: 6 per side of ``sides``: [moment about the sole frame's origin, N m (3);
+            force, N (3)], world (the F/T sensors' convention).
+
+    Args:
+        plant: the estimators' finalized plant.
+        handles: its humanoid handles (sole frames, FSR positions in the sole frames).
+        sides: the feet whose wrenches to output, in that order (default both, ``FSR_SIDES``).
+
+    Raises:
+        ValueError: an unfinalized plant, bad handles, an unknown side; NaN or inf on an
+            input at evaluation.
+    """
+
+    def __init__(self, plant: MultibodyPlant, handles: HumanoidHandles, sides=FSR_SIDES):
+        super().__init__(plant, type(self).__name__)
+        _check_handles(handles, self._who)
+        sides = tuple(sides)
+        unknown = [side for side in sides if side not in FSR_SIDES]
+        if unknown or not sides or len(set(sides)) != len(sides):
+            raise ValueError(f"{self._who}: sides must be distinct entries of {FSR_SIDES}, got {sides!r}")
+        self._sides = sides
+        self._soles = [self._check_frame(handles.sole_frames[side], f"sole_frames['{side}']") for side in sides]
+        # Per side: (4, 3) FSR positions in the sole frame (z = 0) and the 4 readings' slots.
+        self._p_S = np.array(
+            [np.column_stack((np.asarray(handles.fsr_positions[side], float), np.zeros(4))) for side in sides]
+        )
+        self._slots = np.array([[FSR_NAMES.index(f"{side}_{name}") for name in FSR_ORDER] for side in sides])
+        self._fsr = self.DeclareVectorInputPort("fsr_forces", len(FSR_NAMES))
+        self.DeclareVectorOutputPort("wrenches", 6 * len(sides), self._CalcWrenches)
+
+    @property
+    def sides(self) -> tuple[str, ...]:
+        return self._sides
+
+    def sole_wrenches(self, readings: np.ndarray, R_WS: np.ndarray) -> np.ndarray:
+        """(k, 6) the class docstring's wrenches from the 8 ``readings`` and the k soles'
+        rotations R_WS (k, 3, 3)."""
+        F = np.asarray(readings, dtype=float)[self._slots]  # (k, 4)
+        n = R_WS[:, :, 2]  # (k, 3)
+        force = F.sum(axis=1)[:, None] * n
+        # sum_i F_i (R p_i) x n = R (sum_i F_i p_i) x n: the readings' first moment in the sole.
+        first_moment = np.einsum("ki,kij->kj", F, self._p_S)  # (k, 3) in the sole frame
+        moment = np.cross(np.einsum("kij,kj->ki", R_WS, first_moment), n)
+        return np.concatenate((moment, force), axis=1)
+
+    def _CalcWrenches(self, context: Context, output: BasicVector) -> None:
+        self._set_positions(context)
+        readings = eval_finite_input(self._who, self._fsr, context)
+        R_WS = np.array([sole.CalcRotationMatrixInWorld(self._plant_context).matrix() for sole in self._soles])
+        output.SetFromVector(self.sole_wrenches(readings, R_WS).ravel())
+
+
 __all__ = [
     "FSR_NAMES",
+    "FsrSoleWrenches",
     "FSR_NOISE_STD",
     "FSR_SATURATION",
     "CenterOfPressure",

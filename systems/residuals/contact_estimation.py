@@ -175,6 +175,110 @@ def unknown_wrench_columns(kin: _SensedConfiguration, frames: Sequence[Frame]) -
     return np.concatenate(list(wrench_maps(kin, frames)), axis=1) if frames else np.zeros((6 + kin.n, 0))
 
 
+#: The six components of a wrench [m_x, m_y, m_z, f_x, f_y, f_z] (moment about the frame's
+#: origin; force) in a frame's own axes, by index: every component is unknown.
+ALL_WRENCH_COMPONENTS = (0, 1, 2, 3, 4, 5)
+#: What a sole's force-sensing resistors leave unknown: the moment about the sole's normal
+#: (m_z) and the shear force (f_x, f_y), in the sole's axes. The FSRs measure the normal
+#: force f_z and, through where they sit, the moments m_x and m_y (the centre of pressure):
+#: the known wrench of ``systems.observer.fsr_sensing.FsrSoleWrenches``.
+SOLE_SHEAR_AND_YAW = (2, 3, 4)
+
+
+class UnknownWrenches:
+    """Unknown wrenches at known frames (the ground's wrench on each sole of a robot
+    without foot F/T sensors), whole or in part: the columns they add to the stacked
+    residuals [r_ext; r_int] and the world wrenches of the values fitted to them.
+
+    A frame whose ``components`` are all six (``ALL_WRENCH_COMPONENTS``) has its wrench
+    [moment about its origin; force] in world as six unknowns, the columns T_F of
+    ``wrench_maps``. A frame with fewer has only those components of its wrench in its own
+    axes as unknowns (its sole's FSRs measure the others, subtracted with the known
+    wrenches), the columns T_F diag(R_WF, R_WF) S (S the selected columns of I_6).
+
+    Args:
+        plant: the estimators' finalized plant.
+        frames: frames or names, each at most once.
+        components: per frame, the unknown components' indices in [m_x, m_y, m_z, f_x, f_y,
+            f_z] of the frame's axes (``SOLE_SHEAR_AND_YAW`` for a sole with FSRs); None:
+            all six for every frame.
+        who: the owner's name, for the error messages.
+
+    Raises:
+        ValueError: a frame the plant does not have or given twice; ``components`` not one
+            non-empty set of distinct indices 0-5 per frame.
+    """
+
+    def __init__(self, plant: MultibodyPlant, frames: Sequence, components: Sequence | None, who: str):
+        self.frames = _unknown_frames(plant, frames, who)
+        if components is None:
+            components = [ALL_WRENCH_COMPONENTS] * len(self.frames)
+        components = list(components)
+        if len(components) != len(self.frames):
+            raise ValueError(
+                f"{who}: unknown_wrench_components has {len(components)} entries for {len(self.frames)} "
+                "unknown wrench frames"
+            )
+        checked = []
+        for frame, chosen in zip(self.frames, components):
+            try:
+                chosen = tuple(sorted(int(i) for i in chosen))
+            except (TypeError, ValueError):
+                chosen = None
+            if not chosen or len(set(chosen)) != len(chosen) or not all(0 <= i < 6 for i in chosen):
+                raise ValueError(
+                    f"{who}: unknown_wrench_components for '{frame.name()}' must be distinct indices 0-5 of "
+                    f"[m_x, m_y, m_z, f_x, f_y, f_z] in its axes, got {components[len(checked)]!r}"
+                )
+            checked.append(chosen)
+        self.components = tuple(checked)
+        self._partial = tuple(c != ALL_WRENCH_COMPONENTS for c in self.components)
+        self.size = sum(len(c) for c in self.components)
+
+    def __bool__(self) -> bool:
+        return bool(self.frames)
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def _bases(self, kin: _SensedConfiguration) -> list[np.ndarray]:
+        """Per frame, the (6, k) world directions of its unknown components."""
+        bases = []
+        for frame, chosen, partial in zip(self.frames, self.components, self._partial):
+            if not partial:
+                bases.append(None)
+                continue
+            R = frame.CalcPoseInWorld(kin.context).rotation().matrix()
+            B = np.zeros((6, 6))
+            B[:3, :3], B[3:, 3:] = R, R
+            bases.append(B[:, chosen])
+        return bases
+
+    def columns(self, kin: _SensedConfiguration) -> np.ndarray:
+        """(6 + n, size) their columns in the stacked residuals at the positions last set on
+        ``kin``: per frame T_F (all six, world components) or T_F diag(R_WF, R_WF) S."""
+        if not self.frames:
+            return np.zeros((6 + kin.n, 0))
+        T = wrench_maps(kin, self.frames)
+        parts = [T_F if B is None else T_F @ B for T_F, B in zip(T, self._bases(kin))]
+        return np.concatenate(parts, axis=1)
+
+    def world_map(self, kin: _SensedConfiguration) -> np.ndarray:
+        """(6 m, size) from the unknowns' values to the m wrenches [moment about the frame's
+        origin; force] in world, stacked, at the positions last set on ``kin`` (a frame's
+        measured components get 0 here: the FSRs' share is among the known wrenches)."""
+        out = np.zeros((6 * len(self.frames), self.size))
+        start = 0
+        for i, (chosen, B) in enumerate(zip(self.components, self._bases(kin))):
+            out[6 * i : 6 * i + 6, start : start + len(chosen)] = np.eye(6) if B is None else B
+            start += len(chosen)
+        return out
+
+    def world_wrenches(self, kin: _SensedConfiguration, values: np.ndarray) -> np.ndarray:
+        """(m, 6) ``world_map`` applied to fitted unknowns ``values`` (size,)."""
+        return (self.world_map(kin) @ np.asarray(values, dtype=float)).reshape(-1, 6)
+
+
 def _bounding_radii(geometry: RobotGeometry) -> np.ndarray:
     """(g,) the radius of each primitive's bounding sphere about its frame's origin, m:
     a sphere's radius, a box's half diagonal, a cylinder's hypot(radius, half length), a
@@ -316,7 +420,13 @@ class ContactForceEstimator(LeafSystem):
         damping: Tikhonov damping, >= 0 (N m per N units of the weighted rows).
         unknown_wrench_frames: frames (or names) whose wrenches are unknowns of the fit
             (mode "stacked" only): the soles of a robot without foot F/T sensors, whose
-            residuals were computed without ``known_wrench_frames``.
+            residuals were computed without ``known_wrench_frames``. Output
+            ``unknown_wrenches_world`` has their wrenches (6 per frame, [moment about the
+            frame's origin; force], world; a measured component's share is 0 there).
+        unknown_wrench_components: per unknown wrench frame, the indices of its unknown
+            components in [m_x, m_y, m_z, f_x, f_y, f_z] of its axes (``UnknownWrenches``;
+            ``SOLE_SHEAR_AND_YAW`` for a sole whose FSRs' wrench is among the known ones);
+            None: all six.
 
     Raises:
         ValueError: unknown mode, unknown body, frame or world body, wrong sizes, negative
@@ -337,6 +447,7 @@ class ContactForceEstimator(LeafSystem):
         classical_weight=1.0,
         damping: float = 0.0,
         unknown_wrench_frames: Sequence = (),
+        unknown_wrench_components: Sequence | None = None,
     ):
         super().__init__()
         who = self._who = "ContactForceEstimator"
@@ -344,8 +455,8 @@ class ContactForceEstimator(LeafSystem):
             raise ValueError(f"{who}: unknown mode {mode!r}; choose one of {self.MODES}")
         self._mode = mode
         self._kin = _SensedConfiguration(plant, who)
-        self._unknown_frames = _unknown_frames(plant, unknown_wrench_frames, who)
-        if self._unknown_frames and mode != "stacked":
+        self._unknown = UnknownWrenches(plant, unknown_wrench_frames, unknown_wrench_components, who)
+        if self._unknown and mode != "stacked":
             raise ValueError(
                 f"{who}: unknown_wrench_frames need mode 'stacked' (eq. 20 with the feet's wrenches as "
                 f"unknowns), got mode {mode!r}"
@@ -394,9 +505,9 @@ class ContactForceEstimator(LeafSystem):
             self._residual_port = self.DeclareVectorInputPort("residual", nv)
         if mode != "external" and self._points is None:
             self._points_port = self.DeclareVectorInputPort("contact_points", 4 * k)
-        # One solve per input change, shared by the outputs: [f (3 k); unknown wrenches (6 m);
-        # fit error].
-        size = 3 * k + 6 * len(self._unknown_frames) + 1
+        # One solve per input change, shared by the outputs: [f (3 k); unknown wrenches (6 m,
+        # world); fit error].
+        size = 3 * k + 6 * len(self._unknown) + 1
         self._solution = self.DeclareCacheEntry(
             "forces and fit error",
             ValueProducer(allocate=lambda: AbstractValue.Make(np.zeros(size)), calc=self._CalcSolution),
@@ -405,10 +516,10 @@ class ContactForceEstimator(LeafSystem):
         inputs = {self.all_input_ports_ticket()}
         self.DeclareVectorOutputPort("contact_forces_world", 3 * k, self._CalcForces, inputs)
         self.DeclareVectorOutputPort("fit_error", 1, self._CalcFitError, inputs)
-        if self._unknown_frames:
+        if self._unknown:
             self.DeclareVectorOutputPort(
                 "unknown_wrenches_world",
-                6 * len(self._unknown_frames),
+                6 * len(self._unknown),
                 lambda c, o: o.SetFromVector(self._solution.Eval(c)[3 * k : -1]),
                 inputs,
             )
@@ -424,7 +535,7 @@ class ContactForceEstimator(LeafSystem):
     @property
     def unknown_wrench_frames(self) -> tuple[Frame, ...]:
         """The frames whose wrenches are unknowns of the fit (() with foot F/T sensors)."""
-        return self._unknown_frames
+        return self._unknown.frames
 
     def _contact_points(self, context: Context) -> list[tuple[RigidBody, np.ndarray]]:
         if self._points is not None:
@@ -449,7 +560,7 @@ class ContactForceEstimator(LeafSystem):
         self, q: np.ndarray, points: Sequence[tuple[RigidBody, np.ndarray]]
     ) -> tuple[np.ndarray, np.ndarray]:
         """(A, w): the linear map from the stacked forces [f_1; ..; f_k] (world), then the
-        unknown wrenches (6 per ``unknown_wrench_frames``), to the residuals this mode
+        unknown wrenches' components (``UnknownWrenches.columns``), to the residuals this mode
         reads, and the row weights. Mode "stacked": (6 + n) rows; "classical": nv rows."""
         kin = self._kin
         kin.set_positions(q)
@@ -464,7 +575,7 @@ class ContactForceEstimator(LeafSystem):
                 A[:3, 3 * c : 3 * c + 3] = skew(p_W)
                 A[3:6, 3 * c : 3 * c + 3] = np.eye(3)
                 A[6:, 3 * c : 3 * c + 3] = (J[:, 6:] - J[:, :6] @ E).T
-            A = np.concatenate((A, unknown_wrench_columns(kin, self._unknown_frames)), axis=1)
+            A = np.concatenate((A, self._unknown.columns(kin)), axis=1)
             return A, np.concatenate((self._w_ext, self._w_int))
         # classical, model (8)
         X_WF0 = kin.base_pose()
@@ -500,7 +611,11 @@ class ContactForceEstimator(LeafSystem):
         else:
             b = np.asarray(r)
         A, w = self.system_matrix(x[: self._kin.nq], self._contact_points(context))
-        return self.solve(A, w, b)
+        f, fit = self.solve(A, w, b)
+        if self._unknown:  # the unknowns' components -> world wrenches
+            k3 = 3 * self._k
+            f = np.concatenate((f[:k3], self._unknown.world_wrenches(self._kin, f[k3:]).ravel()))
+        return f, fit
 
     def _CalcSolution(self, context: Context, value: AbstractValue) -> None:
         f, fit = self._estimate(context)
@@ -669,6 +784,10 @@ class ContactDetector(LeafSystem):
         unknown_wrench_frames: frames (or names) whose wrenches are unknown (the soles of a
             robot without foot F/T sensors; the residuals computed without
             ``known_wrench_frames``): the joint test above. Needs ``use_internal``.
+        unknown_wrench_components: per unknown wrench frame, the indices of its unknown
+            components in [m_x, m_y, m_z, f_x, f_y, f_z] of its axes (``UnknownWrenches``;
+            ``SOLE_SHEAR_AND_YAW`` for a sole whose FSRs' wrench is among the known ones);
+            None: all six.
     """
 
     def __init__(
@@ -690,24 +809,38 @@ class ContactDetector(LeafSystem):
         use_internal: bool = True,
         startup_time: float = 0.0,
         unknown_wrench_frames: Sequence = (),
+        unknown_wrench_components: Sequence | None = None,
     ):
         super().__init__()
         who = self._who = "ContactDetector"
         self._kin = kin = _SensedConfiguration(plant, who)
         n = kin.n
-        self._unknown_frames = _unknown_frames(plant, unknown_wrench_frames, who)
-        if self._unknown_frames:
-            if known_wrench_frames:
-                raise ValueError(f"{who}: a frame's wrench is either known (F/T) or unknown; give one of the two")
+        self._unknown = UnknownWrenches(plant, unknown_wrench_frames, unknown_wrench_components, who)
+        try:
+            known_wrench_frames = check_wrench_frames(plant, known_wrench_frames, "known wrench frame")
+        except ValueError as error:
+            raise ValueError(f"{who}: {error}") from None
+        if self._unknown:
+            whole = {
+                int(frame.index())
+                for frame, chosen in zip(self._unknown.frames, self._unknown.components)
+                if chosen == ALL_WRENCH_COMPONENTS
+            }
+            both = [frame for frame in known_wrench_frames if int(frame.index()) in whole]
+            if both:
+                raise ValueError(
+                    f"{who}: the wrench at '{both[0].name()}' is both known and wholly unknown; a frame among the "
+                    "known wrench frames can have only the components its sensor does not measure as unknowns"
+                )
             if not use_internal:
                 raise ValueError(f"{who}: unknown_wrench_frames need use_internal (the joint test)")
             use_external = False
-        joint_dof = 3 + n - 6 * len(self._unknown_frames)
-        self._column_shape = (3 + n, 6 * len(self._unknown_frames))
+        joint_dof = 3 + n - self._unknown.size
+        self._column_shape = (3 + n, self._unknown.size)
         if joint_dof < 1:
             raise ValueError(
-                f"{who}: {len(self._unknown_frames)} unknown wrenches (6 each) leave no degree of freedom in the "
-                f"3 + {n} force and internal residual rows"
+                f"{who}: {len(self._unknown)} unknown wrenches ({self._unknown.size} components) leave no degree "
+                f"of freedom in the 3 + {n} force and internal residual rows"
             )
         if not (use_external or use_internal):
             raise ValueError(f"{who}: at least one of use_external, use_internal must be True")
@@ -745,20 +878,20 @@ class ContactDetector(LeafSystem):
         self._L_int = self._whitener(covariance_internal, n, "covariance_internal")
         self._L_ext = self._whitener(covariance_external_force, 3, "covariance_external_force")
         self._use = (bool(use_external), bool(use_internal))
-        dof_int = joint_dof if self._unknown_frames else n
+        dof_int = joint_dof if self._unknown else n
         self._on = (chi2.isf(false_alarm_probability, 3), chi2.isf(false_alarm_probability, dof_int))
         self._off = (chi2.isf(release_probability, 3), chi2.isf(release_probability, dof_int))
 
         self._wrench_port = self.DeclareVectorInputPort("external_wrench_world", 6)
         self._residual_port = self.DeclareVectorInputPort("residual", n)
-        self._state_port = self.DeclareVectorInputPort("state", kin.nq + kin.nv) if self._unknown_frames else None
+        self._state_port = self.DeclareVectorInputPort("state", kin.nq + kin.nv) if self._unknown else None
         # The filters' factors K T of the columns' rows (force rows: external; joints: internal).
         self._column_gain = (
             np.concatenate((np.full(3, float(external_gain)), np.full(n, float(internal_gain)))) * self._period
         )
-        if self._unknown_frames and not np.all((self._column_gain > 0.0) & (self._column_gain < 1.0)):
+        if self._unknown and not np.all((self._column_gain > 0.0) & (self._column_gain < 1.0)):
             raise ValueError(f"{who}: the residual gains times the period must be in (0, 1) to filter the columns")
-        columns0 = np.zeros(self._column_shape[0] * self._column_shape[1] if self._unknown_frames else 0)
+        columns0 = np.zeros(self._column_shape[0] * self._column_shape[1] if self._unknown else 0)
         self._state_index = self.DeclareDiscreteState(
             np.concatenate(([0.0, -1.0, 0.0, 0.0, 0.0, 0.0], columns0))  # _DetectorState, Tbar
         )
@@ -802,7 +935,7 @@ class ContactDetector(LeafSystem):
     @property
     def unknown_wrench_frames(self) -> tuple[Frame, ...]:
         """The frames whose wrenches are unknown (() with foot F/T sensors)."""
-        return self._unknown_frames
+        return self._unknown.frames
 
     def statistics(
         self, wrench: np.ndarray, residual: np.ndarray, columns: np.ndarray | None = None
@@ -812,7 +945,7 @@ class ContactDetector(LeafSystem):
         robot at rest, ``filtered_columns`` along a motion)."""
         z_ext = self._L_ext @ np.asarray(wrench)[3:]
         z_int = self._L_int @ np.asarray(residual)
-        if self._unknown_frames:
+        if self._unknown:
             return 0.0, float(self._joint_statistics(self._checked_columns(columns)[None], z_ext[None], z_int[None])[0])
         return float(z_ext @ z_ext), float(z_int @ z_int)
 
@@ -824,7 +957,7 @@ class ContactDetector(LeafSystem):
         ``filtered_columns``) at once: ``statistics`` of each, to rounding."""
         z_ext = np.asarray(wrenches)[:, 3:] @ self._L_ext.T
         z_int = np.asarray(residuals) @ self._L_int.T
-        if self._unknown_frames:
+        if self._unknown:
             if columns is None or np.shape(columns) != (len(z_ext), *self._column_shape):
                 raise ValueError(
                     f"{self._who}: with unknown_wrench_frames the samples' filtered columns "
@@ -841,7 +974,7 @@ class ContactDetector(LeafSystem):
         if q.shape != (self._kin.nq,):
             raise ValueError(f"{self._who}: q must have shape ({self._kin.nq},), got {q.shape}")
         self._kin.set_positions(q)
-        return unknown_wrench_columns(self._kin, self._unknown_frames)[3:]
+        return self._unknown.columns(self._kin)[3:]
 
     def filtered_columns(self, start: np.ndarray, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The filtered columns along N updates (class docstring), without a Context
@@ -1124,6 +1257,10 @@ class ContactLocalizer(LeafSystem):
         unknown_wrench_frames: frames (or names) whose wrenches are unknown (the soles of a
             robot without foot F/T sensors, the residuals computed without
             ``known_wrench_frames``): the per-link mode above. Default ().
+        unknown_wrench_components: per unknown wrench frame, the indices of its unknown
+            components in [m_x, m_y, m_z, f_x, f_y, f_z] of its axes (``UnknownWrenches``;
+            ``SOLE_SHEAR_AND_YAW`` for a sole whose FSRs' wrench is among the known ones);
+            None: all six.
         external_weights: 6 weights of the external residual's rows [moment; force] in that
             mode (default 1; e.g. 1 / its noise std).
     """
@@ -1147,12 +1284,13 @@ class ContactLocalizer(LeafSystem):
         score_weights=1.0,
         skip_unsupported_shapes: bool = False,
         unknown_wrench_frames: Sequence = (),
+        unknown_wrench_components: Sequence | None = None,
         external_weights=1.0,
     ):
         super().__init__()
         who = self._who = "ContactLocalizer"
         self._kin = kin = _SensedConfiguration(plant, who)
-        self._unknown_frames = _unknown_frames(plant, unknown_wrench_frames, who)
+        self._unknown = UnknownWrenches(plant, unknown_wrench_frames, unknown_wrench_components, who)
         self._external_w = _weights(external_weights, 6, f"{who}: external_weights")
         self._geometry, self._bodies = candidate_geometry(
             plant, scene_graph, bodies, exclude_bodies, who, skip_unsupported_shapes
@@ -1252,7 +1390,7 @@ class ContactLocalizer(LeafSystem):
         distance, never below the tolerance); convex hulls are never skipped. The numbers
         of the primitives queried are those of querying all (row by row)."""
         wrench_W = np.asarray(wrench_W, dtype=float)
-        if self._unknown_frames:
+        if self._unknown:
             return self._localize_per_link(np.asarray(q, dtype=float), wrench_W, np.asarray(residual, dtype=float))
         m, f = wrench_W[:3], wrench_W[3:]
         f2 = float(f @ f)
@@ -1367,7 +1505,7 @@ class ContactLocalizer(LeafSystem):
         L = len(limited)
         stops = np.zeros((6 + n, L))
         stops[6 + limited, np.arange(L)] = w[6 + limited] * signs
-        shared = np.concatenate((w[:, None] * unknown_wrench_columns(kin, self._unknown_frames), stops), axis=1)
+        shared = np.concatenate((w[:, None] * self._unknown.columns(kin), stops), axis=1)
         Q, R = np.linalg.qr(shared)
         b = w * np.concatenate((wrench_W, residual))
         T = wrench_maps(kin, [body.body_frame() for body in self._bodies]) * w[:, None]  # weighted T_B
@@ -1459,7 +1597,7 @@ class ContactLocalizer(LeafSystem):
     @property
     def unknown_wrench_frames(self) -> tuple[Frame, ...]:
         """The frames whose wrenches are unknown (() with foot F/T sensors)."""
-        return self._unknown_frames
+        return self._unknown.frames
 
     def localization_inputs(self, context: Context) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(q, external wrench in world, internal residual) that the localizer's current

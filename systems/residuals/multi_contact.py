@@ -97,10 +97,12 @@ the covariances are right. With alpha = ``false_alarm`` and L joints on a stop:
 Robots without foot F/T sensors (``unknown_wrench_frames``: the soles): eq. (10) has no
 measured wrench to subtract, and the residuals carry the ground's wrenches w_F at known
 places. They are nuisance unknowns, handled as the stops' reactions: their whitened
-columns T_F (``systems.residuals.contact_estimation.unknown_wrench_columns``) are projected
+columns T_F (``systems.residuals.contact_estimation.UnknownWrenches``) are projected
 out of every row (P removes them with the stops' columns), so every search and test above
 runs unchanged on what no ground wrench can explain, with 6 fewer degrees of freedom per
-frame; the final refits estimate them (``ContactFit.unknown_wrenches``). A contact force
+frame (3 for a sole whose FSRs measure its normal force and centre of pressure, the
+known wrench; its shear and yaw moment stay unknown); the final refits estimate them
+(``ContactFit.unknown_wrenches``). A contact force
 whose effect a ground wrench can also produce (on a leg, part of its effect) is seen only
 through the rest of it: legs are harder than arms here.
 
@@ -128,12 +130,11 @@ from scipy.stats import f as f_distribution
 from systems.common.checks import check_plant, positive_number
 from systems.common.topology import rigid_link_of_bodies, same_rigid_link
 from systems.residuals.contact_estimation import (
+    UnknownWrenches,
     _JointStops,
     _SensedConfiguration,
     _skews,
-    _unknown_frames,
     candidate_geometry,
-    unknown_wrench_columns,
     wrench_maps,
 )
 from systems.residuals.geometry_intersection import (
@@ -234,7 +235,7 @@ class ContactFit:
         runner_up_log_evidence: the runner-up pair's (``runner_up_body_indices``) for k = 2.
         unknown_wrenches: (m, 6) the wrenches at the localizer's ``unknown_wrench_frames``
             in this fit, [moment about the frame's origin, N m; force, N], world ((0, 6)
-            without such frames).
+            without such frames; a sole with FSRs: only its unknown shear and yaw).
     """
 
     body_indices: tuple[int, ...]
@@ -674,7 +675,8 @@ class _Pose:
     limited: np.ndarray  # (L,) joint indices
     signs: np.ndarray  # (L,) their stops' signs
     stops: np.ndarray  # (rows, L) whitened stop columns times the stops' signs
-    unknown: np.ndarray  # (rows, 6 m) whitened columns of the unknown wrenches
+    unknown: np.ndarray  # (rows, size) whitened columns of the unknown wrenches' components
+    unknown_to_world: np.ndarray  # (6 m, size) their values -> the wrenches in world
     dense: _Points | None = None
     search: _Points | None = None  # the pair search's points, by link
     pairs: dict | None = None  # ``_pair_precomputation`` of the search points, once needed
@@ -751,6 +753,9 @@ class MultiContactLocalizer:
         unknown_wrench_frames: frames (or names) whose wrenches are unknowns (module
             docstring): the soles of a robot without foot F/T sensors, whose residuals were
             computed without ``known_wrench_frames``. Default () (F/T sensors measure them).
+        unknown_wrench_components: per unknown wrench frame, its unknown components
+            (``systems.residuals.contact_estimation.UnknownWrenches``; the shear and yaw of a
+            sole with FSRs); None: all six.
 
     Raises:
         ValueError: a bad plant, scene graph, body, frame, covariance (shape, NaN,
@@ -783,12 +788,13 @@ class MultiContactLocalizer:
         max_link_pairs: int = 100,
         contact_prior: str = "link",
         unknown_wrench_frames: Sequence = (),
+        unknown_wrench_components: Sequence | None = None,
     ):
         who = self._who = "MultiContactLocalizer"
         check_plant(plant, who)
         self._kin = kin = _SensedConfiguration(plant, who)
         self._plant = plant
-        self._unknown_frames = _unknown_frames(plant, unknown_wrench_frames, who)
+        self._unknown = UnknownWrenches(plant, unknown_wrench_frames, unknown_wrench_components, who)
         self._geometry, self._bodies = candidate_geometry(
             plant, scene_graph, bodies, exclude_bodies, who, skip_unsupported_shapes
         )
@@ -797,10 +803,10 @@ class MultiContactLocalizer:
         self._n = n = kin.n
         self._rows = 6 + n
         # Degrees of freedom of the rows after the unknown wrenches are projected out.
-        self._free_rows = self._rows - 6 * len(self._unknown_frames)
+        self._free_rows = self._rows - self._unknown.size
         if self._free_rows < 11:
             raise ValueError(
-                f"{who}: {len(self._unknown_frames)} unknown wrenches leave {self._free_rows} of the {self._rows} "
+                f"{who}: {len(self._unknown)} unknown wrenches leave {self._free_rows} of the {self._rows} "
                 f"residual rows, fewer than two contacts need"
             )
         default_ext = np.array([DEFAULT_EXTERNAL_MOMENT_STD] * 3 + [DEFAULT_EXTERNAL_FORCE_STD] * 3)
@@ -937,7 +943,12 @@ class MultiContactLocalizer:
     @property
     def unknown_wrench_frames(self) -> tuple:
         """The frames whose wrenches are unknowns (() with foot F/T sensors)."""
-        return self._unknown_frames
+        return self._unknown.frames
+
+    @property
+    def partly_known_wrenches(self) -> bool:
+        """Whether some unknown wrench frame has measured components (a sole with FSRs)."""
+        return any(len(chosen) < 6 for chosen in self._unknown.components)
 
     def grid_size(self, dense: bool = True) -> int:
         """Number of grid points (all primitives, before the outer-surface test)."""
@@ -1084,7 +1095,7 @@ class MultiContactLocalizer:
         limited, signs = self.limited_joints(q)
         stops = np.zeros((rows, len(limited)))
         stops[6:] = self._L_int_inv[:, limited] * signs
-        U = unknown_wrench_columns(kin, self._unknown_frames)
+        U = self._unknown.columns(kin)
         unknown = np.concatenate((self._L_ext_inv @ U[:6], self._L_int_inv @ U[6:]))
         P = np.eye(rows)
         if len(limited) or unknown.shape[1]:
@@ -1092,7 +1103,7 @@ class MultiContactLocalizer:
             P -= Qs @ Qs.T
         Tp = P @ Tw
         R_WG, p_WG = geo.world_poses(X_WB)
-        pose = _Pose(key, X_WB, R_WG, p_WG, Tw, Tp, P, limited, signs, stops, unknown)
+        pose = _Pose(key, X_WB, R_WG, p_WG, Tw, Tp, P, limited, signs, stops, unknown, self._unknown.world_map(kin))
         pose.dense = self._outer_points(pose, self._dense_grid)
         self._pose_cache = pose
         return pose
@@ -1259,7 +1270,7 @@ class MultiContactLocalizer:
         misfit = float(e @ e)
         if np.any(np.einsum("ij,ij->i", forces, cand.normals) > 0.0):
             misfit = math.inf
-        return forces, pose.signs * mu, misfit, x[k3:].reshape(-1, 6)
+        return forces, pose.signs * mu, misfit, (pose.unknown_to_world @ x[k3:]).reshape(-1, 6)
 
     def _uncertainty(self, pose: _Pose, bp: np.ndarray, cand: _Candidate) -> tuple[np.ndarray, np.ndarray]:
         """1-sigma (Cramer-Rao) position (m, along the surface) and force (N) uncertainty of

@@ -75,7 +75,7 @@ BASE_ANGULAR_VELOCITY_NOISE_STD = 5e-4  # rad/s
 BASE_LINEAR_VELOCITY_NOISE_STD = 2e-4  # m/s (kinematic-inertial fusion, filtered)
 
 #: Seed offsets used by add_sensors(seed=s): sensor i gets SEEDS_PER_CALL * s + offset.
-SEED_OFFSETS = {"encoders": 0, "torque": 1, "ft": 2, "imu": 3, "base": 4}
+SEED_OFFSETS = {"encoders": 0, "torque": 1, "ft": 2, "imu": 3, "base": 4, "fsr": 5}
 SEEDS_PER_CALL = 16
 
 
@@ -892,6 +892,9 @@ class SensorHandles:
             of the ground on the sole, world), or None.
         ft_frames: the F/T sensor frames in ``ft_wrenches`` order (empty if none).
         ft_sides: the sides ("right", "left", ...) in ``ft_wrenches`` order.
+        fsr_array: the feet's ``FsrArray`` (4 FSRs per foot, both feet) when a foot has
+            ``sensing: fsr``, else None.
+        fsr_forces: its ``fsr_forces`` output port (8, ``FSR_NAMES`` order), or None.
         seeds: the seed of each sensor.
         noise_std_factor: the factor on the default noise stds of this set (0 without
             noise, else ``add_sensors``' noise_scale), for sensors added beside it.
@@ -910,6 +913,8 @@ class SensorHandles:
     ft_sides: tuple
     seeds: dict
     noise_std_factor: float = 1.0
+    fsr_array: object | None = None
+    fsr_forces: OutputPort | None = None
 
 
 def add_sensors(
@@ -1037,6 +1042,28 @@ def add_sensors(
         ft.set_name(f"{name_prefix}foot_force_torque_sensors")
         builder.Connect(plant.get_reaction_forces_output_port(), ft.get_reaction_forces_input_port())
 
+    fsr = None
+    fsr_feet = [side for side, sensing in handles.foot_sensing.items() if sensing == "fsr"]
+    if fsr_feet:
+        from systems.observer.fsr_sensing import FSR_NOISE_STD, FSR_SATURATION, FSR_SIDES, FsrArray
+
+        feet = handles.description.feet if handles.description is not None else {}
+        ranges = [
+            feet[side].fsr_range if side in feet and feet[side].fsr_range is not None else FSR_SATURATION
+            for side in FSR_SIDES
+        ]
+        fsr = builder.AddSystem(
+            FsrArray(
+                plant,
+                handles,
+                noise_std=on * FSR_NOISE_STD,
+                saturation=np.repeat(ranges, 4),
+                seed=seeds["fsr"],
+            )
+        )
+        fsr.set_name(f"{name_prefix}foot_fsr_array")
+        builder.Connect(plant.get_contact_results_output_port(), fsr.GetInputPort("contact_results"))
+
     imu = add_imu(
         builder,
         plant,
@@ -1093,6 +1120,8 @@ def add_sensors(
         ft_sides=sides,
         seeds=seeds,
         noise_std_factor=on,
+        fsr_array=fsr,
+        fsr_forces=None if fsr is None else fsr.GetOutputPort("fsr_forces"),
     )
 
 

@@ -4,6 +4,7 @@ regressor, the base-parameter map, and the identification of KNOWN corrections f
 that Drake's inverse dynamics computes on the TRUE (perturbed) model."""
 
 import copy
+import dataclasses
 
 import numpy as np
 import pytest
@@ -34,6 +35,7 @@ from systems.estimation.model_identification import (
     newton_euler_matrix,
     stance_base_velocity,
 )
+from systems.residuals.contact_estimation import SOLE_SHEAR_AND_YAW
 from systems.simulation.imperfections import (
     ModelMismatch,
     friction_torque,
@@ -640,3 +642,51 @@ def test_stance_base_velocity_keeps_the_soles_still(hrp4):
         stance_base_velocity(plant, context, [], *states)
     with pytest.raises(ValueError, match="base_velocity"):
         IdentificationOptions(base_velocity="imu").validate()
+
+
+def _measured_part(plant, log, frames, unknown_components):
+    """The log with each frame's wrench cut to what its sensor measures: the components
+    not in ``unknown_components`` (of [m; f] in the frame's axes, at each sample's q)."""
+    context = plant.CreateDefaultContext()
+    wrenches = log.known_wrenches.copy()
+    for k in range(len(log.time)):
+        plant.SetPositions(context, log.q[k])
+        for s, frame in enumerate(frames):
+            R = frame.CalcPoseInWorld(context).rotation().matrix()
+            w = wrenches[k, 6 * s : 6 * s + 6]
+            local = np.concatenate((R.T @ w[:3], R.T @ w[3:]))
+            local[list(unknown_components)] = 0.0
+            wrenches[k, 6 * s : 6 * s + 6] = np.concatenate((R @ local[:3], R @ local[3:]))
+    return dataclasses.replace(log, known_wrenches=wrenches)
+
+
+def test_identification_with_the_feet_shear_and_yaw_unknown(hrp4, calibration):
+    """The log of ``test_identification_recovers_known_corrections`` with each foot's
+    wrench measured only in part (FSRs: its normal force and the moments about the sole's
+    x and y axes; the shear and yaw moment unknown, projected out of every sample's
+    equations): the same model, to the same floors."""
+    plant, handles = hrp4
+    true, log, truth, frames = calibration
+    measured = _measured_part(plant, log, frames, SOLE_SHEAR_AND_YAW)
+    options = IdentificationOptions(decimation_period=DECIMATION, torque_std=_torque_std(plant))
+    corrections = identify_model_corrections(
+        plant,
+        measured,
+        known_wrench_frames=frames,
+        options=options,
+        unknown_wrench_frames=frames,
+        unknown_wrench_components=[SOLE_SHEAR_AND_YAW] * 2,
+    )
+    weight, com, force_reduction, moment_reduction = _check_gravity(plant, handles, true, corrections, "FSR feet")
+    assert abs(weight) < 1e-4
+    assert com < 1e-4
+    assert force_reduction >= 0.9 and moment_reduction >= 0.9
+    rated = rated_joint_torques(plant)
+    assert np.max(np.abs(corrections.coulomb / truth["coulomb"] - 1)) < 0.05
+    assert np.max(np.abs(corrections.viscous / truth["viscous"] - 1)) < 0.05
+    assert np.max(np.abs(corrections.torque_scale - truth["scale"])) < 0.01
+    assert np.max(np.abs(corrections.torque_offset - truth["offset"]) / rated) < 0.02
+    # Without the projection the unmeasured shear and yaw read as model error: the fit
+    # gives joints a torque scale of -100 % or less and is refused.
+    with pytest.raises(ValueError, match="does not determine the torque scale"):
+        identify_model_corrections(plant, measured, known_wrench_frames=frames, options=options)

@@ -26,6 +26,7 @@ from systems.residuals.contact_estimation import (
     ContactForceEstimator,
     ContactLocalizer,
     _SensedConfiguration,
+    unexplained_residuals,
     unknown_wrench_columns,
 )
 from systems.residuals.multi_contact import MultiContactLocalizer
@@ -551,3 +552,49 @@ def test_a_standing_robot_with_fsr_feet_measures_its_weight_at_the_soles():
         handles.detector.GetOutputPort("contact_detected").Eval(handles.detector.GetMyContextFromRoot(context))[0]
         == 0.0
     )
+
+
+def test_unexplained_residuals_leave_the_noise_of_a_moving_robot_on_shifting_feet(hrp4):
+    """The noise model's input on a robot without F/T sensors: residuals of a robot moving
+    its arms and torso while its weight shifts between its feet (the ground's wrenches
+    change), plus white noise: what the soles' filtered columns cannot explain is the noise
+    (its projection), not the ground's hundreds of newtons."""
+    plant, _, context = hrp4
+    K, T = 35.0, 1e-3
+    q0 = plant.GetPositions(context)
+    n = plant.num_velocities() - 6
+    rng = np.random.default_rng(12)
+    amplitude = np.zeros(q0.size)
+    amplitude[7 + 12 :] = 0.2
+    phase = rng.uniform(0.0, 2.0 * np.pi, q0.size)
+    times = np.arange(800) * T
+    positions = q0 + amplitude * np.sin(2.0 * np.pi * 0.5 * times[:, None] + phase)
+    shift = np.outer(np.sin(2.0 * np.pi * 0.3 * times), np.array([0, 0, 0, 0, 0, 60.0, 0, 0, 0, 0, 0, -60.0]))
+    kin = _SensedConfiguration(plant, "test")
+    frames = [plant.GetFrameByName(f) for f in SOLE_FRAMES]
+    residual = np.zeros(6 + n)
+    residuals = np.zeros((len(times), 6 + n))
+    for k, q in enumerate(positions):
+        kin.set_positions(q)
+        ground = unknown_wrench_columns(kin, frames) @ (STANDING_WRENCHES + shift[k])
+        residual = (1.0 - K * T) * residual + K * T * ground
+        residuals[k] = residual
+    noise = rng.normal(size=residuals.shape) * 0.05
+    force, internal = unexplained_residuals(
+        plant,
+        SOLE_FRAMES,
+        None,
+        positions,
+        residuals[:, :6] + noise[:, :6],
+        residuals[:, 6:] + noise[:, 6:],
+        external_gain=K,
+        internal_gain=K,
+        period=T,
+    )
+    rest = np.concatenate((force, internal), axis=1)[100:]
+    raw = np.concatenate((residuals[:, 3:6], residuals[:, 6:]), axis=1)[100:]
+    white = np.concatenate((noise[:, 3:6], noise[:, 6:]), axis=1)[100:]
+    assert np.sqrt(np.mean(raw**2)) > 1000.0 * np.sqrt(np.mean(white**2))
+    # The noise's projection: its 3 + n - 12 free dimensions of 3 + n, within 10 %.
+    expected = np.sqrt(np.mean(white**2) * (3 + n - 12) / (3 + n))
+    assert np.sqrt(np.mean(rest**2)) == pytest.approx(expected, rel=0.1)

@@ -45,6 +45,7 @@ from systems.estimation.model_identification import (
     identify_model_corrections,
 )
 from systems.io.update_recorder import UpdateRecorder
+from systems.residuals.contact_estimation import unexplained_residuals
 from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual, ResidualModel
 from systems.residuals.offline import replay_residuals, residual_noise_model
 from systems.simulation.imperfections import Imperfections, rated_joint_torques
@@ -98,7 +99,8 @@ class ModelRefinementScenario:
     """The calibration and its check. SI units.
 
     Attributes:
-        model: a humanoid with foot F/T sensors (``hrp4_like``).
+        model: a humanoid standing on its feet: F/T sensors measure their wrenches; FSRs their
+            normal forces and centres of pressure (the rest unknowns of the fit).
         noise, seed: the sensors' noise and its seed.
         noise_scale: a factor on every sensor's noise std (1: the defaults).
         imperfections: the simulated robot's imperfections (default: realistic, with the
@@ -188,14 +190,14 @@ def build_refinement_diagram(
     sensors a second time each step: 18 % of the step's cost; tested).
 
     Raises:
-        ValueError: a model without foot F/T sensors, bad scenario fields.
+        ValueError: a model that is not a humanoid, bad scenario fields.
     """
     scenario.validate()
     builder = DiagramBuilder()
     station = add_scenario_station(builder, scenario, corrections)
-    if station.humanoid is None or not station.known_wrench_frames or station.estimator.unknown_wrench_frames:
+    if station.humanoid is None or not (station.known_wrench_frames or station.estimator.unknown_wrench_frames):
         raise ValueError(
-            f"model refinement needs a humanoid with foot F/T sensors (hrp4_like), got {scenario.model!r}: "
+            f"model refinement needs a humanoid standing on its feet (a robot description), got {scenario.model!r}: "
             "run with --ideal, or set model_refinement: none"
         )
     plant = station.plant
@@ -206,11 +208,9 @@ def build_refinement_diagram(
     reference.set_name("posture_reference")
     builder.Connect(reference.get_output_port(), station.desired_position)
     T = scenario.plant_config.time_step
-    logged = {
-        "sensed_state": station.sensed_state,
-        "measured_torque": station.raw_measured_torque,
-        "known_wrenches": station.known_wrenches,
-    }
+    logged = {"sensed_state": station.sensed_state, "measured_torque": station.raw_measured_torque}
+    if station.known_wrenches is not None:  # none on feet without F/T sensors or FSRs
+        logged["known_wrenches"] = station.known_wrenches
     internal = external = recorder = None
     loggers = {}
     if not residuals:
@@ -255,12 +255,16 @@ def calibration_log(handles: RefinementHandles, context: Context) -> Calibration
     if handles.recorder is not None:
         recorder = handles.recorder
         times, x = recorder.times, recorder.values("sensed_state")
-        torque, wrenches = recorder.values("measured_torque"), recorder.values("known_wrenches")
+        torque = recorder.values("measured_torque")
+        wrenches = recorder.values("known_wrenches") if "known_wrenches" in recorder.names else None
     else:
         state = handles.loggers["sensed_state"].FindLog(context)
         times, x = state.sample_times().copy(), state.data().T
         torque = handles.loggers["measured_torque"].FindLog(context).data().T.copy()
-        wrenches = handles.loggers["known_wrenches"].FindLog(context).data().T.copy()
+        logger = handles.loggers.get("known_wrenches")
+        wrenches = None if logger is None else logger.FindLog(context).data().T.copy()
+    if wrenches is None:
+        wrenches = np.zeros((len(times), 0))
     return CalibrationLog(
         time=times, q=x[:, :nq].copy(), v=x[:, nq:].copy(), measured_torque=torque, known_wrenches=wrenches
     )
@@ -285,10 +289,16 @@ def calibrate_from_log(
     (``systems.residuals.offline``), after the first ``scenario.skip`` s. ``handles``: a refinement diagram of the
     robot (its station's estimators' plant: the model before refinement, and F/T frames)."""
     station = handles.station
+    estimator = station.estimator
     # The estimators' plant: its default inertias are the model before refinement.
-    plant = station.estimator.plant
+    plant = estimator.plant
     corrections = identify_model_corrections(
-        plant, log, known_wrench_frames=station.known_wrench_frames, options=calibration_options(plant)
+        plant,
+        log,
+        known_wrench_frames=station.known_wrench_frames,
+        options=calibration_options(plant),
+        unknown_wrench_frames=estimator.unknown_wrench_frames,
+        unknown_wrench_components=estimator.unknown_wrench_components,
     )
     model = ResidualModel(plant)
     model.set_spatial_inertias(corrections.spatial_inertias)
@@ -306,14 +316,33 @@ def calibrate_from_log(
         classical_gain=scenario.internal_gain,
         stacked=True,
     )
+    internal, external = replayed.internal, replayed.external_wrench_world
+    classical = replayed.classical
+    if estimator.unknown_wrench_frames:
+        # Feet without F/T sensors: the residuals carry the soles' changing ground wrenches;
+        # the noise is what those cannot explain (the detector tests only that). The
+        # classical residual has no such model here.
+        force, internal = unexplained_residuals(
+            plant,
+            estimator.unknown_wrench_frames,
+            estimator.unknown_wrench_components,
+            log.q,
+            external,
+            internal,
+            external_gain=scenario.external_gain,
+            internal_gain=scenario.internal_gain,
+            period=period,
+        )
+        external = np.concatenate((external[:, :3], force), axis=1)
+        classical = None
     corrections.residual_noise = residual_noise_model(
-        replayed.internal,
-        replayed.external_wrench_world,
+        internal,
+        external,
         internal_gain=scenario.internal_gain,
         external_gain=scenario.external_gain,
         period=period,
         skip=int(round(scenario.skip / period)),
-        classical=replayed.classical,
+        classical=classical,
     )
     return corrections
 

@@ -81,6 +81,7 @@ from pydrake.systems.framework import BasicVector, Context, LeafSystem
 
 from systems.common.checks import check_plant, eval_finite_input, per_joint, positive_number
 from systems.common.topology import floating_base_topology, uniform_gravity
+from systems.residuals.contact_estimation import UnknownWrenches
 from systems.residuals.offline import ResidualNoiseModel
 
 #: Order of a body's 10 inertial parameters (I about the body origin, body frame).
@@ -732,6 +733,17 @@ def _known_wrench_force(plant: MultibodyPlant, context: Context, frames: Sequenc
     return out
 
 
+def _unknown_wrench_columns(plant: MultibodyPlant, context: Context, unknown: UnknownWrenches) -> np.ndarray:
+    """(nv, k) sum over the unknown wrench frames of J_F^T B_F: their components' generalized
+    forces at the context's positions (B_F their world directions, ``world_bases``)."""
+    world = plant.world_frame()
+    parts = []
+    for frame, basis in zip(unknown.frames, unknown.world_bases(context)):
+        J = plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kV, frame, np.zeros(3), world, world)
+        parts.append(J.T if basis is None else J.T @ basis)
+    return np.concatenate(parts, axis=1)
+
+
 def stance_base_velocity(
     plant: MultibodyPlant, context: Context, frames: Sequence[Frame], q: np.ndarray, v: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -800,6 +812,8 @@ def identify_model_corrections(
     known_wrench_frames: Sequence[Frame],
     nominal_inertias: Mapping[int, SpatialInertia] | None = None,
     options: IdentificationOptions | None = None,
+    unknown_wrench_frames: Sequence[Frame] = (),
+    unknown_wrench_components: Sequence | None = None,
 ) -> ModelCorrections:
     """Fits (R3) to a calibration log and returns the corrected model.
 
@@ -811,6 +825,14 @@ def identify_model_corrections(
         nominal_inertias: {body index: M_BBo_B} of the nominal model (e.g. the model the
             estimators use today); default: the plant's.
         options: ``IdentificationOptions`` (defaults when None).
+        unknown_wrench_frames, unknown_wrench_components: contacts whose wrenches (or some
+            of their components, ``systems.residuals.contact_estimation.UnknownWrenches``)
+            no sensor measures: the soles of feet without F/T sensors (with FSRs: their
+            shear and yaw moment), which stay still. Each sample's equations are projected
+            onto the complement of those wrenches' columns J_F^T B_F (weighted as the fit;
+            the floating-base identification with unknown contact forces of Mistry, Schaal
+            and Yamane, 2009), so only what no such wrench can explain is fitted; the frames
+            also join the stance frames of ``stance_kinematics``.
 
     Returns:
         ``ModelCorrections``. The per-link masses and first moments are the nominal ones
@@ -825,6 +847,7 @@ def identify_model_corrections(
     options = (IdentificationOptions() if options is None else options).validate()
     frames = tuple(known_wrench_frames)
     log.validate(plant, len(frames))
+    unknown = UnknownWrenches(plant, unknown_wrench_frames, unknown_wrench_components, who)
     regressor = InertialParameterRegressor(plant)
     topology, nv, nb = regressor.topology, regressor.num_velocities, regressor.num_bodies
     n = topology.num_joints
@@ -834,7 +857,8 @@ def identify_model_corrections(
     stance_speed = None
     if options.base_velocity == "stance_kinematics":
         v_stance = np.array(log.v, dtype=float)
-        v_stance[:, :6], frame_speed = stance_base_velocity(plant, regressor.context, frames, log.q, log.v)
+        still = frames + tuple(f for f in unknown.frames if all(f.index() != k.index() for k in frames))
+        v_stance[:, :6], frame_speed = stance_base_velocity(plant, regressor.context, still, log.q, log.v)
         stance_speed = float(np.percentile(frame_speed, 95))
         log = replace(log, v=v_stance)
     q, v, vdot, tau_m, W, coulomb_column, viscous_column, keep = _filtered_log(log, options)
@@ -875,9 +899,12 @@ def identify_model_corrections(
     S = keep.size
     Y_id = np.empty((S, nv, identified.size * nb))
     rhs = np.empty((S, nv))
+    U_unknown = np.empty((S, nv, unknown.size))  # the unknown wrenches' generalized-force columns
     for row, i in enumerate(keep):
         blocks = regressor.regressor_blocks(q[i], v[i], vdot[i])
         Y_id[row] = blocks[:, :, identified].reshape(nv, -1)
+        if unknown:
+            U_unknown[row] = _unknown_wrench_columns(plant, regressor.context, unknown)
         known = _known_wrench_force(plant, regressor.context, frames, W[i])
         if fixed.size:
             known -= np.einsum("nbp,bp->n", blocks[:, :, fixed], pi_nominal[:, fixed])
@@ -887,10 +914,26 @@ def identify_model_corrections(
             known -= regressor.reflected_inertia * vdot[i]
         rhs[row] = known
 
+    def weighted_unknown_columns(gain: np.ndarray | None = None) -> np.ndarray:
+        """(S, nv, k) each sample's unknown wrench columns J_F^T B_F in the weighted rows:
+        times the row weight and ``gain`` (the actuated rows' 1 + s, which multiplies them
+        as it multiplies the model's torques)."""
+        return U_unknown * (row_weight if gain is None else row_weight * gain)[:, None]
+
+    def project(weighted: np.ndarray, gain: np.ndarray | None = None) -> np.ndarray:
+        """Weighted rows (S, nv[, p]) without what the unknown wrenches explain: minus
+        their projection on each sample's weighted columns."""
+        if not unknown:
+            return weighted
+        Q = np.linalg.qr(weighted_unknown_columns(gain))[0]  # (S, nv, k)
+        if weighted.ndim == 2:
+            return weighted - np.einsum("snk,sk->sn", Q, np.einsum("snk,sn->sk", Q, weighted))
+        return weighted - np.einsum("snk,skp->snp", Q, np.einsum("snk,snp->skp", Q, weighted))
+
     # Base parameters of the weighted, scaled inertial columns (zero-mass bodies excluded).
     live = scale > 0.0
     Y_scaled = Y_id[:, :, live] * scale[live]
-    base = base_parameter_map((Y_scaled * row_weight[:, None]).reshape(S * nv, -1), tol=options.rank_tolerance)
+    base = base_parameter_map(project(Y_scaled * row_weight[:, None]).reshape(S * nv, -1), tol=options.rank_tolerance)
     Y_base = Y_scaled[:, :, base.independent]  # (S, nv, r): Y pi = Y_base theta_base
     del Y_scaled
     theta_nominal = pi_nominal[:, identified].reshape(-1)[live] / scale[live]
@@ -918,10 +961,23 @@ def identify_model_corrections(
         p = unpack(x)
         model = np.einsum("snr,r->sn", Y_base, x[:r]) - rhs
         model[:, rows_a] += p["coulomb"] * coulomb_a + p["viscous"] * viscous_a
-        e = model.copy()
-        e[:, rows_a] = (1.0 + p["scale"]) * model[:, rows_a] + p["offset"] - tau_a
         gain = np.ones(nv)
         gain[rows_a] += p["scale"]
+
+        def output_error(model):
+            e = model.copy()
+            e[:, rows_a] = (1.0 + p["scale"]) * model[:, rows_a] + p["offset"] - tau_a
+            return e
+
+        e = output_error(model)
+        if unknown:
+            # Variable projection: the unknown wrenches' best fit u* per sample, in the
+            # model (so the scale column is the model's torque net of them: Kaufman's
+            # Jacobian, which with these columns in the model converges to the truth).
+            C = weighted_unknown_columns(gain)
+            u = np.einsum("skn,sn->sk", np.linalg.pinv(C), e * row_weight)
+            model = model - np.einsum("snk,sk->sn", U_unknown, u)
+            e = output_error(model)
         J = np.zeros((S, nv, x.size))
         J[:, :, :r] = Y_base * gain[:, None]
         cols = {
@@ -933,7 +989,7 @@ def identify_model_corrections(
         for g, name in enumerate(groups):
             J[:, rows_a, r + g * na + np.arange(na)] = cols[name]
         w = row_weight[:, None]
-        return (e * row_weight).reshape(-1), (J * w).reshape(S * nv, -1)
+        return (e * row_weight).reshape(-1), project(J * w, gain).reshape(S * nv, -1)
 
     # Gauss-Newton on the column-normalised problem (the measured torque stays on the
     # output side: a column of tau_m would bias s by its noise, errors-in-variables); the
@@ -1018,6 +1074,7 @@ def identify_model_corrections(
         return e
 
     def rms(e):
+        e = project(e * row_weight) / row_weight  # what the unknown wrenches do not explain
         return {
             "base_moment": float(np.sqrt(np.mean(e[:, 0:3] ** 2))),
             "base_force": float(np.sqrt(np.mean(e[:, 3:6] ** 2))),

@@ -241,14 +241,18 @@ class UnknownWrenches:
     def __len__(self) -> int:
         return len(self.frames)
 
-    def _bases(self, kin: _SensedConfiguration) -> list[np.ndarray]:
-        """Per frame, the (6, k) world directions of its unknown components."""
+    def _bases(self, kin: _SensedConfiguration) -> list[np.ndarray | None]:
+        return self.world_bases(kin.context)
+
+    def world_bases(self, context: Context) -> list[np.ndarray | None]:
+        """Per frame, the (6, k) world directions [moment; force] of its unknown components
+        at the positions of ``context`` (the plant's), or None for all six (the identity)."""
         bases = []
         for frame, chosen, partial in zip(self.frames, self.components, self._partial):
             if not partial:
                 bases.append(None)
                 continue
-            R = frame.CalcPoseInWorld(kin.context).rotation().matrix()
+            R = frame.CalcPoseInWorld(context).rotation().matrix()
             B = np.zeros((6, 6))
             B[:3, :3], B[3:, 3:] = R, R
             bases.append(B[:, chosen])
@@ -709,6 +713,57 @@ def predicted_residual_covariances(
     return cov_int, R @ cov_ext @ R.T
 
 
+def _filter_columns(
+    kin: _SensedConfiguration, unknown: UnknownWrenches, gain: np.ndarray, start: np.ndarray, positions: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The force and internal rows of the unknown wrenches' columns through the residuals'
+    first-order filter (``ContactDetector``), along positions (N, nq): (the value before
+    each update (N, 3 + n, k), the value after the last), from ``start``; ``gain`` the
+    rows' K T (3 + n)."""
+    positions = np.asarray(positions, dtype=float)
+    current = np.asarray(start, dtype=float).reshape(3 + kin.n, unknown.size)
+    gain = np.asarray(gain, dtype=float)[:, None]
+    used = np.empty((len(positions), *current.shape))
+    for k, q in enumerate(positions):
+        used[k] = current
+        kin.set_positions(q)
+        current = (1.0 - gain) * current + gain * unknown.columns(kin)[3:]
+    return used, current
+
+
+def unexplained_residuals(
+    plant: MultibodyPlant,
+    unknown_wrench_frames: Sequence,
+    unknown_wrench_components: Sequence | None,
+    positions: np.ndarray,
+    external_wrench_world: np.ndarray,
+    internal: np.ndarray,
+    *,
+    external_gain: float,
+    internal_gain: float,
+    period: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The external force and internal residuals of a log (N samples, the residuals after
+    each update at positions q (N, nq), from zero) without what the unknown wrenches
+    explain: per sample minus the least-squares fit of their columns, filtered as the
+    residuals filter them (``ContactDetector``'s columns). What a noise model of the
+    residuals of a robot without foot F/T sensors is measured on: the ground's wrenches on
+    its soles change as it moves, the sensors' noise does not. Returns (force (N, 3),
+    internal (N, n))."""
+    who = "unexplained_residuals"
+    kin = _SensedConfiguration(plant, who)
+    unknown = UnknownWrenches(plant, unknown_wrench_frames, unknown_wrench_components, who)
+    gain = np.concatenate((np.full(3, float(external_gain)), np.full(kin.n, float(internal_gain)))) * float(period)
+    used, last = _filter_columns(kin, unknown, gain, np.zeros((3 + kin.n) * unknown.size), positions)
+    after = np.concatenate((used[1:], last[None]))  # the columns each sample's residuals saw
+    b = np.concatenate(
+        (np.asarray(external_wrench_world, dtype=float)[:, 3:], np.asarray(internal, dtype=float)), axis=1
+    )
+    fit = np.einsum("snk,sk->sn", after, np.einsum("skn,sn->sk", np.linalg.pinv(after), b))
+    rest = b - fit
+    return rest[:, :3], rest[:, 3:]
+
+
 class ContactDetector(LeafSystem):
     """Contact / no contact from the residuals (paper Secs. III, V: a residual that leaves
     its noise band means an unknown external force), with hysteresis.
@@ -982,14 +1037,7 @@ class ContactDetector(LeafSystem):
         the state holds it; zeros at the start) and the positions q_k the updates read
         ((N, nq)), (the Tbar each update's test uses (N, 3 + n, 6 m): the value before
         it, Tbar_k-1; Tbar after the last update)."""
-        positions = np.asarray(positions, dtype=float)
-        current = np.asarray(start, dtype=float).reshape(self._column_shape)
-        gain = self._column_gain[:, None]
-        used = np.empty((len(positions), *self._column_shape))
-        for k, q in enumerate(positions):
-            used[k] = current
-            current = (1.0 - gain) * current + gain * self.unknown_columns(q)
-        return used, current
+        return _filter_columns(self._kin, self._unknown, self._column_gain, start, positions)
 
     def _checked_columns(self, columns) -> np.ndarray:
         if columns is None or np.shape(columns) != self._column_shape:

@@ -205,6 +205,27 @@ def test_detector_statistic_is_chi_square_under_noise(hrp4):
         dut.statistics_of_samples(wrenches, residuals)
 
 
+def _moving_robot_residuals(plant, q0, rng, amplitude, times, wrenches, K=35.0, T=1e-3):
+    """A standing robot moving its torso, head and arms (each joint a 0.5 Hz sine of
+    ``amplitude`` rad and a random phase; v[6:] order: the legs first) while the ground
+    puts ``wrenches`` (per sample, 12) on its soles: (positions, [r_ext; r_int] per sample),
+    the residuals the first-order filter of J(q(t))^T w (eqs. 11, 16; r_k = (1 - K T) r_k-1
+    + K T J_k^T w_k)."""
+    moving = np.zeros(q0.size)
+    moving[7 + 12 :] = amplitude
+    phase = rng.uniform(0.0, 2.0 * np.pi, q0.size)
+    positions = q0 + moving * np.sin(2.0 * np.pi * 0.5 * times[:, None] + phase)
+    kin = _SensedConfiguration(plant, "test")
+    frames = [plant.GetFrameByName(f) for f in SOLE_FRAMES]
+    residual = np.zeros(plant.num_velocities())
+    residuals = np.zeros((len(times), plant.num_velocities()))
+    for k, q in enumerate(positions):
+        kin.set_positions(q)
+        residual = (1.0 - K * T) * residual + K * T * (unknown_wrench_columns(kin, frames) @ wrenches[k])
+        residuals[k] = residual
+    return positions, residuals
+
+
 def test_detector_filters_the_columns_as_the_residuals_filter_the_ground_wrench(hrp4):
     """A robot moving its arms and torso while standing: the residuals are the first-order
     filter of J(q(t))^T w (eqs. 11, 16; r_k = (1 - K T) r_k-1 + K T J_k^T w), not J(q)^T w.
@@ -213,23 +234,12 @@ def test_detector_filters_the_columns_as_the_residuals_filter_the_ground_wrench(
     and its system update reproduces ``filtered_columns``."""
     plant, _, context = hrp4
     dut = _detector(plant, context)
-    K, T = 35.0, 1e-3
+    T = 1e-3  # the residuals' period (their gain K = 35/s, the detector's default)
     q0 = plant.GetPositions(context)
     n = plant.num_velocities() - 6
     rng = np.random.default_rng(5)
-    amplitude = np.zeros(q0.size)
-    amplitude[7 + 12 :] = 0.3  # the torso, head and arms (v[6:] order: the legs first)
-    phase = rng.uniform(0.0, 2.0 * np.pi, q0.size)
     times = np.arange(600) * T
-    positions = q0 + amplitude * np.sin(2.0 * np.pi * 0.5 * times[:, None] + phase)
-    kin = _SensedConfiguration(plant, "test")
-    frames = [plant.GetFrameByName(f) for f in SOLE_FRAMES]
-    residual = np.zeros(6 + n)
-    residuals = np.zeros((len(times), 6 + n))
-    for k, q in enumerate(positions):
-        kin.set_positions(q)
-        residual = (1.0 - K * T) * residual + K * T * (unknown_wrench_columns(kin, frames) @ STANDING_WRENCHES)
-        residuals[k] = residual
+    positions, residuals = _moving_robot_residuals(plant, q0, rng, 0.3, times, np.tile(STANDING_WRENCHES, (600, 1)))
     late = np.vstack((np.zeros((1, 6 + n)), residuals[:-1]))  # update k reads residual k - 1
     used, end = dut.filtered_columns(np.zeros(dut.unknown_columns(q0).size), positions)
     filtered = dut.statistics_of_samples(late[:, :6], late[:, 6:], used)[100:, 1]
@@ -564,21 +574,9 @@ def test_unexplained_residuals_leave_the_noise_of_a_moving_robot_on_shifting_fee
     q0 = plant.GetPositions(context)
     n = plant.num_velocities() - 6
     rng = np.random.default_rng(12)
-    amplitude = np.zeros(q0.size)
-    amplitude[7 + 12 :] = 0.2
-    phase = rng.uniform(0.0, 2.0 * np.pi, q0.size)
     times = np.arange(800) * T
-    positions = q0 + amplitude * np.sin(2.0 * np.pi * 0.5 * times[:, None] + phase)
     shift = np.outer(np.sin(2.0 * np.pi * 0.3 * times), np.array([0, 0, 0, 0, 0, 60.0, 0, 0, 0, 0, 0, -60.0]))
-    kin = _SensedConfiguration(plant, "test")
-    frames = [plant.GetFrameByName(f) for f in SOLE_FRAMES]
-    residual = np.zeros(6 + n)
-    residuals = np.zeros((len(times), 6 + n))
-    for k, q in enumerate(positions):
-        kin.set_positions(q)
-        ground = unknown_wrench_columns(kin, frames) @ (STANDING_WRENCHES + shift[k])
-        residual = (1.0 - K * T) * residual + K * T * ground
-        residuals[k] = residual
+    positions, residuals = _moving_robot_residuals(plant, q0, rng, 0.2, times, STANDING_WRENCHES + shift)
     noise = rng.normal(size=residuals.shape) * 0.05
     force, internal = unexplained_residuals(
         plant,

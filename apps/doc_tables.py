@@ -740,14 +740,16 @@ def _engine_scaling(data: dict) -> list[str]:
 #: The sensing comparison's studies: (results file, robot, foot sensing).
 SENSING_STUDIES = (
     ("contact_study_sensing_ft", "hrp4_like", "F/T"),
+    ("contact_study_sensing_fsr", "hrp4_like", "FSR"),
     ("contact_study_sensing_none", "hrp4_like", "none"),
     ("contact_study_sensing_none_talos", "TALOS", "none"),
 )
 
 
 def _sensing_comparison(sources: dict[str, dict]) -> list[str]:
-    """Issue 36's table: single-contact studies with the feet's F/T sensors and with none
-    (the ground's wrenches unknowns), per body region."""
+    """Issue 36's table: single-contact studies with the feet's F/T sensors, with FSRs (the
+    soles' normal forces and centres of pressure measured, their shear and yaw moment
+    unknowns) and with none (the ground's wrenches unknowns), per body region."""
     lines = [
         "| robot | foot sensing | region | trials | detected | right link, eq. (22) / stacked fit "
         "| median position error, eq. (22) / fit | sole normal force error (RMS, of the weight) |",
@@ -764,7 +766,7 @@ def _sensing_comparison(sources: dict[str, dict]) -> list[str]:
                 f"| {100 * row['correct_link_rate']:.1f} / {'n/a' if fit is None else f'{100 * fit:.1f}'} % "
                 f"| {100 * row['median_position_error_m']:.2f} / "
                 f"{'n/a' if fit_position is None else f'{100 * fit_position:.2f}'} cm "
-                f"| {'measured (F/T)' if sole is None else f'{100 * sole:.1f} %'} |"
+                f"| {f'measured ({sensing})' if sole is None else f'{100 * sole:.1f} %'} |"
             )
     lines.append("")
     for name, robot, sensing in SENSING_STUDIES:

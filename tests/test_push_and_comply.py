@@ -72,18 +72,25 @@ def short_runs():
     return scenario, {kind: run_once(scenario, kind, None, progress=False) for kind in ("internal", "classical")}
 
 
-def test_internal_residual_bends_the_legs_and_classical_does_not(short_runs):
-    """The paper's Figs. 5-6 on a short horizon: driven by the internal residual the knees
-    flex; driven by the classical one they do not, and the chest takes the motion."""
-    scenario, runs = short_runs
-    internal = runs["internal"]["metrics"]
-    classical = runs["classical"]["metrics"]
+def _assert_knees_flex_with_internal_only(internal: dict, classical: dict) -> None:
+    """The paper's Figs. 5-6 on the two runs' metrics: driven by the internal residual the
+    knees flex; driven by the classical one they do not, and the chest takes the motion;
+    upright and without slip in both."""
     assert internal["knee_pitch_flexion_deg"] > 1.0
     assert abs(classical["knee_pitch_flexion_deg"]) < 0.2 * internal["knee_pitch_flexion_deg"]
     moved = classical["max_joint_displacement_deg"]
     assert moved["CHEST_P"] > 1.0 and max(moved, key=moved.get) == "CHEST_P"
     for metrics in (internal, classical):
         assert metrics["upright"] and metrics["max_foot_slip_m"] < 0.005
+
+
+def test_internal_residual_bends_the_legs_and_classical_does_not(short_runs):
+    """The paper's Figs. 5-6 on a short horizon: driven by the internal residual the knees
+    flex; driven by the classical one they do not, and the chest takes the motion."""
+    scenario, runs = short_runs
+    internal = runs["internal"]["metrics"]
+    classical = runs["classical"]["metrics"]
+    _assert_knees_flex_with_internal_only(internal, classical)
 
 
 def test_the_scenario_uses_sap_and_deprecated_tamsi_is_refused():
@@ -101,12 +108,22 @@ def test_the_scenario_uses_sap_and_deprecated_tamsi_is_refused():
         )
 
 
-def test_a_robot_without_foot_ft_sensors_is_refused_not_toppled():
-    """Without foot F/T sensors the residual carries the ground's wrench (measured: the
-    ideal world's robot collapsed to 54 deg knees in both runs): refused with the reason."""
-    scenario = set_ideal_conditions(PushAndComplyScenario(model="models/robots/hrp4_like_no_ft.yaml"))
-    with pytest.raises(ValueError, match="needs foot F/T sensors.*comply with its own weight"):
-        build_push_and_comply_diagram(scenario, "internal")
+@pytest.mark.parametrize(
+    "robot",
+    ["models/robots/hrp4_like_no_ft.yaml", pytest.param("models/robots/hrp4_like_fsr.yaml", marks=pytest.mark.slow)],
+)
+def test_without_foot_ft_sensors_the_legs_comply_with_the_push_not_the_weight(robot):
+    """A robot without foot F/T sensors (or with FSRs only): the residuals carry the soles'
+    changing wrenches, which ``SoleWrenchCompensation`` estimates and removes (without it the
+    ideal world's robot collapsed to 54 deg knees in both runs, complying with its own
+    weight). The F/T robot's assertions hold: the knees flex with the internal residual and
+    not with the classical one, the chest takes the motion, upright, no slip."""
+    scenario = set_ideal_conditions(PushAndComplyScenario(model=robot, **SHORT, push_peak_force=30.0))
+    diagram, handles = build_push_and_comply_diagram(scenario, "internal")
+    assert diagram.HasSubsystemNamed("sole_wrench_compensation")
+    internal = run_once(scenario, "internal", None, progress=False)["metrics"]
+    classical = run_once(scenario, "classical", None, progress=False)["metrics"]
+    _assert_knees_flex_with_internal_only(internal, classical)
 
 
 def test_residual_follows_the_true_effort_in_the_loop(short_runs):

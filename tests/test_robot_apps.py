@@ -77,11 +77,14 @@ def test_model_refinement_on_talos_says_which_joints_a_short_calibration_leaves_
 
 
 def test_an_app_that_needs_foot_force_torque_sensors_says_so(tmp_path, capsys):
-    """Push-and-comply's admittance needs the feet's wrenches measured (the contact study
-    takes them as unknowns instead: tests/test_contact_localization.py)."""
-    assert push_and_comply.main(["--robot", NAO, "--ideal", "--headless", "--out", str(tmp_path)]) == 2
-    assert "needs foot F/T sensors" in capsys.readouterr().err
-    assert not (tmp_path / "push_and_comply").exists()
+    """The demo log of estimate-from-log is a robot's log with its F/T wrenches (the contact
+    study and push-and-comply take the soles' wrenches as unknowns instead:
+    tests/test_contact_localization.py, tests/test_sole_wrenches.py)."""
+    log = tmp_path / "demo.mcap"
+    args = ["--robot", NAO, "--write-demo-log", str(log), "--headless", "--out", str(tmp_path)]
+    assert estimate_from_log.main(args) == 2
+    assert "has a foot without an F/T sensor" in capsys.readouterr().err
+    assert not log.exists() and not (tmp_path / "estimate_from_log").exists()
 
 
 @pytest.mark.parametrize(

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams
 from pydrake.multibody.plant import MultibodyPlantConfig
+from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
@@ -27,7 +28,8 @@ from diagrams.station.humanoid_station import HumanoidStation, add_scenario_stat
 from diagrams.station.standing import size_ratios
 from systems.estimation.model_identification import ModelCorrections
 from systems.residuals.admittance import JointAdmittanceController, admittance_gains_by_group, joint_position_selector
-from systems.residuals.momentum_residuals import ClassicalResidual, InternalResidual
+from systems.residuals.momentum_residuals import ClassicalResidual, ExternalResidual, InternalResidual
+from systems.residuals.sole_wrenches import SoleWrenchCompensation
 from systems.residuals.tare import ResidualTare
 from systems.simulation.disturbances import PolynomialRampUpDown, Push, PushSource
 from systems.simulation.imperfections import Imperfections
@@ -233,6 +235,64 @@ def robot_scaled_push(plant, humanoid, scenario: PushAndComplyScenario) -> tuple
     return scenario.push_peak_force * mass_ratio, 1.0 / moment_ratio, scenario.dead_band * moment_ratio
 
 
+def _add_sole_wrench_compensation(
+    builder: DiagramBuilder,
+    station: HumanoidStation,
+    scenario: PushAndComplyScenario,
+    residual_kind: str,
+    residual,
+) -> SoleWrenchCompensation:
+    """The soles' wrench compensation of a robot without foot F/T sensors, on the internal
+    and external residuals at the scenario's gain (the internal one is ``residual`` itself in
+    the internal run), the push's candidate links every link but the feet."""
+    estimator = station.estimator
+    model = residual.model
+    frames = station.known_wrench_frames
+    inputs = {
+        "external": ExternalResidual(estimator.plant, scenario.residual_gain, known_wrench_frames=frames, model=model)
+    }
+    if residual_kind != "internal":
+        inputs["internal"] = InternalResidual(
+            estimator.plant, scenario.residual_gain, known_wrench_frames=frames, model=model
+        )
+    for name, system in inputs.items():
+        builder.AddSystem(system)
+        system.set_name(f"{name}_residual")
+        builder.Connect(station.sensed_state, system.GetInputPort("state"))
+        if system.HasInputPort("measured_torque"):
+            builder.Connect(station.measured_torque, system.GetInputPort("measured_torque"))
+        if station.known_wrenches is not None:
+            builder.Connect(station.known_wrenches, system.GetInputPort("known_wrenches"))
+    internal = residual if residual_kind == "internal" else inputs["internal"]
+    excluded = set(estimator.excluded_bodies)
+    plant = estimator.plant
+    candidates = [
+        plant.get_body(BodyIndex(i))
+        for i in range(1, plant.num_bodies())
+        if plant.get_body(BodyIndex(i)).name() not in excluded and plant.get_body(BodyIndex(i)).default_mass() > 0.0
+    ]
+    compensation = builder.AddSystem(
+        SoleWrenchCompensation(
+            plant,
+            estimator.unknown_wrench_frames,
+            estimator.unknown_wrench_components,
+            gain=scenario.residual_gain,
+            residual=residual_kind,
+            candidate_bodies=candidates,
+            period=residual.period,
+        )
+    )
+    compensation.set_name("sole_wrench_compensation")
+    builder.Connect(station.sensed_state, compensation.GetInputPort("state"))
+    builder.Connect(
+        inputs["external"].GetOutputPort("external_wrench_world"), compensation.GetInputPort("external_wrench_world")
+    )
+    builder.Connect(internal.GetOutputPort("residual"), compensation.GetInputPort("internal_residual"))
+    if residual_kind == "classical":
+        builder.Connect(residual.GetOutputPort("residual"), compensation.GetInputPort("classical_residual"))
+    return compensation
+
+
 def build_push_and_comply_diagram(
     scenario: PushAndComplyScenario,
     residual_kind: str,
@@ -263,13 +323,6 @@ def build_push_and_comply_diagram(
     plant, humanoid = station.plant, station.humanoid
     if humanoid is None:
         raise ValueError("push-and-comply needs one of the humanoid models (its shoulders and joint groups)")
-    if station.estimator.unknown_wrench_frames:
-        raise ValueError(
-            f"push-and-comply needs foot F/T sensors: {scenario.model!r} has a foot without one (its "
-            "description's feet.*.sensing), so the residual driving the admittance carries the ground's changing "
-            "wrench on that sole with the push, and the robot would comply with its own weight (the contact "
-            "study estimates that wrench as an unknown; the admittance does not yet)"
-        )
     # The residual and the admittance know the robot through the estimators' plant only.
     model, model_humanoid = station.estimator.plant, station.estimator.humanoid
 
@@ -299,6 +352,14 @@ def build_push_and_comply_diagram(
     builder.Connect(station.measured_torque, residual.GetInputPort("measured_torque"))
     if station.known_wrenches is not None:
         builder.Connect(station.known_wrenches, residual.GetInputPort("known_wrenches"))
+    residual_port = residual.GetOutputPort("residual")
+    compensation = None
+    if station.estimator.unknown_wrench_frames:
+        # Feet without F/T sensors: eq. (10) with the soles' wrenches estimated from the
+        # internal and external residuals (SoleWrenchCompensation), which the admittance
+        # then reads net of them.
+        compensation = _add_sole_wrench_compensation(builder, station, scenario, residual_kind, residual)
+        residual_port = compensation.GetOutputPort("residual")
 
     # Joint admittance (eq. 14) on the measured joint positions.
     gains = gain_factor * admittance_gains_by_group(model, model_humanoid, scenario.admittance_gains)
@@ -325,14 +386,14 @@ def build_push_and_comply_diagram(
     # first half of the tare lets the residual (1/K) and the base-state estimate converge.
     tare = builder.AddSystem(
         ResidualTare(
-            residual.GetOutputPort("residual").size(),
+            residual_port.size(),
             scenario.tare_duration,
             residual.period,
             skip=0.5 * scenario.tare_duration,
         )
     )
     tare.set_name("residual_tare")
-    builder.Connect(residual.GetOutputPort("residual"), tare.GetInputPort("residual"))
+    builder.Connect(residual_port, tare.GetInputPort("residual"))
     builder.Connect(tare.GetOutputPort("tared_residual"), admittance.GetInputPort("residual"))
     builder.Connect(measured_position.get_output_port(), admittance.GetInputPort("measured_position"))
     builder.Connect(admittance.GetOutputPort("desired_position"), station.desired_position)
@@ -341,7 +402,7 @@ def build_push_and_comply_diagram(
     loggers = {
         "state": LogVectorOutput(plant.get_state_output_port(), builder, log),
         "sensed_state": LogVectorOutput(station.sensed_state, builder, log),
-        "residual": LogVectorOutput(residual.GetOutputPort("residual"), builder, log),
+        "residual": LogVectorOutput(residual_port, builder, log),
         "tared_residual": LogVectorOutput(tare.GetOutputPort("tared_residual"), builder, log),
         "tau_c_real": LogVectorOutput(push_source.GetOutputPort("tau_c_real"), builder, log),
         "desired_position": LogVectorOutput(admittance.GetOutputPort("desired_position"), builder, log),
@@ -359,7 +420,7 @@ def build_push_and_comply_diagram(
             builder,
             plant,
             meshcat,
-            residual.GetOutputPort("residual"),
+            residual_port,
             plant.get_state_output_port(),
             list(station.topology.joints),
             max_effort=2.0,

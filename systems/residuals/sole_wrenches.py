@@ -1,0 +1,258 @@
+"""Eq. (10) on a robot without foot F/T sensors: the soles' wrenches estimated from the
+residuals and subtracted from them, for a controller that needs the joint effort of a push
+(the joint admittance of eq. 14; ``diagrams.residuals.push_and_comply``).
+
+With F/T sensors, eq. (10) subtracts the soles' measured wrenches and the residuals hold the
+push alone. Without them (or with FSRs, which measure a sole's normal force and centre of
+pressure but not its shear and yaw moment) the residuals [r_ext; r_int] hold the soles'
+unknown wrench components w as well, through their columns U (``UnknownWrenches``):
+
+    [r_ext; r_int] = Ubar w + T_L w_L + noise
+
+with w_L the contact's wrench on one link L (its map T_L, ``wrench_maps``). Every few
+updates the link is chosen whose free wrench, fitted with the soles', leaves the smallest
+misfit, among the links that a sole's wrench cannot mimic: a link of a stance leg can (its
+free wrench and the sole's differ only by joints the sole's columns already span; their
+joint columns have rank below 6 + k), so a push there is not separable from the ground's
+reaction, and the leg links are never chosen on a robot without foot sensing. Each update
+then fits w with that link's wrench and outputs the residual minus the soles' share,
+r - Ubar_r w (the internal residual, eq. 11, or the classical one, eq. 7): eq. (10) with the
+soles' wrenches estimated.
+
+Ubar are the columns through the residuals' own first-order filter (as in
+``ContactDetector``): the residuals see J(q(t))^T w through it, and the columns at the
+current posture would lag by J-dot^T w / K, with w the robot's weight far more than a push's
+effect once the robot moves. The link's map is taken at the current posture (its wrench, a
+push, is small).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable
+from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem
+
+from systems.common.checks import eval_finite_input, positive_number, resolve_body
+from systems.residuals.contact_estimation import UnknownWrenches, _SensedConfiguration, wrench_maps
+
+#: The residuals ``SoleWrenchCompensation`` compensates.
+COMPENSATED_RESIDUALS = ("internal", "classical")
+#: A link is a candidate when its free wrench's columns, with the soles' projected out, keep
+#: this fraction of their largest singular value in every direction: the fit amplifies the
+#: residuals' noise by about its inverse. On hrp4_like standing, a stance-leg link's keep
+#: 1e-16 (a direction lost: the soles' wrenches mimic it) to 3e-4 (with FSRs, the hip links
+#: away from the symmetric posture), the torso's, head's and arms' 2e-2 to 3e-1.
+MIN_LINK_CONDITIONING = 3e-3
+
+
+class SoleWrenchCompensation(LeafSystem):
+    """The residual without the soles' estimated wrenches (module docstring).
+
+    Inputs:
+        ``state`` (nq + nv): the sensed [q; v].
+        ``external_wrench_world`` (6): ``ExternalResidual``'s output.
+        ``internal_residual`` (n): ``InternalResidual``'s output.
+        ``classical_residual`` (nv, ``residual`` "classical" only): ``ClassicalResidual``'s.
+    State (discrete): [the chosen link's slot among ``candidate_bodies`` (-1: none yet);
+        the filtered columns Ubar (6 + n) x k, row-major; with "classical" also its
+        columns' (nv x k)].
+    Outputs:
+        ``residual`` (n, or nv with "classical"): that residual minus the soles' share.
+        ``sole_wrenches_world`` (6 m): the soles' fitted wrenches, [moment about the sole
+            frame's origin; force], world (a measured component's share is 0 there).
+        ``contact_body_index`` (1): the chosen link's body index (-1 before the first choice).
+
+    Args:
+        plant: the estimators' finalized floating-base plant.
+        unknown_wrench_frames, unknown_wrench_components: the soles and their unknown
+            components (``UnknownWrenches``; the estimators' plant's).
+        gain: the residuals' K, 1/s (all three the same).
+        residual: "internal" or "classical": which residual to compensate.
+        candidate_bodies: bodies (names, indices or RigidBody) a contact may be on (default:
+            every body with mass); their links' conditioning decides each time.
+        period: update period, s (the residuals').
+        selection_period: s between two choices of the link (default 0.05).
+
+    Raises:
+        ValueError: no unknown wrench frames, an unknown residual kind or body, a gain
+            outside (0, 1/period).
+    """
+
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        unknown_wrench_frames: Sequence,
+        unknown_wrench_components: Sequence | None = None,
+        *,
+        gain: float,
+        residual: str = "internal",
+        candidate_bodies: Sequence | None = None,
+        period: float = 1e-3,
+        selection_period: float = 0.05,
+    ):
+        super().__init__()
+        who = self._who = "SoleWrenchCompensation"
+        if residual not in COMPENSATED_RESIDUALS:
+            raise ValueError(f"{who}: unknown residual {residual!r}; choose one of {COMPENSATED_RESIDUALS}")
+        self._kind = residual
+        self._kin = kin = _SensedConfiguration(plant, who)
+        self._unknown = UnknownWrenches(plant, unknown_wrench_frames, unknown_wrench_components, who)
+        if not self._unknown:
+            raise ValueError(f"{who}: needs the soles as unknown_wrench_frames (a robot without foot F/T sensors)")
+        self._period = positive_number(period, f"{who}: period")
+        selection_period = positive_number(selection_period, f"{who}: selection_period")
+        self._factor = float(gain) * self._period
+        if not 0.0 < self._factor < 1.0:
+            raise ValueError(f"{who}: gain times period must be in (0, 1), got {self._factor}")
+        if candidate_bodies is None:
+            bodies = [plant.get_body(BodyIndex(i)) for i in range(1, plant.num_bodies())]
+            bodies = [b for b in bodies if b.default_mass() > 0.0]
+        else:
+            bodies = [resolve_body(plant, b, who) for b in candidate_bodies]
+        if not bodies:
+            raise ValueError(f"{who}: no candidate body")
+        self._bodies = tuple(bodies)
+        nq, nv, n, k = kin.nq, kin.nv, kin.n, self._unknown.size
+        self._shape = (6 + n, k)
+        self._classical_shape = (nv, k)
+        sizes = [1, (6 + n) * k] + ([nv * k] if residual == "classical" else [])
+        self._state_port = self.DeclareVectorInputPort("state", nq + nv)
+        self._wrench_port = self.DeclareVectorInputPort("external_wrench_world", 6)
+        self._internal_port = self.DeclareVectorInputPort("internal_residual", n)
+        self._classical_port = (
+            self.DeclareVectorInputPort("classical_residual", nv) if residual == "classical" else None
+        )
+        self._state_index = self.DeclareDiscreteState(np.concatenate(([-1.0], np.zeros(sum(sizes) - 1))))
+        self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._Update)
+        self._every = max(1, int(round(selection_period / self._period)))
+        out = nv if residual == "classical" else n
+        self.DeclareVectorOutputPort("residual", out, self._CalcResidual)
+        self.DeclareVectorOutputPort("sole_wrenches_world", 6 * len(self._unknown), self._CalcWrenches)
+        self.DeclareVectorOutputPort(
+            "contact_body_index", 1, lambda c, o: o.SetFromVector([self._body_index(c)]), {self.xd_ticket()}
+        )
+
+    @property
+    def candidate_bodies(self) -> tuple:
+        return self._bodies
+
+    # -- the columns ----------------------------------------------------------------------
+    def classical_columns(self, q: np.ndarray) -> np.ndarray:
+        """(nv, k) the unknown components' generalized forces in the classical residual's
+        coordinates (``ClassicalResidual``: [moment about the F0 origin, force, both in F0;
+        J_j^T w]) at positions q."""
+        kin = self._kin
+        kin.set_positions(np.asarray(q, dtype=float))
+        X_WF0 = kin.base_pose()
+        R, p_F0 = X_WF0[:, :3], X_WF0[:, 3]
+        world = kin.plant.world_frame()
+        columns = []
+        for frame, basis in zip(self._unknown.frames, self._unknown.world_bases(kin.context)):
+            B = np.eye(6) if basis is None else basis  # world [m; f] directions
+            p_F = frame.CalcPoseInWorld(kin.context).translation()
+            m, f = B[:3], B[3:]
+            J = kin.plant.CalcJacobianSpatialVelocity(
+                kin.context, JacobianWrtVariable.kV, frame, np.zeros(3), world, world
+            )
+            base = np.vstack((R.T @ (m + np.cross(p_F - p_F0, f, axis=0)), R.T @ f))
+            columns.append(np.vstack((base, J[:, 6:].T @ B)))
+        return np.concatenate(columns, axis=1)
+
+    def _filtered(self, context: Context) -> tuple[np.ndarray, np.ndarray | None]:
+        x = context.get_discrete_state(self._state_index).get_value()
+        size = self._shape[0] * self._shape[1]
+        stacked = x[1 : 1 + size].reshape(self._shape)
+        classical = x[1 + size :].reshape(self._classical_shape) if self._kind == "classical" else None
+        return stacked, classical
+
+    def _body_index(self, context: Context) -> float:
+        slot = int(context.get_discrete_state(self._state_index).get_value()[0])
+        return float(self._bodies[slot].index()) if slot >= 0 else -1.0
+
+    # -- the fit --------------------------------------------------------------------------
+    def choose_link(self, q: np.ndarray, rows: np.ndarray, columns: np.ndarray) -> int:
+        """The slot of the candidate link whose free wrench, fitted with the soles' wrench
+        components (``columns``, (6 + n) x k), leaves the smallest misfit of ``rows`` ([r_ext;
+        r_int]) at positions q, among the links a sole's wrench cannot mimic
+        (``MIN_LINK_CONDITIONING``); -1 if none can be told from the soles."""
+        kin = self._kin
+        kin.set_positions(np.asarray(q, dtype=float))
+        T = wrench_maps(kin, [b.body_frame() for b in self._bodies])  # (B, 6 + n, 6)
+
+        def without(Q: np.ndarray) -> np.ndarray:
+            return T - np.einsum("rk,bkc->brc", Q, np.einsum("rk,brc->bkc", Q, T))
+
+        # Which links a sole's wrench can mimic: the columns at this posture (the physics).
+        singular = np.linalg.svd(without(np.linalg.qr(self._unknown.columns(kin))[0]), compute_uv=False)
+        largest = np.linalg.svd(T, compute_uv=False)[:, 0]
+        usable = singular[:, -1] > MIN_LINK_CONDITIONING * largest
+        if not usable.any():
+            return -1
+        # The fit: with the soles' columns as the residuals see them.
+        Q = np.linalg.qr(columns)[0]
+        projected = without(Q)
+        rest = rows - Q @ (Q.T @ rows)
+        x = np.einsum("bcr,r->bc", np.linalg.pinv(projected[usable]), rest)
+        misfit = np.linalg.norm(rest - np.einsum("brc,bc->br", projected[usable], x), axis=1)
+        return int(np.flatnonzero(usable)[int(np.argmin(misfit))])
+
+    def fit(self, q: np.ndarray, rows: np.ndarray, columns: np.ndarray, slot: int) -> np.ndarray:
+        """(k,) the soles' wrench components fitted to ``rows`` with link ``slot``'s free
+        wrench (none for -1), ``columns`` the soles' (6 + n) x k."""
+        A = columns
+        if slot >= 0:
+            self._kin.set_positions(np.asarray(q, dtype=float))
+            A = np.concatenate((columns, wrench_maps(self._kin, [self._bodies[slot].body_frame()])[0]), axis=1)
+        return np.linalg.lstsq(A, rows, rcond=None)[0][: columns.shape[1]]
+
+    def _inputs(self, context: Context) -> tuple[np.ndarray, np.ndarray]:
+        x = eval_finite_input(self._who, self._state_port, context)
+        rows = np.concatenate(
+            (
+                eval_finite_input(self._who, self._wrench_port, context),
+                eval_finite_input(self._who, self._internal_port, context),
+            )
+        )
+        return x[: self._kin.nq], rows
+
+    def _Update(self, context: Context, discrete_state: DiscreteValues) -> None:
+        q, rows = self._inputs(context)
+        stacked, classical = self._filtered(context)
+        kin = self._kin
+        kin.set_positions(q)
+        a = self._factor
+        stacked = (1.0 - a) * stacked + a * self._unknown.columns(kin)
+        parts = [stacked.ravel()]
+        if classical is not None:
+            parts.append(((1.0 - a) * classical + a * self.classical_columns(q)).ravel())
+        slot = int(context.get_discrete_state(self._state_index).get_value()[0])
+        if int(round(context.get_time() / self._period)) % self._every == 0:
+            slot = self.choose_link(q, rows, stacked)
+        discrete_state.get_mutable_vector(self._state_index).SetFromVector(np.concatenate(([float(slot)], *parts)))
+
+    def _solution(self, context: Context) -> np.ndarray:
+        q, rows = self._inputs(context)
+        stacked, _ = self._filtered(context)
+        slot = int(context.get_discrete_state(self._state_index).get_value()[0])
+        return self.fit(q, rows, stacked, slot)
+
+    def _CalcResidual(self, context: Context, output: BasicVector) -> None:
+        w = self._solution(context)
+        stacked, classical = self._filtered(context)
+        if self._kind == "classical":
+            r = eval_finite_input(self._who, self._classical_port, context)
+            output.SetFromVector(r - classical @ w)
+        else:
+            r = eval_finite_input(self._who, self._internal_port, context)
+            output.SetFromVector(r - stacked[6:] @ w)
+
+    def _CalcWrenches(self, context: Context, output: BasicVector) -> None:
+        q, _ = self._inputs(context)
+        self._kin.set_positions(q)
+        output.SetFromVector(self._unknown.world_wrenches(self._kin, self._solution(context)).ravel())
+
+
+__all__ = ["COMPENSATED_RESIDUALS", "MIN_LINK_CONDITIONING", "SoleWrenchCompensation"]

@@ -82,6 +82,30 @@ def _push_and_comply_robots(data: dict) -> list[str]:
     return lines
 
 
+def _push_and_comply_sensing(data: dict) -> list[str]:
+    """Issue 36's push-and-comply rows: robots by foot sensing, in each world."""
+    from diagrams.residuals.push_and_comply import FLOOR_CLASSICAL_KNEE_DEG, FLOOR_INTERNAL_KNEE_DEG, meets_robot_floors
+
+    lines = [
+        "| robot, foot sensing | world | internal: knee flexion | CoM drop | upright | classical: knee flexion "
+        "| upright | push per shoulder | floors met |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for row in data["rows"]:
+        i, c = row["internal"], row["classical"]
+        lines.append(
+            f"| {row['label']} | {row['world']} | {_knee(i)} | {100 * i['com_height_drop_m']:.1f} cm "
+            f"| {_yes(i['upright'])} | {_knee(c)} | {_yes(c['upright'])} | {i['push_peak_force_N']:.1f} N "
+            f"| {_yes(meets_robot_floors(i, c))} |"
+        )
+    lines += [
+        "",
+        f"Floors (issues 31 and 36): the internal run upright with both knees bent >= {FLOOR_INTERNAL_KNEE_DEG:g} "
+        f"deg, the classical run upright with its knees bent < {FLOOR_CLASSICAL_KNEE_DEG:g} deg.",
+    ]
+    return lines
+
+
 def _with_interval(metrics: dict, key: str, scale: float, unit: str) -> str:
     """``metrics[key]`` times ``scale`` with its 95 % interval (``metrics["intervals"]``)."""
     value = metrics.get(key)
@@ -741,6 +765,7 @@ def _engine_scaling(data: dict) -> list[str]:
 SENSING_STUDIES = (
     ("contact_study_sensing_ft", "hrp4_like", "F/T"),
     ("contact_study_sensing_fsr", "hrp4_like", "FSR"),
+    ("contact_study_sensing_fsr_realistic", "hrp4_like, realistic world", "FSR"),
     ("contact_study_sensing_none", "hrp4_like", "none"),
     ("contact_study_sensing_none_talos", "TALOS", "none"),
 )
@@ -821,6 +846,7 @@ def _floors_table(data: dict) -> list[str]:
 RENDERERS: dict[str, Callable[[dict], list[str]]] = {
     "push_and_comply_ablation": _push_and_comply_ablation,
     "push_and_comply_robots": _push_and_comply_robots,
+    "push_and_comply_sensing": _push_and_comply_sensing,
     "paper_speed": _paper_speed,
     "residual_comparison_realistic": _residual_comparison,
     "residual_comparison_ideal": _residual_comparison,

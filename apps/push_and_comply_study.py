@@ -24,7 +24,13 @@ added one at a time, with both residuals, in the ideal and the realistic world:
 imperfection seeds (model mismatch, friction, sensor errors; each its own calibration) and on
 TALOS and Romeo (``models/robots/talos.yaml``, ``romeo.yaml``).
 
-Run: ``python -m apps.push_and_comply_study --study ablation|robots [--worlds ideal realistic]
+``--study sensing``: the project's default on robots whose feet have F/T sensors, FSRs or
+no sensing (issue 36; ``SENSING_ROBOTS``): the soles' unknown wrenches estimated and removed
+from the residual (``SoleWrenchCompensation``) where no F/T sensor measures them. In the
+ideal world on each; in the realistic world on those whose base-state EKF has contact flags
+(F/T sensors or FSRs).
+
+Run: ``python -m apps.push_and_comply_study --study ablation|robots|sensing [--worlds ideal realistic]
 [--engine E] [--workers N] [--cluster ADDRESS] [--duration S] [--results-folder DIR] [--out DIR]``
 (the runs go to the workers of ``apps.engine``: Ray actors here by default). Writes
 ``results/push_and_comply_<study>.json`` (``--results-folder``: elsewhere) and prints the
@@ -88,6 +94,16 @@ ROBOTS = (
     ("Romeo robot 0", "models/robots/romeo.yaml", 0, 0),
 )
 
+#: The robots of ``--study sensing``: (label, model, world).
+SENSING_ROBOTS = (
+    ("hrp4_like, foot F/T sensors", "hrp4_like", "ideal"),
+    ("hrp4_like, FSRs", "models/robots/hrp4_like_fsr.yaml", "ideal"),
+    ("hrp4_like, no foot sensing", "models/robots/hrp4_like_no_ft.yaml", "ideal"),
+    ("TALOS, no foot sensing", "models/robots/talos_no_ft.yaml", "ideal"),
+    ("hrp4_like, foot F/T sensors", "hrp4_like", "realistic"),
+    ("hrp4_like, FSRs", "models/robots/hrp4_like_fsr.yaml", "realistic"),
+)
+
 #: The metrics each row keeps (``push_and_comply_metrics``' keys).
 KEPT_METRICS = (
     "push_peak_force_N",
@@ -137,6 +153,20 @@ def robot_scenarios(duration: float | None = None) -> list[dict]:
             imperfections=dataclasses.replace(default.imperfections, seed=robot_seed),
         )
         rows.append({"label": label, "world": "realistic", "scenario": _shortened(scenario, duration)})
+    return rows
+
+
+def sensing_scenarios(duration: float | None = None) -> list[dict]:
+    """The foot-sensing rows (``SENSING_ROBOTS``): dicts with ``label``, ``world`` and
+    ``scenario``."""
+    from diagrams.residuals.push_and_comply import PushAndComplyScenario
+
+    rows = []
+    for label, model, world in SENSING_ROBOTS:
+        scenario = dataclasses.replace(PushAndComplyScenario(), model=model)
+        if world == "ideal":
+            scenario = set_ideal_conditions(scenario)
+        rows.append({"label": label, "world": world, "scenario": _shortened(scenario, duration)})
     return rows
 
 
@@ -245,7 +275,7 @@ def _parse(argv):
         description=__doc__.split("\n\n")[0],
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--study", choices=("ablation", "robots"), required=True)
+    parser.add_argument("--study", choices=("ablation", "robots", "sensing"), required=True)
     parser.add_argument("--worlds", nargs="+", choices=WORLDS, default=list(WORLDS), help="the ablation's worlds")
     add_engine_arguments(parser)
     parser.add_argument(
@@ -270,6 +300,8 @@ def main(argv: list[str] | None = None) -> int:
     def body() -> int:
         if args.study == "ablation":
             rows = ablation_scenarios(args.duration, tuple(args.worlds))
+        elif args.study == "sensing":
+            rows = sensing_scenarios(args.duration)
         else:
             rows = robot_scenarios(args.duration)
         start = time.perf_counter()

@@ -46,6 +46,26 @@ def test_the_robots_are_the_default_scenario_on_other_robots():
         assert row["world"] == "realistic"
 
 
+def test_the_sensing_rows_are_the_default_on_each_foot_sensing_in_the_worlds_it_supports():
+    """Issue 36: the default scenario on robots with foot F/T sensors, FSRs and none, in the
+    ideal world; in the realistic one only where the base-state EKF has contact flags."""
+    from models import robot_description
+
+    rows = push_and_comply_study.sensing_scenarios()
+    sensing = {
+        (next(iter({f.sensing for f in robot_description(r["scenario"].model).feet.values()})), r["world"])
+        for r in rows
+    }
+    assert {("force_torque", "ideal"), ("fsr", "ideal"), ("none", "ideal"), ("fsr", "realistic")} <= sensing
+    assert ("none", "realistic") not in sensing
+    default = PushAndComplyScenario()
+    for row in rows:
+        expected = dataclasses.replace(default, model=row["scenario"].model)
+        if row["world"] == "ideal":
+            expected = set_ideal_conditions(expected)
+        assert scenario_as_dict(row["scenario"]) == scenario_as_dict(expected)
+
+
 @pytest.mark.slow
 def test_app_writes_the_ablation_results_file(tmp_path):
     """Short horizon, ideal world: every row runs with both residuals. With eq. (14) as

@@ -56,9 +56,11 @@ class SoleWrenchCompensation(LeafSystem):
         ``external_wrench_world`` (6): ``ExternalResidual``'s output.
         ``internal_residual`` (n): ``InternalResidual``'s output.
         ``classical_residual`` (nv, ``residual`` "classical" only): ``ClassicalResidual``'s.
+
     State (discrete): [the chosen link's slot among ``candidate_bodies`` (-1: none yet);
         the filtered columns Ubar (6 + n) x k, row-major; with "classical" also its
         columns' (nv x k)].
+
     Outputs:
         ``residual`` (n, or nv with "classical"): that residual minus the soles' share.
         ``sole_wrenches_world`` (6 m): the soles' fitted wrenches, [moment about the sole

@@ -218,7 +218,9 @@ def _parse(argv):
         default=None,
         help="trials simulated one after another in one run (default 1: each from the standing start)",
     )
-    parser.add_argument("--model", default=None, help="humanoid with foot F/T sensors (hrp4_like)")
+    parser.add_argument(
+        "--model", default=None, help="the humanoid (hrp4_like, or a robot description; --robot is the same)"
+    )
     add_engine_arguments(parser)
     parser.add_argument(
         "--replays", type=non_negative_int, default=3, help="Meshcat replays of the first N trials (default 3)"

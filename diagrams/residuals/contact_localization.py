@@ -11,10 +11,11 @@ internal and external residuals, and the contact detector and localizer fed only
                                         ▼
                               ContactDetector ──contact_detected──► ContactLocalizer ──► loggers
 
-Only robots with foot F/T sensors (``hrp4_like``) are supported: without them the ground
-reaction is an unknown external force for the residuals and no single contact can be
-isolated. The soles (below the F/T sensors) are not candidate links: a force there is part
-of the measured wrench and invisible to the residuals.
+A robot's feet have F/T sensors (``hrp4_like``), FSRs or no sensing: the estimators take
+what no sensor measures of the ground's wrench on each sole (all of it, or with FSRs its
+shear and yaw moment) as unknowns at the sole (``EstimatorPlant.unknown_wrench_frames`` and
+``unknown_wrench_components``). The soles (below the F/T sensors, or the whole feet without
+them) are not candidate links: a force there is part of the ground's wrench.
 
 The Monte Carlo study (``apps.contact_localization``) samples random contacts
 (``sample_trials``), runs one diagram per trial and one without contact, and computes its
@@ -207,7 +208,8 @@ class ContactLocalizationScenario:
     """The contact study, and one run of its diagram. SI units.
 
     Attributes:
-        model: ``hrp4_like`` (needs foot F/T sensors).
+        model: ``hrp4_like``, or any humanoid description (its feet with F/T sensors, FSRs
+            or no sensing).
         push_body: the pushed link, or None for a run without contact (the study sets each
             trial's push_body, push_point, push_force and seed from ``sample_trials``).
         push_point: the contact point in the link's body frame, m.

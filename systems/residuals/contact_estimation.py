@@ -58,13 +58,19 @@ from systems.simulation import sensors as _sensors
 DEFAULT_PERIOD = 1e-3  # s
 
 __all__ = [
+    "ALL_WRENCH_COMPONENTS",
     "ContactDetector",
     "ContactForceEstimator",
     "ContactLocalizer",
     "GatedEstimate",
     "LocalizationResult",
+    "SOLE_SHEAR_AND_YAW",
     "STATUS_REASONS",
+    "UnknownWrenches",
     "predicted_residual_covariances",
+    "unexplained_residuals",
+    "unknown_wrench_columns",
+    "wrench_maps",
 ]
 
 

@@ -26,9 +26,9 @@ TALOS and Romeo (``models/robots/talos.yaml``, ``romeo.yaml``).
 
 ``--study sensing``: the project's default on robots whose feet have F/T sensors, FSRs or
 no sensing (issue 36; ``SENSING_ROBOTS``): the soles' unknown wrenches estimated and removed
-from the residual (``SoleWrenchCompensation``) where no F/T sensor measures them. In the
-ideal world on each; in the realistic world on those whose base-state EKF has contact flags
-(F/T sensors or FSRs).
+from the residual (``SoleWrenchCompensation``) where no F/T sensor measures them, in both
+worlds (the realistic world's base-state EKF flags contact from the F/T sensors, the FSRs,
+or without either from the soles' wrenches estimated from the residuals).
 
 Run: ``python -m apps.push_and_comply_study --study ablation|robots|sensing [--worlds ideal realistic]
 [--engine E] [--workers N] [--cluster ADDRESS] [--duration S] [--results-folder DIR] [--out DIR]``
@@ -102,6 +102,7 @@ SENSING_ROBOTS = (
     ("TALOS, no foot sensing", "models/robots/talos_no_ft.yaml", "ideal"),
     ("hrp4_like, foot F/T sensors", "hrp4_like", "realistic"),
     ("hrp4_like, FSRs", "models/robots/hrp4_like_fsr.yaml", "realistic"),
+    ("hrp4_like, no foot sensing", "models/robots/hrp4_like_no_ft.yaml", "realistic"),
 )
 
 #: The metrics each row keeps (``push_and_comply_metrics``' keys).

@@ -102,18 +102,6 @@ def test_a_bad_robot_description_is_an_error_that_names_the_field(tmp_path, caps
     assert "feet.left.sensing: must be one of" in capsys.readouterr().err
 
 
-def test_feet_without_sensing_are_refused_by_the_base_state_estimator_that_needs_them(tmp_path, capsys):
-    raw = yaml.safe_load(Path(TALOS).read_text())
-    for side in ("left", "right"):
-        raw["feet"][side]["sensing"] = "none"
-        del raw["feet"][side]["force_torque_joint"]
-    blind = tmp_path / "blind_talos.yaml"
-    blind.write_text(yaml.safe_dump(raw))
-    # The realistic world estimates the base state from the feet's contact sensing.
-    assert push_and_comply.main(["--robot", str(blind), "--headless", "--out", str(tmp_path)]) == 2
-    assert "needs foot F/T sensors or four FSRs per foot" in capsys.readouterr().err
-
-
 @pytest.mark.slow
 def test_estimate_from_log_on_talos_recovers_a_known_push(tmp_path, capsys):
     """The offline pipeline on a robot the project never shipped: a demo log of TALOS under a

@@ -129,22 +129,26 @@ def test_unknown_base_state_names_the_choices():
         add_humanoid_station(DiagramBuilder(), "hrp4_like", base_state="ekf")
 
 
-def test_invariant_ekf_needs_force_torque_sensors_or_fsrs(monkeypatch):
-    """A humanoid whose feet have neither F/T sensors nor four FSRs each is refused (nao_like,
-    with FSRs, is accepted: tests/test_base_state_estimator.py runs it)."""
-    import dataclasses
-
-    import diagrams.station.humanoid_station as station_module
-
-    load = station_module._load
-
-    def load_without_foot_sensors(plant, scene_graph, model):
-        handles = load(plant, scene_graph, model)
-        return dataclasses.replace(handles, ft_sensor_joints={}, fsr_geometries={})
-
-    monkeypatch.setattr(station_module, "_load", load_without_foot_sensors)
-    with pytest.raises(ValueError, match="F/T sensors or four FSRs per foot"):
-        add_humanoid_station(DiagramBuilder(), "hrp4_like", base_state="invariant_ekf")
+def test_invariant_ekf_without_foot_force_sensing_flags_contact_from_the_estimated_sole_wrenches():
+    """hrp4_like without foot F/T sensors or FSRs (``models/robots/hrp4_like_no_ft.yaml``),
+    realistic sensors: the EKF's contact flags come from the soles' wrenches estimated from
+    the station's own residuals (``foot_contact_from_estimated_wrenches``); both feet are in
+    contact from the first steps, and the sensed base state meets the F/T robot's floors of
+    ``test_invariant_ekf_sensed_base_state_meets_the_floors_standing``."""
+    data, station = _standing(
+        2.5,
+        model="models/robots/hrp4_like_no_ft.yaml",
+        log_contact=True,
+        base_state="invariant_ekf",
+        imperfections=Imperfections.realistic(),
+    )
+    assert station.foot_contact.get_name() == "foot_contact_from_estimated_wrenches"
+    assert np.all(data["contact"][:, 10:] == 1.0)
+    errors = _base_errors(station, data["sensed"], data["true"])
+    assert np.isfinite(data["sensed"]).all()
+    assert max(errors["tilt"]) <= 0.5
+    assert errors["velocity_rms"] <= 0.02
+    assert float(np.linalg.norm(errors["position_error"])) <= 0.01
 
 
 def test_default_base_state_is_bit_identical():

@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 from pydrake.geometry import SceneGraph
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
+from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.framework import Context, DiagramBuilder, InputPort, OutputPort
 from pydrake.systems.primitives import MatrixGain, Multiplexer, ZeroOrderHold
 
@@ -312,11 +313,7 @@ def add_humanoid_station(
             humanoid.foot_sensing.get(side) == "fsr" and len(humanoid.fsr_geometries.get(side, ())) == 4
             for side in ("left", "right")
         )
-        if base_state == "invariant_ekf" and not humanoid.ft_sensor_joints and not fsr_feet:
-            raise ValueError(
-                f"base_state 'invariant_ekf' needs foot F/T sensors or four FSRs per foot for its contact "
-                f"flags; {model!r} has neither (its description's feet.*.sensing): use 'truth_plus_noise' (--ideal)"
-            )
+        measured_feet = bool(humanoid.ft_sensor_joints) or fsr_feet
         sensors = add_sensors(
             builder,
             plant,
@@ -327,7 +324,7 @@ def add_humanoid_station(
             imperfections=imperfections,
             base_estimator=(base_state == "truth_plus_noise"),
         )
-        if base_state == "invariant_ekf":
+        if base_state == "invariant_ekf" and measured_feet:
             base_state_estimator, foot_contact = _add_invariant_ekf(
                 builder, plant, humanoid, estimator, sensors, at_rest_duration
             )
@@ -338,6 +335,13 @@ def add_humanoid_station(
             builder.Connect(sensors.measured_torque, corrected.GetInputPort("measured_torque"))
             builder.Connect(sensors.state, corrected.GetInputPort("state"))
             measured_torque = corrected.GetOutputPort("joint_torque")
+        if base_state == "invariant_ekf" and not measured_feet:
+            # No foot force sensing: the contact flags from the soles' wrenches estimated
+            # from residuals of the estimators' own (SoleWrenchCompensation).
+            contact = _add_estimated_foot_contact(builder, estimator, sensors.state, measured_torque, time_step)
+            base_state_estimator, foot_contact = _add_invariant_ekf(
+                builder, plant, humanoid, estimator, sensors, at_rest_duration, contact=contact
+            )
         if len(estimator.ft_frames) != len(sensors.ft_frames):
             raise ValueError("the estimators' plant and the simulated robot have different F/T sensors")
         known_frames, known_wrenches = estimator.ft_frames, sensors.ft_wrenches
@@ -433,6 +437,7 @@ def _add_invariant_ekf(
     estimator: EstimatorPlant,
     sensors: SensorHandles,
     at_rest_duration: float | None,
+    contact: FootContactFromForceTorque | None = None,
 ) -> tuple[InvariantEkfBaseStateEstimator, FootContactFromForceTorque | FootContactFromFsr]:
     """The contact-aided invariant EKF as the source of the assembler's base pose and velocity:
     gyro and accelerometer from the IMU, joint positions from the encoders, one contact flag
@@ -453,14 +458,16 @@ def _add_invariant_ekf(
     so the filter starts with that prior (``STANDING_START_ORIENTATION_STD``,
     ``STANDING_START_VELOCITY_STD``) rather than the generic one. The FSRs are sensors of
     the simulated ``plant`` (``humanoid``: its handles); the filter, the contact flags' weight
-    threshold and the filter's start are the estimators' (``estimator``)."""
+    threshold and the filter's start are the estimators' (``estimator``). ``contact``: flags
+    of the caller's instead (a robot without foot force sensing: ``_add_estimated_foot_contact``,
+    one per sole, sides sorted)."""
     from systems.observer.fsr_sensing import FSR_SIDES
 
-    model = estimator.plant
-    mass = model.CalcTotalMass(model.CreateDefaultContext(), [estimator.humanoid.model_instance])
-    weight = mass * float(np.linalg.norm(model.gravity_field().gravity_vector()))
+    weight = _model_weight(estimator)
     period = plant.time_step()
-    if sensors.ft_sides:
+    if contact is not None:
+        sides = tuple(sorted(estimator.humanoid.sole_frames))
+    elif sensors.ft_sides:
         sides = sensors.ft_sides
         contact = builder.AddSystem(
             FootContactFromForceTorque(
@@ -535,6 +542,76 @@ def _add_fsr_sole_wrenches(
     builder.Connect(sensors.ft_wrenches, both.get_input_port(0))
     builder.Connect(soles.GetOutputPort("wrenches"), both.get_input_port(1))
     return estimator.known_wrench_frames, both.get_output_port()
+
+
+def _model_weight(estimator: EstimatorPlant) -> float:
+    """The humanoid's weight in the estimators' model, N."""
+    model = estimator.plant
+    mass = model.CalcTotalMass(model.CreateDefaultContext(), [estimator.humanoid.model_instance])
+    return mass * float(np.linalg.norm(model.gravity_field().gravity_vector()))
+
+
+#: The gain of the residuals a robot without foot force sensing estimates its soles' wrenches
+#: from for the EKF's contact flags, 1/s (the contact detector's: a sole's normal force
+#: reaches the 10 % contact threshold 3 ms after it appears).
+ESTIMATED_CONTACT_RESIDUAL_GAIN = 35.0
+
+
+def _add_estimated_foot_contact(
+    builder: DiagramBuilder,
+    estimator: EstimatorPlant,
+    sensed_state: OutputPort,
+    measured_torque: OutputPort,
+    period: float,
+) -> FootContactFromForceTorque:
+    """Contact flags of a robot without foot F/T sensors or FSRs, from its soles' wrenches
+    estimated from the internal and external residuals (eqs. 11, 16; ``SoleWrenchCompensation``
+    with one contact link's free wrench, gain ``ESTIMATED_CONTACT_RESIDUAL_GAIN``), with the
+    F/T flags' thresholds (``CONTACT_ON_WEIGHT_FRACTION``, ``CONTACT_OFF_WEIGHT_FRACTION`` of
+    the model's weight). The residuals read the sensed state, whose base part the EKF these
+    flags feed estimates: their outputs come from their discrete state, so the loop has a
+    step's delay and no algebraic loop."""
+    from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual
+    from systems.residuals.sole_wrenches import SoleWrenchCompensation
+
+    gain = ESTIMATED_CONTACT_RESIDUAL_GAIN
+    model = ResidualModel(estimator.plant)
+    internal = builder.AddSystem(InternalResidual(estimator.plant, gain, period, model=model))
+    external = builder.AddSystem(ExternalResidual(estimator.plant, gain, period, model=model))
+    for name, residual in (("contact_internal_residual", internal), ("contact_external_residual", external)):
+        residual.set_name(name)
+        builder.Connect(sensed_state, residual.GetInputPort("state"))
+        if residual.HasInputPort("measured_torque"):
+            builder.Connect(measured_torque, residual.GetInputPort("measured_torque"))
+    excluded = set(estimator.excluded_bodies)
+    plant = estimator.plant
+    bodies = [plant.get_body(BodyIndex(i)) for i in range(1, plant.num_bodies())]
+    soles = builder.AddSystem(
+        SoleWrenchCompensation(
+            plant,
+            estimator.unknown_wrench_frames,
+            estimator.unknown_wrench_components,
+            gain=gain,
+            candidate_bodies=[b for b in bodies if b.name() not in excluded and b.default_mass() > 0.0],
+            period=period,
+        )
+    )
+    soles.set_name("contact_sole_wrenches")
+    builder.Connect(sensed_state, soles.GetInputPort("state"))
+    builder.Connect(external.GetOutputPort("external_wrench_world"), soles.GetInputPort("external_wrench_world"))
+    builder.Connect(internal.GetOutputPort("residual"), soles.GetInputPort("internal_residual"))
+    weight = _model_weight(estimator)
+    contact = builder.AddSystem(
+        FootContactFromForceTorque(
+            len(estimator.unknown_wrench_frames),
+            CONTACT_ON_WEIGHT_FRACTION * weight,
+            off_threshold=CONTACT_OFF_WEIGHT_FRACTION * weight,
+            period=period,
+        )
+    )
+    contact.set_name("foot_contact_from_estimated_wrenches")
+    builder.Connect(soles.GetOutputPort("sole_wrenches_world"), contact.GetInputPort("wrenches"))
+    return contact
 
 
 def _load(plant: MultibodyPlant, scene_graph: SceneGraph, model: str) -> HumanoidHandles | None:

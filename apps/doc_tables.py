@@ -767,6 +767,7 @@ SENSING_STUDIES = (
     ("contact_study_sensing_fsr", "hrp4_like", "FSR"),
     ("contact_study_sensing_fsr_realistic", "hrp4_like, realistic world", "FSR"),
     ("contact_study_sensing_none", "hrp4_like", "none"),
+    ("contact_study_sensing_none_realistic", "hrp4_like, realistic world", "none"),
     ("contact_study_sensing_none_talos", "TALOS", "none"),
 )
 

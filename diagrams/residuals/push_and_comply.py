@@ -302,11 +302,12 @@ def build_push_and_comply_diagram(
 ) -> tuple[Diagram, PushAndComplyHandles]:
     """Builds the closed loop of the module docstring with the ``residual_kind`` residual
     ("internal" or "classical") driving the admittance controller; ``model_corrections``
-    (the scenario's refined model, see ``model_refinement``) go to the station.
+    (the scenario's refined model, see ``model_refinement``) go to the station. On a robot
+    without foot F/T sensors the admittance reads the residual net of the soles' estimated
+    wrenches (``_add_sole_wrench_compensation``).
 
     Raises:
-        ValueError: an unknown residual kind, model or joint group; a robot without foot F/T
-            sensors; bad scenario values.
+        ValueError: an unknown residual kind, model or joint group; bad scenario values.
     """
     if residual_kind not in RESIDUAL_KINDS:
         raise ValueError(f"unknown residual '{residual_kind}'; choose one of {RESIDUAL_KINDS}")
@@ -353,7 +354,6 @@ def build_push_and_comply_diagram(
     if station.known_wrenches is not None:
         builder.Connect(station.known_wrenches, residual.GetInputPort("known_wrenches"))
     residual_port = residual.GetOutputPort("residual")
-    compensation = None
     if station.estimator.unknown_wrench_frames:
         # Feet without F/T sensors: eq. (10) with the soles' wrenches estimated from the
         # internal and external residuals (SoleWrenchCompensation), which the admittance

@@ -145,7 +145,8 @@ class FsrArray(LeafSystem):
         self.DeclareVectorOutputPort("true_fsr_forces", len(ids), self._CalcTrueForces)
 
     @property
-    def saturation(self) -> float:
+    def saturation(self) -> float | np.ndarray:
+        """The sensors' upper range, N: a number, or one per FSR (``FSR_NAMES`` order)."""
         return self._saturation
 
     @property

@@ -56,11 +56,7 @@ def _push_and_comply_ablation(data: dict) -> list[str]:
 
 
 def _push_and_comply_robots(data: dict) -> list[str]:
-    from diagrams.residuals.push_and_comply import (
-        FLOOR_CLASSICAL_KNEE_DEG,
-        FLOOR_INTERNAL_KNEE_DEG,
-        meets_robot_floors,
-    )
+    from diagrams.residuals.push_and_comply import meets_robot_floors
 
     lines = [
         "| robot (imperfections / sensor seed) | internal: knee flexion | CoM drop | base tilt | upright "
@@ -74,17 +70,12 @@ def _push_and_comply_robots(data: dict) -> list[str]:
             f"| {100 * i['com_height_drop_m']:.1f} cm | {i['max_base_tilt_deg']:.1f} deg | {_yes(i['upright'])} "
             f"| {_knee(c)} | {_yes(c['upright'])} | {i['push_peak_force_N']:.1f} N | {_yes(meets_robot_floors(i, c))} |"
         )
-    lines += [
-        "",
-        f"Floors (issue 31): the internal run upright with both knees bent >= {FLOOR_INTERNAL_KNEE_DEG:g} deg, "
-        f"the classical run upright with its knees bent < {FLOOR_CLASSICAL_KNEE_DEG:g} deg.",
-    ]
-    return lines
+    return lines + ["", _robot_floors_note("issue 31")]
 
 
 def _push_and_comply_sensing(data: dict) -> list[str]:
     """Issue 36's push-and-comply rows: robots by foot sensing, in each world."""
-    from diagrams.residuals.push_and_comply import FLOOR_CLASSICAL_KNEE_DEG, FLOOR_INTERNAL_KNEE_DEG, meets_robot_floors
+    from diagrams.residuals.push_and_comply import meets_robot_floors
 
     lines = [
         "| robot, foot sensing | world | internal: knee flexion | CoM drop | upright | classical: knee flexion "
@@ -98,12 +89,17 @@ def _push_and_comply_sensing(data: dict) -> list[str]:
             f"| {_yes(i['upright'])} | {_knee(c)} | {_yes(c['upright'])} | {i['push_peak_force_N']:.1f} N "
             f"| {_yes(meets_robot_floors(i, c))} |"
         )
-    lines += [
-        "",
-        f"Floors (issues 31 and 36): the internal run upright with both knees bent >= {FLOOR_INTERNAL_KNEE_DEG:g} "
-        f"deg, the classical run upright with its knees bent < {FLOOR_CLASSICAL_KNEE_DEG:g} deg.",
-    ]
-    return lines
+    return lines + ["", _robot_floors_note("issues 31 and 36")]
+
+
+def _robot_floors_note(issues: str) -> str:
+    """The push-and-comply floors of a robot (``meets_robot_floors``), under ``issues``."""
+    from diagrams.residuals.push_and_comply import FLOOR_CLASSICAL_KNEE_DEG, FLOOR_INTERNAL_KNEE_DEG
+
+    return (
+        f"Floors ({issues}): the internal run upright with both knees bent >= {FLOOR_INTERNAL_KNEE_DEG:g} deg, "
+        f"the classical run upright with its knees bent < {FLOOR_CLASSICAL_KNEE_DEG:g} deg."
+    )
 
 
 def _with_interval(metrics: dict, key: str, scale: float, unit: str) -> str:

@@ -18,7 +18,6 @@ from pathlib import Path
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams
 from pydrake.multibody.plant import MultibodyPlantConfig
-from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
@@ -264,21 +263,14 @@ def _add_sole_wrench_compensation(
         if station.known_wrenches is not None:
             builder.Connect(station.known_wrenches, system.GetInputPort("known_wrenches"))
     internal = residual if residual_kind == "internal" else inputs["internal"]
-    excluded = set(estimator.excluded_bodies)
-    plant = estimator.plant
-    candidates = [
-        plant.get_body(BodyIndex(i))
-        for i in range(1, plant.num_bodies())
-        if plant.get_body(BodyIndex(i)).name() not in excluded and plant.get_body(BodyIndex(i)).default_mass() > 0.0
-    ]
     compensation = builder.AddSystem(
         SoleWrenchCompensation(
-            plant,
+            estimator.plant,
             estimator.unknown_wrench_frames,
             estimator.unknown_wrench_components,
             gain=scenario.residual_gain,
             residual=residual_kind,
-            candidate_bodies=candidates,
+            candidate_bodies=estimator.contact_candidate_bodies,
             period=residual.period,
         )
     )

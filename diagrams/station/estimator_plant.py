@@ -100,6 +100,14 @@ class EstimatorPlant:
         return tuple(self.ft_frames) + tuple(self.fsr_frames)
 
     @property
+    def contact_candidate_bodies(self) -> tuple:
+        """The bodies a push may be on: every body with mass but the world and
+        ``excluded_bodies`` (``SoleWrenchCompensation``'s candidates)."""
+        excluded = set(self.excluded_bodies)
+        bodies = (self.plant.get_body(BodyIndex(i)) for i in range(1, self.plant.num_bodies()))
+        return tuple(b for b in bodies if b.name() not in excluded and b.default_mass() > 0.0)
+
+    @property
     def joint_names(self) -> tuple[str, ...]:
         """The 1-DoF joints in the plant's v[6:] order."""
         return tuple(j.name() for j in self.topology.joints)

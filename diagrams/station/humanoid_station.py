@@ -36,7 +36,6 @@ from typing import Any
 import numpy as np
 from pydrake.geometry import SceneGraph
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
-from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.framework import Context, DiagramBuilder, InputPort, OutputPort
 from pydrake.systems.primitives import MatrixGain, Multiplexer, ZeroOrderHold
 
@@ -583,16 +582,13 @@ def _add_estimated_foot_contact(
         builder.Connect(sensed_state, residual.GetInputPort("state"))
         if residual.HasInputPort("measured_torque"):
             builder.Connect(measured_torque, residual.GetInputPort("measured_torque"))
-    excluded = set(estimator.excluded_bodies)
-    plant = estimator.plant
-    bodies = [plant.get_body(BodyIndex(i)) for i in range(1, plant.num_bodies())]
     soles = builder.AddSystem(
         SoleWrenchCompensation(
-            plant,
+            estimator.plant,
             estimator.unknown_wrench_frames,
             estimator.unknown_wrench_components,
             gain=gain,
-            candidate_bodies=[b for b in bodies if b.name() not in excluded and b.default_mass() > 0.0],
+            candidate_bodies=estimator.contact_candidate_bodies,
             period=period,
         )
     )

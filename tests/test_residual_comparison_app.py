@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -75,6 +76,30 @@ def test_classical_residual_cannot_see_the_legs(short_noise_free_run):
         true_rms = metrics["rms_true_joint_effort_Nm"][knee]
         assert true_rms > 0.05
         assert metrics["rms_classical_joint_effort_Nm"][knee] < 0.05 * true_rms
+
+
+@pytest.mark.parametrize("robot", ["hrp4_like_no_ft.yaml", "hrp4_like_fsr.yaml"])
+def test_residuals_net_of_the_soles_track_the_truth_without_foot_ft_sensors(robot):
+    """Without foot F/T sensors the raw residuals hold the robot's weight (hundreds of N on
+    the knees); net of the soles' wrenches fitted with the push's link (SoleWrenchCompensation)
+    they track the push's own effort as the F/T robot's do, knees included, and the classical
+    residual still cannot see the legs."""
+    scenario = set_ideal_conditions(
+        ResidualComparisonScenario(model=f"models/robots/{robot}", duration=3.0, noise=False, skip=0.5)
+    )
+    run = run_once(scenario)
+    metrics = run["metrics"]
+    assert set(run["handles"].sole_compensations) == {"internal", "classical"}
+    assert metrics["internal_rel_rms_error_vs_filtered_truth"] < 0.01
+    assert metrics["external_force_rel_rms_error_vs_filtered_truth"] < 0.01
+    assert metrics["external_wrench_base_rel_rms_error_vs_filtered_truth"] < 0.01
+    for joint in ("R_KNEE_P", "L_KNEE_P", "CHEST_Y"):
+        assert metrics["internal_rel_rms_error_per_joint_vs_filtered_truth"][joint] < 0.03, joint
+    assert metrics["classical_rel_rms_error"] > 0.3
+    for knee in ("R_KNEE_P", "L_KNEE_P"):
+        assert metrics["rms_classical_joint_effort_Nm"][knee] < 0.05 * metrics["rms_true_joint_effort_Nm"][knee]
+    with pytest.raises(ValueError, match="must be equal"):
+        run_once(dataclasses.replace(scenario, classical_gain=20.0))
 
 
 def test_robot_stands_still_while_pushed(short_noise_free_run):

@@ -138,3 +138,52 @@ def test_bad_settings_are_refused(hrp4):
         SoleWrenchCompensation(plant, SOLE_FRAMES, gain=2000.0)
     with pytest.raises(ValueError, match="no_such_body"):
         SoleWrenchCompensation(plant, SOLE_FRAMES, gain=5.0, candidate_bodies=["no_such_body"])
+
+
+@pytest.mark.parametrize("components", [None, [SOLE_SHEAR_AND_YAW] * 2], ids=["no foot sensing", "FSRs"])
+def test_replay_is_the_system_update_by_update(hrp4, components):
+    """``replay`` (the offline twin a log's estimation runs) gives what the system's own
+    update and outputs give, stepped through a moving robot with residuals that change:
+    the chosen link, the internal and external residuals net of the soles and the soles'
+    wrenches, from the start and when continued from a replay's end."""
+    plant, handles, context = hrp4
+    q0 = plant.GetPositions(context)
+    pushes = _shoulder_pushes(plant, handles, context)
+    wrench, tau = _exact_residuals(plant, context, pushes)
+    soles = _ground_residuals(plant, context, STANDING_WRENCHES)
+    rng = np.random.default_rng(3)
+    N, nq = 130, plant.num_positions()
+    positions = np.tile(q0, (N, 1))
+    positions[:, 7:] += 0.02 * np.sin(np.linspace(0.0, 3.0, N))[:, None] * rng.uniform(-1, 1, nq - 7)
+    scale = np.linspace(0.0, 1.0, N)[:, None]
+    external = scale * (wrench + soles[:6]) + 0.1 * rng.standard_normal((N, 6))
+    internal = scale * (tau + soles[6:]) + 0.05 * rng.standard_normal((N, len(tau)))
+    dut = SoleWrenchCompensation(plant, SOLE_FRAMES, components, gain=20.0, selection_period=0.01)
+    replayed = dut.replay(positions, external, internal)
+    ctx = dut.CreateDefaultContext()
+    v = np.zeros(plant.num_velocities())
+    for k in range(N):
+        ctx.SetTime(k * 1e-3)
+        dut.GetInputPort("state").FixValue(ctx, np.concatenate((positions[k], v)))
+        dut.GetInputPort("external_wrench_world").FixValue(ctx, external[k])
+        dut.GetInputPort("internal_residual").FixValue(ctx, internal[k])
+        ctx.SetDiscreteState(dut.EvalUniquePeriodicDiscreteUpdate(ctx).get_vector().CopyToVector())
+        assert dut.GetOutputPort("contact_body_index").Eval(ctx)[0] == replayed.body_index[k]
+        np.testing.assert_allclose(dut.GetOutputPort("residual").Eval(ctx), replayed.internal[k], atol=1e-9)
+        np.testing.assert_allclose(
+            dut.GetOutputPort("external_wrench_world").Eval(ctx), replayed.external_wrench_world[k], atol=1e-9
+        )
+        np.testing.assert_allclose(
+            dut.GetOutputPort("sole_wrenches_world").Eval(ctx), replayed.sole_wrenches_world[k], atol=1e-7
+        )
+    assert (replayed.body_index >= 0).any()
+    np.testing.assert_allclose(ctx.get_discrete_state_vector().CopyToVector(), replayed.end, atol=1e-12)
+    # In two parts: the second goes on from the first's end.
+    first = dut.replay(positions[:57], external[:57], internal[:57])
+    second = dut.replay(positions[57:], external[57:], internal[57:], start=first.end, first_update=57)
+    np.testing.assert_allclose(second.internal, replayed.internal[57:], atol=1e-9)
+    np.testing.assert_array_equal(second.body_index, replayed.body_index[57:])
+    with pytest.raises(ValueError, match="internal_residual must be"):
+        dut.replay(positions, external, internal[:, :3])
+    with pytest.raises(ValueError, match="positions holds NaN"):
+        dut.replay(np.full_like(positions, np.nan), external, internal)

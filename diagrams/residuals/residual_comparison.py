@@ -10,8 +10,13 @@ the three residuals of Flacco et al. (2016) fed only by those sensors.
                                           (one shared ResidualModel) ──► loggers
 
 For ``hrp4_like`` and ``nao_like`` the robot stands on flat ground; its F/T sensors (HRP-4)
-make the ground reaction a known wrench. Any other floating-base model (an SDFormat or URDF
-path) floats in zero gravity with no ground, holding its default posture.
+make the ground reaction a known wrench. On a humanoid without foot F/T sensors (``sensing:
+none`` or ``fsr``) the residuals hold the ground's unknown wrenches as well: two
+``SoleWrenchCompensation`` systems fit the soles' wrenches with the push's link and report
+the internal, classical and external residuals net of the soles' share (eq. 10 with the
+soles' wrenches estimated), which the metrics compare with the push's own effort. Any other
+floating-base model (an SDFormat or URDF path) floats in zero gravity with no ground,
+holding its default posture.
 
 Scenarios are YAML files loaded into ``ResidualComparisonScenario`` with
 ``pydrake.common.yaml.yaml_load_typed`` (``diagrams.scenarios``); the default is the paper's.
@@ -36,6 +41,7 @@ from diagrams.station.humanoid_station import HumanoidStation, add_scenario_stat
 from models import HumanoidHandles
 from systems.estimation.model_identification import ModelCorrections
 from systems.residuals.momentum_residuals import ClassicalResidual, ExternalResidual, InternalResidual, ResidualModel
+from systems.residuals.sole_wrenches import SoleWrenchCompensation
 from systems.simulation.disturbances import Push, PushSource, Sinusoid
 from systems.simulation.imperfections import Imperfections
 from systems.simulation.sensors import SensorHandles
@@ -118,6 +124,7 @@ class ResidualComparisonHandles:
     loggers: dict[str, VectorLogSink]
     meshcat_visualizer: MeshcatVisualizer | None = None
     station: HumanoidStation | None = None
+    sole_compensations: dict[str, SoleWrenchCompensation] = field(default_factory=dict)
 
 
 def build_residual_comparison_diagram(
@@ -188,13 +195,26 @@ def build_residual_comparison_diagram(
         if known_frames:
             builder.Connect(known_wrenches, residual.GetInputPort("known_wrenches"))
 
+    outputs = {
+        "classical": classical.GetOutputPort("residual"),
+        "internal": internal.GetOutputPort("residual"),
+        "external_base": external.GetOutputPort("external_wrench_base"),
+        "external_world": external.GetOutputPort("external_wrench_world"),
+    }
+    compensations = {}
+    if station.estimator.unknown_wrench_frames:
+        compensations = _add_sole_wrench_compensations(builder, station, scenario, classical, internal, external)
+        outputs = {
+            "classical": compensations["classical"].GetOutputPort("residual"),
+            "internal": compensations["internal"].GetOutputPort("residual"),
+            "external_base": compensations["internal"].GetOutputPort("external_wrench_base"),
+            "external_world": compensations["internal"].GetOutputPort("external_wrench_world"),
+        }
+
     log = scenario.log_period
     loggers = {
         "state": LogVectorOutput(plant.get_state_output_port(), builder, log),
-        "classical": LogVectorOutput(classical.GetOutputPort("residual"), builder, log),
-        "internal": LogVectorOutput(internal.GetOutputPort("residual"), builder, log),
-        "external_base": LogVectorOutput(external.GetOutputPort("external_wrench_base"), builder, log),
-        "external_world": LogVectorOutput(external.GetOutputPort("external_wrench_world"), builder, log),
+        **{name: LogVectorOutput(port, builder, log) for name, port in outputs.items()},
         "tau_c_real": LogVectorOutput(push_source.GetOutputPort("tau_c_real"), builder, log),
         "wrench_base_true": LogVectorOutput(push_source.GetOutputPort("total_wrench_base"), builder, log),
         "wrench_world_true": LogVectorOutput(push_source.GetOutputPort("total_wrench_world"), builder, log),
@@ -220,7 +240,52 @@ def build_residual_comparison_diagram(
         loggers=loggers,
         meshcat_visualizer=visualizer,
         station=station,
+        sole_compensations=compensations,
     )
+
+
+def _add_sole_wrench_compensations(
+    builder: DiagramBuilder,
+    station: HumanoidStation,
+    scenario: ResidualComparisonScenario,
+    classical: ClassicalResidual,
+    internal: InternalResidual,
+    external: ExternalResidual,
+) -> dict[str, SoleWrenchCompensation]:
+    """{"internal", "classical"}: the soles' wrench compensation of each residual on a robot
+    without foot F/T sensors (module docstring); the internal one also gives the external
+    residual net of the soles' share. Both fit the same soles' wrenches (the internal and
+    external residuals); the push's candidate links are every link but the feet."""
+    estimator = station.estimator
+    if not (scenario.internal_gain == scenario.external_gain == scenario.classical_gain):
+        raise ValueError(
+            "without foot F/T sensors the soles' wrenches are fitted to the residuals through their common "
+            f"filter: classical_gain, internal_gain and external_gain must be equal, got {scenario.classical_gain}, "
+            f"{scenario.internal_gain} and {scenario.external_gain}"
+        )
+    compensations = {}
+    for kind, residual in (("internal", internal), ("classical", classical)):
+        compensation = builder.AddSystem(
+            SoleWrenchCompensation(
+                estimator.plant,
+                estimator.unknown_wrench_frames,
+                estimator.unknown_wrench_components,
+                gain=scenario.internal_gain,
+                residual=kind,
+                candidate_bodies=estimator.contact_candidate_bodies,
+                period=scenario.period,
+            )
+        )
+        compensation.set_name(f"{kind}_sole_wrench_compensation")
+        builder.Connect(station.sensed_state, compensation.GetInputPort("state"))
+        builder.Connect(
+            external.GetOutputPort("external_wrench_world"), compensation.GetInputPort("external_wrench_world")
+        )
+        builder.Connect(internal.GetOutputPort("residual"), compensation.GetInputPort("internal_residual"))
+        if kind == "classical":
+            builder.Connect(residual.GetOutputPort("residual"), compensation.GetInputPort("classical_residual"))
+        compensations[kind] = compensation
+    return compensations
 
 
 def set_initial_state(diagram: Diagram, context: Context, handles: ResidualComparisonHandles) -> None:

@@ -29,6 +29,7 @@ push, is small).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
@@ -46,6 +47,26 @@ COMPENSATED_RESIDUALS = ("internal", "classical")
 #: 1e-16 (a direction lost: the soles' wrenches mimic it) to 3e-4 (with FSRs, the hip links
 #: away from the symmetric posture), the torso's, head's and arms' 2e-2 to 3e-1.
 MIN_LINK_CONDITIONING = 3e-3
+
+
+class ReplayedCompensation(NamedTuple):
+    """``SoleWrenchCompensation.replay``'s per-update outputs (N updates) and end state.
+
+    Attributes:
+        body_index: (N,) the chosen link's body index (-1: none chosen or none usable).
+        internal: (N, n) the internal residual minus the soles' share, N m.
+        external_wrench_world: (N, 6) the external residual minus the soles' share,
+            [moment about the world origin; force], world.
+        sole_wrenches_world: (N, 6 m) the soles' fitted wrenches, [moment about the sole
+            frame's origin; force] per sole, world (a measured component's share is 0).
+        end: the system's discrete state after the last update (to continue from).
+    """
+
+    body_index: np.ndarray
+    internal: np.ndarray
+    external_wrench_world: np.ndarray
+    sole_wrenches_world: np.ndarray
+    end: np.ndarray
 
 
 class SoleWrenchCompensation(LeafSystem):
@@ -66,6 +87,10 @@ class SoleWrenchCompensation(LeafSystem):
         ``sole_wrenches_world`` (6 m): the soles' fitted wrenches, [moment about the sole
             frame's origin; force], world (a measured component's share is 0 there).
         ``contact_body_index`` (1): the chosen link's body index (-1 before the first choice).
+        ``external_wrench_world`` (6): the external residual (eq. 16) minus the soles' share,
+            [moment about the world origin; force], world: the push's wrench.
+        ``external_wrench_base`` (6): the same wrench as ``ExternalResidual``'s base output,
+            [moment about the base frame F0's origin; force], in F0.
 
     Args:
         plant: the estimators' finalized floating-base plant.
@@ -136,6 +161,8 @@ class SoleWrenchCompensation(LeafSystem):
         self.DeclareVectorOutputPort(
             "contact_body_index", 1, lambda c, o: o.SetFromVector([self._body_index(c)]), {self.xd_ticket()}
         )
+        self.DeclareVectorOutputPort("external_wrench_world", 6, self._CalcExternalWorld)
+        self.DeclareVectorOutputPort("external_wrench_base", 6, self._CalcExternalBase)
 
     @property
     def candidate_bodies(self) -> tuple:
@@ -210,6 +237,75 @@ class SoleWrenchCompensation(LeafSystem):
             A = np.concatenate((columns, wrench_maps(self._kin, [self._bodies[slot].body_frame()])[0]), axis=1)
         return np.linalg.lstsq(A, rows, rcond=None)[0][: columns.shape[1]]
 
+    def replay(
+        self,
+        positions: np.ndarray,
+        external_wrench_world: np.ndarray,
+        internal_residual: np.ndarray,
+        start: np.ndarray | None = None,
+        first_update: int = 0,
+    ) -> ReplayedCompensation:
+        """The system's N updates without a Context (``systems.residuals.offline``), with
+        its internal residual output: at update k (the ``first_update`` + k-th of the
+        system, which chooses the link when that count is a multiple of the selection
+        period's updates) it reads positions[k] and the residuals its input ports hold then
+        (``external_wrench_world``[k], ``internal_residual``[k]), and its outputs are read
+        right after it with those inputs. From ``start`` (the discrete state; default the
+        initial one: no link, zero columns).
+
+        Raises:
+            ValueError: arrays of inconsistent sizes or non-finite values (naming them).
+        """
+        kin, unknown = self._kin, self._unknown
+        q = np.asarray(positions, dtype=float)
+        r_ext = np.asarray(external_wrench_world, dtype=float)
+        r_int = np.asarray(internal_residual, dtype=float)
+        N = q.shape[0] if q.ndim == 2 else -1
+        for name, array, width in (
+            ("positions", q, kin.nq),
+            ("external_wrench_world", r_ext, 6),
+            ("internal_residual", r_int, kin.n),
+        ):
+            if array.ndim != 2 or array.shape != (N, width):
+                raise ValueError(f"{self._who}.replay: {name} must be (N, {width}) with N = {N}, got {array.shape}")
+            if not np.isfinite(array).all():
+                raise ValueError(f"{self._who}.replay: {name} holds NaN or inf")
+        if self._kind != "internal":
+            raise ValueError(f"{self._who}.replay: replays the internal residual's compensation only")
+        if start is None:
+            start = self.CreateDefaultContext().get_discrete_state(self._state_index).get_value()
+        start = np.asarray(start, dtype=float)
+        slot = int(start[0])
+        stacked = start[1:].reshape(self._shape).copy()
+        rows = np.concatenate((r_ext, r_int), axis=1)
+        k_size, a = unknown.size, self._factor
+        body = np.full(N, -1.0)
+        fitted = np.zeros((N, k_size))
+        shares = np.zeros((N, rows.shape[1]))
+        soles = np.zeros((N, 6 * len(unknown)))
+        for k in range(N):
+            kin.set_positions(q[k])
+            stacked = (1.0 - a) * stacked + a * unknown.columns(kin)
+            if (first_update + k) % self._every == 0:
+                slot = self.choose_link(q[k], rows[k], stacked)
+                kin.set_positions(q[k])
+            A = stacked
+            if slot >= 0:
+                A = np.concatenate((stacked, wrench_maps(kin, [self._bodies[slot].body_frame()])[0]), axis=1)
+                body[k] = float(self._bodies[slot].index())
+            w = np.linalg.lstsq(A, rows[k], rcond=None)[0][:k_size]
+            fitted[k] = w
+            shares[k] = stacked @ w
+            soles[k] = unknown.world_map(kin) @ w
+        end = np.concatenate(([float(slot)], stacked.ravel()))
+        return ReplayedCompensation(
+            body_index=body,
+            internal=r_int - shares[:, 6:],
+            external_wrench_world=r_ext - shares[:, :6],
+            sole_wrenches_world=soles,
+            end=end,
+        )
+
     def _inputs(self, context: Context) -> tuple[np.ndarray, np.ndarray]:
         x = eval_finite_input(self._who, self._state_port, context)
         rows = np.concatenate(
@@ -251,10 +347,28 @@ class SoleWrenchCompensation(LeafSystem):
             r = eval_finite_input(self._who, self._internal_port, context)
             output.SetFromVector(r - stacked[6:] @ w)
 
+    def _external_world(self, context: Context) -> np.ndarray:
+        """[moment about the world origin; force], world: r_ext minus the soles' share."""
+        stacked, _ = self._filtered(context)
+        r_ext = eval_finite_input(self._who, self._wrench_port, context)
+        return r_ext - stacked[:6] @ self._solution(context)
+
+    def _CalcExternalWorld(self, context: Context, output: BasicVector) -> None:
+        output.SetFromVector(self._external_world(context))
+
+    def _CalcExternalBase(self, context: Context, output: BasicVector) -> None:
+        wrench = self._external_world(context)
+        q, _ = self._inputs(context)
+        self._kin.set_positions(q)
+        X_WF0 = self._kin.base_pose()
+        R, p_F0 = X_WF0[:, :3], X_WF0[:, 3]
+        moment_F0 = wrench[:3] - np.cross(p_F0, wrench[3:])
+        output.SetFromVector(np.concatenate((R.T @ moment_F0, R.T @ wrench[3:])))
+
     def _CalcWrenches(self, context: Context, output: BasicVector) -> None:
         q, _ = self._inputs(context)
         self._kin.set_positions(q)
         output.SetFromVector(self._unknown.world_wrenches(self._kin, self._solution(context)).ravel())
 
 
-__all__ = ["COMPENSATED_RESIDUALS", "MIN_LINK_CONDITIONING", "SoleWrenchCompensation"]
+__all__ = ["COMPENSATED_RESIDUALS", "MIN_LINK_CONDITIONING", "ReplayedCompensation", "SoleWrenchCompensation"]

@@ -185,13 +185,39 @@ def _residual_comparison(data: dict) -> list[str]:
         ("classical residual (joint part) vs tau_c,real", "classical_rel_rms_error"),
         ("external residual force vs the applied force", "external_force_rel_rms_error"),
     )
+    robot = "" if data.get("model", "hrp4_like") == "hrp4_like" else f"`{data['model']}`, "
     lines = [
-        f"| relative RMS error after {data['skip_s']:g} s, {world} world, seed {data['seed']} | raw "
+        f"| relative RMS error after {data['skip_s']:g} s, {robot}{world} world, seed {data['seed']} | raw "
         "| vs the truth through the residual's filter |",
         "| --- | --- | --- |",
     ]
     for label, key in rows:
         lines.append(f"| {label} | {100 * data[key]:.2f} % | {100 * data[key + '_vs_filtered_truth']:.2f} % |")
+    return lines
+
+
+#: The residual comparison per foot sensing on hrp4_like, realistic world: (results file, label).
+RESIDUAL_SENSING_RUNS = (
+    ("residual_comparison_realistic", "F/T (measured soles' wrenches)"),
+    ("residual_comparison_realistic_fsr", "FSRs (soles' shear and yaw estimated)"),
+    ("residual_comparison_realistic_no_ft", "none (soles' wrenches estimated)"),
+)
+
+
+def _residual_comparison_sensing(runs: dict) -> list[str]:
+    lines = [
+        "| foot sensing | internal residual, all joints | knees (right / left) | external force "
+        "| classical (joint part) |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    for name, label in RESIDUAL_SENSING_RUNS:
+        data = runs[name]
+        knees = data["internal_rel_rms_error_per_joint"]
+        lines.append(
+            f"| {label} | {100 * data['internal_rel_rms_error']:.1f} % | {100 * knees['R_KNEE_P']:.1f} / "
+            f"{100 * knees['L_KNEE_P']:.1f} % | {100 * data['external_force_rel_rms_error']:.1f} % | "
+            f"{100 * data['classical_rel_rms_error']:.0f} % |"
+        )
     return lines
 
 
@@ -847,6 +873,9 @@ RENDERERS: dict[str, Callable[[dict], list[str]]] = {
     "paper_speed": _paper_speed,
     "residual_comparison_realistic": _residual_comparison,
     "residual_comparison_ideal": _residual_comparison,
+    "residual_comparison_sensing": _residual_comparison_sensing,
+    "residual_comparison_realistic_no_ft": _residual_comparison,
+    "residual_comparison_realistic_fsr": _residual_comparison,
     "contact_study_single": _contact_study,
     "contact_study_two": _contact_study,
     "nao_force_observer": _nao_force_observer,
@@ -882,6 +911,7 @@ SOURCES: dict[str, tuple[str, ...]] = {
     "speed": ("benchmark", "contact_study_single", "contact_study_two", "test_suite"),
     "readme_speed": ("benchmark",),
     "sensing_comparison": tuple(name for name, _, _ in SENSING_STUDIES),
+    "residual_comparison_sensing": tuple(name for name, _ in RESIDUAL_SENSING_RUNS),
 }
 
 

@@ -148,7 +148,9 @@ def estimate_columns(estimates: LogEstimates) -> dict[str, np.ndarray | None]:
     its estimate was not made (``LogEstimates.not_estimated``), the base state the estimators
     used (``base_qw`` .. ``base_vz``: logged, or the invariant EKF's; m, rad/s, m/s) and,
     when the EKF estimated IMU biases, ``gyro_bias_*`` (rad/s) and ``accel_bias_*``
-    (m/s^2)."""
+    (m/s^2); on a robot without foot F/T sensors the soles' estimated ground wrenches
+    ``sole_<frame>_mx`` .. ``sole_<frame>_fz`` (world, about the sole frame's origin; N m,
+    N), which the residual and force columns are net of (``LogEstimates.sole_frames``)."""
     detected, statistics = estimates.contact_detected, estimates.test_statistics
     force, wrench, residual = estimates.force_world, estimates.external_wrench_world, estimates.internal_residual
     columns: dict[str, np.ndarray | None] = {
@@ -178,6 +180,8 @@ def estimate_columns(estimates: LogEstimates) -> dict[str, np.ndarray | None]:
     if estimates.imu_bias is not None:
         names = [f"gyro_bias_{a}" for a in "xyz"] + [f"accel_bias_{a}" for a in "xyz"]
         columns |= {name: estimates.imu_bias[:, i] for i, name in enumerate(names)}
+    for j, frame in enumerate(estimates.sole_frames):
+        columns |= {f"sole_{frame}_{a}": estimates.sole_wrenches_world[:, 6 * j + i] for i, a in enumerate(axes)}
     return columns
 
 
@@ -391,6 +395,13 @@ def _run(args: argparse.Namespace) -> int:
         print(f"slip test: contact updates dropped as slips, per foot: {slips}")
     for estimate, reason in estimates.not_estimated.items():
         print(f"not estimated: {estimate}: {reason}")
+    if estimates.sole_frames:
+        normal = estimates.sole_wrenches_world.reshape(len(estimates.time), -1, 6)[:, :, 5]
+        print(
+            "no foot F/T sensors: the soles' ground wrenches are estimated with the contacts (residual and force "
+            "net of them); mean normal force "
+            + ", ".join(f"{frame} {f:.1f} N" for frame, f in zip(estimates.sole_frames, normal.mean(axis=0)))
+        )
     print(
         f"estimation: {estimates.wall_time_s:.2f} s wall for {duration:.2f} s of log: real-time factor "
         f"{estimates.real_time_factor:.2f} (one thread)"
@@ -422,6 +433,7 @@ def _run(args: argparse.Namespace) -> int:
         "slip_updates": estimates.slip_updates or None,
         "noise_model": estimates.noise_model,
         "base_state": estimates.base_state,
+        "estimated_sole_wrenches": list(estimates.sole_frames) or None,
         "wall_time_s": estimates.wall_time_s,
         "real_time_factor": estimates.real_time_factor,
         "contacts": None if estimates.contact_detected is None else contacts,

@@ -71,6 +71,45 @@ def test_offline_replay_equals_the_online_estimators(simulated, robot):
     assert np.abs(estimates.internal_residual[1:] - online.internal_residual[:-1]).max() > 1e3 * 1e-10 * scale_int
 
 
+@pytest.mark.parametrize("robot_file", ["hrp4_like_no_ft.yaml", "hrp4_like_fsr.yaml"])
+def test_a_log_of_a_robot_without_foot_ft_sensors(robot_file):
+    """The demo push on hrp4_like without foot F/T sensors (without foot sensing, and with
+    FSRs, whose readings the log holds): offline, the detector and the localizer (the soles'
+    wrenches their unknowns) give what they gave online, exactly; the contact is found on
+    the pushed link, its force net of the soles' estimated wrenches is the push's, and the
+    soles' estimated normal forces (without sensing) hold the robot's weight less the push's
+    vertical part (statics)."""
+    name = f"models/robots/{robot_file}"
+    log, online = simulate_push_log(name, duration=1.5)
+    assert not log.wrenches and (log.fsr_forces is not None) == ("fsr" in robot_file)
+    robot = build_estimator_plant(name)
+    estimates = estimate_from_log(robot, log)
+    assert estimates.not_estimated == {}
+    np.testing.assert_array_equal(estimates.contact_detected, online.contact_detected)
+    loc = estimates.localization
+    np.testing.assert_array_equal(loc["status"], online.status)
+    np.testing.assert_array_equal(loc["body_index"], online.body_index)
+    np.testing.assert_allclose(loc["point_world"], online.point_world, rtol=0, atol=1e-9)
+    # The soles' compensation: the same link as online every update; its outputs read the
+    # posture of the update after online (the sensed state's sample-and-hold), hence not
+    # equal to rounding (tests/test_sole_wrenches.py checks the replay update by update).
+    np.testing.assert_array_equal(estimates.sole_contact_body_index, online.extra["sole_body"][:, 0])
+    raw = np.abs(online.internal_residual).max()
+    assert np.abs(estimates.internal_residual - online.extra["sole_internal"]).max() < 0.005 * raw
+
+    force, link, localized = recovered_push(estimates, online)
+    true_force = online.push.force_W(1.0)
+    assert link == online.push.body_name
+    assert np.linalg.norm(force - true_force) < 0.03 * np.linalg.norm(true_force)
+    assert np.linalg.norm(localized - true_force) < 0.03 * np.linalg.norm(true_force)
+    assert estimates.sole_frames == tuple(f.name() for f in robot.unknown_wrench_frames)
+    if "no_ft" in robot_file:
+        pushed = (estimates.time > 1.2) & (estimates.time < 1.5)
+        normal = estimates.sole_wrenches_world[pushed].reshape(-1, 2, 6)[:, :, 5].sum(axis=1)
+        weight = robot.plant.CalcTotalMass(robot.plant.CreateDefaultContext()) * 9.81
+        np.testing.assert_allclose(normal.mean(), weight - true_force[2], rtol=0.005)
+
+
 def test_stacked_residuals_equal_the_systems_own_updates(simulated, robot):
     """The whole-log residuals of ``replay_contact_estimation`` and ``replay_residuals(stacked=True)``
     (eq. 9's elimination, the momenta and rates stacked over the samples; the classical
@@ -451,18 +490,18 @@ def test_noise_calibrated_on_the_log_start(simulated, robot):
         estimate_from_log(robot, log.select(slice(0, 200)), LogEstimationSettings(noise_calibration_time=0.45))
 
 
-def test_robot_without_ft_feet_has_no_residuals():
-    """nao_like (FSR feet, no F/T): the ground's wrenches on its feet are unknown, so neither
-    residual runs (they would report the robot's weight as an external contact), nor the
-    detector or the localizer; the base state is the log's, and the reasons are named."""
-    from diagrams.residuals.log_estimation import DETECTION, EXTERNAL_RESIDUAL, INTERNAL_RESIDUAL, LOCALIZATION
+def test_fsr_feet_without_their_readings_in_the_log_have_whole_sole_wrenches_unknown():
+    """nao_like (FSR feet, no F/T) with a log that has no FSR readings: its soles' whole
+    wrenches become unknowns (as with ``sensing: none``); with the readings, only their
+    shear and yaw. Either way the residuals, the detector and the localizer run."""
+    from diagrams.residuals.log_estimation import fsr_sides_logged
+    from systems.common.topology import floating_base_topology
+    from systems.observer.fsr_sensing import FSR_NAMES
+    from systems.residuals.contact_estimation import ALL_WRENCH_COMPONENTS, SOLE_SHEAR_AND_YAW
 
     nao = build_estimator_plant("nao_like")
-    nq = nao.plant.num_positions()
     state = nao.standing_state
     samples = 200
-    from systems.common.topology import floating_base_topology
-
     joints = floating_base_topology(nao.plant).joints
     q = np.tile([state[j.position_start()] for j in joints], (samples, 1))
     log = RobotLog(
@@ -474,13 +513,20 @@ def test_robot_without_ft_feet_has_no_residuals():
         base_pose=np.tile(state[:7], (samples, 1)),
         base_velocity=np.zeros((samples, 6)),
     )
-    estimates = estimate_from_log(nao, log)
-    assert nq == 7 + len(joints)
-    assert estimates.localization is None and estimates.contact_detected is None
-    assert estimates.internal_residual is None and estimates.external_wrench_world is None
-    assert list(estimates.not_estimated) == [INTERNAL_RESIDUAL, EXTERNAL_RESIDUAL, DETECTION, LOCALIZATION]
-    assert "no foot F/T sensors" in estimates.not_estimated[EXTERNAL_RESIDUAL]
-    np.testing.assert_array_equal(estimates.base_pose, log.base_pose)
+    assert nao.unknown_wrench_components == (SOLE_SHEAR_AND_YAW, SOLE_SHEAR_AND_YAW)
+    unlogged = fsr_sides_logged(nao, log)
+    assert unlogged.unknown_wrench_components == (ALL_WRENCH_COMPONENTS, ALL_WRENCH_COMPONENTS)
+    assert unlogged.fsr_sides == () and unlogged.known_wrench_frames == ()
+    with_fsrs = replace(log, fsr_names=FSR_NAMES, fsr_forces=np.full((samples, len(FSR_NAMES)), 6.0))
+    assert fsr_sides_logged(nao, with_fsrs) is nao
+    one_side = replace(log, fsr_names=FSR_NAMES[:4], fsr_forces=np.full((samples, 4), 6.0))
+    assert fsr_sides_logged(nao, one_side).unknown_wrench_components == (SOLE_SHEAR_AND_YAW, ALL_WRENCH_COMPONENTS)
+    for each in (log, with_fsrs):
+        estimates = estimate_from_log(nao, each)
+        assert estimates.not_estimated == {}
+        assert estimates.sole_frames == ("l_sole_frame", "r_sole_frame")
+        assert estimates.internal_residual.shape == (samples, len(joints))
+        np.testing.assert_array_equal(estimates.base_pose, log.base_pose)
 
 
 def _hrp4_like_without_collision_geometry(folder: Path) -> Path:
@@ -834,7 +880,12 @@ def test_a_nao_log_with_fsr_feet_and_no_torques_estimates_the_base_state(tmp_pat
     no base state. The EKF runs on the FSR sums' contact flags and keeps the base where it
     started, standing on level ground (within 1 mm and 0.05 deg over 0.5 s); the internal
     residual, the detection and the localization are not estimated."""
-    from diagrams.residuals.log_estimation import INTERNAL_RESIDUAL, LOCALIZATION, standing_base_pose
+    from diagrams.residuals.log_estimation import (
+        EXTERNAL_RESIDUAL,
+        INTERNAL_RESIDUAL,
+        LOCALIZATION,
+        standing_base_pose,
+    )
     from systems.common.topology import floating_base_topology
     from systems.observer.fsr_sensing import FSR_NAMES
 
@@ -865,7 +916,8 @@ def test_a_nao_log_with_fsr_feet_and_no_torques_estimates_the_base_state(tmp_pat
     cos_half = np.abs(estimates.base_pose[:, :4] @ start[:4])
     assert np.degrees(2.0 * np.arccos(np.minimum(cos_half, 1.0))).max() < 0.05
     assert INTERNAL_RESIDUAL in estimates.not_estimated and LOCALIZATION in estimates.not_estimated
-    assert estimates.external_wrench_world is None  # no F/T frame: the ground's reaction is unknown
+    # No F/T frame and no torques: the ground's wrenches cannot be estimated, so neither can the external residual.
+    assert estimates.external_wrench_world is None and "no joint torques" in estimates.not_estimated[EXTERNAL_RESIDUAL]
     path = write_log(log, tmp_path / "nao.csv")
     args = ["--robot", "nao_like", "--log", str(path), "--out", str(tmp_path), "--no-replay"]
     assert estimate_from_log_app.main(args) == 0

@@ -6,6 +6,7 @@ description, is a clear error (exit 2), never a traceback."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -76,15 +77,19 @@ def test_model_refinement_on_talos_says_which_joints_a_short_calibration_leaves_
     assert "the log does not determine the torque scale of joints ['" in capsys.readouterr().err
 
 
-def test_an_app_that_needs_foot_force_torque_sensors_says_so(tmp_path, capsys):
-    """The demo log of estimate-from-log is a robot's log with its F/T wrenches (the contact
-    study and push-and-comply take the soles' wrenches as unknowns instead:
-    tests/test_contact_localization.py, tests/test_sole_wrenches.py)."""
-    log = tmp_path / "demo.mcap"
-    args = ["--robot", NAO, "--write-demo-log", str(log), "--headless", "--out", str(tmp_path)]
-    assert estimate_from_log.main(args) == 2
-    assert "has a foot without an F/T sensor" in capsys.readouterr().err
-    assert not log.exists() and not (tmp_path / "estimate_from_log").exists()
+def test_estimate_from_log_on_a_robot_with_fsrs(tmp_path, capsys):
+    """nao_like's demo log (FSR readings, no F/T wrench: a table format, FSRs have no ROS
+    message) is estimated with its soles' shear and yaw as unknowns: the push is found on
+    its link, as the simulation's own estimators found it."""
+    log = tmp_path / "demo.csv"
+    args = ["--robot", NAO, "--write-demo-log", str(log), "--headless", "--out", str(tmp_path), "--no-replay"]
+    assert estimate_from_log.main(args) == 0
+    printed = capsys.readouterr().out
+    pushed = re.search(r"a push of [0-9.]+ N \S+ \S+ \S+ on (\S+) from", printed).group(1)
+    metrics = json.loads((tmp_path / "estimate_from_log" / "metrics.json").read_text())
+    assert metrics["estimated_sole_wrenches"] == ["l_sole_frame", "r_sole_frame"]
+    assert [c["link"] for c in metrics["contacts"]] == [pushed]
+    assert not metrics["not_estimated"]
 
 
 @pytest.mark.parametrize(

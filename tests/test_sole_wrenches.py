@@ -165,9 +165,12 @@ def test_replay_is_the_system_update_by_update(hrp4, components):
     for k in range(N):
         ctx.SetTime(k * 1e-3)
         dut.GetInputPort("state").FixValue(ctx, np.concatenate((positions[k], v)))
+        # The update reads the residuals of their previous update, the outputs their latest.
+        dut.GetInputPort("external_wrench_world").FixValue(ctx, external[k - 1] if k else np.zeros(6))
+        dut.GetInputPort("internal_residual").FixValue(ctx, internal[k - 1] if k else np.zeros(internal.shape[1]))
+        ctx.SetDiscreteState(dut.EvalUniquePeriodicDiscreteUpdate(ctx).get_vector().CopyToVector())
         dut.GetInputPort("external_wrench_world").FixValue(ctx, external[k])
         dut.GetInputPort("internal_residual").FixValue(ctx, internal[k])
-        ctx.SetDiscreteState(dut.EvalUniquePeriodicDiscreteUpdate(ctx).get_vector().CopyToVector())
         assert dut.GetOutputPort("contact_body_index").Eval(ctx)[0] == replayed.body_index[k]
         np.testing.assert_allclose(dut.GetOutputPort("residual").Eval(ctx), replayed.internal[k], atol=1e-9)
         np.testing.assert_allclose(
@@ -180,7 +183,14 @@ def test_replay_is_the_system_update_by_update(hrp4, components):
     np.testing.assert_allclose(ctx.get_discrete_state_vector().CopyToVector(), replayed.end, atol=1e-12)
     # In two parts: the second goes on from the first's end.
     first = dut.replay(positions[:57], external[:57], internal[:57])
-    second = dut.replay(positions[57:], external[57:], internal[57:], start=first.end, first_update=57)
+    second = dut.replay(
+        positions[57:],
+        external[57:],
+        internal[57:],
+        start=first.end,
+        first_update=57,
+        before=(external[56], internal[56]),
+    )
     np.testing.assert_allclose(second.internal, replayed.internal[57:], atol=1e-9)
     np.testing.assert_array_equal(second.body_index, replayed.body_index[57:])
     with pytest.raises(ValueError, match="internal_residual must be"):

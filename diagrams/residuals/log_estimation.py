@@ -1,7 +1,10 @@
 """Offline contact estimation on a recorded log (issue 14): the residuals (Flacco et al. 2016,
-eqs. 11, 16), the force estimate (eq. 19), the contact detector and, on a robot with foot
-F/T sensors, the single-contact localizer (Sec. VI, eq. 22), run on a ``RobotLog``
-(``systems.io.robot_log``) instead of in a simulation.
+eqs. 11, 16), the force estimate (eq. 19), the contact detector and the single-contact
+localizer (Sec. VI, eq. 22), run on a ``RobotLog`` (``systems.io.robot_log``) instead of in a
+simulation. On a robot without foot F/T sensors the soles' ground wrenches are unknowns of
+the detector and the localizer (with FSRs, only their shear and yaw: the FSRs' readings give
+the rest, ``fsr_sole_wrenches``), and ``SoleWrenchCompensation.replay`` estimates them with
+the contact and takes them out of the reported residuals and force.
 
     RobotLog ──log_inputs──► sensed [q; v], motor torques, F/T wrenches (world), plant order
                  │
@@ -40,9 +43,12 @@ speed are ``LogEstimationSettings.ekf`` (``systems.estimation.ekf_settings``).
 What the log lacks, the estimation goes without, and ``LogEstimates.not_estimated`` says
 which estimates it could not make and why: without joint torques the internal residual
 (eq. 11), hence the detector and the localizer, are not computed, while the external
-residual (eq. 16) and its force (eq. 19) need none; without every F/T foot's full 6-axis
-wrench (a foot logging only its normal force, or nothing) neither residual runs (both
-subtract the feet's wrenches as known wrenches); the base-state EKF runs on any of them.
+residual (eq. 16) and its force (eq. 19) need none (on a robot with foot F/T sensors:
+without them the soles' wrenches are estimated from both residuals); without every F/T
+foot's full 6-axis wrench (a foot logging only its normal force, or nothing) neither
+residual runs (both subtract the feet's wrenches as known wrenches); a foot with FSRs whose
+readings the log lacks has its whole sole wrench unknown (``fsr_sides_logged``); the
+base-state EKF runs on any of them.
 """
 
 from __future__ import annotations
@@ -82,7 +88,13 @@ from systems.estimation.ekf_settings import (
     check_ekf_settings,
 )
 from systems.io.robot_log import RobotLog, StampTiming, resample_uniform, stamp_timing
-from systems.residuals.contact_estimation import STATUS_REASONS, ContactDetector, ContactLocalizer
+from systems.observer.fsr_sensing import FSR_NAMES, FsrSoleWrenches
+from systems.residuals.contact_estimation import (
+    ALL_WRENCH_COMPONENTS,
+    STATUS_REASONS,
+    ContactDetector,
+    ContactLocalizer,
+)
 from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual, ResidualModel
 from systems.residuals.offline import (
     STACKED_IMPLEMENTATIONS,
@@ -91,6 +103,7 @@ from systems.residuals.offline import (
     replay_residuals,
     residual_noise_model,
 )
+from systems.residuals.sole_wrenches import ReplayedCompensation, SoleWrenchCompensation
 from systems.simulation.disturbances import Push, PushSource, Step
 from systems.simulation.visualization import ForceArrows
 
@@ -193,11 +206,13 @@ def make_detector(
         robot.plant,
         internal_gain=settings.internal_gain,
         external_gain=settings.external_gain,
-        known_wrench_frames=robot.ft_frames,
+        known_wrench_frames=robot.known_wrench_frames,
         nominal_positions=robot.standing_state[: robot.plant.num_positions()],
         period=period,
         startup_time=settings.detector_startup_time,
         release_probability=settings.detector_release_probability,
+        unknown_wrench_frames=robot.unknown_wrench_frames,
+        unknown_wrench_components=robot.unknown_wrench_components,
         **(covariances or {}),
     )
 
@@ -210,11 +225,13 @@ DETECTION = "contact detection"
 
 
 def localization_unavailable(robot: EstimatorPlant) -> str | None:
-    """Why the localizer cannot run on ``robot``, or None when it can: no foot F/T sensors
-    (the ground reaction is then an unknown force: no single contact to isolate), or no
-    collision geometry on any link above them (no surface to localize a contact on)."""
-    if not robot.ft_frames:
-        return "no foot F/T sensors: the ground reaction is an unknown force, no single contact to isolate"
+    """Why the localizer cannot run on ``robot``, or None when it can: no feet (a model
+    file, not a humanoid description: no soles whose ground wrenches to measure or
+    estimate), or no collision geometry on any link above them (no surface to localize a
+    contact on). Feet without F/T sensors are fine: their soles' wrenches are unknowns of
+    the localizer (``EstimatorPlant.unknown_wrench_frames``)."""
+    if not robot.ft_frames and not robot.unknown_wrench_frames:
+        return "no feet (a model file, not a humanoid description): no ground wrenches to tell a contact from"
     plant = robot.plant
     excluded = set(robot.excluded_bodies)
     bodies = [plant.get_body(BodyIndex(i)) for i in range(1, plant.num_bodies())]
@@ -228,7 +245,7 @@ def localization_unavailable(robot: EstimatorPlant) -> str | None:
 
 def make_localizer(robot: EstimatorPlant, settings: LogEstimationSettings, period: float) -> ContactLocalizer | None:
     """The ContactLocalizer of ``settings``, the soles excluded; None when it cannot run
-    (``localization_unavailable``: no foot F/T sensors, no collision geometry)."""
+    (``localization_unavailable``: no feet, no collision geometry)."""
     if localization_unavailable(robot) is not None:
         return None
     return ContactLocalizer(
@@ -238,6 +255,8 @@ def make_localizer(robot: EstimatorPlant, settings: LogEstimationSettings, perio
         period=period,
         localization_period=settings.localization_period,
         settle_time=settings.settle_time,
+        unknown_wrench_frames=robot.unknown_wrench_frames,
+        unknown_wrench_components=robot.unknown_wrench_components,
     )
 
 
@@ -499,6 +518,43 @@ def foot_force_sources(robot: EstimatorPlant, log: RobotLog) -> dict[str, tuple[
     return sources
 
 
+def fsr_sides_logged(robot: EstimatorPlant, log: RobotLog) -> EstimatorPlant:
+    """``robot`` as the log can serve it: a foot with FSRs (``EstimatorPlant.fsr_sides``)
+    whose four readings the log lacks (``fsr_<side>_<name>`` columns) has its sole's whole
+    wrench unknown, as a foot with ``sensing: none``; ``robot`` itself when every FSR foot's
+    readings are logged."""
+    logged = set(log.fsr_names)
+    unlogged = [side for side in robot.fsr_sides if not {n for n in FSR_NAMES if n.startswith(f"{side}_")} <= logged]
+    if not unlogged:
+        return robot
+    side_of = {robot.humanoid.sole_frames[side].name(): side for side in robot.humanoid.sole_frames}
+    sides = [side_of[frame.name()] for frame in robot.unknown_wrench_frames]
+    fsr_sides = tuple(side for side in robot.fsr_sides if side not in unlogged)
+    return replace(
+        robot,
+        unknown_wrench_components=tuple(
+            ALL_WRENCH_COMPONENTS if side in unlogged else components
+            for side, components in zip(sides, robot.unknown_wrench_components)
+        ),
+        fsr_sides=fsr_sides,
+        fsr_frames=tuple(robot.humanoid.sole_frames[side] for side in fsr_sides),
+    )
+
+
+def fsr_sole_wrenches(robot: EstimatorPlant, log: RobotLog, positions: np.ndarray) -> np.ndarray:
+    """(N, 6 k) the wrenches the FSRs of the k feet ``robot.fsr_sides`` measure at their
+    soles (``FsrSoleWrenches``: normal force and centre of pressure, [moment about the sole
+    frame's origin; force], world), from the log's readings and the positions (N, nq)."""
+    readings = np.zeros((log.num_samples, len(FSR_NAMES)))
+    column = {name: i for i, name in enumerate(log.fsr_names)}
+    for slot, name in enumerate(FSR_NAMES):
+        if name in column:
+            readings[:, slot] = log.fsr_forces[:, column[name]]
+    soles = FsrSoleWrenches(robot.plant, robot.humanoid, robot.fsr_sides)
+    R_WS = robot.frame_rotations(robot.fsr_frames, positions)
+    return np.array([soles.sole_wrenches(r, R).ravel() for r, R in zip(readings, R_WS)])
+
+
 def log_inputs(
     robot: EstimatorPlant,
     log: RobotLog,
@@ -593,6 +649,8 @@ def log_inputs(
         for j, name in enumerate(ft_names):
             w = log.wrenches[name].reshape(N, 2, 3)
             wrenches[:, 6 * j : 6 * j + 6] = np.einsum("nij,nkj->nki", R_WS[:, j], w).reshape(N, 6)
+    if wrenches is not None and robot.fsr_frames:
+        wrenches = np.concatenate((wrenches, fsr_sole_wrenches(robot, log, state[:, :nq])), axis=1)
     return LogInputs(
         time=log.time,
         period=period,
@@ -1001,6 +1059,18 @@ class LogEstimates:
             ``LOCALIZATION`` (no detection, or ``localization_unavailable``); empty when
             everything ran.
         wall_time_s: the replay's wall time; real_time_factor = log duration / it.
+        sole_frames: the soles whose ground wrenches were estimated (a robot without foot
+            F/T sensors; empty otherwise). Their wrenches, fitted every update with one
+            link's free wrench (``SoleWrenchCompensation.replay``, as the system runs
+            online), are taken out of ``internal_residual``,
+            ``external_wrench_world`` and ``force_world``, which then hold the contacts'
+            share alone, as with F/T sensors (the detector and the localizer fit the soles'
+            wrenches themselves, from the raw residuals).
+        sole_wrenches_world: (N, 6 m) the soles' estimated wrenches, [moment about the
+            sole frame's origin; force] per sole, world (FSRs' measured components are
+            not in it: 0 there); None with F/T sensors.
+        sole_contact_body_index: (N,) the link whose free wrench was fitted with the soles'
+            (-1: none), or None.
     """
 
     time: np.ndarray
@@ -1024,6 +1094,9 @@ class LogEstimates:
     not_estimated: dict = field(default_factory=dict)
     at_rest: AtRestCalibration | None = None
     slip_updates: dict[str, int] = field(default_factory=dict)
+    sole_frames: tuple[str, ...] = ()
+    sole_wrenches_world: np.ndarray | None = None
+    sole_contact_body_index: np.ndarray | None = None
 
     @property
     def real_time_factor(self) -> float:
@@ -1066,7 +1139,7 @@ def build_offline_estimators(
     """The residual systems of ``settings`` on one shared ``ResidualModel``, as
     ``diagrams.residuals.wiring`` builds them online."""
     model = ResidualModel(robot.plant, settings.dynamics)
-    frames = robot.ft_frames
+    frames = robot.known_wrench_frames
     internal = InternalResidual(robot.plant, settings.internal_gain, period, frames, model=model)
     external = ExternalResidual(robot.plant, settings.external_gain, period, frames, model=model)
     return model, internal, external
@@ -1093,6 +1166,13 @@ def estimate_from_log(
     """
     settings = settings or LogEstimationSettings()
     robot = robot if isinstance(robot, EstimatorPlant) else build_estimator_plant(robot)
+    robot = fsr_sides_logged(robot, log)
+    if robot.unknown_wrench_frames and settings.internal_gain != settings.external_gain:
+        raise ValueError(
+            "without foot F/T sensors the soles' wrenches are fitted to both residuals through their common filter: "
+            f"internal_gain and external_gain must be equal, got {settings.internal_gain} and "
+            f"{settings.external_gain}"
+        )
     start = _time.perf_counter()
     inputs = log_inputs(robot, log, settings, initial_base_pose)
     period = inputs.period
@@ -1105,7 +1185,7 @@ def estimate_from_log(
             external_wrench = replay_residuals(
                 robot.plant,
                 model,
-                robot.ft_frames,
+                robot.known_wrench_frames,
                 inputs.state,
                 np.zeros((inputs.state.shape[0], robot.plant.num_velocities() - 6)),
                 inputs.known_wrenches,
@@ -1150,17 +1230,38 @@ def estimate_from_log(
         inputs.joint_torque,
         inputs.known_wrenches,
     )
+    soles = None
+    if robot.unknown_wrench_frames:
+        soles = make_sole_compensation(robot, settings, period).replay(
+            inputs.state[:, : robot.plant.num_positions()], replay.external_wrench_world, replay.internal
+        )
     wall = _time.perf_counter() - start
-    return _estimates(robot, inputs, replay, wall, settings, skipped)
+    return _estimates(robot, inputs, replay, wall, settings, skipped, soles)
+
+
+def make_sole_compensation(
+    robot: EstimatorPlant, settings: LogEstimationSettings, period: float
+) -> SoleWrenchCompensation:
+    """The soles' wrench compensation of a robot without foot F/T sensors (its soles'
+    unknown wrench components fitted with one link's free wrench; the residuals' gain)."""
+    return SoleWrenchCompensation(
+        robot.plant,
+        robot.unknown_wrench_frames,
+        robot.unknown_wrench_components,
+        gain=settings.internal_gain,
+        residual="internal",
+        candidate_bodies=robot.contact_candidate_bodies,
+        period=period,
+    )
 
 
 def skipped_estimates(robot: EstimatorPlant, inputs: LogInputs) -> dict[str, str]:
     """{estimate: why it cannot be made} on the log ``inputs``
     (``LogEstimates.not_estimated``): the internal residual without joint torques or without every F/T
-    foot's full wrench, the external residual without the latter (both on a robot whose
-    feet have no F/T sensor at all: the ground's wrenches are unknown), the detector without
-    both residuals, the localizer without the detector or on a model it cannot run on
-    (``localization_unavailable``)."""
+    foot's full wrench, the external residual without the latter (or, on a robot without
+    foot F/T sensors, without joint torques: the soles' unknown wrenches are estimated from
+    both residuals), the detector without both residuals, the localizer without the
+    detector or on a model it cannot run on (``localization_unavailable``)."""
     skipped = {}
     wrenches = None
     if inputs.known_wrenches is None:
@@ -1168,15 +1269,15 @@ def skipped_estimates(robot: EstimatorPlant, inputs: LogInputs) -> dict[str, str
             f"the feet {list(inputs.missing_wrenches)} have no 6-axis F/T wrench in the log (a normal force at most): "
             "the residuals subtract the feet's full wrenches as known wrenches"
         )
-    elif not robot.ft_frames and robot.humanoid is not None and robot.humanoid.sole_frames:
-        wrenches = (
-            "the robot has no foot F/T sensors: the ground's wrenches on its feet are unknown, and the residuals "
-            "would report them as an external contact (the robot's weight)"
-        )
     if inputs.joint_torque is None:
         skipped[INTERNAL_RESIDUAL] = (
             "the log has no joint torques (tau_<joint> columns, JointState effort): eq. 11 needs the motor torques"
         )
+        if wrenches is None and robot.unknown_wrench_frames:
+            wrenches = (
+                "the robot has no foot F/T sensors and the log no joint torques: the ground's wrenches on its soles "
+                "are estimated from both residuals, and the external one alone would report them as a contact"
+            )
     elif wrenches is not None:
         skipped[INTERNAL_RESIDUAL] = wrenches
     if wrenches is not None:
@@ -1194,7 +1295,13 @@ def skipped_estimates(robot: EstimatorPlant, inputs: LogInputs) -> dict[str, str
 
 
 def _estimates(
-    robot: EstimatorPlant, inputs: LogInputs, replay: ReplayedEstimation, wall: float, settings, skipped: dict
+    robot: EstimatorPlant,
+    inputs: LogInputs,
+    replay: ReplayedEstimation,
+    wall: float,
+    settings,
+    skipped: dict,
+    soles: ReplayedCompensation | None = None,
 ) -> LogEstimates:
     plant = robot.plant
     free_joint = robot.topology.free_joint
@@ -1204,12 +1311,15 @@ def _estimates(
         localization = dict(replay.localization)
         localization["status"] = localization["status"].astype(int)
         localization["body_index"] = localization["body_index"].astype(int)
+    internal, external = replay.internal, replay.external_wrench_world
+    if soles is not None:  # net of the soles' estimated wrenches
+        internal, external = soles.internal, soles.external_wrench_world
     return LogEstimates(
         time=inputs.time - inputs.time[0],
         joint_names=robot.joint_names,
-        internal_residual=replay.internal,
-        external_wrench_world=replay.external_wrench_world,
-        force_world=None if replay.external_wrench_world is None else replay.external_wrench_world[:, 3:].copy(),
+        internal_residual=internal,
+        external_wrench_world=external,
+        force_world=None if external is None else external[:, 3:].copy(),
         contact_detected=replay.contact_detected,
         test_statistics=replay.test_statistics,
         localization=localization,
@@ -1230,6 +1340,9 @@ def _estimates(
         not_estimated=dict(skipped),
         at_rest=inputs.at_rest,
         slip_updates=dict(inputs.slip_updates),
+        sole_frames=tuple(frame.name() for frame in robot.unknown_wrench_frames) if soles is not None else (),
+        sole_wrenches_world=None if soles is None else soles.sole_wrenches_world,
+        sole_contact_body_index=None if soles is None else soles.body_index.astype(int),
     )
 
 
@@ -1307,9 +1420,14 @@ def simulate_push_log(
     reported. Each logged sample is what the estimators read at that update (sample-and-
     holds on their inputs), so the log replays them exactly.
 
+    On a robot without foot F/T sensors the log has no wrenches (the FSRs' readings on a
+    robot with FSRs), and ``OnlineEstimates.extra`` holds the online
+    ``SoleWrenchCompensation``'s outputs (``make_sole_compensation``): "sole_internal",
+    "sole_external", "sole_wrenches" and "sole_body".
+
     Raises:
-        ValueError: a zero force or a bad body (see ``Push``); a robot without F/T feet or
-            without collision geometry (``localization_unavailable``).
+        ValueError: a zero force or a bad body (see ``Push``); a robot without collision
+            geometry (``localization_unavailable``).
     """
     settings = settings or LogEstimationSettings()
     force = np.asarray(push_force, dtype=float)
@@ -1321,8 +1439,6 @@ def simulate_push_log(
     )
     builder = DiagramBuilder()
     station = add_humanoid_station(builder, robot, noise=noise, seed=seed, base_state=base_state)
-    if not station.known_wrench_frames or station.estimator.unknown_wrench_frames:
-        raise ValueError(f"simulate_push_log: {robot!r} has a foot without an F/T sensor")
     unavailable = localization_unavailable(station.estimator)
     if unavailable is not None:
         raise ValueError(f"simulate_push_log: {robot!r} cannot be localized on: {unavailable}")
@@ -1341,19 +1457,32 @@ def simulate_push_log(
     localizer = builder.AddSystem(make_localizer(robot_view, settings, period))
     builder.Connect(external.GetOutputPort("external_wrench_world"), detector.GetInputPort("external_wrench_world"))
     builder.Connect(internal.GetOutputPort("residual"), detector.GetInputPort("residual"))
+    if detector.HasInputPort("state"):  # the soles' columns (no foot F/T sensors) move with q
+        builder.Connect(station.sensed_state, detector.GetInputPort("state"))
     builder.Connect(station.sensed_state, localizer.GetInputPort("state"))
     builder.Connect(external.GetOutputPort("external_wrench_world"), localizer.GetInputPort("external_wrench_world"))
     builder.Connect(internal.GetOutputPort("residual"), localizer.GetInputPort("residual"))
     builder.Connect(detector.GetOutputPort("contact_detected"), localizer.GetInputPort("contact_detected"))
+    compensation = None
+    if robot_view.unknown_wrench_frames:  # the soles' wrenches estimated (no foot F/T sensors)
+        compensation = builder.AddSystem(make_sole_compensation(robot_view, settings, period))
+        builder.Connect(station.sensed_state, compensation.GetInputPort("state"))
+        builder.Connect(
+            external.GetOutputPort("external_wrench_world"), compensation.GetInputPort("external_wrench_world")
+        )
+        builder.Connect(internal.GetOutputPort("residual"), compensation.GetInputPort("internal_residual"))
     sensors = station.sensors
     # Sample-and-holds: their output after the update at t_k is what the estimators read then.
     held = {
         "state": station.sensed_state,
         "torque": station.measured_torque,
-        "wrenches": station.known_wrenches,
         "gyro": sensors.imu.angular_velocity,
         "accel": sensors.imu.linear_acceleration,
     }
+    if station.known_wrenches is not None:
+        held["wrenches"] = station.known_wrenches
+    if robot_view.fsr_sides:
+        held["fsr"] = sensors.fsr_forces
     loggers = {}
     for name, port in held.items():
         hold = builder.AddSystem(ZeroOrderHold(period, port.size()))
@@ -1369,6 +1498,13 @@ def simulate_push_log(
         "point": localizer.GetOutputPort("contact_point_world"),
         "force": localizer.GetOutputPort("contact_force_world"),
     }
+    if compensation is not None:
+        outputs |= {
+            "sole_internal": compensation.GetOutputPort("residual"),
+            "sole_external": compensation.GetOutputPort("external_wrench_world"),
+            "sole_wrenches": compensation.GetOutputPort("sole_wrenches_world"),
+            "sole_body": compensation.GetOutputPort("contact_body_index"),
+        }
     for name, port in outputs.items():
         loggers[name] = LogVectorOutput(port, builder, period)
     diagram = builder.Build()
@@ -1387,7 +1523,14 @@ def simulate_push_log(
     data = {name: values[first:] for name, values in data.items()}
     times = times[first:] - times[first]
     log = log_from_signals(
-        robot_view, times, data["state"], data["torque"], data["wrenches"], data["gyro"], data["accel"]
+        robot_view,
+        times,
+        data["state"],
+        data["torque"],
+        data.get("wrenches"),
+        data["gyro"],
+        data["accel"],
+        fsr_forces=data.get("fsr"),
     )
     online = OnlineEstimates(
         internal_residual=data["internal"],
@@ -1400,6 +1543,7 @@ def simulate_push_log(
         push=push,
         push_start=push_start,
         push_end=push_end,
+        extra={name: values for name, values in data.items() if name.startswith("sole_")},
     )
     return log, online
 
@@ -1409,14 +1553,17 @@ def log_from_signals(
     time: np.ndarray,
     state: np.ndarray,
     joint_torque: np.ndarray,
-    known_wrenches: np.ndarray,
+    known_wrenches: np.ndarray | None,
     gyro: np.ndarray | None = None,
     accel: np.ndarray | None = None,
+    fsr_forces: np.ndarray | None = None,
 ) -> RobotLog:
     """The ``RobotLog`` of the estimators' inputs in the plant's layout (the inverse of
-    ``log_inputs``): the sensed state (N, nq + nv), the motor torques (N, n), the F/T
-    wrenches in world (N, 6 k, ``robot.ft_frames`` order; rotated to their sensor frames
-    with the sensed configuration) and the IMU (N, 3 each, IMU frame)."""
+    ``log_inputs``): the sensed state (N, nq + nv), the motor torques (N, n), the known
+    wrenches in world (N, 6 k, ``robot.known_wrench_frames`` order: the F/T wrenches,
+    rotated to their sensor frames with the sensed configuration, are logged; the FSR
+    soles' are not: the FSRs' readings are), the IMU (N, 3 each, IMU frame) and the FSRs'
+    readings (N, 8, ``FSR_NAMES`` order, N) on a robot with FSRs."""
     plant = robot.plant
     topology = floating_base_topology(plant)
     nq = plant.num_positions()
@@ -1428,6 +1575,9 @@ def log_from_signals(
         for j, frame in enumerate(robot.ft_frames):
             w_W = known_wrenches[:, 6 * j : 6 * j + 6].reshape(N, 2, 3)
             wrenches[frame.name()] = np.einsum("nji,nkj->nki", R_WS[:, j], w_W).reshape(N, 6)
+    fsr = {}
+    if fsr_forces is not None:
+        fsr = {"fsr_names": FSR_NAMES, "fsr_forces": np.asarray(fsr_forces, dtype=float)}
     return RobotLog(
         time=time,
         joint_names=tuple(j.name() for j in topology.joints),
@@ -1439,6 +1589,7 @@ def log_from_signals(
         wrenches=wrenches,
         imu_angular_velocity=gyro,
         imu_linear_acceleration=accel,
+        **fsr,
     )
 
 

@@ -244,14 +244,17 @@ class SoleWrenchCompensation(LeafSystem):
         internal_residual: np.ndarray,
         start: np.ndarray | None = None,
         first_update: int = 0,
+        before: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> ReplayedCompensation:
-        """The system's N updates without a Context (``systems.residuals.offline``), with
-        its internal residual output: at update k (the ``first_update`` + k-th of the
-        system, which chooses the link when that count is a multiple of the selection
-        period's updates) it reads positions[k] and the residuals its input ports hold then
-        (``external_wrench_world``[k], ``internal_residual``[k]), and its outputs are read
-        right after it with those inputs. From ``start`` (the discrete state; default the
-        initial one: no link, zero columns).
+        """The system's N updates without a Context (``systems.residuals.offline``), as in a
+        diagram whose residuals output their discrete state and update at the same times:
+        ``external_wrench_world`` and ``internal_residual`` (N rows each) are the residuals
+        after each of their updates. Update k (the ``first_update`` + k-th of the system,
+        which chooses the link when that count is a multiple of the selection period's
+        updates) reads positions[k] and the residuals of update k - 1 (``before``, the pair
+        before the first, default zeros); its outputs, read after it, the residuals of
+        update k. From ``start`` (the discrete state; default the initial one: no link,
+        zero columns).
 
         Raises:
             ValueError: arrays of inconsistent sizes or non-finite values (naming them).
@@ -278,6 +281,8 @@ class SoleWrenchCompensation(LeafSystem):
         slot = int(start[0])
         stacked = start[1:].reshape(self._shape).copy()
         rows = np.concatenate((r_ext, r_int), axis=1)
+        first = np.zeros(rows.shape[1]) if before is None else np.concatenate([np.asarray(b, float) for b in before])
+        read = np.vstack((first[None], rows[:-1]))  # what each update reads
         k_size, a = unknown.size, self._factor
         body = np.full(N, -1.0)
         fitted = np.zeros((N, k_size))
@@ -287,7 +292,7 @@ class SoleWrenchCompensation(LeafSystem):
             kin.set_positions(q[k])
             stacked = (1.0 - a) * stacked + a * unknown.columns(kin)
             if (first_update + k) % self._every == 0:
-                slot = self.choose_link(q[k], rows[k], stacked)
+                slot = self.choose_link(q[k], read[k], stacked)
                 kin.set_positions(q[k])
             A = stacked
             if slot >= 0:

@@ -103,7 +103,7 @@ from systems.residuals.offline import (
     replay_residuals,
     residual_noise_model,
 )
-from systems.residuals.sole_wrenches import ReplayedCompensation, SoleWrenchCompensation
+from systems.residuals.sole_wrenches import ReplayedCompensation
 from systems.simulation.disturbances import Push, PushSource, Step
 from systems.simulation.visualization import ForceArrows
 
@@ -1232,27 +1232,11 @@ def estimate_from_log(
     )
     soles = None
     if robot.unknown_wrench_frames:
-        soles = make_sole_compensation(robot, settings, period).replay(
+        soles = robot.sole_wrench_compensation(settings.internal_gain, period).replay(
             inputs.state[:, : robot.plant.num_positions()], replay.external_wrench_world, replay.internal
         )
     wall = _time.perf_counter() - start
     return _estimates(robot, inputs, replay, wall, settings, skipped, soles)
-
-
-def make_sole_compensation(
-    robot: EstimatorPlant, settings: LogEstimationSettings, period: float
-) -> SoleWrenchCompensation:
-    """The soles' wrench compensation of a robot without foot F/T sensors (its soles'
-    unknown wrench components fitted with one link's free wrench; the residuals' gain)."""
-    return SoleWrenchCompensation(
-        robot.plant,
-        robot.unknown_wrench_frames,
-        robot.unknown_wrench_components,
-        gain=settings.internal_gain,
-        residual="internal",
-        candidate_bodies=robot.contact_candidate_bodies,
-        period=period,
-    )
 
 
 def skipped_estimates(robot: EstimatorPlant, inputs: LogInputs) -> dict[str, str]:
@@ -1422,7 +1406,7 @@ def simulate_push_log(
 
     On a robot without foot F/T sensors the log has no wrenches (the FSRs' readings on a
     robot with FSRs), and ``OnlineEstimates.extra`` holds the online
-    ``SoleWrenchCompensation``'s outputs (``make_sole_compensation``): "sole_internal",
+    ``SoleWrenchCompensation``'s outputs (``EstimatorPlant.sole_wrench_compensation``): "sole_internal",
     "sole_external", "sole_wrenches" and "sole_body".
 
     Raises:
@@ -1465,7 +1449,7 @@ def simulate_push_log(
     builder.Connect(detector.GetOutputPort("contact_detected"), localizer.GetInputPort("contact_detected"))
     compensation = None
     if robot_view.unknown_wrench_frames:  # the soles' wrenches estimated (no foot F/T sensors)
-        compensation = builder.AddSystem(make_sole_compensation(robot_view, settings, period))
+        compensation = builder.AddSystem(robot_view.sole_wrench_compensation(settings.internal_gain, period))
         builder.Connect(station.sensed_state, compensation.GetInputPort("state"))
         builder.Connect(
             external.GetOutputPort("external_wrench_world"), compensation.GetInputPort("external_wrench_world")

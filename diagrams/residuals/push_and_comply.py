@@ -264,15 +264,7 @@ def _add_sole_wrench_compensation(
             builder.Connect(station.known_wrenches, system.GetInputPort("known_wrenches"))
     internal = residual if residual_kind == "internal" else inputs["internal"]
     compensation = builder.AddSystem(
-        SoleWrenchCompensation(
-            estimator.plant,
-            estimator.unknown_wrench_frames,
-            estimator.unknown_wrench_components,
-            gain=scenario.residual_gain,
-            residual=residual_kind,
-            candidate_bodies=estimator.contact_candidate_bodies,
-            period=residual.period,
-        )
+        estimator.sole_wrench_compensation(scenario.residual_gain, residual.period, residual_kind)
     )
     compensation.set_name("sole_wrench_compensation")
     builder.Connect(station.sensed_state, compensation.GetInputPort("state"))

@@ -266,15 +266,7 @@ def _add_sole_wrench_compensations(
     compensations = {}
     for kind, residual in (("internal", internal), ("classical", classical)):
         compensation = builder.AddSystem(
-            SoleWrenchCompensation(
-                estimator.plant,
-                estimator.unknown_wrench_frames,
-                estimator.unknown_wrench_components,
-                gain=scenario.internal_gain,
-                residual=kind,
-                candidate_bodies=estimator.contact_candidate_bodies,
-                period=scenario.period,
-            )
+            estimator.sole_wrench_compensation(scenario.internal_gain, scenario.period, kind)
         )
         compensation.set_name(f"{kind}_sole_wrench_compensation")
         builder.Connect(station.sensed_state, compensation.GetInputPort("state"))

@@ -37,6 +37,7 @@ from models import (
 )
 from systems.common.topology import FloatingBaseTopology, floating_base_topology, rigid_link_of_bodies
 from systems.residuals.contact_estimation import ALL_WRENCH_COMPONENTS, SOLE_SHEAR_AND_YAW
+from systems.residuals.sole_wrenches import SoleWrenchCompensation
 
 
 @dataclass
@@ -106,6 +107,26 @@ class EstimatorPlant:
         excluded = set(self.excluded_bodies)
         bodies = (self.plant.get_body(BodyIndex(i)) for i in range(1, self.plant.num_bodies()))
         return tuple(b for b in bodies if b.name() not in excluded and b.default_mass() > 0.0)
+
+    def sole_wrench_compensation(
+        self, gain: float, period: float, residual: str = "internal"
+    ) -> SoleWrenchCompensation:
+        """The ``SoleWrenchCompensation`` of this robot's soles (its unknown wrench frames and
+        components; the push's candidate links ``contact_candidate_bodies``) on residuals of
+        gain ``gain`` (1/s) updated every ``period`` s, compensating the ``residual`` one.
+
+        Raises:
+            ValueError: no unknown wrench frames (a robot with foot F/T sensors), bad settings.
+        """
+        return SoleWrenchCompensation(
+            self.plant,
+            self.unknown_wrench_frames,
+            self.unknown_wrench_components,
+            gain=gain,
+            residual=residual,
+            candidate_bodies=self.contact_candidate_bodies,
+            period=period,
+        )
 
     @property
     def joint_names(self) -> tuple[str, ...]:

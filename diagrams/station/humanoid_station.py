@@ -571,7 +571,6 @@ def _add_estimated_foot_contact(
     flags feed estimates: their outputs come from their discrete state, so the loop has a
     step's delay and no algebraic loop."""
     from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual
-    from systems.residuals.sole_wrenches import SoleWrenchCompensation
 
     gain = ESTIMATED_CONTACT_RESIDUAL_GAIN
     model = ResidualModel(estimator.plant)
@@ -582,16 +581,7 @@ def _add_estimated_foot_contact(
         builder.Connect(sensed_state, residual.GetInputPort("state"))
         if residual.HasInputPort("measured_torque"):
             builder.Connect(measured_torque, residual.GetInputPort("measured_torque"))
-    soles = builder.AddSystem(
-        SoleWrenchCompensation(
-            estimator.plant,
-            estimator.unknown_wrench_frames,
-            estimator.unknown_wrench_components,
-            gain=gain,
-            candidate_bodies=estimator.contact_candidate_bodies,
-            period=period,
-        )
-    )
+    soles = builder.AddSystem(estimator.sole_wrench_compensation(gain, period))
     soles.set_name("contact_sole_wrenches")
     builder.Connect(sensed_state, soles.GetInputPort("state"))
     builder.Connect(external.GetOutputPort("external_wrench_world"), soles.GetInputPort("external_wrench_world"))

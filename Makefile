@@ -2,17 +2,22 @@
 # Each creates .venv when missing and installs what the project needs into it (its
 # dependencies and its metadata only: the code runs from this folder, see pyproject.toml).
 # The interpreter decides the Drake release (pyproject.toml: drake>=1.51.1,<1.59): Python
-# 3.12 and 3.13 get drake 1.58, Python 3.11 drake 1.51.1. `make PYTHON=python3.12 ...` picks
-# it, once: later commands without PYTHON keep the environment's interpreter. A pyenv
-# interpreter (`pyenv versions`) is found even when no pyenv shell selected it.
+# 3.12 and 3.13 get drake 1.58, Python 3.11 drake 1.51.1. `make PYTHON=python3.11 ...` picks
+# it, once: later commands without PYTHON keep the environment's interpreter. Without PYTHON
+# a new environment gets Python 3.12 where it is installed (today's Drake, and the main job's
+# closed loop runs faster on it: BENCHMARKS.md), else python3. A pyenv interpreter
+# (`pyenv versions`) is found even when no pyenv shell selected it.
 # The environment; a second one beside it, e.g. VENV=.venv-py3.11, keeps both releases.
 VENV ?= .venv
+PYENV_VERSIONS = $${PYENV_ROOT:-$$HOME/.pyenv}/versions
 ifeq ($(origin PYTHON),undefined)
-PYTHON := $(if $(wildcard $(VENV)/bin/python),$(VENV)/bin/python,python3)
+PYTHON := $(if $(wildcard $(VENV)/bin/python),$(VENV)/bin/python,$(shell \
+	{ python3.12 -c '' 2>/dev/null || ls -d "$(PYENV_VERSIONS)"/3.12.*/bin/python3.12 2>/dev/null | grep -q .; } \
+	&& echo python3.12 || echo python3))
 endif
 PYTHON_BIN := $(shell $(PYTHON) -c 'import sys; print(sys.executable)' 2>/dev/null || \
 	{ v=$$(echo '$(PYTHON)' | sed -n 's/^python\([0-9][0-9.]*\)$$/\1/p'); [ -n "$$v" ] && \
-	  ls -d "$${PYENV_ROOT:-$$HOME/.pyenv}"/versions/$$v.*/bin/python$$v 2>/dev/null | sort -V | tail -n 1; })
+	  ls -d "$(PYENV_VERSIONS)"/$$v.*/bin/python$$v 2>/dev/null | sort -V | tail -n 1; })
 PYTHON_VERSION := $(shell '$(PYTHON_BIN)' -c 'import sys; print("%d.%d" % sys.version_info[:2])' 2>/dev/null)
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-python$(PYTHON_VERSION)

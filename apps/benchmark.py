@@ -63,6 +63,7 @@ from apps.runner import (
     run_app,
     write_metrics,
 )
+from diagrams.station.humanoid_station import ONLINE_DYNAMICS
 from models import MODEL_NAMES, MODELS_DIR, add_humanoid
 from systems.dynamics.floating_base import FloatingBaseDynamics
 from systems.residuals.momentum_residuals import (
@@ -195,8 +196,9 @@ def benchmark_model(name: str, *, calls: int = 300, batches: int = 7, reference_
 def _project_residual_bank(plant: MultibodyPlant, frames, torque: np.ndarray, wrenches: np.ndarray, x0: np.ndarray):
     """The project's classical, internal and external residuals sharing one ResidualModel
     (gain 35 1/s, 1 ms), each with a context whose torque and wrench inputs are fixed; returns
-    (residuals, contexts, the fixed state input values)."""
-    model = ResidualModel(plant)
+    (residuals, contexts, the fixed state input values). The model's dynamics are the
+    stations' (``ONLINE_DYNAMICS``)."""
+    model = ResidualModel(plant, ONLINE_DYNAMICS)
     residuals = [
         ClassicalResidual(plant, 35.0, known_wrench_frames=frames, model=model),
         InternalResidual(plant, 35.0, known_wrench_frames=frames, model=model),
@@ -337,7 +339,7 @@ def benchmark_residual_peer(robot: str, *, calls: int = 150, batches: int = 7, s
         plant.SetPositions(plant_context, states[i % 16][0])
         return plant.CalcMassMatrix(plant_context)
 
-    bank = ResidualBank(plant, 35.0, known_wrench_frames=frames)
+    bank = ResidualBank(plant, 35.0, known_wrench_frames=frames, implementation=ONLINE_DYNAMICS)
     bank_context = bank.CreateDefaultContext()
     bank.GetInputPort("measured_torque").FixValue(bank_context, torque)
     if frames:
@@ -396,6 +398,7 @@ def benchmark_residual_peer(robot: str, *, calls: int = 150, batches: int = 7, s
         "num_joints": n,
         "known_wrench_frames": len(frames),
         "peer_model_source": source,
+        "project_dynamics": ONLINE_DYNAMICS,
         "calc_mass_matrix_us": unit,
         "project_bank_us": project,
         "fused_bank_us": timings["fused"],

@@ -367,7 +367,20 @@ def _benchmark_residual_peer(data: dict) -> list[str]:
         + "; ".join(f"{r['model']} {_PEER_SOURCES.get(r['peer_model_source'], r['peer_model_source'])}" for r in rows)
         + ", with the plant's reflected rotor inertia as `model.armature` and its joint damping.",
     ]
+    dynamics = {r.get("project_dynamics", "fast") for r in rows}
+    lines[-1] += (
+        " The project's residuals run on the stations' dynamics: "
+        + " and ".join(f"`{d}` ({_DYNAMICS.get(d, d)})" for d in sorted(dynamics))
+        + "."
+    )
     return lines
+
+
+#: How each ``FloatingBaseDynamics`` implementation computes the model, for the benchmark tables.
+_DYNAMICS = {
+    "fast": "Drake's kernels, M-dot by a central difference of two more mass matrices",
+    "pinocchio": "Pinocchio's `crba` and `computeCoriolisMatrix` on a model built from the Drake plant",
+}
 
 
 def _benchmark_force_observer(data: dict) -> list[str]:

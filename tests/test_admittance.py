@@ -570,3 +570,65 @@ def test_hold_center_of_mass_keeps_it_over_the_feet_in_the_estimators_model(hrp4
         JointAdmittanceController(plant, gains, spatial_inertias=model)
     with pytest.raises(ValueError, match="body indices of the plant to SpatialInertia"):
         JointAdmittanceController(plant, gains, support_frames=soles, spatial_inertias={10_000: heavier})
+
+
+def test_pinocchio_kinematics_give_drakes_closed_chain_matrix(hrp4):
+    """The closed-chain matrix from Pinocchio's kinematics (the default) equals Drake's
+    (``kinematics="drake"``) at bent, random postures, with the plant's inertias and with a
+    heavier chest model; a plant whose floating tree holds another model instance's body
+    falls back to Drake's (its centre of mass is the support frames' instance only)."""
+    plant, handles = hrp4
+    joints = joints_in_velocity_order(plant)
+    n = len(joints)
+    soles = (handles.sole_frames["left"], handles.sole_frames["right"])
+    chest = plant.GetBodyByName("CHEST_P_LINK", handles.model_instance)
+    M = chest.default_spatial_inertia()
+    heavier = {int(chest.index()): SpatialInertia(M.get_mass() + 3.0, M.get_com(), M.get_unit_inertia())}
+    rng = np.random.default_rng(11)
+    q_index = np.array([j.position_start() for j in joints])
+    q0 = plant.GetPositions(plant.CreateDefaultContext())[q_index]
+    for inertias in (None, heavier):
+        kwargs = dict(support_frames=soles, hold_center_of_mass=True, spatial_inertias=inertias)
+        fast = JointAdmittanceController(plant, 1.0, **kwargs)
+        drake = JointAdmittanceController(plant, 1.0, kinematics="drake", **kwargs)
+        assert (fast.kinematics, drake.kinematics) == ("pinocchio", "drake")
+        for _ in range(5):
+            q = q0 + rng.uniform(-0.3, 0.3, n)
+            C_drake = drake.ClosedChainMatrix(q)
+            np.testing.assert_allclose(fast.ClosedChainMatrix(q), C_drake, rtol=0, atol=1e-12 * np.abs(C_drake).max())
+            residual = rng.normal(0.0, 5.0, n)
+            np.testing.assert_allclose(
+                fast.CalcDesiredRate(residual, q), drake.CalcDesiredRate(residual, q), atol=1e-12
+            )
+    assert JointAdmittanceController(plant, 1.0).kinematics is None
+    with pytest.raises(ValueError, match="kinematics must be one of"):
+        JointAdmittanceController(plant, 1.0, kinematics="pin")
+
+    # A gripper of another model instance welded to the right hand: Drake's CoM leaves it out.
+    two = MultibodyPlant(T)
+    robot = add_humanoid(two, "hrp4_like")
+    tool = two.AddModelInstance("tool")
+    gripper = two.AddRigidBody("gripper", tool, SpatialInertia.SolidBoxWithMass(2.0, 0.1, 0.1, 0.1))
+    hand = two.GetBodyByName("R_WRIST_Y_LINK", robot.model_instance)
+    two.WeldFrames(hand.body_frame(), gripper.body_frame())
+    two.Finalize()
+    held = JointAdmittanceController(
+        two, 1.0, support_frames=(robot.sole_frames["left"], robot.sole_frames["right"]), hold_center_of_mass=True
+    )
+    assert held.kinematics == "drake"
+
+
+def test_symmetric_least_squares_is_lstsq():
+    """The projection's small solve: a Cholesky solve where the matrix is safely invertible,
+    else NumPy's least squares (a rank-deficient matrix, as two identical support rows give)."""
+    from systems.residuals.admittance import _least_squares_symmetric
+
+    rng = np.random.default_rng(2)
+    B = rng.normal(size=(8, 30))
+    A, b = B @ B.T, rng.normal(size=8)
+    np.testing.assert_allclose(_least_squares_symmetric(A, b), np.linalg.solve(A, b), rtol=1e-12)
+    B[7] = B[6]  # rank 7
+    A = B @ B.T
+    np.testing.assert_allclose(
+        _least_squares_symmetric(A, b), np.linalg.lstsq(A, b, rcond=1e-12)[0], rtol=1e-9, atol=1e-12
+    )

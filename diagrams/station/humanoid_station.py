@@ -81,6 +81,13 @@ from systems.simulation.sensors import SensorHandles, add_sensors
 #: The sources of the sensed state's base part (``add_humanoid_station``'s ``base_state``).
 BASE_STATE_SOURCES = ("truth_plus_noise", "invariant_ekf")
 
+#: The implementation of the estimators' dynamics on a humanoid (``HumanoidStation.dynamics_model``
+#: and the estimated contact flags' residuals; ``FloatingBaseDynamics``): Pinocchio's C++ kernels
+#: on a model built from the estimators' plant, M-dot exact from one Coriolis pass, equal to
+#: Drake's "fast" to ~1e-10 (tests/test_pinocchio_dynamics.py) at about half its cost per step
+#: (BENCHMARKS.md).
+ONLINE_DYNAMICS = "pinocchio"
+
 
 @dataclass
 class HumanoidStation:
@@ -109,8 +116,8 @@ class HumanoidStation:
         sensed_state_hold: the ZeroOrderHold between the sensors and the PD (humanoids), or
             None. Its held sample is set by ``set_initial_state``: call it before
             ``Simulator.Initialize``.
-        dynamics_model: the ``ResidualModel`` of ``estimator.plant`` whose gravity the PD
-            uses (humanoids), or None. Give it to the diagram's residuals (``model=``): the
+        dynamics_model: the ``ResidualModel`` of ``estimator.plant`` (``ONLINE_DYNAMICS``)
+            whose gravity the PD uses (humanoids), or None. Give it to the diagram's residuals (``model=``): the
             PD reads the sample they evaluated one step earlier, so the dynamics at each
             sensed state are computed once for the PD and all residuals.
         imperfections: the Imperfections the station was built with (ideal by default).
@@ -288,7 +295,7 @@ def add_humanoid_station(
     else:
         kp, kd = _generic_gains(estimator.plant, estimator.standing_state, time_step)
     # Humanoids: gravity from the dynamics model the estimators share (see HumanoidStation).
-    dynamics_model = ResidualModel(estimator.plant) if humanoid is not None else None
+    dynamics_model = ResidualModel(estimator.plant, ONLINE_DYNAMICS) if humanoid is not None else None
     friction = None
     if imperfections.friction.coulomb_percent or imperfections.friction.viscous_percent:
         rated = rated_joint_torques(plant)
@@ -573,7 +580,7 @@ def _add_estimated_foot_contact(
     from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual
 
     gain = ESTIMATED_CONTACT_RESIDUAL_GAIN
-    model = ResidualModel(estimator.plant)
+    model = ResidualModel(estimator.plant, ONLINE_DYNAMICS)
     internal = builder.AddSystem(InternalResidual(estimator.plant, gain, period, model=model))
     external = builder.AddSystem(ExternalResidual(estimator.plant, gain, period, model=model))
     for name, residual in (("contact_internal_residual", internal), ("contact_external_residual", external)):

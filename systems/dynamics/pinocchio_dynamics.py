@@ -95,6 +95,7 @@ class PinocchioFloatingBaseDynamics:
         self._R_WP = None if np.array_equal(R_WP, np.eye(3)) else R_WP
         self._R_WB_last: np.ndarray | None = None  # F0 rotation of the last compute
         self._gravity_W = np.array(self.model.gravity.linear)  # the plant's, world axes (m/s^2)
+        self._support_gather: np.ndarray | None = None  # support_jacobians' row/column gather
 
     def _use_permutation(self, P: np.ndarray) -> None:
         """Sets P and the gathers derived from it (the tests' controls pass a wrong one)."""
@@ -196,6 +197,35 @@ class PinocchioFloatingBaseDynamics:
         J = np.empty((6, J_W.shape[1]))
         J[:3], J[3:] = R_BW @ J_W[3:], R_BW @ J_W[:3]
         return J[:, self.permutation]
+
+    def frame_ids(self, frames: Sequence[Frame]) -> tuple[int, ...]:
+        """The Pinocchio frame ids of the plant's ``frames`` (for ``support_jacobians``).
+
+        Raises:
+            ValueError: a frame that is not on the floating tree."""
+        return tuple(self._frame_id(frame) for frame in frames)
+
+    def support_jacobians(self, q: np.ndarray, frame_ids: Sequence[int]) -> tuple[np.ndarray, np.ndarray, list]:
+        """At the positions q (Drake's order, not checked), one kinematics pass: the frames'
+        spatial-velocity Jacobians of their origins stacked (6 k, nv; each frame's rows
+        [angular; linear] in world axes), the centre of mass's translational-velocity Jacobian
+        (3, nv; world axes; every body of the model) and each frame's R_WF. ``frame_ids`` from
+        ``frame_ids``. Columns in F0 order: the base [w_B; v_B] in F0 axes, then the joints in
+        v[6:] order (a base-invariant quantity, such as a frame's velocity relative to another
+        frame held still, reads the same as from Drake's columns)."""
+        model, data = self.model, self.data
+        nv = model.nv
+        gather = self._support_gather
+        if gather is None or gather.shape[0] != 6 * len(frame_ids):
+            # [angular; linear] rows of Pinocchio's [linear; angular], columns in F0 order.
+            one = np.array((3, 4, 5, 0, 1, 2))[:, None] * nv + self.permutation[None, :]
+            gather = self._support_gather = np.concatenate([one + 6 * nv * k for k in range(len(frame_ids))])
+        J_G = pin.jacobianCenterOfMass(model, data, q[self._q_source], False)  # also fills data.J
+        stacked = np.concatenate(
+            [pin.getFrameJacobian(model, data, frame_id, pin.LOCAL_WORLD_ALIGNED) for frame_id in frame_ids]
+        )
+        rotations = [pin.updateFramePlacement(model, data, frame_id).rotation for frame_id in frame_ids]
+        return stacked.take(gather), J_G[:, self.permutation], rotations
 
     def mass_matrix_terms_of_samples(
         self, q: np.ndarray, v: np.ndarray, frames: Sequence[Frame] = ()

@@ -84,6 +84,9 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import BodyIndex, Frame, JacobianWrtVariable, SpatialInertia
 from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem
 from pydrake.systems.primitives import MatrixGain
+from scipy.linalg.lapack import dgesv as _lu_solve
+from scipy.linalg.lapack import dpotrf as _cholesky
+from scipy.linalg.lapack import dpotrs as _cholesky_solve
 
 from systems.common.checks import eval_finite_input, per_joint
 from systems.simulation.pd_gravity import joints_in_velocity_order
@@ -95,6 +98,38 @@ DEFAULT_LIMIT_MARGIN = 0.02
 
 _WHO = "JointAdmittanceController"
 _INTEGRATE_FROM = ("measured", "desired")
+_KINEMATICS = ("pinocchio", "drake")
+
+
+def _pinocchio_kinematics(plant: MultibodyPlant, com_instance, spatial_inertias: Mapping):
+    """The Pinocchio kinematics of ``plant`` (``PinocchioFloatingBaseDynamics.support_jacobians``,
+    a quarter of the cost of Drake's two frame Jacobians and centre-of-mass Jacobian) with the
+    given spatial inertias, or None where it would not give Drake's numbers: a plant Pinocchio's
+    model cannot represent (other joint types), or one whose floating tree holds bodies of
+    another model instance than ``com_instance`` (Drake's centre of mass is that instance's)."""
+    try:
+        from systems.dynamics.pinocchio_dynamics import PinocchioFloatingBaseDynamics
+
+        kinematics = PinocchioFloatingBaseDynamics(plant)
+    except ValueError:
+        return None
+    if any(plant.get_body(BodyIndex(i)).model_instance() != com_instance for i in kinematics.pinocchio.bodies):
+        return None
+    if spatial_inertias:
+        kinematics.set_spatial_inertias(spatial_inertias)
+    return kinematics
+
+
+def _least_squares_symmetric(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """x minimising |A x - b| for a symmetric positive semi-definite A: a Cholesky solve when
+    its pivots are within a factor 1e6 of each other (A safely invertible: the same x as
+    ``lstsq`` to rounding, in a fraction of its time), else ``lstsq`` with rcond 1e-12."""
+    L, info = _cholesky(A, lower=True, clean=False)
+    if info == 0:
+        pivots = np.abs(np.diagonal(L))
+        if pivots.min() > 1e-6 * pivots.max():
+            return _cholesky_solve(L, b, lower=True)[0]
+    return np.linalg.lstsq(A, b, rcond=1e-12)[0]
 
 
 def soft_threshold(r: np.ndarray, dead_band) -> np.ndarray:
@@ -221,6 +256,7 @@ class JointAdmittanceController(LeafSystem):
         support_frames: tuple[Frame, Frame] | None = None,
         hold_center_of_mass: bool = False,
         spatial_inertias: Mapping[int, SpatialInertia] | None = None,
+        kinematics: str = "pinocchio",
     ):
         """Constructs the controller.
 
@@ -253,6 +289,11 @@ class JointAdmittanceController(LeafSystem):
                 plane (see the module doc).
             spatial_inertias: ``{body index: SpatialInertia}`` (M_BBo_B) of the model the
                 centre of mass is computed with (the estimators' model); None: the plant's.
+            kinematics: what computes the support frames' and the centre of mass's Jacobians:
+                "pinocchio" (default; Pinocchio's kernels on a model built from the plant, the
+                same numbers as Drake's to rounding at a quarter of the cost, where that model
+                holds the same bodies as the support frames' model instance; else Drake's) or
+                "drake".
 
         Raises:
             ValueError: unsupported/unfinalized plant, wrong sizes, negative gains,
@@ -306,6 +347,8 @@ class JointAdmittanceController(LeafSystem):
         else:
             self._initial_position = per_joint(initial_position, n, "initial_position", who=_WHO)
 
+        if kinematics not in _KINEMATICS:
+            raise ValueError(f"{_WHO}: kinematics must be one of {_KINEMATICS}, got {kinematics!r}")
         self._plant = plant
         self._support_frames = None
         if support_frames is not None:
@@ -331,6 +374,11 @@ class JointAdmittanceController(LeafSystem):
             self._q_index = np.array([j.position_start() for j in joints], dtype=int)
             # C does not depend on the base pose: the default one (a valid quaternion) will do.
             self._q_template = plant.GetPositions(self._plant_context).copy()
+            self._kinematics = None
+            if kinematics == "pinocchio":
+                self._kinematics = _pinocchio_kinematics(plant, self._com_instances[0], spatial_inertias or {})
+            if self._kinematics is not None:
+                self._support_frame_ids = self._kinematics.frame_ids(frames)
 
         self._hold_center_of_mass = bool(hold_center_of_mass)
         if self._hold_center_of_mass and self._support_frames is None:
@@ -433,6 +481,14 @@ class JointAdmittanceController(LeafSystem):
     def holds_center_of_mass(self) -> bool:
         return self._hold_center_of_mass
 
+    @property
+    def kinematics(self) -> str | None:
+        """What computes the closed-chain matrix's Jacobians ("pinocchio" or "drake"), None
+        without ``support_frames``."""
+        if self._support_frames is None:
+            return None
+        return "drake" if self._kinematics is None else "pinocchio"
+
     def ClosedChainMatrix(self, joint_positions: np.ndarray) -> np.ndarray:
         """C (6 x n): the left support frame's spatial velocity relative to the right one's
         for joint rates q̇ when the base moves so that the right one is still (v[6:] order);
@@ -442,6 +498,26 @@ class JointAdmittanceController(LeafSystem):
             raise ValueError(f"{_WHO}: ClosedChainMatrix needs support_frames")
         q = self._q_template.copy()
         q[self._q_index] = joint_positions
+        if self._kinematics is not None:
+            J, J_G_W, (_, R_WR) = self._kinematics.support_jacobians(q, self._support_frame_ids)
+            J_left, J_right = J[:6], J[6:]
+        else:
+            J_left, J_right, J_G_W, R_WR = self._drake_support_jacobians(q)
+        if self._hold_center_of_mass:
+            # C does not depend on the base pose, but the CoM's support-plane axes do: express
+            # it in the right support frame (still, so measured in world = relative to that sole).
+            J_left = np.vstack([J_left, R_WR[:, :2].T @ J_G_W])
+        # The base velocity that keeps the right support frame still, per unit joint rate, is
+        # -base_rate.
+        _, _, base_rate, info = _lu_solve(J_right[:, :6], J_right[:, 6:])
+        if info != 0:
+            raise np.linalg.LinAlgError(f"{_WHO}: the right support frame's base Jacobian is singular")
+        return J_left[:, 6:] - J_left[:, :6] @ base_rate
+
+    def _drake_support_jacobians(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Drake's J_left, J_right (spatial velocity of each support frame's origin, world
+        axes), J_G (the CoM of the support frames' model instance, world axes) and R_WR (the
+        right support frame) at the positions q; the columns are v's."""
         plant, context = self._plant, self._plant_context
         plant.SetPositions(context, q)
         world = plant.world_frame()
@@ -449,17 +525,11 @@ class JointAdmittanceController(LeafSystem):
             plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kV, f, np.zeros(3), world, world)
             for f in self._support_frames
         )
-        # The base velocity that keeps the right support frame still, per unit joint rate.
-        base_rate = -np.linalg.solve(J_right[:, :6], J_right[:, 6:])
-        C = J_left[:, 6:] + J_left[:, :6] @ base_rate
-        if not self._hold_center_of_mass:
-            return C
-        # C does not depend on the base pose, but the CoM's support-plane axes do: express it
-        # in the right support frame (still, so measured in world = relative to that sole).
         J_G = plant.CalcJacobianCenterOfMassTranslationalVelocity(
-            context, self._com_instances, JacobianWrtVariable.kV, world, self._support_frames[1]
-        )[:2]
-        return np.vstack([C, J_G[:, 6:] + J_G[:, :6] @ base_rate])
+            context, self._com_instances, JacobianWrtVariable.kV, world, world
+        )
+        R_WR = self._support_frames[1].CalcRotationMatrixInWorld(context).matrix()
+        return J_left, J_right, J_G, R_WR
 
     def get_residual_input_port(self):
         return self._residual_port
@@ -481,10 +551,10 @@ class JointAdmittanceController(LeafSystem):
         if self._support_frames is not None:
             if joint_positions is None:
                 raise ValueError(f"{_WHO}: CalcDesiredRate needs the joint positions with support_frames")
-            C = self.ClosedChainMatrix(joint_positions)
-            CK = C * self._gains  # C K_a
-            lam = np.linalg.lstsq(CK @ C.T, C @ rate, rcond=1e-12)[0]
-            rate -= CK.T @ lam
+            if rate.any():  # (the projection of a zero rate is zero)
+                C = self.ClosedChainMatrix(joint_positions)
+                CK = C * self._gains  # C K_a
+                rate -= CK.T @ _least_squares_symmetric(CK @ C.T, C @ rate)
         np.minimum(rate, self._max_rate, out=rate)
         np.maximum(rate, self._neg_max_rate, out=rate)
         return rate

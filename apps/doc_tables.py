@@ -642,7 +642,7 @@ def _speed(sources: dict[str, dict]) -> list[str]:
         row(
             f"three residuals in one `ResidualBank` update, {r['model']} ({r['num_joints']} joints), "
             "x the Pinocchio plain-loop peer",
-            _ratio(r["fused_bank_over_peer"]),
+            f"{r['fused_bank_over_peer']:.2f}x",  # two decimals: the floor is 1x
             f"<= {_ratio(floors['residual_bank_max_ratio_to_peer'])}",
             r["fused_bank_over_peer"] <= floors["residual_bank_max_ratio_to_peer"],
             "make benchmark",

@@ -20,13 +20,13 @@ QUATERNION_NORM_TOLERANCE = 0.05
 def quaternion_to_rotation(quaternion_wxyz: np.ndarray) -> np.ndarray:
     """Rotation matrix of a unit quaternion [w, x, y, z] (Drake's order)."""
     w, x, y, z = np.asarray(quaternion_wxyz, dtype=float).tolist()
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    return np.array(  # a flat tuple of floats, reshaped: the cheapest way to a 3 x 3 array
+        (
+            1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+            2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+            2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+        )
+    ).reshape(3, 3)  # fmt: skip
 
 
 def quaternions_to_rotations(quaternions_wxyz: np.ndarray) -> np.ndarray:

@@ -325,6 +325,18 @@ class FloatingBaseDynamics:
         None: the caller takes Drake's on a context of its own."""
         return getattr(self._impl, "spatial_jacobian_F0", None)
 
+    @property
+    def own_stacked_world_jacobian(self):
+        """The implementation's stacked world-axes Jacobians of frames at the state of its last
+        ``compute`` (``"pinocchio"``: ``PinocchioFloatingBaseDynamics.stacked_world_jacobian``,
+        a callable of the frame ids its ``frame_ids`` gives), or None."""
+        return getattr(self._impl, "stacked_world_jacobian", None)
+
+    def own_frame_ids(self, frames: Sequence[Frame]):
+        """The implementation's ids of ``frames`` for ``own_stacked_world_jacobian``, or None."""
+        frame_ids = getattr(self._impl, "frame_ids", None)
+        return None if frame_ids is None else frame_ids(frames)
+
     def mass_matrix_terms(
         self, q: np.ndarray, v: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -95,7 +95,7 @@ class PinocchioFloatingBaseDynamics:
         self._R_WP = None if np.array_equal(R_WP, np.eye(3)) else R_WP
         self._R_WB_last: np.ndarray | None = None  # F0 rotation of the last compute
         self._gravity_W = np.array(self.model.gravity.linear)  # the plant's, world axes (m/s^2)
-        self._support_gather: np.ndarray | None = None  # support_jacobians' row/column gather
+        self._support_gather: np.ndarray | None = None  # _stacked_gather's last gather
 
     def _use_permutation(self, P: np.ndarray) -> None:
         """Sets P and the gathers derived from it (the tests' controls pass a wrong one)."""
@@ -198,6 +198,30 @@ class PinocchioFloatingBaseDynamics:
         J[:3], J[3:] = R_BW @ J_W[3:], R_BW @ J_W[:3]
         return J[:, self.permutation]
 
+    def stacked_world_jacobian(self, frame_ids: Sequence[int]) -> np.ndarray:
+        """(6 k, nv) the frames' spatial-velocity Jacobians of their origins at the state of
+        the last ``compute`` or ``mass_matrix_terms``, stacked: each frame's rows [angular;
+        linear] in WORLD axes, columns in F0 order (``support_jacobians``' layout), so that
+        J^T [m_W; f_W] is the generalized force of wrenches given in world, about the frames'
+        origins, with no rotation. ``frame_ids`` from ``frame_ids``."""
+        if self._R_WB_last is None:
+            raise ValueError("stacked_world_jacobian: call compute(q, v) first")
+        model, data = self.model, self.data
+        stacked = np.concatenate(
+            [pin.getFrameJacobian(model, data, frame_id, pin.LOCAL_WORLD_ALIGNED) for frame_id in frame_ids]
+        )
+        return stacked.take(self._stacked_gather(len(frame_ids)))
+
+    def _stacked_gather(self, count: int) -> np.ndarray:
+        """The flat gather of ``count`` stacked Pinocchio frame Jacobians (6 rows each,
+        [linear; angular]) into rows [angular; linear] and columns in F0 order."""
+        gather = self._support_gather
+        if gather is None or gather.shape[0] != 6 * count:
+            nv = self.model.nv
+            one = np.array((3, 4, 5, 0, 1, 2))[:, None] * nv + self.permutation[None, :]
+            gather = self._support_gather = np.concatenate([one + 6 * nv * k for k in range(count)])
+        return gather
+
     def frame_ids(self, frames: Sequence[Frame]) -> tuple[int, ...]:
         """The Pinocchio frame ids of the plant's ``frames`` (for ``support_jacobians``).
 
@@ -214,18 +238,12 @@ class PinocchioFloatingBaseDynamics:
         v[6:] order (a base-invariant quantity, such as a frame's velocity relative to another
         frame held still, reads the same as from Drake's columns)."""
         model, data = self.model, self.data
-        nv = model.nv
-        gather = self._support_gather
-        if gather is None or gather.shape[0] != 6 * len(frame_ids):
-            # [angular; linear] rows of Pinocchio's [linear; angular], columns in F0 order.
-            one = np.array((3, 4, 5, 0, 1, 2))[:, None] * nv + self.permutation[None, :]
-            gather = self._support_gather = np.concatenate([one + 6 * nv * k for k in range(len(frame_ids))])
         J_G = pin.jacobianCenterOfMass(model, data, q[self._q_source], False)  # also fills data.J
         stacked = np.concatenate(
             [pin.getFrameJacobian(model, data, frame_id, pin.LOCAL_WORLD_ALIGNED) for frame_id in frame_ids]
         )
         rotations = [pin.updateFramePlacement(model, data, frame_id).rotation for frame_id in frame_ids]
-        return stacked.take(gather), J_G[:, self.permutation], rotations
+        return stacked.take(self._stacked_gather(len(frame_ids))), J_G[:, self.permutation], rotations
 
     def mass_matrix_terms_of_samples(
         self, q: np.ndarray, v: np.ndarray, frames: Sequence[Frame] = ()

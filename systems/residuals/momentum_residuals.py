@@ -145,8 +145,9 @@ class ResidualModel:
         # Per-state results (None: not computed at the state ``_key`` yet).
         self._terms: FloatingBaseTerms | None = None
         self._rates: StateRates | None = None
-        self._jacobians: dict[int, np.ndarray] = {}
+        self._jacobians: dict = {}  # per state: frame index or frames key -> Jacobian
         self._known_cache: dict = {}
+        self._frame_ids: dict = {}  # frames key -> the implementation's frame ids
 
     def forget_state(self) -> None:
         """Drops the per-state results: for a caller that moved the dynamics' own context or
@@ -229,7 +230,9 @@ class ResidualModel:
         F = M[:6, 6:]
         G_qdot = lapack.dpotrs(I0c_factor, MX[:6, 1])[0]
         # G^T applied to [F_dot qdot, I0c_dot G qdot, p^] at once.
-        GT = F.T @ lapack.dpotrs(I0c_factor, np.column_stack((M_dot_X[:6, 1], M_dot[:6, :6] @ G_qdot, bias[:6])))[0]
+        rhs = np.empty((6, 3))
+        rhs[:, 0], rhs[:, 1], rhs[:, 2] = M_dot_X[:6, 1], M_dot[:6, :6] @ G_qdot, bias[:6]
+        GT = F.T @ lapack.dpotrs(I0c_factor, rhs)[0]
         H_fb_qdot = MX[6:, 1] - F.T @ G_qdot
         H_fb_dot_qdot = M_dot_X[6:, 1] - GT[:, 0] - M_dot[6:, :6] @ G_qdot + GT[:, 1]
         internal = (H_fb_qdot, H_fb_dot_qdot - (bias[6:] - GT[:, 2]))
@@ -287,6 +290,21 @@ class ResidualModel:
             self._jacobians[index] = J
         return J
 
+    def _stacked_world_jacobian(self, frames: Sequence[Frame], frames_key) -> np.ndarray | None:
+        """The frames' Jacobians stacked in world axes (``FloatingBaseDynamics.
+        own_stacked_world_jacobian``) at the current state, from the implementation's own
+        kinematics of it (cached per state), or None (Drake's "fast": per frame, in F0)."""
+        own = self.dynamics.own_stacked_world_jacobian if self._impl_at_key else None
+        if own is None:
+            return None
+        J = self._jacobians.get(frames_key)
+        if J is None:
+            frame_ids = self._frame_ids.get(frames_key)
+            if frame_ids is None:
+                frame_ids = self._frame_ids[frames_key] = self.dynamics.own_frame_ids(frames)
+            J = self._jacobians[frames_key] = own(frame_ids)
+        return J
+
     def known_wrench_forces(
         self, terms: StateRates | FloatingBaseTerms, frames: Sequence[Frame], wrenches_W: np.ndarray, frames_key=None
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -310,17 +328,15 @@ class ResidualModel:
         cached = self._known_cache.get(key)
         if cached is not None:
             return cached
-        # Rotate every [m; f] into F0 (the Jacobians are expressed in F0, at the frame origins).
-        w_B = (wrenches_W.reshape(-1, 3) @ terms.R_WB).ravel()
-        generalized = None
-        for i, frame in enumerate(frames):
-            force = self.spatial_jacobian_F0(frame).T @ w_B[6 * i : 6 * i + 6]
-            if generalized is None:
-                generalized = force
-            else:
-                generalized += force
-        if generalized is None:
+        stacked = self._stacked_world_jacobian(frames, frames_key) if frames else None
+        if stacked is not None:  # world axes: J^T w with the world wrenches as they are
+            generalized = stacked.T @ wrenches_W
+        else:
+            # Rotate every [m; f] into F0 (the Jacobians are expressed in F0, at the frame origins).
+            w_B = (wrenches_W.reshape(-1, 3) @ terms.R_WB).ravel()
             generalized = np.zeros(self.num_velocities)
+            for i, frame in enumerate(frames):
+                generalized += self.spatial_jacobian_F0(frame).T @ w_B[6 * i : 6 * i + 6]
         result = (generalized[:6], generalized[6:])
         self._known_cache[key] = result
         return result

@@ -34,7 +34,12 @@ from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, Ve
 from diagrams.residuals.wiring import add_internal_and_external_residuals
 from diagrams.scenarios import scenario_as_yaml
 from diagrams.station.conditions import check_model_refinement
-from diagrams.station.humanoid_station import HumanoidStation, add_scenario_station, default_plant_config
+from diagrams.station.humanoid_station import (
+    ONLINE_DYNAMICS,
+    HumanoidStation,
+    add_scenario_station,
+    default_plant_config,
+)
 from diagrams.station.motions import SlowMotion, slow_whole_body_motion
 from models import robot_description
 from models.description import collision_mesh_files
@@ -300,7 +305,7 @@ def calibrate_from_log(
         unknown_wrench_frames=estimator.unknown_wrench_frames,
         unknown_wrench_components=estimator.unknown_wrench_components,
     )
-    model = ResidualModel(plant)
+    model = ResidualModel(plant, ONLINE_DYNAMICS)  # the dynamics the stations' estimators run on
     model.set_spatial_inertias(corrections.spatial_inertias)
     period = float(np.median(np.diff(log.time)))
     replayed = replay_residuals(

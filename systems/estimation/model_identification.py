@@ -762,22 +762,35 @@ def stance_base_velocity(
     if not frames:
         raise ValueError("stance_base_velocity: needs at least one frame that stays still (the feet)")
     world = plant.world_frame()
-    twist = np.empty((q.shape[0], 6))
-    frame_speed = np.empty(q.shape[0])
-    weight = np.array([0.1] * 3 + [1.0] * 3)
-    for k in range(q.shape[0]):
-        plant.SetPositions(context, q[k])
-        J = np.vstack(
-            [
-                plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kV, frame, np.zeros(3), world, world)
-                for frame in frames
-            ]
-        )
-        if k == 0 and np.linalg.matrix_rank(J[:, :6]) < 6:
+    count, rows = q.shape[0], 6 * len(frames)
+    twist = np.empty((count, 6))
+    frame_speed = np.empty(count)
+    weight = np.tile([0.1] * 3 + [1.0] * 3, len(frames))
+    origin = np.zeros(3)
+    for start in range(0, count, _STANCE_CHUNK):  # the Jacobians of a chunk of samples, then batched algebra
+        stop = min(start + _STANCE_CHUNK, count)
+        J = np.empty((stop - start, rows, v.shape[1]))
+        for k in range(start, stop):
+            plant.SetPositions(context, q[k])
+            for f, frame in enumerate(frames):
+                J[k - start, 6 * f : 6 * f + 6] = plant.CalcJacobianSpatialVelocity(
+                    context, JacobianWrtVariable.kV, frame, origin, world, world
+                )
+        if start == 0 and np.linalg.matrix_rank(J[0, :, :6]) < 6:
             raise ValueError("stance_base_velocity: the frames do not determine the base twist (rank < 6)")
-        twist[k] = np.linalg.lstsq(J[:, :6], -J[:, 6:] @ v[k, 6:], rcond=None)[0]
-        frame_speed[k] = np.max(np.abs((J @ v[k]).reshape(-1, 6) * weight))
+        # Least squares of each sample by its normal equations (the base columns have full
+        # rank: the same twist as lstsq to rounding).
+        base_T = J[:, :, :6].transpose(0, 2, 1)
+        rhs = -np.einsum("sij,sj->si", J[:, :, 6:], v[start:stop, 6:])
+        twist[start:stop] = np.linalg.solve(base_T @ J[:, :, :6], np.einsum("sji,si->sj", base_T, rhs)[..., None])[
+            ..., 0
+        ]
+        frame_speed[start:stop] = np.max(np.abs(np.einsum("sij,sj->si", J, v[start:stop]) * weight), axis=1)
     return twist, frame_speed
+
+
+#: Samples per batch of ``stance_base_velocity``'s algebra (bounds its memory: 12 x 40 doubles each).
+_STANCE_CHUNK = 4096
 
 
 def _joint_prior_rows(

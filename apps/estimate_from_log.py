@@ -131,7 +131,8 @@ def _parse(argv):
         default=None,
         metavar="PATH",
         help="simulate --robot under a known push (on hrp4_like a fixed 28 N push, elsewhere a random contact "
-        "of the contact study), write its log to PATH (format by extension) and, without --log, estimate from it",
+        "of the contact study, on a robot lighter than hrp4_like capped at the study's largest force scaled by "
+        "its mass), write its log to PATH (format by extension) and, without --log, estimate from it",
     )
     args = parser.parse_args(argv)
     if args.log is None and args.write_demo_log is None:

@@ -80,16 +80,26 @@ def test_model_refinement_on_talos_says_which_joints_a_short_calibration_leaves_
 def test_estimate_from_log_on_a_robot_with_fsrs(tmp_path, capsys):
     """nao_like's demo log (FSR readings, no F/T wrench: a table format, FSRs have no ROS
     message) is estimated with its soles' shear and yaw as unknowns: the push is found on
-    its link, as the simulation's own estimators found it."""
+    its link, as the simulation's own estimators found it, and its force, net of the soles'
+    estimated wrenches, within 3 % over the whole contact. The demo's push stands within
+    what this light robot withstands (the study's force scaled by its mass): its feet carry
+    its weight less the push's lift throughout (the study's 11 N tipped it over)."""
     log = tmp_path / "demo.csv"
     args = ["--robot", NAO, "--write-demo-log", str(log), "--headless", "--out", str(tmp_path), "--no-replay"]
     assert estimate_from_log.main(args) == 0
     printed = capsys.readouterr().out
-    pushed = re.search(r"a push of [0-9.]+ N \S+ \S+ \S+ on (\S+) from", printed).group(1)
+    found = re.search(r"a push of [0-9.]+ N \[(\S+), (\S+), (\S+)\] on (\S+) from", printed)
+    push, pushed = np.array([float(found.group(i)) for i in (1, 2, 3)]), found.group(4)
     metrics = json.loads((tmp_path / "estimate_from_log" / "metrics.json").read_text())
     assert metrics["estimated_sole_wrenches"] == ["l_sole_frame", "r_sole_frame"]
     assert [c["link"] for c in metrics["contacts"]] == [pushed]
+    estimated = np.array(metrics["contacts"][0]["mean_force_world_N"])
+    assert np.linalg.norm(estimated - push) < 0.03 * np.linalg.norm(push)
     assert not metrics["not_estimated"]
+    table = np.genfromtxt(log, delimiter=",", names=True)
+    fsr = np.column_stack([table[name] for name in table.dtype.names if name.startswith("fsr_")])
+    weight = fsr[100:400].sum(axis=1).mean()  # standing before the push
+    assert fsr[400:].sum(axis=1).min() > weight - push[2] - 0.1 * weight
 
 
 @pytest.mark.parametrize(

@@ -197,3 +197,30 @@ def test_replay_is_the_system_update_by_update(hrp4, components):
         dut.replay(positions, external, internal[:, :3])
     with pytest.raises(ValueError, match="positions holds NaN"):
         dut.replay(np.full_like(positions, np.nan), external, internal)
+
+
+def test_replay_takes_a_given_link_unless_the_soles_can_mimic_it(hrp4):
+    """``replay(links=)``, as a log's estimation passes the localizer's answer: a given link
+    that the soles' wrenches cannot mimic (an elbow) is the one fitted at every selection
+    update, whatever the misfit would choose; a stance leg's link (a knee), which they can
+    mimic, and -1 leave the choice by misfit as without links."""
+    plant, handles, context = hrp4
+    q0 = plant.GetPositions(context)
+    wrench, tau = _exact_residuals(plant, context, _shoulder_pushes(plant, handles, context))
+    soles = _ground_residuals(plant, context, STANDING_WRENCHES)
+    N = 30
+    positions = np.tile(q0, (N, 1))
+    external = np.tile(wrench + soles[:6], (N, 1))
+    internal = np.tile(tau + soles[6:], (N, 1))
+    dut = SoleWrenchCompensation(plant, SOLE_FRAMES, gain=20.0, selection_period=0.01)
+    chosen = dut.replay(positions, external, internal)
+    elbow, knee = (int(plant.GetBodyByName(name).index()) for name in ("L_ELBOW_P_LINK", "L_KNEE_P_LINK"))
+    assert elbow not in chosen.body_index
+    given = dut.replay(positions, external, internal, links=np.full(N, elbow))
+    np.testing.assert_array_equal(given.body_index, np.full(N, elbow))
+    for links in (np.full(N, knee), np.full(N, -1)):
+        np.testing.assert_array_equal(
+            dut.replay(positions, external, internal, links=links).body_index, chosen.body_index
+        )
+    with pytest.raises(ValueError, match="links must be"):
+        dut.replay(positions, external, internal, links=np.zeros(N - 1))

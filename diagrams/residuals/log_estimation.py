@@ -92,6 +92,7 @@ from systems.observer.fsr_sensing import FSR_NAMES, FsrSoleWrenches
 from systems.residuals.contact_estimation import (
     ALL_WRENCH_COMPONENTS,
     STATUS_REASONS,
+    VALID,
     ContactDetector,
     ContactLocalizer,
 )
@@ -1232,8 +1233,14 @@ def estimate_from_log(
     )
     soles = None
     if robot.unknown_wrench_frames:
+        # The soles' wrenches fitted with the localizer's link where it found one (a link
+        # chosen by misfit alone can be a leg's as a foot unloads), else the best fitting link.
+        links = None
+        if replay.localization is not None:
+            located = replay.localization
+            links = np.where(located["status"] == VALID, located["body_index"], -1.0)
         soles = robot.sole_wrench_compensation(settings.internal_gain, period).replay(
-            inputs.state[:, : robot.plant.num_positions()], replay.external_wrench_world, replay.internal
+            inputs.state[:, : robot.plant.num_positions()], replay.external_wrench_world, replay.internal, links=links
         )
     wall = _time.perf_counter() - start
     return _estimates(robot, inputs, replay, wall, settings, skipped, soles)
@@ -1372,13 +1379,21 @@ DEMO_PUSH_BODY, DEMO_PUSH_POINT, DEMO_PUSH_FORCE = "R_SHOULDER_Y_LINK", (-0.0387
 def demo_push(robot: str, seed: int = 0) -> tuple[str, tuple[float, ...], tuple[float, ...]]:
     """(body, point in its frame (m), force in world (N)) of the demo log's push: on
     hrp4_like the fixed ``DEMO_PUSH_*``; on another robot one random contact of the contact
-    study (``sample_trials``: a point of a link's outer surface, 5-40 N into it)."""
+    study (``sample_trials``: a point of a link's outer surface, 5-40 N into it). Those forces
+    are an HRP-4-sized robot's; on a lighter robot the push is capped at the study's largest
+    force scaled by its mass (``size_ratios``, as push-and-comply scales its push): the study's
+    11 N on nao_like's wrist, held for the demo's second, tips it over."""
     if robot == "hrp4_like":
         return DEMO_PUSH_BODY, DEMO_PUSH_POINT, DEMO_PUSH_FORCE
-    from diagrams.residuals.contact_localization import sample_trials
+    from diagrams.residuals.contact_localization import MAX_FORCE, sample_trials
+    from diagrams.station.standing import size_ratios
 
     (spec,) = sample_trials(robot, 1, seed)
-    return spec["body"], tuple(spec["point_body"]), tuple(spec["force_world"])
+    estimator = build_estimator_plant(robot)
+    force = np.asarray(spec["force_world"])
+    cap = MAX_FORCE * size_ratios(estimator.plant, estimator.humanoid)[0]
+    force *= min(1.0, cap / float(np.linalg.norm(force)))
+    return spec["body"], tuple(spec["point_body"]), tuple(force.tolist())
 
 
 def simulate_push_log(

@@ -142,6 +142,7 @@ class SoleWrenchCompensation(LeafSystem):
         if not bodies:
             raise ValueError(f"{who}: no candidate body")
         self._bodies = tuple(bodies)
+        self._slots = {int(b.index()): slot for slot, b in enumerate(self._bodies)}
         nq, nv, n, k = kin.nq, kin.nv, kin.n, self._unknown.size
         self._shape = (6 + n, k)
         self._classical_shape = (nv, k)
@@ -214,10 +215,7 @@ class SoleWrenchCompensation(LeafSystem):
         def without(Q: np.ndarray) -> np.ndarray:
             return T - np.einsum("rk,bkc->brc", Q, np.einsum("rk,brc->bkc", Q, T))
 
-        # Which links a sole's wrench can mimic: the columns at this posture (the physics).
-        singular = np.linalg.svd(without(np.linalg.qr(self._unknown.columns(kin))[0]), compute_uv=False)
-        largest = np.linalg.svd(T, compute_uv=False)[:, 0]
-        usable = singular[:, -1] > MIN_LINK_CONDITIONING * largest
+        usable = self._separable(T)
         if not usable.any():
             return -1
         # The fit: with the soles' columns as the residuals see them.
@@ -227,6 +225,26 @@ class SoleWrenchCompensation(LeafSystem):
         x = np.einsum("bcr,r->bc", np.linalg.pinv(projected[usable]), rest)
         misfit = np.linalg.norm(rest - np.einsum("brc,bc->br", projected[usable], x), axis=1)
         return int(np.flatnonzero(usable)[int(np.argmin(misfit))])
+
+    def _separable(self, T: np.ndarray) -> np.ndarray:
+        """(B,) which of the links whose wrench maps are ``T`` (B, 6 + n, 6), at the posture
+        ``self._kin`` holds, a sole's wrench cannot mimic: the soles' columns at this posture
+        (the physics) projected out, they keep ``MIN_LINK_CONDITIONING`` of their largest
+        singular value."""
+        Q = np.linalg.qr(self._unknown.columns(self._kin))[0]
+        projected = T - np.einsum("rk,bkc->brc", Q, np.einsum("rk,brc->bkc", Q, T))
+        singular = np.linalg.svd(projected, compute_uv=False)
+        return singular[:, -1] > MIN_LINK_CONDITIONING * np.linalg.svd(T, compute_uv=False)[:, 0]
+
+    def given_link(self, q: np.ndarray, body_index: int) -> int | None:
+        """The slot of the body ``body_index`` (e.g. a localizer's answer) when it is one of
+        the candidates and a sole's wrench cannot mimic it at positions q; else None."""
+        slot = self._slots.get(int(body_index))
+        if slot is None:
+            return None
+        self._kin.set_positions(np.asarray(q, dtype=float))
+        T = wrench_maps(self._kin, [self._bodies[slot].body_frame()])
+        return slot if self._separable(T)[0] else None
 
     def fit(self, q: np.ndarray, rows: np.ndarray, columns: np.ndarray, slot: int) -> np.ndarray:
         """(k,) the soles' wrench components fitted to ``rows`` with link ``slot``'s free
@@ -245,6 +263,7 @@ class SoleWrenchCompensation(LeafSystem):
         start: np.ndarray | None = None,
         first_update: int = 0,
         before: tuple[np.ndarray, np.ndarray] | None = None,
+        links: np.ndarray | None = None,
     ) -> ReplayedCompensation:
         """The system's N updates without a Context (``systems.residuals.offline``), as in a
         diagram whose residuals output their discrete state and update at the same times:
@@ -254,7 +273,10 @@ class SoleWrenchCompensation(LeafSystem):
         updates) reads positions[k] and the residuals of update k - 1 (``before``, the pair
         before the first, default zeros); its outputs, read after it, the residuals of
         update k. From ``start`` (the discrete state; default the initial one: no link,
-        zero columns).
+        zero columns). ``links`` (N,), optional: a body index per update (-1: none), e.g.
+        the contact localizer's answer; at a selection update a given link that is a
+        candidate a sole's wrench cannot mimic (``given_link``) is taken instead of the
+        choice by misfit.
 
         Raises:
             ValueError: arrays of inconsistent sizes or non-finite values (naming them).
@@ -275,6 +297,10 @@ class SoleWrenchCompensation(LeafSystem):
                 raise ValueError(f"{self._who}.replay: {name} holds NaN or inf")
         if self._kind != "internal":
             raise ValueError(f"{self._who}.replay: replays the internal residual's compensation only")
+        if links is not None:
+            links = np.asarray(links)
+            if links.shape != (N,):
+                raise ValueError(f"{self._who}.replay: links must be (N,) with N = {N}, got {links.shape}")
         if start is None:
             start = self.CreateDefaultContext().get_discrete_state(self._state_index).get_value()
         start = np.asarray(start, dtype=float)
@@ -292,7 +318,8 @@ class SoleWrenchCompensation(LeafSystem):
             kin.set_positions(q[k])
             stacked = (1.0 - a) * stacked + a * unknown.columns(kin)
             if (first_update + k) % self._every == 0:
-                slot = self.choose_link(q[k], read[k], stacked)
+                given = None if links is None or links[k] < 0 else self.given_link(q[k], int(links[k]))
+                slot = given if given is not None else self.choose_link(q[k], read[k], stacked)
                 kin.set_positions(q[k])
             A = stacked
             if slot >= 0:

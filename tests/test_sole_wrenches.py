@@ -224,3 +224,16 @@ def test_replay_takes_a_given_link_unless_the_soles_can_mimic_it(hrp4):
         )
     with pytest.raises(ValueError, match="links must be"):
         dut.replay(positions, external, internal, links=np.zeros(N - 1))
+
+
+def test_batched_least_squares_is_lstsq_sample_by_sample():
+    """``replay``'s batched fit: QR where a sample's matrix has full column rank, the
+    minimum-norm solution where it has not (two equal columns), as ``lstsq`` per sample."""
+    from systems.residuals.sole_wrenches import _least_squares_of_samples
+
+    rng = np.random.default_rng(8)
+    A, b = rng.normal(size=(5, 20, 7)), rng.normal(size=(5, 20))
+    A[2, :, 6] = A[2, :, 5]
+    x = _least_squares_of_samples(A, b)
+    for k in range(5):
+        np.testing.assert_allclose(x[k], np.linalg.lstsq(A[k], b[k], rcond=None)[0], rtol=1e-9, atol=1e-12)

@@ -25,6 +25,7 @@ from systems.residuals.contact_estimation import (
     ContactDetector,
     ContactForceEstimator,
     ContactLocalizer,
+    UnknownWrenches,
     _SensedConfiguration,
     unexplained_residuals,
     unknown_wrench_columns,
@@ -80,6 +81,29 @@ def test_unknown_wrench_columns_match_drakes_generalized_forces(hrp4):
     for w in (STANDING_WRENCHES, rng.normal(size=12) * 30.0):
         expected = _ground_residuals(plant, context, w)
         np.testing.assert_allclose(T @ w, expected, atol=1e-9 * np.abs(expected).max())
+
+
+@pytest.mark.parametrize("components", [None, [SOLE_SHEAR_AND_YAW] * 2])
+def test_columns_of_many_samples_at_once_are_the_columns_sample_by_sample(hrp4, components):
+    """``UnknownWrenches.columns_of_samples`` (Pinocchio's kinematics and mass matrix per
+    sample, the rest stacked: what the offline replays use) gives ``columns`` and
+    ``world_map`` (Drake, one sample at a time) at random poses, whole wrenches and FSR soles'
+    shear and yaw alike."""
+    plant, _, context = hrp4
+    unknown = UnknownWrenches(plant, SOLE_FRAMES, components, "test")
+    kin = _SensedConfiguration(plant, "test")
+    rng = np.random.default_rng(12)
+    q = np.tile(plant.GetPositions(context), (6, 1))
+    q[:, 7:] += 0.2 * rng.standard_normal((6, q.shape[1] - 7))
+    quaternions = rng.standard_normal((6, 4))
+    q[:, :4] = quaternions / np.linalg.norm(quaternions, axis=1, keepdims=True)
+    q[:, 4:7] += rng.standard_normal((6, 3))
+    columns, world = unknown.columns_of_samples(kin.pinocchio, q)
+    for k in range(6):
+        kin.set_positions(q[k])
+        expected = unknown.columns(kin)
+        np.testing.assert_allclose(columns[k], expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+        np.testing.assert_allclose(world[k], unknown.world_map(kin), rtol=0, atol=1e-12)
 
 
 def _arm_push(plant, context, localizer, seed: int):

@@ -553,7 +553,7 @@ def fsr_sole_wrenches(robot: EstimatorPlant, log: RobotLog, positions: np.ndarra
             readings[:, slot] = log.fsr_forces[:, column[name]]
     soles = FsrSoleWrenches(robot.plant, robot.humanoid, robot.fsr_sides)
     R_WS = robot.frame_rotations(robot.fsr_frames, positions)
-    return np.array([soles.sole_wrenches(r, R).ravel() for r, R in zip(readings, R_WS)])
+    return soles.sole_wrenches(readings, R_WS).reshape(log.num_samples, -1)
 
 
 def log_inputs(

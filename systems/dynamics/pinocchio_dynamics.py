@@ -222,6 +222,35 @@ class PinocchioFloatingBaseDynamics:
             gather = self._support_gather = np.concatenate([one + 6 * nv * k for k in range(count)])
         return gather
 
+    def floating_frame_jacobians_of_samples(
+        self, q: np.ndarray, frame_ids: Sequence[int]
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """At K positions q (K, nq; Drake's order, unit quaternions, not checked), for each
+        frame (``frame_ids``, from ``frame_ids``): J^fb (K, m, 6, n), the floating Jacobian of
+        eq. (12) of its origin, rows [angular; linear] in world axes (J^fb^T [m; f] is the
+        internal residual's share of a wrench at the origin), its origin p_WF (K, m, 3) and
+        its rotation R_WF (K, m, 3, 3). Per sample ``computeJointJacobians`` and ``crba``;
+        J^fb = J_j - J_b M_bb^-1 M_bj (any base coordinates: Pinocchio's here) stacked over
+        the samples."""
+        model, data = self.model, self.data
+        K, m, nv = q.shape[0], len(frame_ids), model.nv
+        M = np.empty((K, nv, nv))
+        J = np.empty((K, m, 6, nv))
+        p_WF, R_WF = np.empty((K, m, 3)), np.empty((K, m, 3, 3))
+        joint_jacobians, crba = pin.computeJointJacobians, pin.crba
+        frame_jacobian, aligned = pin.getFrameJacobian, pin.LOCAL_WORLD_ALIGNED
+        for k, q_k in enumerate(q[:, self._q_source]):
+            joint_jacobians(model, data, q_k)
+            M[k] = crba(model, data, q_k)
+            for f, frame_id in enumerate(frame_ids):
+                J[k, f] = frame_jacobian(model, data, frame_id, aligned)  # updates data.oMf[frame_id]
+                placement = data.oMf[frame_id]
+                p_WF[k, f], R_WF[k, f] = placement.translation, placement.rotation
+        M = self._to_F0_order(M)
+        J = J[..., self.permutation][:, :, (3, 4, 5, 0, 1, 2)]  # F0 columns, rows [angular; linear]
+        E = np.linalg.solve(M[:, :6, :6], M[:, :6, 6:])  # (K, 6, n)
+        return J[..., 6:] - J[..., :6] @ E[:, None], p_WF, R_WF
+
     def frame_ids(self, frames: Sequence[Frame]) -> tuple[int, ...]:
         """The Pinocchio frame ids of the plant's ``frames`` (for ``support_jacobians``).
 

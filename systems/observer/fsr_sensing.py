@@ -430,14 +430,15 @@ class FsrSoleWrenches(_KinematicsSystem):
 
     def sole_wrenches(self, readings: np.ndarray, R_WS: np.ndarray) -> np.ndarray:
         """(k, 6) the class docstring's wrenches from the 8 ``readings`` and the k soles'
-        rotations R_WS (k, 3, 3)."""
-        F = np.asarray(readings, dtype=float)[self._slots]  # (k, 4)
-        n = R_WS[:, :, 2]  # (k, 3)
-        force = F.sum(axis=1)[:, None] * n
+        rotations R_WS (k, 3, 3); or (N, k, 6) of N samples at once, readings (N, 8) and R_WS
+        (N, k, 3, 3)."""
+        F = np.asarray(readings, dtype=float)[..., self._slots]  # ([N,] k, 4)
+        n = R_WS[..., :, 2]  # ([N,] k, 3)
+        force = F.sum(axis=-1)[..., None] * n
         # sum_i F_i (R p_i) x n = R (sum_i F_i p_i) x n: the readings' first moment in the sole.
-        first_moment = np.einsum("ki,kij->kj", F, self._p_S)  # (k, 3) in the sole frame
-        moment = np.cross(np.einsum("kij,kj->ki", R_WS, first_moment), n)
-        return np.concatenate((moment, force), axis=1)
+        first_moment = np.einsum("...ki,kij->...kj", F, self._p_S)  # ([N,] k, 3) in the sole frame
+        moment = np.cross(np.einsum("...kij,...kj->...ki", R_WS, first_moment), n)
+        return np.concatenate((moment, force), axis=-1)
 
     def _CalcWrenches(self, context: Context, output: BasicVector) -> None:
         self._set_positions(context)

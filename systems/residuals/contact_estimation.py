@@ -37,6 +37,7 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import BodyIndex, Frame, JacobianWrtVariable, RigidBody
 from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem, ValueProducer
 from scipy.optimize import nnls
+from scipy.signal import lfilter
 from scipy.stats import chi2
 
 from systems.common.checks import eval_finite_input, positive_number, resolve_body
@@ -96,6 +97,7 @@ class _SensedConfiguration:
         self._q_key: bytes | None = None
         self._A: np.ndarray | None = None
         self._world = plant.world_frame()
+        self._pinocchio = None  # ``pinocchio``
 
     def set_positions(self, q: np.ndarray) -> None:
         key = q.tobytes()
@@ -127,6 +129,16 @@ class _SensedConfiguration:
 
     def base_pose(self) -> np.ndarray:
         return self.topology.base_frame.CalcPoseInWorld(self.context).GetAsMatrix34()
+
+    @property
+    def pinocchio(self):
+        """Pinocchio's kinematics and mass matrix of the plant (``PinocchioFloatingBaseDynamics``),
+        built on first use: the computations over many samples at once (``wrench_maps_of_samples``)."""
+        if self._pinocchio is None:
+            from systems.dynamics.pinocchio_dynamics import PinocchioFloatingBaseDynamics
+
+            self._pinocchio = PinocchioFloatingBaseDynamics(self.plant)
+        return self._pinocchio
 
 
 def _unknown_frames(plant: MultibodyPlant, frames: Sequence, who: str) -> tuple[Frame, ...]:
@@ -170,6 +182,22 @@ def wrench_maps(kin: _SensedConfiguration, frames: Sequence[Frame]) -> np.ndarra
         J = plant.CalcJacobianSpatialVelocity(kin.context, JacobianWrtVariable.kV, frame, np.zeros(3), world, world)
         T[i, 6:] = (J[:, 6:] - J[:, :6] @ E).T
     return T
+
+
+def wrench_maps_of_samples(dynamics, frames: Sequence[Frame], q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``wrench_maps`` at each of K positions q (K, nq) at once, (K, m, 6 + n, 6), and the
+    frames' rotations R_WF (K, m, 3, 3), from ``dynamics``, a ``PinocchioFloatingBaseDynamics``
+    of the plant (``floating_frame_jacobians_of_samples``: Pinocchio's kinematics and mass
+    matrix per sample, the rest stacked); the same numbers as ``wrench_maps`` to rounding."""
+    q = np.asarray(q, dtype=float)
+    J_fb, p_WF, R_WF = dynamics.floating_frame_jacobians_of_samples(q, dynamics.frame_ids(frames))
+    K, m, _, n = J_fb.shape
+    T = np.zeros((K, m, 6 + n, 6))
+    T[:, :, :3, :3] = np.eye(3)
+    T[:, :, :3, 3:] = _skews(p_WF.reshape(-1, 3)).reshape(K, m, 3, 3)
+    T[:, :, 3:6, 3:] = np.eye(3)
+    T[:, :, 6:] = J_fb.transpose(0, 1, 3, 2)
+    return T, R_WF
 
 
 def unknown_wrench_columns(kin: _SensedConfiguration, frames: Sequence[Frame]) -> np.ndarray:
@@ -272,6 +300,29 @@ class UnknownWrenches:
         T = wrench_maps(kin, self.frames)
         parts = [T_F if B is None else T_F @ B for T_F, B in zip(T, self._bases(kin))]
         return np.concatenate(parts, axis=1)
+
+    def columns_of_samples(self, dynamics, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``columns`` and ``world_map`` at each of K positions q (K, nq) at once: (K, 6 + n,
+        size) and (K, 6 m, size), from ``dynamics``, a ``PinocchioFloatingBaseDynamics`` of
+        the plant (``wrench_maps_of_samples``), the same numbers to rounding."""
+        K = q.shape[0]
+        T, R_WF = wrench_maps_of_samples(dynamics, self.frames, q)
+        columns = np.empty((K, T.shape[2], self.size))
+        world = np.zeros((K, 6 * len(self.frames), self.size))
+        start = 0
+        for i, (chosen, partial) in enumerate(zip(self.components, self._partial)):
+            stop = start + len(chosen)
+            if not partial:
+                columns[:, :, start:stop] = T[:, i]
+                world[:, 6 * i : 6 * i + 6, start:stop] = np.eye(6)
+            else:
+                B = np.zeros((K, 6, 6))
+                B[:, :3, :3], B[:, 3:, 3:] = R_WF[:, i], R_WF[:, i]
+                B = B[:, :, list(chosen)]
+                columns[:, :, start:stop] = T[:, i] @ B
+                world[:, 6 * i : 6 * i + 6, start:stop] = B
+            start = stop
+        return columns, world
 
     def world_map(self, kin: _SensedConfiguration) -> np.ndarray:
         """(6 m, size) from the unknowns' values to the m wrenches [moment about the frame's
@@ -728,13 +779,19 @@ def _filter_columns(
     rows' K T (3 + n)."""
     positions = np.asarray(positions, dtype=float)
     current = np.asarray(start, dtype=float).reshape(3 + kin.n, unknown.size)
-    gain = np.asarray(gain, dtype=float)[:, None]
-    used = np.empty((len(positions), *current.shape))
-    for k, q in enumerate(positions):
-        used[k] = current
-        kin.set_positions(q)
-        current = (1.0 - gain) * current + gain * unknown.columns(kin)[3:]
-    return used, current
+    if not len(positions):
+        return np.empty((0, *current.shape)), current
+    gain = np.broadcast_to(np.asarray(gain, dtype=float), (3 + kin.n,))
+    # Every update's columns at once, then the recursion Tbar_k = (1 - KT) Tbar_k-1 + KT T_k,
+    # term for term, as a first-order filter per distinct gain.
+    columns = unknown.columns_of_samples(kin.pinocchio, positions)[0][:, 3:]
+    after = np.empty_like(columns)
+    for value in np.unique(gain):
+        rows = gain == value
+        after[:, rows] = lfilter(
+            [value], [1.0, -(1.0 - value)], columns[:, rows], axis=0, zi=((1.0 - value) * current[rows])[None]
+        )[0]
+    return np.concatenate((current[None], after[:-1])), after[-1]
 
 
 def unexplained_residuals(

@@ -35,9 +35,15 @@ import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable
 from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem
+from scipy.signal import lfilter
 
 from systems.common.checks import eval_finite_input, positive_number, resolve_body
-from systems.residuals.contact_estimation import UnknownWrenches, _SensedConfiguration, wrench_maps
+from systems.residuals.contact_estimation import (
+    UnknownWrenches,
+    _SensedConfiguration,
+    wrench_maps,
+    wrench_maps_of_samples,
+)
 
 #: The residuals ``SoleWrenchCompensation`` compensates.
 COMPENSATED_RESIDUALS = ("internal", "classical")
@@ -47,6 +53,22 @@ COMPENSATED_RESIDUALS = ("internal", "classical")
 #: 1e-16 (a direction lost: the soles' wrenches mimic it) to 3e-4 (with FSRs, the hip links
 #: away from the symmetric posture), the torso's, head's and arms' 2e-2 to 3e-1.
 MIN_LINK_CONDITIONING = 3e-3
+
+
+def _least_squares_of_samples(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(K, c) the least-squares solutions of K systems A_k x = b_k (A (K, r, c), b (K, r)):
+    by QR where A_k has full column rank (its triangular factor's diagonal within 1e-10 of its
+    largest), else the minimum-norm solution (pseudo-inverse), as ``lstsq`` gives."""
+    Q, R = np.linalg.qr(A)
+    diagonal = np.abs(np.diagonal(R, axis1=1, axis2=2))
+    full = diagonal.min(axis=1) > 1e-10 * diagonal.max(axis=1)
+    x = np.empty((A.shape[0], A.shape[2]))
+    if full.any():
+        Qb = np.einsum("krc,kr->kc", Q[full], b[full])
+        x[full] = np.linalg.solve(R[full], Qb[..., None])[..., 0]
+    if not full.all():
+        x[~full] = (np.linalg.pinv(A[~full]) @ b[~full, :, None])[..., 0]
+    return x
 
 
 class ReplayedCompensation(NamedTuple):
@@ -276,7 +298,10 @@ class SoleWrenchCompensation(LeafSystem):
         zero columns). ``links`` (N,), optional: a body index per update (-1: none), e.g.
         the contact localizer's answer; at a selection update a given link that is a
         candidate a sole's wrench cannot mimic (``given_link``) is taken instead of the
-        choice by misfit.
+        choice by misfit. Computed over all updates at once where the system steps them one
+        by one (the columns from Pinocchio's kinematics, ``UnknownWrenches.columns_of_samples``;
+        the filter as a first-order ``lfilter``; the fits per run of updates with one link): the
+        same numbers to rounding (tests).
 
         Raises:
             ValueError: arrays of inconsistent sizes or non-finite values (naming them).
@@ -310,32 +335,40 @@ class SoleWrenchCompensation(LeafSystem):
         first = np.zeros(rows.shape[1]) if before is None else np.concatenate([np.asarray(b, float) for b in before])
         read = np.vstack((first[None], rows[:-1]))  # what each update reads
         k_size, a = unknown.size, self._factor
-        body = np.full(N, -1.0)
-        fitted = np.zeros((N, k_size))
-        shares = np.zeros((N, rows.shape[1]))
-        soles = np.zeros((N, 6 * len(unknown)))
+        if N == 0:
+            empty = np.zeros((0, 6 * len(unknown)))
+            return ReplayedCompensation(np.zeros(0), r_int.copy(), r_ext.copy(), empty, start.copy())
+        # Every sample's columns and world maps at once, then the residuals' first-order filter
+        # over them (the system's recursion, term for term).
+        columns, world_maps = unknown.columns_of_samples(self._kin.pinocchio, q)
+        filtered = lfilter([a], [1.0, -(1.0 - a)], columns, axis=0, zi=((1.0 - a) * stacked)[None])[0]
+        # The link: chosen at the selection updates, held in between.
+        slots = np.empty(N, dtype=int)
         for k in range(N):
-            kin.set_positions(q[k])
-            stacked = (1.0 - a) * stacked + a * unknown.columns(kin)
             if (first_update + k) % self._every == 0:
                 given = None if links is None or links[k] < 0 else self.given_link(q[k], int(links[k]))
-                slot = given if given is not None else self.choose_link(q[k], read[k], stacked)
-                kin.set_positions(q[k])
-            A = stacked
+                slot = given if given is not None else self.choose_link(q[k], read[k], filtered[k])
+            slots[k] = slot
+        # The fits, batched per run of updates with one link: least squares of [filtered
+        # columns, the link's wrench map] (minimum norm, as lstsq).
+        fitted = np.zeros((N, k_size))
+        changes = np.flatnonzero(np.diff(slots)) + 1
+        for begin, end in zip(np.concatenate(([0], changes)), np.concatenate((changes, [N]))):
+            A = filtered[begin:end]
+            slot = int(slots[begin])
             if slot >= 0:
-                A = np.concatenate((stacked, wrench_maps(kin, [self._bodies[slot].body_frame()])[0]), axis=1)
-                body[k] = float(self._bodies[slot].index())
-            w = np.linalg.lstsq(A, rows[k], rcond=None)[0][:k_size]
-            fitted[k] = w
-            shares[k] = stacked @ w
-            soles[k] = unknown.world_map(kin) @ w
-        end = np.concatenate(([float(slot)], stacked.ravel()))
+                frames = [self._bodies[slot].body_frame()]
+                link = wrench_maps_of_samples(self._kin.pinocchio, frames, q[begin:end])[0][:, 0]
+                A = np.concatenate((A, link), axis=2)
+            fitted[begin:end] = _least_squares_of_samples(A, rows[begin:end])[:, :k_size]
+        shares = (filtered @ fitted[:, :, None])[:, :, 0]
+        body = np.array([float(self._bodies[s].index()) if s >= 0 else -1.0 for s in slots])
         return ReplayedCompensation(
             body_index=body,
             internal=r_int - shares[:, 6:],
             external_wrench_world=r_ext - shares[:, :6],
-            sole_wrenches_world=soles,
-            end=end,
+            sole_wrenches_world=(world_maps @ fitted[:, :, None])[:, :, 0],
+            end=np.concatenate(([float(slots[-1])], filtered[-1].ravel())),
         )
 
     def _inputs(self, context: Context) -> tuple[np.ndarray, np.ndarray]:

@@ -169,6 +169,12 @@ def _print_table(metrics: dict) -> None:
                 value = value * scale[0]
             cells.append(fmt.format(value))
         print(f"{label:42s}" + "".join(f"{c:>12s}" for c in cells))
+    for label, key in (
+        ("knee dead band [N m]", "knee_dead_band_N_m"),
+        ("push's knee effort, peak [N m]", "knee_push_effort_N_m"),
+    ):
+        cells = [max(metrics[kind][key].values(), default=float("nan")) for kind in kinds]
+        print(f"{label:42s}" + "".join(f"{c:>12.3f}" for c in cells))
     print("largest joint displacements [deg]:")
     for kind in kinds:
         top = sorted(metrics[kind]["max_joint_displacement_deg"].items(), key=lambda item: -item[1])[:8]

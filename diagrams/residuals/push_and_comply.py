@@ -435,7 +435,8 @@ def push_and_comply_metrics(
     the loggers of ``handles``): knee flexion and joints moved from the posture at the push's
     start, CoM and pelvis height drop, the CoM's largest horizontal travel, foot slip, base
     tilt, whether it stayed upright, and the real-time factor of a run that took
-    ``wall_time_s`` s."""
+    ``wall_time_s`` s; the admittance's dead band at the knees and the push's peak true
+    effort there (eq. 12), N m."""
     station = handles.station
     plant, humanoid = station.plant, station.humanoid
     t, x = s["t"], s["state"]
@@ -448,6 +449,13 @@ def push_and_comply_metrics(
     }
     knees = list(humanoid.joint_groups["knees"])
     flexion = {n: float(np.degrees(displacement[names.index(n), reference:].max())) for n in knees}
+    # The admittance's dead band at the knees, against the push's own effort there (the true
+    # joint effort, eq. 12): a soft threshold, it takes that much of the knees' residual.
+    dead_band = np.broadcast_to(handles.admittance.dead_band, (len(names),))
+    admittance_names = list(handles.admittance.joint_names)
+    knee_dead_band = {n: float(dead_band[admittance_names.index(n)]) for n in knees}
+    effort = np.abs(s["tau_c_real"][:, reference:]).max(axis=1) if "tau_c_real" in s else None
+    knee_push_effort = {n: float(effort[names.index(n)]) for n in knees} if effort is not None else {}
 
     context = plant.CreateDefaultContext()
     com, pelvis_z, tilt_deg, soles = [], [], [], {side: [] for side in humanoid.sole_frames}
@@ -470,6 +478,8 @@ def push_and_comply_metrics(
         "push_peak_force_N": handles.push_peak_force,
         "knee_pitch_flexion_deg": min(flexion.values()) if flexion else None,
         "knee_pitch_flexion_per_knee_deg": flexion,
+        "knee_dead_band_N_m": knee_dead_band,
+        "knee_push_effort_N_m": knee_push_effort,
         "joints_moved_over_1deg": int(sum(v > 1.0 for v in max_displacement_deg.values())),
         "com_height_drop_m": float(com_z[0] - com_z.min()),
         "com_horizontal_travel_m": float(np.linalg.norm(com[:, :2] - com[0, :2], axis=1).max()),

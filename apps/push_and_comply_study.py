@@ -109,6 +109,8 @@ SENSING_ROBOTS = (
 KEPT_METRICS = (
     "push_peak_force_N",
     "knee_pitch_flexion_deg",
+    "knee_dead_band_N_m",
+    "knee_push_effort_N_m",
     "joints_moved_over_1deg",
     "com_height_drop_m",
     "com_horizontal_travel_m",

@@ -84,8 +84,8 @@ BASE_STATE_SOURCES = ("truth_plus_noise", "invariant_ekf")
 #: The implementation of the estimators' dynamics on a humanoid (``HumanoidStation.dynamics_model``
 #: and the estimated contact flags' residuals; ``FloatingBaseDynamics``): Pinocchio's C++ kernels
 #: on a model built from the estimators' plant, M-dot exact from one Coriolis pass, equal to
-#: Drake's "fast" to ~1e-10 (tests/test_pinocchio_dynamics.py) at about half its cost per step
-#: (BENCHMARKS.md).
+#: Drake's "fast" to ~1e-10 (tests/test_pinocchio_dynamics.py) and cheaper per step: one
+#: Coriolis pass instead of two more mass matrices (BENCHMARKS.md).
 ONLINE_DYNAMICS = "pinocchio"
 
 

@@ -103,7 +103,7 @@ _KINEMATICS = ("pinocchio", "drake")
 
 def _pinocchio_kinematics(plant: MultibodyPlant, com_instance, spatial_inertias: Mapping):
     """The Pinocchio kinematics of ``plant`` (``PinocchioFloatingBaseDynamics.support_jacobians``,
-    a quarter of the cost of Drake's two frame Jacobians and centre-of-mass Jacobian) with the
+    cheaper than Drake's two frame Jacobians and centre-of-mass Jacobian) with the
     given spatial inertias, or None where it would not give Drake's numbers: a plant Pinocchio's
     model cannot represent (other joint types), or one whose floating tree holds bodies of
     another model instance than ``com_instance`` (Drake's centre of mass is that instance's)."""
@@ -291,7 +291,7 @@ class JointAdmittanceController(LeafSystem):
                 centre of mass is computed with (the estimators' model); None: the plant's.
             kinematics: what computes the support frames' and the centre of mass's Jacobians:
                 "pinocchio" (default; Pinocchio's kernels on a model built from the plant, the
-                same numbers as Drake's to rounding at a quarter of the cost, where that model
+                same numbers as Drake's to rounding at a fraction of the cost, where that model
                 holds the same bodies as the support frames' model instance; else Drake's) or
                 "drake".
 

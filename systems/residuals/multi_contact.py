@@ -180,7 +180,7 @@ _GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
 _POLISH_TOLERANCE = 1e-4  # m: the line polish stops early when no point moves more than this
 _LM_ITERATIONS = 15  # at most, of the surface Levenberg-Marquardt polish
 _MAX_STEP = 0.02  # m, its largest tangent step per contact
-_LM_GAIN = 1e-6  # it stops when an iteration gains less than this times (1 + misfit)
+_LM_GAIN = 1e-6  # it stops when an iteration gains less than this times the misfit (or moves < 0.1 um)
 _LM_CANDIDATES = 4  # fit_two polishes the best this many link pairs with it (fit_one: 2 links)
 _MEDIUM_PAIRS = 5  # times link_pairs: the link pairs searched on the medium grids
 _PAIR_BLOCK = 8192  # point pairs per block of the vectorised pair search (cache-sized arrays)
@@ -1321,7 +1321,7 @@ class MultiContactLocalizer:
             JTJ, g = J.T @ J, J.T @ e
             scale = np.diag(JTJ).copy()
             scale[scale <= 0.0] = 1.0
-            if g @ _jittered_solve(JTJ, g) < _LM_GAIN * (1.0 + cand.misfit):
+            if g @ _jittered_solve(JTJ, g) < _LM_GAIN * cand.misfit:
                 break  # converged: the Gauss-Newton step would gain (almost) nothing
             accepted = None
             for _ in range(6):
@@ -1351,7 +1351,7 @@ class MultiContactLocalizer:
             moved = float(np.max(np.linalg.norm(accepted.points - cand.points, axis=1)))
             gain = cand.misfit - accepted.misfit
             cand = accepted
-            if moved < 1e-7 or gain < _LM_GAIN * (1.0 + cand.misfit):
+            if moved < 1e-7 or gain < _LM_GAIN * cand.misfit:
                 break
         return cand
 
@@ -1498,11 +1498,12 @@ class MultiContactLocalizer:
                     link_best[link] = c
         cands = sorted(link_best.values(), key=lambda c: c.misfit)
         cands = cands[: self._refit_links]
-        # A line entry is already the best point of its link; the best few grid points are
-        # polished along their surfaces.
+        # The two best are polished along their surfaces: a grid point, and a line entry too
+        # (the best point of its link only where the link's zero-pitch wrench is unique; with
+        # the soles' columns projected out a stance leg link's is not). At a line entry that
+        # is already the best point the polish stops at its first step.
         for m in range(min(len(cands), 2)):
-            if not cands[m].on_line:
-                cands[m] = self._lm_polish(pose, bp, cands[m])
+            cands[m] = self._lm_polish(pose, bp, cands[m])
         return self._result(pose, bt, bp, cands, 1)
 
     # -- two contacts -------------------------------------------------------------------------

@@ -170,17 +170,26 @@ def wrench_maps(kin: _SensedConfiguration, frames: Sequence[Frame]) -> np.ndarra
     [angular; translational])."""
     plant = kin.plant
     world = plant.world_frame()
-    T = np.zeros((len(frames), 6 + kin.n, 6))
     if not frames:
-        return T
+        return np.zeros((0, 6 + kin.n, 6))
     E = kin.elimination()
     p_F = np.array([frame.CalcPoseInWorld(kin.context).translation() for frame in frames])
-    T[:, :3, :3] = np.eye(3)
-    T[:, :3, 3:] = _skews(p_F)
-    T[:, 3:6, 3:] = np.eye(3)
+    J_fb = np.empty((len(frames), 6, kin.n))
     for i, frame in enumerate(frames):
         J = plant.CalcJacobianSpatialVelocity(kin.context, JacobianWrtVariable.kV, frame, np.zeros(3), world, world)
-        T[i, 6:] = (J[:, 6:] - J[:, :6] @ E).T
+        J_fb[i] = J[:, 6:] - J[:, :6] @ E
+    return _assemble_wrench_maps(p_F, J_fb)
+
+
+def _assemble_wrench_maps(p_F: np.ndarray, J_fb: np.ndarray) -> np.ndarray:
+    """T_F = [[I, skew(p_F)]; [0, I]; J^fb_F^T] (..., 6 + n, 6) of frame origins p_F (..., 3)
+    and their floating Jacobians J^fb_F (..., 6, n) (``wrench_maps``)."""
+    lead, n = p_F.shape[:-1], J_fb.shape[-1]
+    T = np.zeros((*lead, 6 + n, 6))
+    T[..., :3, :3] = np.eye(3)
+    T[..., :3, 3:] = _skews(p_F.reshape(-1, 3)).reshape(*lead, 3, 3)
+    T[..., 3:6, 3:] = np.eye(3)
+    T[..., 6:, :] = np.swapaxes(J_fb, -1, -2)
     return T
 
 
@@ -191,13 +200,7 @@ def wrench_maps_of_samples(dynamics, frames: Sequence[Frame], q: np.ndarray) -> 
     matrix per sample, the rest stacked); the same numbers as ``wrench_maps`` to rounding."""
     q = np.asarray(q, dtype=float)
     J_fb, p_WF, R_WF = dynamics.floating_frame_jacobians_of_samples(q, dynamics.frame_ids(frames))
-    K, m, _, n = J_fb.shape
-    T = np.zeros((K, m, 6 + n, 6))
-    T[:, :, :3, :3] = np.eye(3)
-    T[:, :, :3, 3:] = _skews(p_WF.reshape(-1, 3)).reshape(K, m, 3, 3)
-    T[:, :, 3:6, 3:] = np.eye(3)
-    T[:, :, 6:] = J_fb.transpose(0, 1, 3, 2)
-    return T, R_WF
+    return _assemble_wrench_maps(p_WF, J_fb), R_WF
 
 
 def unknown_wrench_columns(kin: _SensedConfiguration, frames: Sequence[Frame]) -> np.ndarray:
@@ -217,6 +220,22 @@ ALL_WRENCH_COMPONENTS = (0, 1, 2, 3, 4, 5)
 #: force f_z and, through where they sit, the moments m_x and m_y (the centre of pressure):
 #: the known wrench of ``systems.observer.fsr_sensing.FsrSoleWrenches``.
 SOLE_SHEAR_AND_YAW = (2, 3, 4)
+
+
+def _component_basis(R_WF: np.ndarray, chosen: Sequence[int]) -> np.ndarray:
+    """(..., 6, k) the world directions [moment; force] of a frame's wrench components
+    ``chosen`` (indices in its own axes' [m_x, m_y, m_z, f_x, f_y, f_z]), its rotation R_WF (..., 3, 3)."""
+    B = np.zeros((*R_WF.shape[:-2], 6, 6))
+    B[..., :3, :3], B[..., 3:, 3:] = R_WF, R_WF
+    return B[..., list(chosen)]
+
+
+def first_order_filter(samples: np.ndarray, factor: float, previous: np.ndarray) -> np.ndarray:
+    """y_k = (1 - a) y_k-1 + a x_k along the first axis of ``samples`` (a = ``factor``), from
+    y_-1 = ``previous``: the residuals' own filter (a = K T) as ``ContactDetector`` and
+    ``SoleWrenchCompensation`` apply it to columns update by update, and the localizer's
+    running means (a = T / tau), the same arithmetic as their updates."""
+    return lfilter([factor], [1.0, -(1.0 - factor)], samples, axis=0, zi=((1.0 - factor) * previous)[None])[0]
 
 
 class UnknownWrenches:
@@ -281,16 +300,10 @@ class UnknownWrenches:
     def world_bases(self, context: Context) -> list[np.ndarray | None]:
         """Per frame, the (6, k) world directions [moment; force] of its unknown components
         at the positions of ``context`` (the plant's), or None for all six (the identity)."""
-        bases = []
-        for frame, chosen, partial in zip(self.frames, self.components, self._partial):
-            if not partial:
-                bases.append(None)
-                continue
-            R = frame.CalcPoseInWorld(context).rotation().matrix()
-            B = np.zeros((6, 6))
-            B[:3, :3], B[3:, 3:] = R, R
-            bases.append(B[:, chosen])
-        return bases
+        return [
+            _component_basis(frame.CalcPoseInWorld(context).rotation().matrix(), chosen) if partial else None
+            for frame, chosen, partial in zip(self.frames, self.components, self._partial)
+        ]
 
     def columns(self, kin: _SensedConfiguration) -> np.ndarray:
         """(6 + n, size) their columns in the stacked residuals at the positions last set on
@@ -316,9 +329,7 @@ class UnknownWrenches:
                 columns[:, :, start:stop] = T[:, i]
                 world[:, 6 * i : 6 * i + 6, start:stop] = np.eye(6)
             else:
-                B = np.zeros((K, 6, 6))
-                B[:, :3, :3], B[:, 3:, 3:] = R_WF[:, i], R_WF[:, i]
-                B = B[:, :, list(chosen)]
+                B = _component_basis(R_WF[:, i], chosen)
                 columns[:, :, start:stop] = T[:, i] @ B
                 world[:, 6 * i : 6 * i + 6, start:stop] = B
             start = stop
@@ -788,9 +799,7 @@ def _filter_columns(
     after = np.empty_like(columns)
     for value in np.unique(gain):
         rows = gain == value
-        after[:, rows] = lfilter(
-            [value], [1.0, -(1.0 - value)], columns[:, rows], axis=0, zi=((1.0 - value) * current[rows])[None]
-        )[0]
+        after[:, rows] = first_order_filter(columns[:, rows], value, current[rows])
     return np.concatenate((current[None], after[:-1])), after[-1]
 
 
@@ -1835,8 +1844,6 @@ class ContactLocalizer(LeafSystem):
         (each localization depends on its own averaged inputs only); the state's running
         means are then those of the last contact (an averaging restarts from its first
         sample, so earlier ones do not matter)."""
-        from scipy.signal import lfilter
-
         N = len(times)
         out = np.empty((N, 14))
         detected = np.asarray(detected, dtype=bool)
@@ -1871,9 +1878,7 @@ class ContactLocalizer(LeafSystem):
                     if tail.size:
                         c = int(tail[0])
                         y0 = means[c - 1] if c > 0 else np.zeros(s.shape[1])
-                        means[c:], _ = lfilter(
-                            [beta], [1.0, beta - 1.0], s[c:], axis=0, zi=((1.0 - beta) * y0)[None, :]
-                        )
+                        means[c:] = first_order_filter(s[c:], beta, y0)
                 means_end = means[-1]
             # The localizations: at the first sample, then each one localization period
             # after the last (the ticks depend on the times only).

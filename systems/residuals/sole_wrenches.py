@@ -35,12 +35,12 @@ import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable
 from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem
-from scipy.signal import lfilter
 
 from systems.common.checks import eval_finite_input, positive_number, resolve_body
 from systems.residuals.contact_estimation import (
     UnknownWrenches,
     _SensedConfiguration,
+    first_order_filter,
     wrench_maps,
     wrench_maps_of_samples,
 )
@@ -53,6 +53,11 @@ COMPENSATED_RESIDUALS = ("internal", "classical")
 #: 1e-16 (a direction lost: the soles' wrenches mimic it) to 3e-4 (with FSRs, the hip links
 #: away from the symmetric posture), the torso's, head's and arms' 2e-2 to 3e-1.
 MIN_LINK_CONDITIONING = 3e-3
+
+
+def _without(Q: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """The wrench maps T (B, r, c) without their part in the span of Q's orthonormal columns (r, k)."""
+    return T - np.einsum("rk,bkc->brc", Q, np.einsum("rk,brc->bkc", Q, T))
 
 
 def _least_squares_of_samples(A: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -233,16 +238,12 @@ class SoleWrenchCompensation(LeafSystem):
         kin = self._kin
         kin.set_positions(np.asarray(q, dtype=float))
         T = wrench_maps(kin, [b.body_frame() for b in self._bodies])  # (B, 6 + n, 6)
-
-        def without(Q: np.ndarray) -> np.ndarray:
-            return T - np.einsum("rk,bkc->brc", Q, np.einsum("rk,brc->bkc", Q, T))
-
         usable = self._separable(T)
         if not usable.any():
             return -1
         # The fit: with the soles' columns as the residuals see them.
         Q = np.linalg.qr(columns)[0]
-        projected = without(Q)
+        projected = _without(Q, T)
         rest = rows - Q @ (Q.T @ rows)
         x = np.einsum("bcr,r->bc", np.linalg.pinv(projected[usable]), rest)
         misfit = np.linalg.norm(rest - np.einsum("brc,bc->br", projected[usable], x), axis=1)
@@ -253,8 +254,7 @@ class SoleWrenchCompensation(LeafSystem):
         ``self._kin`` holds, a sole's wrench cannot mimic: the soles' columns at this posture
         (the physics) projected out, they keep ``MIN_LINK_CONDITIONING`` of their largest
         singular value."""
-        Q = np.linalg.qr(self._unknown.columns(self._kin))[0]
-        projected = T - np.einsum("rk,bkc->brc", Q, np.einsum("rk,brc->bkc", Q, T))
+        projected = _without(np.linalg.qr(self._unknown.columns(self._kin))[0], T)
         singular = np.linalg.svd(projected, compute_uv=False)
         return singular[:, -1] > MIN_LINK_CONDITIONING * np.linalg.svd(T, compute_uv=False)[:, 0]
 
@@ -300,7 +300,7 @@ class SoleWrenchCompensation(LeafSystem):
         candidate a sole's wrench cannot mimic (``given_link``) is taken instead of the
         choice by misfit. Computed over all updates at once where the system steps them one
         by one (the columns from Pinocchio's kinematics, ``UnknownWrenches.columns_of_samples``;
-        the filter as a first-order ``lfilter``; the fits per run of updates with one link): the
+        the filter ``first_order_filter``; the fits per run of updates with one link): the
         same numbers to rounding (tests).
 
         Raises:
@@ -341,7 +341,7 @@ class SoleWrenchCompensation(LeafSystem):
         # Every sample's columns and world maps at once, then the residuals' first-order filter
         # over them (the system's recursion, term for term).
         columns, world_maps = unknown.columns_of_samples(self._kin.pinocchio, q)
-        filtered = lfilter([a], [1.0, -(1.0 - a)], columns, axis=0, zi=((1.0 - a) * stacked)[None])[0]
+        filtered = first_order_filter(columns, a, stacked)
         # The link: chosen at the selection updates, held in between.
         slots = np.empty(N, dtype=int)
         for k in range(N):

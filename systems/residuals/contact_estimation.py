@@ -68,10 +68,12 @@ __all__ = [
     "SOLE_SHEAR_AND_YAW",
     "STATUS_REASONS",
     "UnknownWrenches",
+    "first_order_filter",
     "predicted_residual_covariances",
     "unexplained_residuals",
     "unknown_wrench_columns",
     "wrench_maps",
+    "wrench_maps_of_samples",
 ]
 
 
@@ -231,8 +233,8 @@ def _component_basis(R_WF: np.ndarray, chosen: Sequence[int]) -> np.ndarray:
 
 
 def first_order_filter(samples: np.ndarray, factor: float, previous: np.ndarray) -> np.ndarray:
-    """y_k = (1 - a) y_k-1 + a x_k along the first axis of ``samples`` (a = ``factor``), from
-    y_-1 = ``previous``: the residuals' own filter (a = K T) as ``ContactDetector`` and
+    """``y[k] = (1 - a) y[k-1] + a x[k]`` along the first axis of ``samples`` (a = ``factor``),
+    from ``y[-1] = previous``: the residuals' own filter (a = K T) as ``ContactDetector`` and
     ``SoleWrenchCompensation`` apply it to columns update by update, and the localizer's
     running means (a = T / tau), the same arithmetic as their updates."""
     return lfilter([factor], [1.0, -(1.0 - factor)], samples, axis=0, zi=((1.0 - factor) * previous)[None])[0]

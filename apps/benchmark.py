@@ -451,6 +451,7 @@ def benchmark_closed_loop(seconds: float = 2.0) -> list[dict]:
     from pydrake.systems.primitives import ConstantVectorSource
 
     from diagrams.residuals.push_and_comply import PushAndComplyScenario, build_push_and_comply_diagram
+    from diagrams.station.config import StationConfig
     from diagrams.station.humanoid_station import add_humanoid_station
 
     scenario = PushAndComplyScenario(
@@ -459,7 +460,8 @@ def benchmark_closed_loop(seconds: float = 2.0) -> list[dict]:
 
     def station_only():
         builder = DiagramBuilder()
-        station = add_humanoid_station(builder, scenario.model, plant_config=scenario.plant_config, noise=True, seed=0)
+        ideal = StationConfig(model=scenario.station.model, plant_config=scenario.station.plant_config)
+        station = add_humanoid_station(builder, ideal)
         posture = builder.AddSystem(ConstantVectorSource(station.q_hold))
         builder.Connect(posture.get_output_port(), station.desired_position)
         return builder.Build(), station, None
@@ -516,8 +518,11 @@ def benchmark_contact_localizer(model: str = "hrp4_like", *, calls: int = 100, b
         build_contact_localization_diagram,
         sample_trials,
     )
+    from diagrams.station.config import StationConfig
 
-    _, handles = build_contact_localization_diagram(ContactLocalizationScenario(model=model, noise=False))
+    _, handles = build_contact_localization_diagram(
+        ContactLocalizationScenario(station=StationConfig.realistic(model=model, noise=False))
+    )
     plant, localizer = handles.plant, handles.localizer
     x0 = handles.station.initial_state
     nq = plant.num_positions()
@@ -574,9 +579,12 @@ def benchmark_multi_contact_fit(model: str = "hrp4_like", *, pairs: int = 10, se
         build_contact_localization_diagram,
         sample_trials,
     )
+    from diagrams.station.config import StationConfig
     from systems.residuals.multi_contact import MultiContactLocalizer
 
-    _, handles = build_contact_localization_diagram(ContactLocalizationScenario(model=model, noise=False))
+    _, handles = build_contact_localization_diagram(
+        ContactLocalizationScenario(station=StationConfig.realistic(model=model, noise=False))
+    )
     plant = handles.plant
     x0 = handles.station.initial_state
     nq = plant.num_positions()

@@ -1,6 +1,6 @@
 """Contact localization Monte Carlo study: Flacco et al. (2016), Secs. V-VI, Fig. 9.
 
-By default the study runs in the realistic world (``diagrams.station.conditions``: the
+By default the study runs in the realistic world (``diagrams.station.config``: the
 base state from the invariant EKF, realistic imperfections, the model refined once from a
 calibration motion before the trials); ``--ideal`` runs it in the ideal world.
 
@@ -338,13 +338,13 @@ def _study(scenario: ContactLocalizationScenario, args, out_dir: Path, start: fl
     """The study of ``main``, run on ``engine`` (``apps.engine``), from its start time
     ``start`` (s, ``time.perf_counter``)."""
     specs = sample_study_trials(scenario)
-    if scenario.model_refinement == "calibrate":
+    if scenario.station.model_refinement == "calibrate":
         # Calibrated once, here; the workers read the saved corrections. The file is named
         # before the calibration, as refined_model names it (its key hashes the code: an
         # edit of the sources during a long calibration must not change the name read back).
         saved = calibration_file(scenario, calibration_cache_folder(args))
         refined_model(scenario, calibration_cache_folder(args))
-        scenario.model_refinement = str(saved)
+        scenario.station.model_refinement = str(saved)
     phases = {"calibration": time.perf_counter() - start}  # wall time of each phase, s
     scenario_yaml = scenario_as_yaml(scenario)
     scenario.multi_contact = scenario.multi_contact or scenario.contacts == 2
@@ -383,13 +383,13 @@ def _study(scenario: ContactLocalizationScenario, args, out_dir: Path, start: fl
     )
     metrics.update(
         {
-            "model": scenario.model,
-            "seed": scenario.seed,
-            "seeds": list(range(scenario.seed, scenario.seed + scenario.num_seeds)),
+            "model": scenario.station.model,
+            "seed": scenario.station.seed,
+            "seeds": list(range(scenario.station.seed, scenario.station.seed + scenario.num_seeds)),
             "trials_per_run": scenario.trials_per_run,
             "contacts": scenario.contacts,
             "trials_with_a_sole_slip": sum(r["sole_slipped"] for r in results),
-            "noise": scenario.noise,
+            "noise": scenario.station.noise,
             "engine": engine.kind,
             "workers": engine.workers,
             "push_start_s": scenario.push_start,

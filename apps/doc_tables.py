@@ -151,13 +151,20 @@ def _floor(text: str | None, scale: float, unit: str) -> str:
     return f"{op} {scale * float(value):g} {unit}"
 
 
+def _station(scenario: dict) -> dict:
+    """A results file's station settings (model, seed, world): its scenario's ``station``, or
+    the scenario itself in a file written before scenarios nested them."""
+    return scenario.get("station", scenario)
+
+
 def _contact_study(data: dict) -> list[str]:
     scenario = data.get("scenario", {})
+    station = _station(scenario)
     contacts = scenario.get("contacts", 1)
-    seeds = f"{scenario.get('seed')}-{scenario.get('seed', 0) + scenario.get('num_seeds', 1) - 1}"
+    seeds = f"{station.get('seed')}-{station.get('seed', 0) + scenario.get('num_seeds', 1) - 1}"
     lines = [
         f"{data.get('trials')} trials, {'two links pushed at once' if contacts == 2 else 'one contact'} each, "
-        f"seeds {seeds}, {'ideal' if scenario.get('model_refinement') == 'none' else 'realistic'} world; "
+        f"seeds {seeds}, {'ideal' if station.get('model_refinement') == 'none' else 'realistic'} world; "
         f"false detections: {data.get('false_detections')}",
         "",
         "| metric | value [95 % interval] | floor | met |",
@@ -193,8 +200,7 @@ def _paper_speed(data: dict) -> list[str]:
 
 
 def _residual_comparison(data: dict) -> list[str]:
-    scenario = data.get("scenario", {})
-    world = "ideal" if scenario.get("model_refinement") == "none" else "realistic"
+    world = "ideal" if _station(data.get("scenario", {})).get("model_refinement") == "none" else "realistic"
     rows = (
         ("internal residual vs tau_c,real, all joints", "internal_rel_rms_error"),
         ("classical residual (joint part) vs tau_c,real", "classical_rel_rms_error"),

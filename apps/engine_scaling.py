@@ -255,8 +255,9 @@ def _calibrate(seed: int, cache: Path) -> float:
 
     from diagrams.residuals.contact_localization import ContactLocalizationScenario
     from diagrams.residuals.model_refinement import calibration_file, refined_model
+    from diagrams.station.config import StationConfig
 
-    scenario = ContactLocalizationScenario(seed=seed)
+    scenario = ContactLocalizationScenario(station=StationConfig.realistic(seed=seed))
     print("calibrating the study's model once (timed; the studies reuse it)", flush=True)
     with tempfile.TemporaryDirectory() as fresh:
         path = calibration_file(scenario, Path(fresh))

@@ -2,7 +2,7 @@
 the estimators' model of the realistic robot from a slow calibration motion, then measure
 the spurious effort it removes.
 
-The realistic robot (``diagrams.station.conditions``: invariant-EKF base state, IMU noise
+The realistic robot (``diagrams.station.config``: invariant-EKF base state, IMU noise
 and bias walks, encoder quantisation, unmodelled joint friction, motor-torque scale and
 offset errors, 5 % mass / 10 % CoM / 10 % inertia mismatch) stands on its F/T feet and
 follows a 40 s slow whole-body motion; from that log alone (``CalibrationLog``: sensed state,

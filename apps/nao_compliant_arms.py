@@ -191,7 +191,7 @@ def main(argv: list[str] | None = None) -> int:
             + ", ".join(f"{n} {v:.3f}" for n, v in km.items())
             + " N m/rad"
         )
-        initial_state = settle_standing_state(wide_stance(), plant_config=scenario.plant_config)
+        initial_state = settle_standing_state(wide_stance(), plant_config=scenario.station.plant_config)
         meshcat = replay_meshcat(not args.no_replay, args.headless)
         metrics = {}
         for case in runs:

@@ -190,7 +190,9 @@ def main(argv: list[str] | None = None) -> int:
         for experiment in schedules:
             print(f"{experiment.title}: {experiment.duration:.1f} s simulated ...", flush=True)
             initial_state = settle_standing_state(
-                experiment_posture(scenario, experiment), plant_config=scenario.plant_config, robot=scenario.robot
+                experiment_posture(scenario, experiment),
+                plant_config=scenario.station.plant_config,
+                robot=scenario.station.model,
             )
             diagram, handles = build_experiment_diagram(scenario, experiment, meshcat)
             run = simulate(

@@ -6,7 +6,7 @@ residual moves the joints in the direction of the effort the residual sees. The 
 runs twice: with the classical residual (eq. 7: it only feels the chest) and with the
 internal residual (eq. 11: it feels the legs too, and the robot bends as if sitting down).
 
-By default it runs in the realistic world (``diagrams.station.conditions``: the invariant
+By default it runs in the realistic world (``diagrams.station.config``: the invariant
 EKF's base state, realistic sensor, friction and model imperfections, the model refined
 from a calibration motion first, cached in ``DIR/calibration_cache/``); ``--ideal`` runs it
 in the ideal world. The admittance keeps both soles and the centre of mass still
@@ -192,7 +192,7 @@ def main(argv: list[str] | None = None) -> int:
         corrections = refined_model(scenario, calibration_cache_folder(args))
         meshcat = replay_meshcat(True, args.headless)
         print(
-            f"push and comply: {scenario.model}, {scenario.push_peak_force:g} N"
+            f"push and comply: {scenario.station.model}, {scenario.push_peak_force:g} N"
             f"{' (on hrp4_like; scaled to the robot: see the table)' if scenario.scale_to_robot else ''} down on each "
             "shoulder from "
             f"{scenario.push_start:g} s (peak {scenario.push_peak_time:g} s, off {scenario.push_end:g} s), "

@@ -56,7 +56,6 @@ from apps.runner import (
     writable_folder,
 )
 from diagrams.scenarios import scenario_as_yaml
-from diagrams.station.conditions import set_ideal_conditions
 
 #: The ablation's rows: (label, the fields each adds to the previous row's scenario).
 ABLATION_STEPS = (
@@ -136,8 +135,7 @@ def ablation_scenarios(duration: float | None = None, worlds: tuple[str, ...] = 
         for label, changes in ABLATION_STEPS:
             fields.update(changes)
             scenario = dataclasses.replace(PushAndComplyScenario(), **fields)
-            if world == "ideal":
-                scenario = set_ideal_conditions(scenario)
+            scenario.station = scenario.station.in_world(world)
             rows.append({"label": label, "world": world, "scenario": _shortened(scenario, duration)})
     return rows
 
@@ -149,12 +147,9 @@ def robot_scenarios(duration: float | None = None) -> list[dict]:
     rows = []
     for label, model, robot_seed, sensor_seed in ROBOTS:
         default = PushAndComplyScenario()
-        scenario = dataclasses.replace(
-            default,
-            model=model,
-            seed=sensor_seed,
-            imperfections=dataclasses.replace(default.imperfections, seed=robot_seed),
-        )
+        imperfections = dataclasses.replace(default.station.imperfections, seed=robot_seed)
+        station = dataclasses.replace(default.station, model=model, seed=sensor_seed, imperfections=imperfections)
+        scenario = dataclasses.replace(default, station=station)
         rows.append({"label": label, "world": "realistic", "scenario": _shortened(scenario, duration)})
     return rows
 
@@ -166,9 +161,8 @@ def sensing_scenarios(duration: float | None = None) -> list[dict]:
 
     rows = []
     for label, model, world in SENSING_ROBOTS:
-        scenario = dataclasses.replace(PushAndComplyScenario(), model=model)
-        if world == "ideal":
-            scenario = set_ideal_conditions(scenario)
+        scenario = PushAndComplyScenario()
+        scenario.station = dataclasses.replace(scenario.station, model=model).in_world(world)
         rows.append({"label": label, "world": world, "scenario": _shortened(scenario, duration)})
     return rows
 
@@ -242,9 +236,9 @@ def run_study(rows: list[dict], cache: Path, engine) -> list[dict]:
             {
                 "label": row["label"],
                 "world": row["world"],
-                "model": row["scenario"].model,
-                "robot_seed": row["scenario"].imperfections.seed,
-                "sensor_seed": row["scenario"].seed,
+                "model": row["scenario"].station.model,
+                "robot_seed": row["scenario"].station.imperfections.seed,
+                "sensor_seed": row["scenario"].station.seed,
                 "internal": results[2 * k],
                 "classical": results[2 * k + 1],
                 "scenario": text,

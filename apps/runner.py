@@ -35,7 +35,7 @@ from diagrams.scenarios import (
     scenario_as_dict,
     scenario_file_text,
 )
-from diagrams.station.conditions import set_ideal_conditions
+from diagrams.station.config import StationConfig
 from models import robot_description
 
 #: The folder every app writes into, as ``DIR/<experiment>/`` (``--out DIR``).
@@ -54,7 +54,7 @@ def experiment_parser(
     """The arguments every app shares; the app adds its own. ``module`` is the app's module
     name (``apps.<experiment>``), ``doc`` its docstring (the first paragraph is the
     description). With ``conditions`` (the experiments whose default is the realistic
-    world, ``diagrams.station.conditions``) the app also takes ``--ideal``; with ``robot``
+    world, ``diagrams.station.config``) the app also takes ``--ideal``; with ``robot``
     (the experiments on any humanoid) ``--robot FILE.yaml``, a robot description
     (``models.description``) that replaces the scenario's model."""
     parser = _AppParser(module, prog=f"python -m {module}", description=(doc or "").split("\n\n")[0])
@@ -69,7 +69,7 @@ def experiment_parser(
         "--scenario-text",
         default=None,
         metavar="YAML",
-        help="YAML overrides applied after --scenario, e.g. --scenario-text 'seed: 3'",
+        help="YAML overrides applied after --scenario, e.g. --scenario-text 'station: {seed: 3}'",
     )
     parser.add_argument(
         "--print-scenario",
@@ -218,10 +218,11 @@ def add_out_argument(parser: argparse.ArgumentParser, folder: str = "<experiment
 
 def scenario_from_args(schema: type, args: argparse.Namespace, defaults: Any = None, **overrides: Any) -> Any:
     """The scenario of ``--scenario`` and ``--scenario-text`` over ``defaults`` (or
-    ``schema()``); with ``--ideal``, its condition fields set to the ideal world
-    (``diagrams.station.conditions``); then each keyword in ``overrides`` whose value is not None replaces that
-    field (an app's shorthand options such as ``--seed``); last, ``--robot`` replaces its
-    ``model`` (or its ``models`` list), after the description is read and checked. With
+    ``schema()``); with ``--ideal``, its ``station`` in the ideal world
+    (``StationConfig.in_world``); then each keyword in ``overrides`` whose value is not None
+    replaces that field, or else its ``station``'s (an app's shorthand options such as
+    ``--seed``); ``--robot`` replaces its station's ``model`` (or its ``models`` list), after
+    the description is read and checked. With
     ``--print-scenario`` it prints the result as a scenario file and exits (``SystemExit(0)``).
 
     Raises:
@@ -238,14 +239,20 @@ def scenario_from_args(schema: type, args: argparse.Namespace, defaults: Any = N
         else:
             overrides = {**overrides, "model": robot}
     scenario = load_scenario(schema, filename=args.scenario, text=args.scenario_text, defaults=defaults)
+    station = getattr(scenario, "station", None)
     if getattr(args, "ideal", False):
-        set_ideal_conditions(scenario)
+        if not isinstance(station, StationConfig):
+            raise ScenarioError(f"{schema.__name__} has no station to put in the ideal world")
+        scenario.station = station = station.in_world("ideal")
     for name, value in overrides.items():
         if value is None:
             continue
-        if not hasattr(scenario, name):
+        if hasattr(scenario, name):
+            setattr(scenario, name, value)
+        elif isinstance(station, StationConfig) and hasattr(station, name):
+            setattr(station, name, value)
+        else:
             raise ScenarioError(f"{schema.__name__} has no field '{name}'")
-        setattr(scenario, name, value)
     check_finite_and_signs(scenario)
     if getattr(args, "print_scenario", False):
         header = f"A scenario of {schema.__module__}.{schema.__qualname__} (SI units)."

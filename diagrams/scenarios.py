@@ -4,7 +4,7 @@ that nests Drake's own config types where they exist (``MultibodyPlantConfig``,
 ``SimulatorConfig``), loaded from YAML with ``pydrake.common.yaml.yaml_load_typed``.
 
 A scenario is read in layers: the dataclass's defaults (or a caller's ``defaults``), then a
-YAML file, then YAML text (``--scenario FILE`` and ``--scenario-text 'seed: 3'`` in every
+YAML file, then YAML text (``--scenario FILE`` and ``--scenario-text 'station: {seed: 3}'`` in every
 app). Keys missing from a layer keep the previous layer's value; an unknown key or a value of
 the wrong type is an error that names it.
 """

@@ -21,6 +21,7 @@ from diagrams.observer.nao_compliant_arms import (
     hand_pushes,
 )
 from diagrams.observer.nao_force_observer import full_posture, wide_stance
+from diagrams.station.config import StationConfig
 from diagrams.station.humanoid_station import add_humanoid_station
 from diagrams.station.standing import default_gains
 from systems.observer.arm_compliance import (
@@ -41,7 +42,7 @@ ARM_JOINTS = [n for c in NAO_ARM_CHAINS for n in c.joint_names]
 
 @pytest.fixture(scope="module")
 def station():
-    return add_humanoid_station(DiagramBuilder(), "nao_like", noise=False)
+    return add_humanoid_station(DiagramBuilder(), StationConfig(model="nao_like", noise=False))
 
 
 def _gains(station):
@@ -243,7 +244,10 @@ def test_compliance_moves_the_hands_by_f_over_k():
     estimate is within 3 % of the applied force."""
     profile = SmoothPiecewise((0.0, 0.3, 1.0), (0.0, 0.0, 1.5))
     diagram, handles = build_nao_compliant_arms_diagram(
-        hand_pushes(profile), noise=False, constant_k1=0.0, motor_constants=dict(identified_motor_constants())
+        hand_pushes(profile),
+        station=StationConfig(model="nao_like", noise=False),
+        constant_k1=0.0,
+        motor_constants=dict(identified_motor_constants()),
     )
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()

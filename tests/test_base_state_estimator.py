@@ -17,6 +17,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
+from diagrams.station.config import StationConfig
 from diagrams.station.humanoid_station import add_humanoid_station
 from models import add_humanoid, set_standing_state
 from systems.dynamics.base_state import quaternion_to_rotation
@@ -272,7 +273,7 @@ def test_contact_hysteresis_switches_on_above_the_upper_and_off_below_the_lower_
 
 def _station_with_estimator(push: Push | None = None):
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, "hrp4_like", noise=True)
+    station = add_humanoid_station(builder, StationConfig(model="hrp4_like", noise=True))
     hold = builder.AddSystem(ConstantVectorSource(station.q_hold))
     builder.Connect(hold.get_output_port(), station.desired_position)
     sensors = station.sensors
@@ -737,9 +738,8 @@ def _realistic_imu_run(push: Push | None, duration: float, log_period: float = 0
     (velocity RMS and max tilt over the run, yaw and position errors at its end) and its
     bias estimate at the end, and the simulated IMU's true biases then."""
     builder = DiagramBuilder()
-    station = add_humanoid_station(
-        builder, "hrp4_like", imperfections=Imperfections(imu=Imperfections.realistic().imu), base_state="invariant_ekf"
-    )
+    imu = Imperfections(imu=Imperfections.realistic().imu)
+    station = add_humanoid_station(builder, StationConfig(imperfections=imu, base_state="invariant_ekf"))
     builder.Connect(builder.AddSystem(ConstantVectorSource(station.q_hold)).get_output_port(), station.desired_position)
     sensors, with_bias = station.sensors, station.base_state_estimator
     assert with_bias.estimates_imu_bias
@@ -930,7 +930,7 @@ def test_online_contact_flags_have_the_logs_hysteresis():
     with pytest.raises(ValueError, match="off_threshold 50.0 N is above the threshold 40.0 N"):
         FootContactFromForceTorque(2, 40.0, off_threshold=50.0)
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, "hrp4_like", base_state="invariant_ekf")
+    station = add_humanoid_station(builder, StationConfig(model="hrp4_like", base_state="invariant_ekf"))
     model = station.estimator.plant
     weight = model.CalcTotalMass(model.CreateDefaultContext()) * 9.81
     contact = station.foot_contact

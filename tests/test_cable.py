@@ -11,6 +11,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
+from diagrams.station.config import StationConfig
 from diagrams.station.humanoid_station import add_humanoid_station
 from models import add_humanoid, set_standing_state
 from systems.simulation.cable import PulleyLoad
@@ -159,7 +160,7 @@ def test_pulls_a_standing_robot_in_a_diagram():
     """Wired with the plant (through a force multiplexer): no algebraic loop, the load is
     lifted and hangs at m0 g while the position-controlled robot stands."""
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, "nao_like", noise=False)
+    station = add_humanoid_station(builder, StationConfig(model="nao_like", noise=False))
     plant = station.plant
     builder.Connect(builder.AddSystem(ConstantVectorSource(station.q_hold)).get_output_port(), station.desired_position)
     x0 = station.initial_state

@@ -219,11 +219,12 @@ def test_force_estimates_recover_a_simulated_push_eqs_19_and_20():
     from pydrake.systems.primitives import ConstantVectorSource
 
     from diagrams.residuals.wiring import add_internal_and_external_residuals
+    from diagrams.station.config import StationConfig
     from diagrams.station.humanoid_station import add_humanoid_station
 
     body, point, force = PUSHES[0]
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, "hrp4_like", noise=False)
+    station = add_humanoid_station(builder, StationConfig(model="hrp4_like", noise=False))
     plant = station.plant
     posture = builder.AddSystem(ConstantVectorSource(station.q_hold))
     builder.Connect(posture.get_output_port(), station.desired_position)

@@ -9,14 +9,15 @@ from pydrake.systems.analysis import Simulator
 
 from diagrams.residuals.contact_localization import ContactLocalizationScenario as RealisticScenario
 from diagrams.residuals.contact_localization import build_contact_localization_diagram
-from diagrams.station.conditions import set_ideal_conditions
+from diagrams.station.config import StationConfig
 from systems.residuals.contact_estimation import ALL_WRENCH_COMPONENTS, SOLE_SHEAR_AND_YAW, VALID
 
 
 def ContactLocalizationScenario(**fields) -> RealisticScenario:
     """These tests measure the ideal world (the study's ``--ideal``): the scenario with its
     conditions set to ideal."""
-    return set_ideal_conditions(RealisticScenario(**fields))
+    station = fields.pop("station", StationConfig())
+    return RealisticScenario(station=station.in_world("ideal"), **fields)
 
 
 def _simulate(config: ContactLocalizationScenario, t_end: float):
@@ -33,7 +34,9 @@ def test_no_contact_statistics_match_predicted_noise():
     """Without contact, with sensor noise, the detector's Mahalanobis statistics have the
     chi-square means (3 and n dof) that the covariances predicted from the sensor noise
     imply, and nothing is detected."""
-    handles, context = _simulate(ContactLocalizationScenario(push_body=None, seed=5), 1.5)
+    handles, context = _simulate(
+        ContactLocalizationScenario(station=StationConfig.realistic(seed=5), push_body=None), 1.5
+    )
     log = handles.loggers["test_statistics"].FindLog(context)
     t, stats = log.sample_times(), log.data()
     window = t > 0.2
@@ -47,7 +50,9 @@ def test_push_detected_and_localized_without_noise():
     """A 12 N push on the chest's front face, ideal sensors: detected within 7 ms, the
     right link, the point within 1 mm, the force within 0.5 %."""
     body = "CHEST_Y_LINK"
-    _, handles = build_contact_localization_diagram(ContactLocalizationScenario(noise=False))
+    _, handles = build_contact_localization_diagram(
+        ContactLocalizationScenario(station=StationConfig.realistic(noise=False))
+    )
     localizer = handles.localizer
     geo = localizer.geometry
     plant = handles.plant
@@ -64,7 +69,12 @@ def test_push_detected_and_localized_without_noise():
     tangent /= np.linalg.norm(tangent)
     f_W = 12.0 * (-np.cos(np.radians(30)) * n_W + np.sin(np.radians(30)) * tangent)
     config = ContactLocalizationScenario(
-        noise=False, push_start=0.2, push_duration=0.5, push_body=body, push_point=tuple(p_B), push_force=tuple(f_W)
+        station=StationConfig.realistic(noise=False),
+        push_start=0.2,
+        push_duration=0.5,
+        push_body=body,
+        push_point=tuple(p_B),
+        push_force=tuple(f_W),
     )
     handles, root = _simulate(config, 0.7)
     detection = handles.detector.GetOutputPort("detection_time").Eval(handles.detector.GetMyContextFromRoot(root))[0]
@@ -88,7 +98,9 @@ def test_feet_without_ft_sensors_are_unknowns_and_feet_are_never_pushed():
     are then known wrenches at the soles. A push on a foot is refused either way (it is part
     of the ground's wrench, or below an F/T sensor)."""
     soles = ["l_sole_frame", "r_sole_frame"]
-    _, handles = build_contact_localization_diagram(ContactLocalizationScenario(model="nao_like"))
+    _, handles = build_contact_localization_diagram(
+        ContactLocalizationScenario(station=StationConfig.realistic(model="nao_like"))
+    )
     assert [f.name() for f in handles.station.estimator.unknown_wrench_frames] == soles
     assert handles.station.estimator.unknown_wrench_components == (SOLE_SHEAR_AND_YAW, SOLE_SHEAR_AND_YAW)
     assert [f.name() for f in handles.detector.unknown_wrench_frames] == soles
@@ -96,7 +108,7 @@ def test_feet_without_ft_sensors_are_unknowns_and_feet_are_never_pushed():
     assert [f.name() for f in handles.station.known_wrench_frames] == soles
     assert handles.station.known_wrenches.size() == 12
     _, handles = build_contact_localization_diagram(
-        ContactLocalizationScenario(model="models/robots/hrp4_like_no_ft.yaml")
+        ContactLocalizationScenario(station=StationConfig.realistic(model="models/robots/hrp4_like_no_ft.yaml"))
     )
     assert [f.name() for f in handles.detector.unknown_wrench_frames] == soles
     assert handles.station.estimator.unknown_wrench_components == (ALL_WRENCH_COMPONENTS, ALL_WRENCH_COMPONENTS)
@@ -106,7 +118,9 @@ def test_feet_without_ft_sensors_are_unknowns_and_feet_are_never_pushed():
     with pytest.raises(ValueError, match="part of a foot"):
         build_contact_localization_diagram(
             ContactLocalizationScenario(
-                model="models/robots/hrp4_like_no_ft.yaml", push_body="R_ANKLE_R_LINK", push_force=(0, 0, -5)
+                station=StationConfig.realistic(model="models/robots/hrp4_like_no_ft.yaml"),
+                push_body="R_ANKLE_R_LINK",
+                push_force=(0, 0, -5),
             )
         )
 
@@ -116,7 +130,9 @@ def test_study_trials_split_over_seeds_and_match_each_seeds_own_draw():
     seeds, each exactly the trial its seed's ``sample_trials`` draws."""
     from diagrams.residuals.contact_localization import sample_study_trials, sample_trials
 
-    specs = sample_study_trials(ContactLocalizationScenario(trials=7, num_seeds=3, seed=40))
+    specs = sample_study_trials(
+        ContactLocalizationScenario(station=StationConfig.realistic(seed=40), trials=7, num_seeds=3)
+    )
     assert [s["trial"] for s in specs] == list(range(7))
     assert [s["seed"] for s in specs] == [40, 40, 40, 41, 41, 42, 42]
     for spec in specs:
@@ -175,7 +191,9 @@ def test_trials_from_one_shared_standing_start_match_the_trials_run_alone():
     from diagrams.residuals.contact_localization import sample_trials
     from diagrams.residuals.contact_trials import run_trials
 
-    shared = ContactLocalizationScenario(push_start=0.3, push_duration=0.3, noise=False, multi_contact=False)
+    shared = ContactLocalizationScenario(
+        station=StationConfig.realistic(noise=False), push_start=0.3, push_duration=0.3, multi_contact=False
+    )
     assert shared.shared_standing_start and shared.trials_per_run == 1
     specs = sample_trials("hrp4_like", 3, seed=0)
     together = run_trials([dict(s) for s in specs], shared)
@@ -212,11 +230,13 @@ def test_offline_estimation_of_the_trials_equals_the_estimators_in_the_loop(worl
     from diagrams.residuals.contact_trials import run_trials
     from systems.simulation.imperfections import Imperfections
 
-    scenario = RealisticScenario(push_start=0.3, push_duration=0.4, multi_contact=False, model_refinement="none")
+    scenario = RealisticScenario(
+        station=StationConfig.realistic(model_refinement="none"), push_start=0.3, push_duration=0.4, multi_contact=False
+    )
     if world == "ideal":
-        set_ideal_conditions(scenario)
+        scenario.station = scenario.station.in_world("ideal")
     elif world == "ekf":
-        scenario.imperfections = Imperfections()
+        scenario.station.imperfections = Imperfections()
     assert scenario.estimation == "offline" and scenario.shared_standing_start
     specs = sample_trials("hrp4_like", 3, seed=4)
     offline = run_trials([dict(s) for s in specs], scenario)
@@ -290,7 +310,9 @@ def test_study_trials_on_a_robot_without_foot_ft_sensors():
     from systems.residuals.multi_contact import MultiContactLocalizer
 
     robot = "models/robots/hrp4_like_no_ft.yaml"
-    scenario = ContactLocalizationScenario(model=robot, seed=9, no_contact_duration=0.0, slow_motion_duration=0.0)
+    scenario = ContactLocalizationScenario(
+        station=StationConfig.realistic(model=robot, seed=9), no_contact_duration=0.0, slow_motion_duration=0.0
+    )
     specs = sample_trials(robot, 40, 9)
     chosen = [next(s for s in specs if s["region"] == r) for r in ("arms", "torso")]
     chosen.append(next(s for s in specs if s["body"] in ("L_KNEE_P_LINK", "R_KNEE_P_LINK")))
@@ -341,8 +363,13 @@ def test_floors_follow_the_robots_foot_sensing():
 
     assert lacks_foot_ft_sensors("models/robots/hrp4_like_no_ft.yaml") and lacks_foot_ft_sensors("nao_like")
     assert not lacks_foot_ft_sensors("hrp4_like") and not lacks_foot_ft_sensors("models/robots/talos.yaml")
-    assert floors_for(ContactLocalizationScenario(model="models/robots/hrp4_like_no_ft.yaml")) is NO_FOOT_FT_FLOORS
-    assert floors_for(RealisticScenario(model="nao_like")) is FSR_FEET_FLOORS
+    assert (
+        floors_for(
+            ContactLocalizationScenario(station=StationConfig.realistic(model="models/robots/hrp4_like_no_ft.yaml"))
+        )
+        is NO_FOOT_FT_FLOORS
+    )
+    assert floors_for(RealisticScenario(station=StationConfig.realistic(model="nao_like"))) is FSR_FEET_FLOORS
     assert "foot_normal_force_rms_error_valid_of_weight" not in FSR_FEET_FLOORS
     assert FSR_FEET_FLOORS.items() < NO_FOOT_FT_FLOORS.items()
     assert floors_for(ContactLocalizationScenario()) is FLOORS

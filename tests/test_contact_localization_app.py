@@ -19,7 +19,6 @@ from diagrams.residuals.contact_localization import (
     trial_scenario,
 )
 from diagrams.scenarios import load_scenario
-from diagrams.station.conditions import set_ideal_conditions
 from systems.simulation.visualization import read_static_html
 
 
@@ -93,7 +92,8 @@ def test_app_smoke(tmp_path):
     inputs = np.load(out / "localizer_inputs.npz")
     assert list(inputs["trial"]) == [0, 1]
     scenario = load_scenario(ContactLocalizationScenario, text="{}")
-    _, handles = build_contact_localization_diagram(set_ideal_conditions(scenario))
+    scenario.station = scenario.station.in_world("ideal")
+    _, handles = build_contact_localization_diagram(scenario)
     for k, trial in enumerate(metrics["per_trial"]):
         replay = handles.localizer.localize(inputs["q"][k], inputs["external_wrench_world"][k], inputs["residual"][k])
         assert replay.body_index == trial["estimated_body_index"] and replay.status == trial["status"]
@@ -156,29 +156,34 @@ def test_scenario_files_load_into_the_dataclass(tmp_path):
     scenario = load_scenario(
         ContactLocalizationScenario,
         filename=SCENARIOS / "contact_localization_default.yaml",
-        text="trials: 40\nno_contact_duration: 0\nplant_config: {discrete_contact_approximation: lagged}",
+        text="trials: 40\nno_contact_duration: 0\nstation: {plant_config: {discrete_contact_approximation: lagged}}",
     )
-    assert (scenario.trials, scenario.no_contact_duration, scenario.seed) == (40, 0.0, 0)  # others keep the defaults
-    assert scenario.plant_config.discrete_contact_approximation == "lagged"
+    assert (scenario.trials, scenario.no_contact_duration, scenario.station.seed) == (
+        40,
+        0.0,
+        0,
+    )  # others keep the defaults
+    assert scenario.station.plant_config.discrete_contact_approximation == "lagged"
     # One trial's run: the study's settings with the trial's push and noise seed.
     spec = {"body": "CHEST_Y_LINK", "point_body": [0.1, 0.0, 0.2], "force_world": [-20.0, 0.0, 0.0], "noise_seed": 17}
     trial = trial_scenario(scenario, spec)
-    assert (trial.push_body, trial.push_point, trial.push_force, trial.seed) == (
+    assert (trial.push_body, trial.push_point, trial.push_force, trial.station.seed) == (
         "CHEST_Y_LINK",
         [0.1, 0.0, 0.2],
         [-20.0, 0.0, 0.0],
         17,
     )
-    assert trial.plant_config.discrete_contact_approximation == "lagged" and scenario.push_body is None
+    assert trial.station.plant_config.discrete_contact_approximation == "lagged" and scenario.push_body is None
     quiet = no_contact_scenario(scenario)
-    assert quiet.push_body is None and quiet.seed == 99991
+    assert quiet.push_body is None and quiet.station.seed == 99991
 
 
 def test_app_reads_scenario_text_and_reports_errors(tmp_path, capsys):
     code = contact_localization.main(
         [
             "--scenario-text",
-            "trials: 1\npush_start: 0.15\npush_duration: 0.3\nno_contact_duration: 0\nslow_motion_duration: 0\nseed: 2",
+            "trials: 1\npush_start: 0.15\npush_duration: 0.3\nno_contact_duration: 0\nslow_motion_duration: 0\n"
+            "station: {seed: 2}",
             "--ideal",
             "--workers",
             "1",

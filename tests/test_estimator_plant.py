@@ -9,6 +9,7 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import BodyIndex, SpatialInertia, UnitInertia
 from pydrake.systems.framework import DiagramBuilder
 
+from diagrams.station.config import StationConfig
 from diagrams.station.estimator_plant import build_estimator_plant
 from diagrams.station.humanoid_station import add_humanoid_station
 from models import add_humanoid, with_link_inertias
@@ -60,7 +61,7 @@ def test_the_station_gives_the_estimators_their_own_plant_with_the_mismatch():
     the model mismatch's; the simulated plant keeps the description's."""
     builder = DiagramBuilder()
     imperfections = Imperfections.realistic()
-    station = add_humanoid_station(builder, "hrp4_like", imperfections=imperfections)
+    station = add_humanoid_station(builder, StationConfig(model="hrp4_like", imperfections=imperfections))
     estimator = station.estimator
     assert estimator.plant is not station.plant and estimator.scene_graph is not station.scene_graph
     nominal = build_estimator_plant("hrp4_like")
@@ -89,7 +90,7 @@ def test_a_model_file_gets_its_own_estimators_plant(tmp_path):
     from models import model_file
 
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, str(model_file("nao_like")))
+    station = add_humanoid_station(builder, StationConfig(model=str(model_file("nao_like"))))
     assert station.humanoid is None and station.estimator.humanoid is None
     assert station.estimator.plant is not station.plant
     np.testing.assert_array_equal(station.estimator.plant.gravity_field().gravity_vector(), np.zeros(3))

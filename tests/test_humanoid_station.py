@@ -14,13 +14,13 @@ from diagrams.residuals.residual_comparison import (
     build_residual_comparison_diagram,
     set_initial_state,
 )
-from diagrams.station.conditions import set_ideal_conditions
+from diagrams.station.config import StationConfig
 from diagrams.station.humanoid_station import add_humanoid_station
 
 
 def _station_diagram(noise: bool):
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, "hrp4_like", noise=noise)
+    station = add_humanoid_station(builder, StationConfig(model="hrp4_like", noise=noise))
     hold = builder.AddSystem(ConstantVectorSource(station.q_hold))
     builder.Connect(hold.get_output_port(), station.desired_position)
     return builder.Build(), station
@@ -51,7 +51,7 @@ def test_sensor_chain_runs_once_per_step_with_three_residuals(monkeypatch):
 
     monkeypatch.setattr(sensors_module.SensedStateAssembler, "_CalcState", counting)
     diagram, handles = build_residual_comparison_diagram(
-        set_ideal_conditions(ResidualComparisonScenario(duration=0.02))
+        ResidualComparisonScenario(station=StationConfig(), duration=0.02)
     )
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()

@@ -14,6 +14,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
+from diagrams.station.config import StationConfig
 from diagrams.station.humanoid_station import add_humanoid_station
 from systems.simulation.imperfections import (
     EncoderImperfections,
@@ -47,7 +48,7 @@ def _two_body_plant(time_step: float = 1e-3) -> MultibodyPlant:
 
 def _station(model: str = "hrp4_like", noise: bool = True, **kwargs):
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, model, noise=noise, **kwargs)
+    station = add_humanoid_station(builder, StationConfig(model=model, noise=noise, **kwargs))
     source = builder.AddSystem(ConstantVectorSource(station.q_hold))
     builder.Connect(source.get_output_port(), station.desired_position)
     return builder, station
@@ -432,7 +433,7 @@ def test_bad_values_raise_naming_the_field(imperfections, field):
     with pytest.raises(ValueError, match=field.replace(".", r"\.")):
         imperfections.validate()
     with pytest.raises(ValueError, match=field.replace(".", r"\.")):
-        add_humanoid_station(DiagramBuilder(), "nao_like", imperfections=imperfections)
+        add_humanoid_station(DiagramBuilder(), StationConfig(model="nao_like", imperfections=imperfections))
 
 
 def test_bad_system_arguments():
@@ -446,4 +447,4 @@ def test_bad_system_arguments():
     with pytest.raises(ValueError, match="position_step"):
         JointEncoders(plant, position_step=-1e-3)
     with pytest.raises(ValueError, match="imperfections must be Imperfections"):
-        add_humanoid_station(DiagramBuilder(), "nao_like", imperfections={"seed": 1})
+        add_humanoid_station(DiagramBuilder(), StationConfig(model="nao_like", imperfections={"seed": 1}))

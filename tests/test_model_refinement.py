@@ -2,6 +2,8 @@
 log a simulated robot records, the identification run on it, and the spurious effort the
 refined model removes, measured against the simulator's own (exact) model."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 import yaml
@@ -21,6 +23,7 @@ from diagrams.residuals.model_refinement import (
 )
 from diagrams.residuals.push_and_comply import PushAndComplyScenario
 from diagrams.residuals.residual_comparison import ResidualComparisonScenario
+from diagrams.station.config import StationConfig, replace_station
 from diagrams.station.motions import SlowMotion
 from models import description_file, model_file
 from systems.estimation.model_identification import ModelCorrections
@@ -33,6 +36,8 @@ from systems.simulation.imperfections import (
     torque_measurement_errors,
 )
 
+STATION_FIELDS = {f.name for f in dataclasses.fields(StationConfig)}
+
 
 def _short(**fields) -> ModelRefinementScenario:
     """A short calibration (15 s) and checks (6 s); the base state from the stand-in (the
@@ -42,11 +47,12 @@ def _short(**fields) -> ModelRefinementScenario:
         standing_duration=6.0,
         check_duration=6.0,
         skip=1.0,
-        base_state="truth_plus_noise",
         calibration_motion=SlowMotion(seed=1, min_frequency=0.15, max_frequency=0.4, ramp_time=1.0),
     )
+    station = {"base_state": "truth_plus_noise"}
+    station.update({name: fields.pop(name) for name in list(fields) if name in STATION_FIELDS})
     defaults.update(fields)
-    return ModelRefinementScenario(**defaults)
+    return ModelRefinementScenario(station=replace_station(ModelRefinementScenario(), **station).station, **defaults)
 
 
 def test_the_calibration_log_is_what_the_sensors_report():
@@ -98,9 +104,9 @@ def _leg_and_chest_offset_errors(scenario, corrections) -> tuple[np.ndarray, np.
     """On the joints rated >= 100 N m (legs and chest): |identified - simulated| torque
     offset, and |simulated offset|, each over the joint's rated torque."""
     rated = rated_joint_torques(build_refinement_diagram(scenario, None)[1].plant)
-    errors = scenario.imperfections.torque_sensor
+    errors = scenario.station.imperfections.torque_sensor
     _, offset = torque_measurement_errors(
-        rated, errors.scale_error_percent, errors.offset_percent, scenario.imperfections.seed
+        rated, errors.scale_error_percent, errors.offset_percent, scenario.station.imperfections.seed
     )
     big = rated >= 100.0
     return np.abs(corrections.torque_offset - offset)[big] / rated[big], np.abs(offset[big]) / rated[big]
@@ -149,7 +155,7 @@ def test_calibration_with_the_base_state_estimator_finds_the_leg_offsets(noise_s
     corrections, _ = calibrate_model(scenario)
     error, _ = _leg_and_chest_offset_errors(scenario, corrections)
     mass = sum(M.get_mass() for M in corrections.spatial_inertias.values())
-    weight_error = mass / robot_mass(scenario.model) - 1.0
+    weight_error = mass / robot_mass(scenario.station.model) - 1.0
     print(
         f"EKF base, noise x{noise_scale}: leg and chest offsets: worst error {100 * error.max():.3f} % of rated; "
         f"weight error {100 * weight_error:+.3f} %; {corrections.diagnostics['num_clipped_masses']} masses clipped"
@@ -175,13 +181,13 @@ def test_corrections_saved_and_reused_by_an_experiment(calibrated, tmp_path, mon
     _, corrections, _ = calibrated
     path = tmp_path / "corrections.npz"
     corrections.save(path)
-    experiment = PushAndComplyScenario(model_refinement=str(path))
+    experiment = PushAndComplyScenario(station=StationConfig.realistic(model_refinement=str(path)))
     loaded = refined_model(experiment)
     for index, inertia in corrections.spatial_inertias.items():
         assert loaded.spatial_inertias[index].get_mass() == inertia.get_mass()
-    assert refined_model(PushAndComplyScenario(model_refinement="none")) is None
+    assert refined_model(PushAndComplyScenario(station=StationConfig.realistic(model_refinement="none"))) is None
     with pytest.raises(ValueError, match="model_refinement"):
-        refined_model(PushAndComplyScenario(model_refinement="calibrated"))
+        refined_model(PushAndComplyScenario(station=StationConfig.realistic(model_refinement="calibrated")))
     # "calibrate" calibrates the experiment's robot once and then reads the cache.
     calls = []
 
@@ -190,11 +196,15 @@ def test_corrections_saved_and_reused_by_an_experiment(calibrated, tmp_path, mon
         return corrections, None
 
     monkeypatch.setattr(model_refinement, "calibrate_model", fake_calibration)
-    experiment = ResidualComparisonScenario(seed=3)  # realistic by default: model_refinement "calibrate"
+    experiment = ResidualComparisonScenario(
+        station=StationConfig.realistic(seed=3)
+    )  # realistic by default: model_refinement "calibrate"
     first = refined_model(experiment, tmp_path / "cache")
     second = refined_model(experiment, tmp_path / "cache")
     assert len(calls) == 1 and calibration_file(experiment, tmp_path / "cache").is_file()
-    assert calls[0].seed == 4 and calls[0].imperfections.model_mismatch.mass_percent == 5.0  # same robot, new noise
+    assert (
+        calls[0].station.seed == 4 and calls[0].station.imperfections.model_mismatch.mass_percent == 5.0
+    )  # same robot, new noise
     assert first.spatial_inertias.keys() == second.spatial_inertias.keys()
 
 
@@ -219,7 +229,7 @@ def test_residuals_replayed_on_the_log_match_the_live_ones():
         log.known_wrenches[1:],
         internal_gain=scenario.internal_gain,
         external_gain=scenario.external_gain,
-        period=scenario.plant_config.time_step,
+        period=scenario.station.plant_config.time_step,
         classical_gain=scenario.internal_gain,
     )
     live_internal = handles.loggers["internal_residual"].FindLog(context).data().T[1:]
@@ -331,7 +341,7 @@ def test_the_calibration_cache_is_keyed_by_content_and_heals_a_corrupt_file(tmp_
     raw["model"] = str(model)
     description = tmp_path / "robot.yaml"
     description.write_text(yaml.safe_dump(raw))
-    experiment = ResidualComparisonScenario(model=str(description))
+    experiment = ResidualComparisonScenario(station=StationConfig.realistic(model=str(description)))
     cache = tmp_path / "cache"
     first = calibration_file(experiment, cache)
     refined_model(experiment, cache)

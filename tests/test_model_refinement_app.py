@@ -11,7 +11,7 @@ from diagrams.residuals.model_refinement import ModelRefinementScenario
 
 SHORT = (
     "{calibration_duration: 8.0, standing_duration: 3.0, check_duration: 3.0, skip: 1.0, "
-    "base_state: truth_plus_noise, calibration_motion: {seed: 1, min_frequency: 0.2, max_frequency: 0.5, "
+    "station: {base_state: truth_plus_noise}, calibration_motion: {seed: 1, min_frequency: 0.2, max_frequency: 0.5, "
     "ramp_time: 1.0}}"
 )
 

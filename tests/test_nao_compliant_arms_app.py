@@ -29,7 +29,7 @@ def test_outputs_and_floor(app_output):
     assert set(metrics) == {"scenario_b", "summary", "scenario", "memory_allocator"}
     m = metrics["scenario_b"]
     assert m["floor_relative_error"] == 0.10 and metrics["summary"]["seed"] == 3
-    assert metrics["scenario"]["seed"] == 3 and metrics["scenario"]["cases"] == ["b"]
+    assert metrics["scenario"]["station"]["seed"] == 3 and metrics["scenario"]["cases"] == ["b"]
     for side in ("left", "right"):
         hand = m["hands"][side]
         # The applied force per hand is -1.5 N along the torso's x (the torso barely tilts).
@@ -70,9 +70,9 @@ def test_scenario_file_text_overrides_and_unknown_keys(tmp_path, capsys):
     overridden = load_scenario(
         NaoCompliantArmsScenario,
         filename=SCENARIOS / "nao_compliant_arms_default.yaml",
-        text="cases: [b]\nlean: -0.2\nplant_config: {discrete_contact_approximation: lagged}",
+        text="cases: [b]\nlean: -0.2\nstation: {plant_config: {discrete_contact_approximation: lagged}}",
     )
     assert (overridden.cases, overridden.lean, overridden.force) == (["b"], -0.2, DEFAULT_FORCE)
-    assert overridden.plant_config.discrete_contact_approximation == "lagged"
+    assert overridden.station.plant_config.discrete_contact_approximation == "lagged"
     assert nao_compliant_arms.main(["--scenario-text", "push_force: 2.0", "--no-replay", "--out", str(tmp_path)]) == 2
     assert "nao_compliant_arms: error:" in capsys.readouterr().err

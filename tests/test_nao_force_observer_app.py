@@ -11,6 +11,7 @@ from scenario_checks import SCENARIOS, check_scenario_convention
 from apps import nao_force_observer
 from diagrams.observer.nao_force_observer import LOAD_MASS, NaoForceObserverScenario, make_experiment
 from diagrams.scenarios import load_scenario
+from diagrams.station.config import StationConfig
 from systems.simulation.disturbances import SmoothPiecewise
 from systems.simulation.visualization import read_static_html
 
@@ -36,7 +37,7 @@ def test_app_writes_plot_replay_and_metrics(app_output):
     assert m["floors_N"] == {"steady_state": 0.5, "rms": 1.0}
     floors_met = max(m["steady_state_error_N"].values()) <= 0.5 and max(m["rms_error_N"].values()) <= 1.0
     assert m["meets_floors"] is floors_met and metrics["summary"]["seed"] == 2
-    assert metrics["scenario"]["seed"] == 2 and metrics["scenario"]["experiments"] == [3]
+    assert metrics["scenario"]["station"]["seed"] == 2 and metrics["scenario"]["experiments"] == [3]
     assert m["invalid_samples"] == 0 and m["fsr_saturated_samples"] == 0 and m["base_height_drop_m"] < 0.01
 
 
@@ -75,7 +76,9 @@ def test_experiment_3_hand_is_where_eq_24_puts_it():
     )
     from systems.simulation.disturbances import Push
 
-    scenario = NaoForceObserverScenario(wide_stance=False, noise=False, experiments=[3])
+    scenario = NaoForceObserverScenario(
+        wide_stance=False, station=StationConfig(model="nao_like_recorded", noise=False), experiments=[3]
+    )
     experiment = make_experiment(3)
     weight = LOAD_MASS * 9.81
     experiment.pushes = [
@@ -87,7 +90,7 @@ def test_experiment_3_hand_is_where_eq_24_puts_it():
         )
     ]
     diagram, handles = build_experiment_diagram(scenario, experiment)
-    state = settle_standing_state(experiment_posture(scenario, experiment), robot=scenario.robot)
+    state = settle_standing_state(experiment_posture(scenario, experiment), robot=scenario.station.model)
     run = simulate(diagram, 3.0, set_initial_state=functools.partial(handles.set_initial_state, state=state))
     truth = logged_signals(handles.loggers, run.context, "virtual_force")["truth"][:, -1]
     np.testing.assert_allclose(truth, [2.22, -4.16, -weight], atol=0.05)
@@ -134,11 +137,11 @@ def test_scenario_file_text_overrides_and_unknown_keys(tmp_path):
     overridden = load_scenario(
         NaoForceObserverScenario,
         filename=SCENARIOS / "nao_force_observer_default.yaml",
-        text="experiments: [2]\nramp: 0.1\nplant_config: {discrete_contact_approximation: lagged}",
+        text="experiments: [2]\nramp: 0.1\nstation: {plant_config: {discrete_contact_approximation: lagged}}",
     )
-    assert (overridden.experiments, overridden.ramp, overridden.seed) == ([2], 0.1, 0)
-    assert overridden.plant_config.discrete_contact_approximation == "lagged"
-    assert overridden.plant_config.time_step == 1e-3
+    assert (overridden.experiments, overridden.ramp, overridden.station.seed) == ([2], 0.1, 0)
+    assert overridden.station.plant_config.discrete_contact_approximation == "lagged"
+    assert overridden.station.plant_config.time_step == 1e-3
 
 
 def test_scenario_errors_from_the_command_line(tmp_path, capsys):

@@ -14,6 +14,7 @@ from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 from diagrams.observer.calibration import settle_standing_state
 from diagrams.observer.nao_force_observer import build_nao_force_observer_diagram, wide_stance
 from diagrams.observer.nao_sensing import OBSERVER_PERIOD
+from diagrams.station.config import StationConfig
 from diagrams.station.humanoid_station import add_humanoid_station
 from models import add_ground, add_humanoid
 from systems.observer.force_observer import STANDING, LipForceObserver, transition_matrices
@@ -34,7 +35,7 @@ GRAVITY = 9.81
 @pytest.fixture(scope="module")
 def standing_run():
     """The full diagram, noisy sensors, no push: 2 s from the settled standing state."""
-    diagram, handles = build_nao_force_observer_diagram(seed=3)
+    diagram, handles = build_nao_force_observer_diagram(station=StationConfig(model="nao_like", seed=3))
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
     handles.set_initial_state(context, settle_standing_state())
@@ -78,7 +79,7 @@ def test_observer_estimates_no_force_on_a_standing_robot(standing_run):
 def _station_with(builder_hook, duration=0.2, posture_state=None):
     """Station (no noise) holding the nominal posture + systems added by ``builder_hook``."""
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, "nao_like", noise=False)
+    station = add_humanoid_station(builder, StationConfig(model="nao_like", noise=False))
     hold = builder.AddSystem(ConstantVectorSource(station.q_hold))
     builder.Connect(hold.get_output_port(), station.desired_position)
     extra = builder_hook(builder, station)
@@ -260,7 +261,7 @@ def test_statics_of_a_pushed_robot_match_the_virtual_force():
     from systems.simulation.disturbances import SmoothPiecewise
 
     push = Push("torso", (0.05, 0.0, -0.05), (0.6, 0.0, 0.8), SmoothPiecewise((0.0, 1.0), (0.0, 3.0)))
-    diagram, handles = build_nao_force_observer_diagram([push], noise=False)
+    diagram, handles = build_nao_force_observer_diagram([push], station=StationConfig(model="nao_like", noise=False))
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
     handles.set_initial_state(context, settle_standing_state())
@@ -350,6 +351,6 @@ def test_observer_converges_to_a_constant_3d_force_on_an_exact_lip():
 
 
 def test_observer_period_is_the_papers():
-    diagram, handles = build_nao_force_observer_diagram(noise=False)
+    diagram, handles = build_nao_force_observer_diagram(station=StationConfig(model="nao_like", noise=False))
     assert handles.parameters.period == OBSERVER_PERIOD and abs(OBSERVER_PERIOD - 0.0167) < 1e-4
     assert abs(handles.parameters.mass - 5.19) < 1e-9

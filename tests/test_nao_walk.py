@@ -142,9 +142,10 @@ def test_scenario_file_text_and_unknown_keys(tmp_path):
     scenario = load_scenario(
         NaoWalkScenario,
         filename=SCENARIOS / "nao_walk_default.yaml",
-        text="seed: 3\nwalking: {num_steps: 4}\nplant_config: {time_step: 0.002}",
+        text="station: {seed: 3, plant_config: {time_step: 0.002}}\nwalking: {num_steps: 4}",
     )
-    assert scenario.seed == 3 and scenario.walking.num_steps == 4 and scenario.plant_config.time_step == 0.002
+    assert scenario.station.seed == 3 and scenario.walking.num_steps == 4
+    assert scenario.station.plant_config.time_step == 0.002
     assert scenario.walking.step_length == WalkingParameters().step_length
     with pytest.raises(ScenarioError, match="walk_speed"):
         load_scenario(NaoWalkScenario, text="walking: {walk_speed: 1.0}")

@@ -27,6 +27,7 @@ from diagrams.observer.nao_walk_pulled import (
     observer_metrics,
 )
 from diagrams.scenarios import ScenarioError, load_scenario
+from diagrams.station.config import StationConfig
 from models import add_humanoid, set_standing_state
 from systems.locomotion.walking_pattern import WalkingParameters
 from systems.observer.fsr_sensing import CenterOfPressure, SupportFootCom
@@ -107,13 +108,15 @@ def test_bad_cable_setups_are_refused():
             NaoWalkPulledScenario(
                 walking=WalkingParameters(num_steps=12),
                 cable=CableSetup(pulley_height=0.3, tighten_distance=0.05),
-                noise=False,
+                station=StationConfig(model="nao_like", noise=False),
             )
         )
     with pytest.raises(ValueError, match="never tightens"):
         build_nao_walk_pulled_diagram(
             NaoWalkPulledScenario(
-                walking=WalkingParameters(num_steps=4), cable=CableSetup(tighten_distance=0.5), noise=False
+                walking=WalkingParameters(num_steps=4),
+                cable=CableSetup(tighten_distance=0.5),
+                station=StationConfig(model="nao_like", noise=False),
             )
         )
 
@@ -122,7 +125,9 @@ def test_bad_cable_setups_are_refused():
 def pulled_walk():
     """The app's configuration (defaults), sensor noise on, seed 0, no replay."""
     diagram, handles = build_nao_walk_pulled_diagram(
-        NaoWalkPulledScenario(walking=WalkingParameters(), cable=CableSetup(), noise=True, seed=0)
+        NaoWalkPulledScenario(
+            walking=WalkingParameters(), cable=CableSetup(), station=StationConfig(model="nao_like", noise=True, seed=0)
+        )
     )
     simulator = Simulator(diagram)  # Build() refused any algebraic loop
     handles.set_initial_state(simulator.get_mutable_context())

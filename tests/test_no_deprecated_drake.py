@@ -65,11 +65,12 @@ def _case_humanoid_station() -> None:
     from pydrake.systems.framework import DiagramBuilder
     from pydrake.systems.primitives import ConstantVectorSource
 
+    from diagrams.station.config import StationConfig
     from diagrams.station.humanoid_station import add_humanoid_station
 
     for model in ("hrp4_like", "nao_like"):
         builder = DiagramBuilder()
-        station = add_humanoid_station(builder, model)
+        station = add_humanoid_station(builder, StationConfig(model=model))
         posture = builder.AddSystem(ConstantVectorSource(station.q_hold))
         builder.Connect(posture.get_output_port(), station.desired_position)
         _simulate(builder.Build(), station.set_initial_state)

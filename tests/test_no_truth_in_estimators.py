@@ -18,6 +18,7 @@ from truth_isolation import (
     references_to_plant,
 )
 
+from diagrams.station.config import StationConfig
 from diagrams.station.estimator_plant import build_estimator_plant
 from systems.estimation.model_identification import ModelCorrections
 from systems.simulation.imperfections import Imperfections, ModelMismatch, perturbed_spatial_inertias
@@ -114,10 +115,10 @@ def test_the_checks_catch_estimators_built_on_the_simulated_plant(monkeypatch):
     from diagrams.residuals import push_and_comply
     from systems.residuals.momentum_residuals import ResidualModel
 
-    real_station = push_and_comply.add_scenario_station
+    real_station = push_and_comply.add_humanoid_station
 
-    def leaky_station(builder, scenario, corrections=None):
-        station = real_station(builder, scenario, corrections)
+    def leaky_station(builder, config, model_corrections=None):
+        station = real_station(builder, config, model_corrections=model_corrections)
         station.estimator = dataclasses.replace(
             station.estimator,
             plant=station.plant,
@@ -130,7 +131,7 @@ def test_the_checks_catch_estimators_built_on_the_simulated_plant(monkeypatch):
         station.dynamics_model = ResidualModel(station.plant)
         return station
 
-    monkeypatch.setattr(push_and_comply, "add_scenario_station", leaky_station)
+    monkeypatch.setattr(push_and_comply, "add_humanoid_station", leaky_station)
     diagram, _ = _push_and_comply("internal")
     plant = _plant(diagram)
     leaks = [s.get_name() for s in estimator_side(diagram) if references_to_plant(s, plant)]
@@ -147,7 +148,9 @@ def test_the_absurd_inertia_reaches_the_simulated_plant_only(monkeypatch):
     nominal = build_estimator_plant("hrp4_like").plant.GetBodyByName(LINK).default_spatial_inertia()
     absurd = absurd_inertia(nominal)
     with absurd_simulated_inertias(monkeypatch, {LINK: absurd}):
-        _, handles = build_push_and_comply_diagram(PushAndComplyScenario(imperfections=Imperfections()), "internal")
+        _, handles = build_push_and_comply_diagram(
+            PushAndComplyScenario(station=StationConfig.realistic(imperfections=Imperfections())), "internal"
+        )
     simulated = handles.station.plant.GetBodyByName(LINK).default_spatial_inertia()
     estimated = handles.station.estimator.plant.GetBodyByName(LINK).default_spatial_inertia()
     np.testing.assert_allclose(simulated.CopyToFullMatrix6(), absurd.CopyToFullMatrix6(), rtol=1e-12)

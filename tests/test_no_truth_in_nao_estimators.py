@@ -75,9 +75,13 @@ def _force_guided_walk():
 
 def _nao_walk(base_state: str = "truth_plus_noise"):
     from diagrams.locomotion.nao_walk import NaoWalkScenario, build_nao_walk_diagram
+    from diagrams.station.config import StationConfig
     from systems.locomotion.walking_pattern import WalkingParameters
 
-    scenario = NaoWalkScenario(walking=WalkingParameters(num_steps=4), noise=True, base_state=base_state)
+    scenario = NaoWalkScenario(
+        station=StationConfig(model="nao_like", noise=True, base_state=base_state),
+        walking=WalkingParameters(num_steps=4),
+    )
     diagram, handles = build_nao_walk_diagram(scenario)
     return diagram, _simulated(diagram, handles.set_initial_state)
 

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from pydrake.systems.framework import DiagramBuilder
 
+from diagrams.station.config import StationConfig
 from diagrams.station.humanoid_station import add_humanoid_station
 from diagrams.station.motions import SlowMotion, slow_whole_body_motion
 from systems.locomotion.posture_motion import SinusoidalPostureMotion
@@ -52,7 +53,7 @@ def test_bad_motions_are_refused(kwargs, message):
 
 @pytest.fixture(scope="module")
 def station():
-    return add_humanoid_station(DiagramBuilder(), "hrp4_like", noise=False)
+    return add_humanoid_station(DiagramBuilder(), StationConfig(model="hrp4_like", noise=False))
 
 
 def test_slow_motion_stays_inside_the_limits_and_keeps_the_soles_flat(station):

@@ -13,7 +13,7 @@ from apps import push_and_comply
 from apps.push_and_comply import run_once
 from diagrams.residuals.push_and_comply import PushAndComplyScenario, build_push_and_comply_diagram, load_scenario
 from diagrams.scenarios import scenario_as_dict
-from diagrams.station.conditions import set_ideal_conditions
+from diagrams.station.config import StationConfig
 from systems.simulation.visualization import read_static_html
 from tests.headless_chromium import requires_chromium, run_chromium
 
@@ -31,11 +31,12 @@ def test_scenario_files_load_into_the_dataclass(tmp_path):
     assert scenario_as_dict(load_scenario(None)) == default
     assert scenario_as_dict(load_scenario(SCENARIOS / "push_and_comply_default.yaml")) == default
     overridden = load_scenario(
-        SCENARIOS / "paper_5N.yaml", text="seed: 7\nplant_config: {discrete_contact_approximation: lagged}"
+        SCENARIOS / "paper_5N.yaml", text="station: {seed: 7, plant_config: {discrete_contact_approximation: lagged}}"
     )
-    assert (overridden.push_peak_force, overridden.seed) == (5.0, 7)
+    assert (overridden.push_peak_force, overridden.station.seed) == (5.0, 7)
     assert (
-        overridden.plant_config.discrete_contact_approximation == "lagged" and overridden.plant_config.time_step == 1e-3
+        overridden.station.plant_config.discrete_contact_approximation == "lagged"
+        and overridden.station.plant_config.time_step == 1e-3
     )
     paper = load_scenario(SCENARIOS / "paper_5N.yaml")
     assert paper.push_peak_force == 5.0 and paper.duration == 15.0  # other keys keep the defaults
@@ -58,8 +59,10 @@ def test_scenario_files_load_into_the_dataclass(tmp_path):
     with pytest.raises(ValueError, match="unknown contact approximation 'ode'"):
         build_push_and_comply_diagram(
             PushAndComplyScenario(
-                plant_config=MultibodyPlantConfig(
-                    time_step=1e-3, contact_model="point", discrete_contact_approximation="ode"
+                station=StationConfig.realistic(
+                    plant_config=MultibodyPlantConfig(
+                        time_step=1e-3, contact_model="point", discrete_contact_approximation="ode"
+                    )
                 )
             ),
             "internal",
@@ -68,7 +71,7 @@ def test_scenario_files_load_into_the_dataclass(tmp_path):
 
 @pytest.fixture(scope="module")
 def short_runs():
-    scenario = set_ideal_conditions(PushAndComplyScenario(**SHORT, push_peak_force=30.0))
+    scenario = PushAndComplyScenario(station=StationConfig(), **SHORT, push_peak_force=30.0)
     return scenario, {kind: run_once(scenario, kind, None, progress=False) for kind in ("internal", "classical")}
 
 
@@ -96,12 +99,14 @@ def test_internal_residual_bends_the_legs_and_classical_does_not(short_runs):
 def test_the_scenario_uses_sap_and_deprecated_tamsi_is_refused():
     """Drake deprecated TAMSI (removal on or after 2026-09-01): the scenario runs on SAP and
     asking for TAMSI gets a message that says why, not a Drake deprecation warning."""
-    assert PushAndComplyScenario().plant_config.discrete_contact_approximation == "sap"
+    assert PushAndComplyScenario().station.plant_config.discrete_contact_approximation == "sap"
     with pytest.raises(ValueError, match="deprecated the TAMSI solver"):
         build_push_and_comply_diagram(
             PushAndComplyScenario(
-                plant_config=MultibodyPlantConfig(
-                    time_step=1e-3, contact_model="point", discrete_contact_approximation="tamsi"
+                station=StationConfig.realistic(
+                    plant_config=MultibodyPlantConfig(
+                        time_step=1e-3, contact_model="point", discrete_contact_approximation="tamsi"
+                    )
                 )
             ),
             "internal",
@@ -118,7 +123,7 @@ def test_without_foot_ft_sensors_the_legs_comply_with_the_push_not_the_weight(ro
     ideal world's robot collapsed to 54 deg knees in both runs, complying with its own
     weight). The F/T robot's assertions hold: the knees flex with the internal residual and
     not with the classical one, the chest takes the motion, upright, no slip."""
-    scenario = set_ideal_conditions(PushAndComplyScenario(model=robot, **SHORT, push_peak_force=30.0))
+    scenario = PushAndComplyScenario(station=StationConfig(model=robot), **SHORT, push_peak_force=30.0)
     diagram, handles = build_push_and_comply_diagram(scenario, "internal")
     assert diagram.HasSubsystemNamed("sole_wrench_compensation")
     internal = run_once(scenario, "internal", None, progress=False)["metrics"]
@@ -147,7 +152,7 @@ def test_the_tare_removes_a_torque_sensor_offset_before_the_push():
     )
     runs = {}
     for tare in (0.0, 0.5):
-        scenario = set_ideal_conditions(PushAndComplyScenario(**timing, tare_duration=tare))
+        scenario = PushAndComplyScenario(station=StationConfig(), **timing, tare_duration=tare)
         scenario.imperfections = Imperfections(torque_sensor=TorqueSensorImperfections(offset_percent=1.0), seed=3)
         runs[tare] = run_once(scenario, "internal", None, progress=False)["signals"]
 
@@ -195,7 +200,7 @@ def test_app_writes_replays_plots_and_metrics(app_output):
         ):
             assert key in metrics[kind], (kind, key)
         assert isinstance(metrics[kind]["upright"], bool)
-    assert metrics["scenario"]["seed"] == 4
+    assert metrics["scenario"]["station"]["seed"] == 4
 
 
 def test_replay_is_self_contained(app_output):
@@ -254,7 +259,7 @@ def test_dead_band_from_the_calibrated_noise_of_each_residual():
     noise = ResidualNoiseModel(
         internal_gain=scenario.residual_gain,
         external_gain=35.0,
-        period=scenario.plant_config.time_step,
+        period=scenario.station.plant_config.time_step,
         covariance_internal=np.diag([1e-6, 0.01, 0.04, 1.0]),
         covariance_external_force=np.eye(3),
         samples=1000,

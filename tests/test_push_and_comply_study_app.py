@@ -12,7 +12,6 @@ from apps import push_and_comply_study
 from diagrams.residuals import push_and_comply
 from diagrams.residuals.push_and_comply import PushAndComplyScenario
 from diagrams.scenarios import scenario_as_dict
-from diagrams.station.conditions import set_ideal_conditions
 
 
 def test_the_ablation_goes_from_the_paper_to_the_default_one_change_at_a_time():
@@ -27,21 +26,23 @@ def test_the_ablation_goes_from_the_paper_to_the_default_one_change_at_a_time():
             a, b = scenario_as_dict(before), scenario_as_dict(after)
             assert {name for name in a if a[name] != b[name]} == set(changes)
         default = PushAndComplyScenario()
-        assert scenario_as_dict(chain[-1]) == scenario_as_dict(
-            set_ideal_conditions(default) if world == "ideal" else default
-        )
+        default.station = default.station.in_world(world)
+        assert scenario_as_dict(chain[-1]) == scenario_as_dict(default)
 
 
 def test_the_robots_are_the_default_scenario_on_other_robots():
     rows = push_and_comply_study.robot_scenarios()
-    assert any("talos" in r["scenario"].model for r in rows)
-    seeds = [r["scenario"].imperfections.seed for r in rows if r["scenario"].model == "hrp4_like"]
+    assert any("talos" in r["scenario"].station.model for r in rows)
+    seeds = [r["scenario"].station.imperfections.seed for r in rows if r["scenario"].station.model == "hrp4_like"]
     assert len(set(seeds)) == len(seeds) >= 6
     default = PushAndComplyScenario()
     for row in rows:
         s = row["scenario"]
-        imperfections = dataclasses.replace(default.imperfections, seed=s.imperfections.seed)
-        expected = dataclasses.replace(default, model=s.model, seed=s.seed, imperfections=imperfections)
+        imperfections = dataclasses.replace(default.station.imperfections, seed=s.station.imperfections.seed)
+        station = dataclasses.replace(
+            default.station, model=s.station.model, seed=s.station.seed, imperfections=imperfections
+        )
+        expected = dataclasses.replace(default, station=station)
         assert scenario_as_dict(s) == scenario_as_dict(expected)
         assert row["world"] == "realistic"
 
@@ -53,15 +54,14 @@ def test_the_sensing_rows_are_the_default_on_each_foot_sensing_in_the_worlds_it_
 
     rows = push_and_comply_study.sensing_scenarios()
     sensing = {
-        (next(iter({f.sensing for f in robot_description(r["scenario"].model).feet.values()})), r["world"])
+        (next(iter({f.sensing for f in robot_description(r["scenario"].station.model).feet.values()})), r["world"])
         for r in rows
     }
     assert {(f, w) for f in ("force_torque", "fsr", "none") for w in ("ideal", "realistic")} <= sensing
     default = PushAndComplyScenario()
     for row in rows:
-        expected = dataclasses.replace(default, model=row["scenario"].model)
-        if row["world"] == "ideal":
-            expected = set_ideal_conditions(expected)
+        station = dataclasses.replace(default.station, model=row["scenario"].station.model)
+        expected = dataclasses.replace(default, station=station.in_world(row["world"]))
         assert scenario_as_dict(row["scenario"]) == scenario_as_dict(expected)
 
 

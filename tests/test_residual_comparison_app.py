@@ -18,7 +18,7 @@ from diagrams.residuals.residual_comparison import (
     relative_rms_error,
 )
 from diagrams.scenarios import load_scenario
-from diagrams.station.conditions import set_ideal_conditions
+from diagrams.station.config import StationConfig
 
 
 def test_scenario_files_load_into_the_dataclass(tmp_path):
@@ -28,11 +28,12 @@ def test_scenario_files_load_into_the_dataclass(tmp_path):
     overridden = load_scenario(
         ResidualComparisonScenario,
         filename=SCENARIOS / "residual_comparison_default.yaml",
-        text="seed: 7\nskip: 1.0\npush_direction: [0, 0, -1]\nplant_config: {discrete_contact_approximation: lagged}",
+        text="skip: 1.0\npush_direction: [0, 0, -1]\n"
+        "station: {seed: 7, plant_config: {discrete_contact_approximation: lagged}}",
     )
-    assert (overridden.seed, overridden.skip, overridden.push_direction) == (7, 1.0, [0.0, 0.0, -1.0])
-    assert overridden.plant_config.discrete_contact_approximation == "lagged"
-    assert overridden.plant_config.time_step == 1e-3
+    assert (overridden.station.seed, overridden.skip, overridden.push_direction) == (7, 1.0, [0.0, 0.0, -1.0])
+    assert overridden.station.plant_config.discrete_contact_approximation == "lagged"
+    assert overridden.station.plant_config.time_step == 1e-3
     assert overridden.duration == 10.0  # other keys keep the defaults
     with pytest.raises(ValueError, match="skip < duration"):
         check_metrics_window(ResidualComparisonScenario(duration=1.0, skip=1.0))
@@ -52,7 +53,7 @@ def test_relative_rms_error_and_first_order_filter():
 @pytest.fixture(scope="module")
 def short_noise_free_run():
     """3 s of the paper's experiment with ideal sensors (the push starts at 0.5 s)."""
-    scenario = set_ideal_conditions(ResidualComparisonScenario(duration=3.0, noise=False, skip=0.5))
+    scenario = ResidualComparisonScenario(station=StationConfig(noise=False), duration=3.0, skip=0.5)
     run = run_once(scenario)
     return scenario, run["metrics"], run
 
@@ -84,8 +85,8 @@ def test_residuals_net_of_the_soles_track_the_truth_without_foot_ft_sensors(robo
     the knees); net of the soles' wrenches fitted with the push's link (SoleWrenchCompensation)
     they track the push's own effort as the F/T robot's do, knees included, and the classical
     residual still cannot see the legs."""
-    scenario = set_ideal_conditions(
-        ResidualComparisonScenario(model=f"models/robots/{robot}", duration=3.0, noise=False, skip=0.5)
+    scenario = ResidualComparisonScenario(
+        station=StationConfig(model=f"models/robots/{robot}", noise=False), duration=3.0, skip=0.5
     )
     run = run_once(scenario)
     metrics = run["metrics"]
@@ -125,17 +126,17 @@ def test_app_writes_figures_and_metrics(tmp_path, capsys):
     assert set(metrics["internal_rel_rms_error_per_joint"]) >= {"R_KNEE_P", "L_KNEE_P", "CHEST_Y"}
     assert metrics["noise"] is True and metrics["seed"] == 3
     assert "internal residual" in capsys.readouterr().out
-    assert metrics["scenario"]["seed"] == 3 and metrics["scenario"]["duration"] == 1.2
+    assert metrics["scenario"]["station"]["seed"] == 3 and metrics["scenario"]["duration"] == 1.2
 
 
 def test_app_reads_scenario_file_and_text_and_reports_errors(tmp_path, capsys):
     scenario = tmp_path / "short.yaml"
-    scenario.write_text("duration: 1.0\nskip: 0.2\nseed: 5\nnoise: false\n")
+    scenario.write_text("duration: 1.0\nskip: 0.2\nstation: {seed: 5, noise: false}\n")
     args = [
         "--scenario",
         str(scenario),
         "--scenario-text",
-        "seed: 6",
+        "station: {seed: 6}",
         "--skip",
         "0.3",
         "--ideal",

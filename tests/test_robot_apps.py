@@ -70,7 +70,8 @@ def test_model_refinement_on_talos_says_which_joints_a_short_calibration_leaves_
     # silent wrong model.
     text = (
         "{calibration_duration: 3.0, standing_duration: 1.5, check_duration: 1.5, skip: 0.5, "
-        "base_state: truth_plus_noise, calibration_motion: {seed: 1, min_frequency: 0.3, max_frequency: 0.6, "
+        "station: {base_state: truth_plus_noise}, "
+        "calibration_motion: {seed: 1, min_frequency: 0.3, max_frequency: 0.6, "
         "ramp_time: 0.5}}"
     )
     assert model_refinement.main(["--robot", TALOS, "--scenario-text", text, "--out", str(tmp_path)]) == 2

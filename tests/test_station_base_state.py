@@ -17,7 +17,8 @@ from diagrams.residuals.residual_comparison import (
     build_residual_comparison_diagram,
     residual_comparison_metrics,
 )
-from diagrams.station.humanoid_station import BASE_STATE_SOURCES, add_humanoid_station
+from diagrams.station.config import BASE_STATE_SOURCES, StationConfig
+from diagrams.station.humanoid_station import add_humanoid_station
 from systems.dynamics.base_state import quaternion_to_rotation
 from systems.simulation.imperfections import Imperfections
 
@@ -30,7 +31,7 @@ def _standing(
     """The ``model`` station (default hrp4_like) holding its posture for ``duration`` s: the
     sensed and true states logged every step (and the estimator's contact flags)."""
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, model, **station_kwargs)
+    station = add_humanoid_station(builder, StationConfig(model=model, **station_kwargs))
     hold = builder.AddSystem(ConstantVectorSource(station.q_hold))
     builder.Connect(hold.get_output_port(), station.desired_position)
     logs = {
@@ -86,7 +87,7 @@ def test_invariant_ekf_sensed_base_state_meets_the_floors_standing():
 
 def test_set_initial_state_starts_the_estimator_at_that_state():
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, "hrp4_like", base_state="invariant_ekf")
+    station = add_humanoid_station(builder, StationConfig(model="hrp4_like", base_state="invariant_ekf"))
     builder.Connect(builder.AddSystem(ConstantVectorSource(station.q_hold)).get_output_port(), station.desired_position)
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
@@ -105,7 +106,9 @@ def test_residual_comparison_with_the_invariant_ekf_stays_finite():
     the internal residual's relative error is printed for both (``pytest -s``)."""
     errors = {}
     for base_state in BASE_STATE_SOURCES:
-        scenario = ResidualComparisonScenario(duration=2.0, base_state=base_state, imperfections=Imperfections())
+        scenario = ResidualComparisonScenario(
+            station=StationConfig.realistic(base_state=base_state, imperfections=Imperfections()), duration=2.0
+        )
         diagram, handles = build_residual_comparison_diagram(scenario)
         simulator = Simulator(diagram)
         context = simulator.get_mutable_context()
@@ -126,7 +129,7 @@ def test_residual_comparison_with_the_invariant_ekf_stays_finite():
 
 def test_unknown_base_state_names_the_choices():
     with pytest.raises(ValueError, match="truth_plus_noise.*invariant_ekf"):
-        add_humanoid_station(DiagramBuilder(), "hrp4_like", base_state="ekf")
+        add_humanoid_station(DiagramBuilder(), StationConfig(model="hrp4_like", base_state="ekf"))
 
 
 def test_invariant_ekf_without_foot_force_sensing_flags_contact_from_the_estimated_sole_wrenches():
@@ -205,9 +208,12 @@ def test_invariant_ekf_walking_drift_on_nao_like_with_the_realistic_imu():
     from diagrams.locomotion.nao_walk import NaoWalkScenario, build_nao_walk_diagram
 
     scenario = NaoWalkScenario(
-        noise=True,
-        base_state="invariant_ekf",
-        imperfections=Imperfections(imu=Imperfections.realistic().imu),
+        station=StationConfig(
+            model="nao_like",
+            noise=True,
+            base_state="invariant_ekf",
+            imperfections=Imperfections(imu=Imperfections.realistic().imu),
+        ),
         standing_start=1.0,
     )
     diagram, handles = build_nao_walk_diagram(scenario)

@@ -55,15 +55,16 @@ def test_grid_cells_and_scenarios():
     assert cells[0].robot == "hrp4_like" and cells[-1].robot == "models/robots/talos.yaml"
     cell = SweepCell("hrp4_like", 4, 2.0, 3.0, 2, 0.4)
     scenario = cell_scenario(grid, cell)
-    realistic = ContactLocalizationScenario().imperfections.model_mismatch
-    assert scenario.imperfections.seed == 4
-    assert scenario.imperfections.model_mismatch.mass_percent == pytest.approx(2.0 * realistic.mass_percent)
-    assert scenario.imperfections.model_mismatch.inertia_percent == pytest.approx(2.0 * realistic.inertia_percent)
-    assert (scenario.noise_scale, scenario.contacts, scenario.push_duration) == (3.0, 2, 0.4)
-    assert (scenario.trials, scenario.seed, scenario.num_seeds, scenario.force_range) == (30, 11, 2, [10.0, 20.0])
+    realistic = ContactLocalizationScenario().station.imperfections.model_mismatch
+    station = scenario.station
+    assert station.imperfections.seed == 4
+    assert station.imperfections.model_mismatch.mass_percent == pytest.approx(2.0 * realistic.mass_percent)
+    assert station.imperfections.model_mismatch.inertia_percent == pytest.approx(2.0 * realistic.inertia_percent)
+    assert (station.noise_scale, scenario.contacts, scenario.push_duration) == (3.0, 2, 0.4)
+    assert (scenario.trials, station.seed, scenario.num_seeds, scenario.force_range) == (30, 11, 2, [10.0, 20.0])
     assert scenario.no_contact_duration == 0 and scenario.slow_motion_duration == 0
-    assert scenario.model_refinement == "calibrate" and scenario.base_state == "invariant_ekf"
-    ideal = cell_scenario(replace(grid, world="ideal"), cell)
+    assert station.model_refinement == "calibrate" and station.base_state == "invariant_ekf"
+    ideal = cell_scenario(replace(grid, world="ideal"), cell).station
     assert ideal.model_refinement == "none" and ideal.imperfections.is_ideal and ideal.noise_scale == 3.0
     # The grid file round-trips.
     assert grid_as_yaml(load_scenario(SweepGrid, text=grid_as_yaml(grid))) == grid_as_yaml(grid)

@@ -567,10 +567,9 @@ def test_a_standing_robot_with_fsr_feet_measures_its_weight_at_the_soles():
     from pydrake.systems.analysis import Simulator
 
     from diagrams.residuals.contact_localization import ContactLocalizationScenario, build_contact_localization_diagram
-    from diagrams.station.conditions import set_ideal_conditions
+    from diagrams.station.config import StationConfig
 
-    scenario = ContactLocalizationScenario(model="models/robots/hrp4_like_fsr.yaml")
-    set_ideal_conditions(scenario)
+    scenario = ContactLocalizationScenario(station=StationConfig(model="models/robots/hrp4_like_fsr.yaml"))
     diagram, handles = build_contact_localization_diagram(scenario, online=True)
     station = handles.station
     np.testing.assert_array_equal(station.sensors.fsr_array.saturation, np.full(8, 500.0))

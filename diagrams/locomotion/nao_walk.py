@@ -20,20 +20,19 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams
-from pydrake.multibody.plant import MultibodyPlant, MultibodyPlantConfig
+from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
 from diagrams.scenarios import check_common_fields
+from diagrams.station.config import StationConfig
 from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station
-from diagrams.station.plant_config import default_plant_config
 from diagrams.station.standing import default_gains
 from systems.estimation.ekf_settings import STILL_MIN_DURATION
 from systems.locomotion.contact_zmp import MIN_NORMAL_FORCE, ContactZmp
 from systems.locomotion.walking_pattern import NaoWalkingController, WalkingParameters
 from systems.simulation.disturbances import Push, PushSource
-from systems.simulation.imperfections import Imperfections
 
 
 @dataclass
@@ -102,40 +101,37 @@ class NaoWalkScenario:
             K_p^-1 K_d q_dot_ref (eq. W-3), since the PD damps towards zero velocity. Off by
             default (measured not to help when this was chosen; see the git history of
             BENCHMARKS.md).
-        noise, seed: the station's sensor noise (the PD reads the sensed state) and its seed.
-        base_state: the source of the sensed base state (``diagrams.station.humanoid_station``):
-            "truth_plus_noise" (default) or "invariant_ekf" (the contact-aided invariant EKF,
-            foot contact from the FSRs). The walking controller is open loop and does not
-            read it; the EKF's walking drift is measured on it
-            (``tests/test_station_base_state.py``, which prints it with ``pytest -s``).
-        imperfections: the station's ``Imperfections`` (default none), e.g. the realistic IMU.
+        station: the robot (``nao_like``, the walking controller's) and its world
+            (``diagrams.station.config``; default: noise-free sensors, the ideal world). The
+            PD reads the sensed state; its ``base_state`` "invariant_ekf" (the contact-aided
+            invariant EKF, foot contact from the FSRs) is not read by the open-loop walking
+            controller: the EKF's walking drift is measured on it
+            (``tests/test_station_base_state.py``, which prints it with ``pytest -s``). Its
+            ``at_rest_duration`` is ``standing_start``'s (none below ``STILL_MIN_DURATION``).
         log_period: period of every logger, s.
         standing_start: s the robot stands in the pattern's first posture before walking
             (``NaoWalkingController.start_delay``; default 0).
         log_sensors: also log what a robot's own log holds, every ``log_period``: the IMU's
             ``gyro`` and ``accel`` and the soles' ``fsr_forces`` (the station's noise; an
-            ``FsrArray`` of its own, seed 16 ``seed`` + 7) (``diagrams.locomotion.walking_log``).
-        plant_config: Drake's ``MultibodyPlantConfig`` (default: 1 ms steps, point contact, SAP).
+            ``FsrArray`` of its own, seed 16 ``station.seed`` + 7) (``diagrams.locomotion.walking_log``).
         simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``).
     """
 
+    station: StationConfig = dataclasses.field(default_factory=lambda: StationConfig(model="nao_like", noise=False))
     walking: WalkingParameters = dataclasses.field(default_factory=WalkingParameters)
     zmp_correction_passes: int = 1
     stiffness_compensation: bool = True
     velocity_lead: bool = False
-    noise: bool = False
-    seed: int = 0
-    base_state: str = "truth_plus_noise"
-    imperfections: Imperfections = dataclasses.field(default_factory=Imperfections)
     log_period: float = 0.005
     standing_start: float = 0.0
     log_sensors: bool = False
-    plant_config: MultibodyPlantConfig = dataclasses.field(default_factory=default_plant_config)
     simulator_config: SimulatorConfig = dataclasses.field(default_factory=SimulatorConfig)
 
     def check(self) -> None:
         """Raises ValueError on a bad value (the message names it)."""
         check_common_fields(self)
+        if self.station.model != "nao_like":
+            raise ValueError(f"station.model must be nao_like (the walking controller's), got {self.station.model!r}")
         if self.zmp_correction_passes < 0:
             raise ValueError(f"zmp_correction_passes must be >= 0, got {self.zmp_correction_passes}")
         if not self.standing_start >= 0.0:
@@ -166,16 +162,8 @@ def build_nao_walk_diagram(
     stiffness_compensation, velocity_lead = scenario.stiffness_compensation, scenario.velocity_lead
     zmp_correction_passes = scenario.zmp_correction_passes
     builder = DiagramBuilder()
-    station = add_humanoid_station(
-        builder,
-        "nao_like",
-        plant_config=scenario.plant_config,
-        noise=scenario.noise,
-        seed=scenario.seed,
-        base_state=scenario.base_state,
-        imperfections=scenario.imperfections,
-        at_rest_duration=STILL_MIN_DURATION if scenario.standing_start >= STILL_MIN_DURATION else None,
-    )
+    at_rest_duration = STILL_MIN_DURATION if scenario.standing_start >= STILL_MIN_DURATION else None
+    station = add_humanoid_station(builder, dataclasses.replace(scenario.station, at_rest_duration=at_rest_duration))
     # The simulated robot (plant, pushes, contact ZMP for the metrics) and the robot's own
     # model (the estimators' plant: the gains and the walking plan, issue 31).
     plant, humanoid = station.plant, station.humanoid
@@ -221,8 +209,8 @@ def build_nao_walk_diagram(
             FsrArray(
                 plant,
                 humanoid,
-                noise_std=FSR_NOISE_STD if scenario.noise else 0.0,
-                seed=SEEDS_PER_CALL * scenario.seed + 7,
+                noise_std=FSR_NOISE_STD if scenario.station.noise else 0.0,
+                seed=SEEDS_PER_CALL * scenario.station.seed + 7,
             )
         )
         fsr.set_name("log_fsr_array")
@@ -475,8 +463,8 @@ def nao_walk_metrics(
             "real_time_factor": m["duration_s"] / wall_time_s,
             "parameters": dataclasses.asdict(params),
             "zmp_correction_passes": scenario.zmp_correction_passes,
-            "noise": scenario.noise,
-            "seed": scenario.seed,
+            "noise": scenario.station.noise,
+            "seed": scenario.station.seed,
         }
     )
     return m

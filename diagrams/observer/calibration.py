@@ -26,7 +26,9 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
 from diagrams.observer.nao_force_observer import full_posture, nao_model, wide_stance
-from diagrams.station.humanoid_station import add_humanoid_station, default_plant_config
+from diagrams.station.config import StationConfig
+from diagrams.station.humanoid_station import add_humanoid_station
+from diagrams.station.plant_config import default_plant_config
 from models import set_standing_state
 from systems.common.checks import positive_number
 from systems.observer.arm_compliance import NAO_ARM_CHAINS, ArmChain, MotorConstantIdentification, fit_motor_constants
@@ -38,7 +40,9 @@ from systems.simulation.pd_gravity import joint_vector_from_names
 def _settled_state(duration: float, posture: tuple, plant_config_yaml: str, robot: str) -> tuple[float, ...]:
     plant_config = yaml_load_typed(schema=MultibodyPlantConfig, data=plant_config_yaml)
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, nao_model(robot), plant_config=plant_config, noise=False)
+    station = add_humanoid_station(
+        builder, StationConfig(model=nao_model(robot), plant_config=plant_config, noise=False)
+    )
     plant, humanoid = station.plant, station.humanoid
     # The posture command is the controller's (the robot's model, issue 31); the simulated
     # robot is put in the same posture to start.
@@ -111,7 +115,7 @@ def identify_motor_constant(
     if window >= hold:
         raise ValueError("identify_motor_constant: window must be shorter than hold")
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, "nao_like", noise=False)
+    station = add_humanoid_station(builder, StationConfig(model="nao_like", noise=False))
     # The simulated robot (plant and the known loads; the log is of its sensors) and the
     # robot's model (the estimators' plant: the posture command and the fit, issue 31).
     plant, model = station.plant, station.estimator.plant

@@ -22,14 +22,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams
-from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
 from diagrams.observer.nao_force_observer import full_posture, wide_stance
 from diagrams.observer.nao_sensing import OBSERVER_PERIOD, add_observer_pipeline
-from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station, default_plant_config
+from diagrams.station.config import StationConfig
+from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station
 from diagrams.station.standing import default_gains
 from systems.locomotion.posture_schedule import PostureSchedule
 from systems.observer.arm_compliance import (
@@ -125,13 +125,11 @@ def build_nao_compliant_arms_diagram(
     constant_k1: float | None = None,
     fsr_threshold: float = FSR_CONTACT_THRESHOLD,
     saturation_guard: bool = False,
-    noise: bool = True,
-    seed: int = 0,
+    station: StationConfig | None = None,
     period: float = DEFAULT_PERIOD,
     filter_time_constant: float = 0.1,
     support_foot: str = "right",
     log_period: float = 0.01,
-    plant_config: MultibodyPlantConfig | None = None,
     meshcat: Meshcat | None = None,
 ) -> tuple[Diagram, NaoCompliantArmsHandles]:
     """Builds the diagram of the module docstring.
@@ -152,13 +150,13 @@ def build_nao_compliant_arms_diagram(
         fsr_threshold: N, FSR "in contact" threshold of K_a.
         saturation_guard: K1 = 0 while an FSR saturates (an extension of eq. 28, see
             ``CompliantArmBlender``).
-        noise, seed: sensor noise (FSRs: 0.1 N; see ``systems.simulation.sensors``).
+        station: the robot (``nao_like``) and its world (``diagrams.station.config``;
+            default ``StationConfig(model="nao_like")``: noisy sensors, FSRs 0.1 N, see
+            ``systems.simulation.sensors``; the ideal world).
         period: estimator and controller period, s.
         filter_time_constant: the joint-level estimate's low-pass, s.
         support_foot: the observer's support-foot frame.
         log_period: s.
-        plant_config: Drake's ``MultibodyPlantConfig`` (default
-            ``diagrams.station.humanoid_station.default_plant_config()``).
         meshcat: adds a visualizer and force arrows (red: applied, blue: blended estimate).
     """
     if motor_constants is None:
@@ -166,8 +164,12 @@ def build_nao_compliant_arms_diagram(
             "build_nao_compliant_arms_diagram: motor_constants is required ({arm joint: K_m}, N m/rad): "
             "pass dict(diagrams.observer.calibration.identified_motor_constants()) or your own"
         )
+    config = StationConfig(model="nao_like") if station is None else station
+    if config.model != "nao_like":
+        raise ValueError(f"station.model must be nao_like (the compliant arms' robot), got {config.model!r}")
+    noise, seed = config.noise, config.seed
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, "nao_like", plant_config=plant_config, noise=noise, seed=seed)
+    station = add_humanoid_station(builder, config)
     # The simulated robot (plant, pushes, ground truth) and the robot's own model (the
     # estimators' plant: postures, gains, the controller and every estimator, issue 31).
     plant, humanoid = station.plant, station.humanoid
@@ -375,24 +377,21 @@ class NaoCompliantArmsScenario:
         compensate_deflection: the controller offsets q_d by K_m^-1 J^T F (False: the
             ablation without it).
         saturation_guard: K1 = 0 while an FSR saturates (an extension of eq. 28).
-        noise: sensor noise on.
-        seed: sensor noise seed (>= 0).
-        plant_config: Drake's ``MultibodyPlantConfig`` (default: 1 ms steps, point contact,
-            SAP); the settled initial state uses the same. The K_m identification
+        station: the robot (``nao_like``) and its world (``diagrams.station.config``): the
+            sensors' noise and seed, Drake's plant configuration (the settled initial state
+            uses the same). The K_m identification
             (``diagrams.observer.calibration.identified_motor_constants``) runs on the
             station's default plant.
         simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``).
     """
 
+    station: StationConfig = field(default_factory=lambda: StationConfig(model="nao_like"))
     cases: list[str] = field(default_factory=lambda: list(CASE_NAMES))
     force: float = DEFAULT_FORCE
     lean: float = LEAN_ANGLE
     stiffness: float = DEFAULT_STIFFNESS
     compensate_deflection: bool = True
     saturation_guard: bool = False
-    noise: bool = True
-    seed: int = 0
-    plant_config: MultibodyPlantConfig = field(default_factory=default_plant_config)
     simulator_config: SimulatorConfig = field(default_factory=SimulatorConfig)
 
 
@@ -451,8 +450,7 @@ def scenario_cases(scenario: NaoCompliantArmsScenario) -> list[HandPushCase]:
     """
     if not scenario.cases:
         raise ValueError("the scenario runs no case; choose one or both of a, b")
-    if scenario.seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {scenario.seed}")
+    scenario.station.check()
     if not (math.isfinite(scenario.stiffness) and scenario.stiffness > 0):
         raise ValueError(f"stiffness must be positive, got {scenario.stiffness}")
     return [make_scenario(name, scenario.force, scenario.lean) for name in scenario.cases]
@@ -475,9 +473,7 @@ def build_case_diagram(
         motor_constants=dict(motor_constants),
         compensate_deflection=scenario.compensate_deflection,
         saturation_guard=scenario.saturation_guard,
-        noise=scenario.noise,
-        seed=scenario.seed,
-        plant_config=scenario.plant_config,
+        station=scenario.station,
         meshcat=meshcat,
     )
 
@@ -586,7 +582,7 @@ def arms_summary(scenario: NaoCompliantArmsScenario, metrics: dict, motor_consta
     """The "summary" entry of the app's metrics: every floor met, and the run's settings."""
     return {
         "all_floors_met": all(m["meets_floor"] for m in metrics.values()),
-        "seed": scenario.seed,
+        "seed": scenario.station.seed,
         "motor_constants_N_m_per_rad": dict(motor_constants),
         "controller": f"eq. 29 with k = {scenario.stiffness:g} N/m, damped least-squares arm IK, "
         + (

@@ -21,7 +21,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams
-from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput, MatrixGain
@@ -29,8 +28,8 @@ from pydrake.systems.primitives import LogVectorOutput, MatrixGain
 from diagrams.locomotion.nao_walk import detect_steps
 from diagrams.observer.nao_sensing import add_observer_pipeline, nao_observer_parameters
 from diagrams.scenarios import check_common_fields
+from diagrams.station.config import StationConfig
 from diagrams.station.humanoid_station import add_humanoid_station
-from diagrams.station.plant_config import default_plant_config
 from diagrams.station.standing import default_gains
 from systems.locomotion.contact_zmp import ContactZmp
 from systems.locomotion.walking_pattern import WalkingParameters
@@ -89,12 +88,14 @@ class NaoForceGuidedWalkScenario:
         max_steps: steps of one walking segment at most.
         max_lean: bound of eq. G-3's ZMP offset change, m (0, the default, disables the lean;
             ``systems.observer.force_guided_walking``).
-        noise, seed: sensor noise and its seed.
+        station: the robot (``nao_like``, the walking controller's) and its world
+            (``diagrams.station.config``): the sensor noise, its seed, Drake's plant
+            configuration.
         log_period: period of every logger, s.
-        plant_config: Drake's ``MultibodyPlantConfig`` (default: 1 ms steps, point contact, SAP).
         simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``).
     """
 
+    station: StationConfig = dataclasses.field(default_factory=lambda: StationConfig(model="nao_like"))
     force: float = 3.0
     episodes: list[list[float]] = dataclasses.field(default_factory=lambda: [[1.5, 5.5, 1.0], [7.5, 10.5, -1.0]])
     ramp: float = 0.2
@@ -106,15 +107,14 @@ class NaoForceGuidedWalkScenario:
     walking: WalkingParameters = dataclasses.field(default_factory=lambda: dataclasses.replace(GUIDED_WALKING))
     max_steps: int = 20
     max_lean: float = 0.0
-    noise: bool = True
-    seed: int = 0
     log_period: float = 0.005
-    plant_config: MultibodyPlantConfig = dataclasses.field(default_factory=default_plant_config)
     simulator_config: SimulatorConfig = dataclasses.field(default_factory=SimulatorConfig)
 
     def check(self) -> None:
         """Raises ValueError on a bad value (the message names it)."""
         check_common_fields(self)
+        if self.station.model != "nao_like":
+            raise ValueError(f"station.model must be nao_like (the walking controller's), got {self.station.model!r}")
         if not (self.force > self.trigger.threshold or self.force == 0.0):
             raise ValueError(
                 f"force ({self.force} N) must exceed the trigger's threshold ({self.trigger.threshold} N), or be 0"
@@ -167,15 +167,15 @@ def build_force_guided_diagram(
         scenario.trigger_source,
     )
     noise, seed, walking, max_steps, log_period = (
-        scenario.noise,
-        scenario.seed,
+        scenario.station.noise,
+        scenario.station.seed,
         scenario.walking,
         scenario.max_steps,
         scenario.log_period,
     )
     force_rate_variance = scenario.force_rate_variance
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, "nao_like", plant_config=scenario.plant_config, noise=noise, seed=seed)
+    station = add_humanoid_station(builder, scenario.station)
     # The simulated robot (plant, pushes, contact forces for the metrics) and the robot's own
     # model (the estimators' plant: gains, the controller and every estimator, issue 31).
     plant, humanoid = station.plant, station.humanoid
@@ -428,8 +428,8 @@ def force_guided_walk_metrics(scenario: NaoForceGuidedWalkScenario, handles: dic
         force_N=scenario.force,
         trigger_source=scenario.trigger_source,
         preset=scenario.preset,
-        noise=scenario.noise,
-        seed=scenario.seed,
+        noise=scenario.station.noise,
+        seed=scenario.station.seed,
         walking_parameters=dataclasses.asdict(scenario.walking),
     )
     return m

@@ -26,19 +26,20 @@ absorb it before the settled level ahead of the first load is measured (``QUIET_
 ``STEADY_WINDOW``; measured when this was chosen, see the git history of BENCHMARKS.md).
 """
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams
-from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
 from diagrams.observer.nao_sensing import OBSERVER_PERIOD, add_observer_pipeline, add_virtual_force_arrows
-from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station, default_plant_config
+from diagrams.station.config import StationConfig
+from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station
 from models import MODELS_DIR, HumanoidHandles
 from systems.observer.force_observer import STANDING, LipForceObserverSystem, LipObserverParameters
 from systems.observer.fsr_sensing import CenterOfPressure, FsrArray, ImuComAcceleration, SupportFootCom
@@ -99,13 +100,10 @@ def build_nao_force_observer_diagram(
     *,
     posture: dict[str, float] | None = None,
     support_foot: str = "right",
-    noise: bool = True,
-    seed: int = 0,
+    station: StationConfig | None = None,
     fsr_noise_std: float | None = None,
     observer_period: float = OBSERVER_PERIOD,
-    plant_config: MultibodyPlantConfig | None = None,
     meshcat: Meshcat | None = None,
-    robot: str = "nao_like",
 ) -> tuple[Diagram, NaoForceObserverHandles]:
     """Builds the diagram of the module docstring.
 
@@ -114,22 +112,25 @@ def build_nao_force_observer_diagram(
         posture: joint name -> angle (rad) overriding the model's nominal standing posture
             (e.g. ``wide_stance()``); the PD holds it (position control).
         support_foot: "left" or "right": origin of the support-foot frame.
-        noise: sensor noise on (defaults of ``systems.simulation.sensors`` and ``systems.observer.fsr_sensing``).
-        seed: noise seed; the FSRs use 16 seed + 5, the other sensors 16 seed + 0..4.
+        station: the robot and its world (``diagrams.station.config.StationConfig``; default
+            ``nao_station()``: ``nao_like``, noisy sensors, the ideal world). Its ``model`` is
+            one of ``NAO_ROBOTS``: ``nao_like`` (the documented link masses) or
+            ``nao_like_recorded`` (its standing CoM at the recordings' height). Its ``noise``
+            and ``seed`` are the observer pipeline's too (defaults of
+            ``systems.simulation.sensors`` and ``systems.observer.fsr_sensing``; the FSRs use
+            16 seed + 5, the other sensors 16 seed + 0..4).
         fsr_noise_std: N per FSR (default ``fsr_sensing.FSR_NOISE_STD``; ignored without noise).
         observer_period: T, s (1/60 s: the paper's 16.7 ms).
-        plant_config: Drake's ``MultibodyPlantConfig`` (default
-            ``diagrams.station.humanoid_station.default_plant_config()``).
         meshcat: if given, a MeshcatVisualizer and arrows for the applied forces (red) and
             the estimated virtual force at the CoM (blue) are added (32 Hz).
-        robot: one of ``NAO_ROBOTS``: ``nao_like`` (the documented link masses) or
-            ``nao_like_recorded`` (its standing CoM at the recordings' height).
 
     Raises:
         ValueError: unknown support foot or robot, bad pushes (unknown body), bad noise settings.
     """
+    config = nao_station() if station is None else station
+    noise, seed = config.noise, config.seed
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, nao_model(robot), plant_config=plant_config, noise=noise, seed=seed)
+    station = add_humanoid_station(builder, dataclasses.replace(config, model=nao_model(config.model)))
     # The simulated robot (plant, pushes, ground truth) and the robot's own model (the
     # estimators' plant: the posture command and every estimator, issue 31).
     plant, humanoid = station.plant, station.humanoid
@@ -230,6 +231,12 @@ def build_nao_force_observer_diagram(
 NAO_ROBOTS = {"nao_like": "nao_like", "nao_like_recorded": str(MODELS_DIR / "nao_like_recorded.yaml")}
 
 
+def nao_station(robot: str = "nao_like", **fields) -> StationConfig:
+    """The station of the Nao experiments: ``robot`` (one of ``NAO_ROBOTS``), noisy sensors,
+    the ideal world, and ``fields`` set (``StationConfig``)."""
+    return StationConfig(model=robot, **fields)
+
+
 def nao_model(robot: str) -> str:
     """The model argument of ``add_humanoid_station`` for Nao ``robot`` (a key of NAO_ROBOTS).
 
@@ -315,9 +322,12 @@ class NaoForceObserverScenario:
 
     Attributes:
         experiments: which experiments run, in order (1, 2 and/or 3).
-        robot: the Nao model, one of ``NAO_ROBOTS``: ``nao_like_recorded`` (default: it stands
-            with its CoM at the height of the authors' recordings, 0.314 m) or ``nao_like``
-            (the documented link masses: 0.268 m).
+        station: the robot and its world (``diagrams.station.config``): its ``model`` is the
+            Nao, one of ``NAO_ROBOTS``: ``nao_like_recorded`` (default: it stands with its CoM
+            at the height of the authors' recordings, 0.314 m) or ``nao_like`` (the
+            documented link masses: 0.268 m); the sensors' noise and seed; Drake's plant
+            configuration (the settled initial state of
+            ``diagrams.observer.calibration.settle_standing_state`` uses the same).
         time_scale: multiplies every duration of the schedules (< 1 for quick runs).
         ramp: the load ramp duration of experiments 2-3 before scaling, s; 0: every load of
             every experiment is a step, as in the paper (``apps/scenarios/hawley_paper.yaml``).
@@ -327,17 +337,12 @@ class NaoForceObserverScenario:
         wide_stance: stand in ``wide_stance()`` (each hip rolled out by 0.1 rad) instead of
             the nominal stance.
         support_foot: "left" or "right", the origin of the observer's support-foot frame.
-        noise: sensor noise on.
-        seed: sensor noise seed (>= 0).
-        plant_config: Drake's ``MultibodyPlantConfig`` (default: 1 ms steps, point contact,
-            SAP; see ``diagrams.station.humanoid_station``); the settled initial state of
-            ``diagrams.observer.calibration.settle_standing_state`` uses the same.
         simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``); the plant
             is discrete, so only ``target_realtime_rate`` and the publishing matter.
     """
 
+    station: StationConfig = field(default_factory=lambda: nao_station("nao_like_recorded"))
     experiments: list[int] = field(default_factory=lambda: list(EXPERIMENT_NUMBERS))
-    robot: str = "nao_like_recorded"
     time_scale: float = 1.0
     ramp: float = DEFAULT_RAMP
     load_mass: float = LOAD_MASS
@@ -345,9 +350,6 @@ class NaoForceObserverScenario:
     torso_angles_deg: list[float] = field(default_factory=lambda: list(TORSO_ANGLES_DEG))
     wide_stance: bool = True
     support_foot: str = "right"
-    noise: bool = True
-    seed: int = 0
-    plant_config: MultibodyPlantConfig = field(default_factory=default_plant_config)
     simulator_config: SimulatorConfig = field(default_factory=SimulatorConfig)
 
     def posture(self) -> dict[str, float] | None:
@@ -516,11 +518,10 @@ def scenario_experiments(scenario: NaoForceObserverScenario) -> list[Experiment]
     """
     if not scenario.experiments:
         raise ValueError("the scenario runs no experiment; choose one or more of 1, 2, 3")
-    if scenario.seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {scenario.seed}")
+    scenario.station.check()
     if scenario.support_foot not in ("left", "right"):
         raise ValueError(f"unknown support foot {scenario.support_foot!r}; choose left or right")
-    nao_model(scenario.robot)
+    nao_model(scenario.station.model)
     return [
         make_experiment(
             number,
@@ -540,17 +541,14 @@ def build_experiment_diagram(
     """``build_nao_force_observer_diagram`` with ``experiment``'s pushes and posture, and the
     scenario's stance, sensors and plant. Its initial state is the caller's explicit
     calibration run: ``settle_standing_state(experiment_posture(scenario, experiment),
-    plant_config=scenario.plant_config, robot=scenario.robot)``
+    plant_config=scenario.station.plant_config, robot=scenario.station.model)``
     (``diagrams.observer.calibration``)."""
     return build_nao_force_observer_diagram(
         experiment.pushes,
         posture=experiment_posture(scenario, experiment),
         support_foot=scenario.support_foot,
-        noise=scenario.noise,
-        seed=scenario.seed,
-        plant_config=scenario.plant_config,
+        station=scenario.station,
         meshcat=meshcat,
-        robot=scenario.robot,
     )
 
 
@@ -677,11 +675,11 @@ def experiments_summary(scenario: NaoForceObserverScenario, metrics: dict) -> di
     """The "summary" entry of the app's metrics: every floor met, and the run's settings."""
     return {
         "all_floors_met": all(m["meets_floors"] for m in metrics.values()),
-        "seed": scenario.seed,
+        "seed": scenario.station.seed,
         "time_scale": scenario.time_scale,
         "ramp_s": scenario.ramp,
         "step_loads": scenario.ramp == 0,
-        "robot": scenario.robot,
+        "robot": scenario.station.model,
         "wide_stance": scenario.wide_stance,
         "observer": "LipForceObserverSystem, paper eq. 21 parameters, T = 1/60 s",
     }

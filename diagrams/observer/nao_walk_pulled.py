@@ -53,7 +53,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams
-from pydrake.multibody.plant import ExternallyAppliedSpatialForceMultiplexer, MultibodyPlantConfig
+from pydrake.multibody.plant import ExternallyAppliedSpatialForceMultiplexer
 from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
@@ -67,8 +67,8 @@ from diagrams.observer.nao_sensing import (
     nao_observer_parameters,
 )
 from diagrams.scenarios import check_common_fields
+from diagrams.station.config import StationConfig
 from diagrams.station.humanoid_station import add_humanoid_station
-from diagrams.station.plant_config import default_plant_config
 from diagrams.station.standing import default_gains
 from systems.locomotion.contact_zmp import ContactZmp
 from systems.locomotion.walking_pattern import NaoWalkingController, WalkingParameters
@@ -180,27 +180,27 @@ class NaoWalkPulledScenario:
         cable: the cable geometry (``CableSetup``).
         pull: False leaves the cable out (the walk alone, same pipeline: the observer's
             estimate then measures its own bias while walking).
-        noise, seed: sensor noise (station sensors and FSRs, ``systems.simulation.sensors``
-            defaults) and its seed.
+        station: the robot (``nao_like``, the walking controller's) and its world
+            (``diagrams.station.config``): the sensor noise (station sensors and FSRs,
+            ``systems.simulation.sensors`` defaults), its seed, Drake's plant configuration.
         observer_period: T, s.
         log_period: period of the walking loggers, s.
-        plant_config: Drake's ``MultibodyPlantConfig`` (default: 1 ms steps, point contact, SAP).
         simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``).
     """
 
+    station: StationConfig = dataclasses.field(default_factory=lambda: StationConfig(model="nao_like"))
     walking: WalkingParameters = dataclasses.field(default_factory=WalkingParameters)
     cable: CableSetup = dataclasses.field(default_factory=CableSetup)
     pull: bool = True
-    noise: bool = True
-    seed: int = 0
     observer_period: float = OBSERVER_PERIOD
     log_period: float = 0.005
-    plant_config: MultibodyPlantConfig = dataclasses.field(default_factory=default_plant_config)
     simulator_config: SimulatorConfig = dataclasses.field(default_factory=SimulatorConfig)
 
     def check(self) -> None:
         """Raises ValueError on a bad value (the message names it)."""
         check_common_fields(self)
+        if self.station.model != "nao_like":
+            raise ValueError(f"station.model must be nao_like (the walking controller's), got {self.station.model!r}")
 
 
 def build_nao_walk_pulled_diagram(
@@ -223,13 +223,13 @@ def build_nao_walk_pulled_diagram(
     scenario.check()
     parameters, setup, pull = scenario.walking, scenario.cable, scenario.pull
     noise, seed, observer_period, log_period = (
-        scenario.noise,
-        scenario.seed,
+        scenario.station.noise,
+        scenario.station.seed,
         scenario.observer_period,
         scenario.log_period,
     )
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, "nao_like", plant_config=scenario.plant_config, noise=noise, seed=seed)
+    station = add_humanoid_station(builder, scenario.station)
     # The simulated robot (plant, cable, ground truth) and the robot's own model (the
     # estimators' plant: the gains, the walking plan and every estimator, issue 31).
     plant, humanoid = station.plant, station.humanoid
@@ -521,8 +521,8 @@ def nao_walk_pulled_metrics(
             "preset": "WALKING (eq. 22)",
         },
         "frame": "F0: world-aligned, origin at the right sole at t = 0 (fixed for the run)",
-        "noise": scenario.noise,
-        "seed": scenario.seed,
+        "noise": scenario.station.noise,
+        "seed": scenario.station.seed,
         "wall_time_s": wall_time_s,
         "real_time_factor": w["duration_s"] / wall_time_s,
         "walking_parameters": dataclasses.asdict(scenario.walking),

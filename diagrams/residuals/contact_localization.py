@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, Rgba, SceneGraph
-from pydrake.multibody.plant import MultibodyPlant, MultibodyPlantConfig
+from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.analysis import Simulator, SimulatorConfig
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
@@ -61,8 +61,8 @@ from diagrams.residuals.study_statistics import (
     rate_table,
 )
 from diagrams.residuals.wiring import add_internal_and_external_residuals
-from diagrams.station.conditions import is_ideal, set_ideal_conditions
-from diagrams.station.humanoid_station import HumanoidStation, add_scenario_station, default_plant_config
+from diagrams.station.config import StationConfig, replace_station
+from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station
 from diagrams.station.motions import SlowMotion, slow_whole_body_motion
 from diagrams.station.standing import foot_sphere_normal_forces
 from models import is_humanoid, robot_description
@@ -84,7 +84,6 @@ from systems.residuals.momentum_residuals import ExternalResidual, InternalResid
 from systems.residuals.multi_contact import MultiContactLocalizer
 from systems.residuals.offline import ReplayedEstimation, ReplayState, replay_contact_estimation
 from systems.simulation.disturbances import Push, PushSource, Step
-from systems.simulation.imperfections import Imperfections
 from systems.simulation.visualization import add_force_arrows
 
 TRUE_RGBA = Rgba(0.1, 0.8, 0.1, 0.5)  # wide and translucent: the estimate shows inside it
@@ -193,9 +192,9 @@ def floors_for(scenario: "ContactLocalizationScenario") -> dict:
     or a refined model)."""
     if scenario.contacts == 2:
         return TWO_CONTACT_FLOORS
-    if lacks_foot_ft_sensors(scenario.model):
-        return FSR_FEET_FLOORS if has_fsr_feet(scenario.model) else NO_FOOT_FT_FLOORS
-    return FLOORS if is_ideal(scenario) else REALISTIC_FLOORS
+    if lacks_foot_ft_sensors(scenario.station.model):
+        return FSR_FEET_FLOORS if has_fsr_feet(scenario.station.model) else NO_FOOT_FT_FLOORS
+    return FLOORS if scenario.station.is_ideal else REALISTIC_FLOORS
 
 
 #: The random contacts of the localization study (``sample_trials``): force magnitude, N,
@@ -208,8 +207,11 @@ class ContactLocalizationScenario:
     """The contact study, and one run of its diagram. SI units.
 
     Attributes:
-        model: ``hrp4_like``, or any humanoid description (its feet with F/T sensors, FSRs
-            or no sensing).
+        station: the robot (``hrp4_like``, or any humanoid description: its feet with F/T
+            sensors, FSRs or no sensing) and its world (``diagrams.station.config``):
+            realistic by default, ideal with ``--ideal``. Its ``seed`` is the sensor noise
+            seed of one run; the study's first seed, from which it samples the trials and
+            derives each run's noise seed.
         push_body: the pushed link, or None for a run without contact (the study sets each
             trial's push_body, push_point, push_force and seed from ``sample_trials``).
         push_point: the contact point in the link's body frame, m.
@@ -233,13 +235,8 @@ class ContactLocalizationScenario:
             trial (1 s pushes). The trials' pushes then follow one another in time, so each
             push sees sensor noise of its own; what the trials of one job share is the
             noise of the start. False: each trial simulates its own standing start.
-        noise: sensor noise on (systems.simulation.sensors defaults) or off.
-        noise_scale: a factor on every sensor's noise std (1: the defaults; the sweeps'
-            noise level, ``apps.sweep``).
-        seed: the sensor noise seed of one run; the study's first seed, from which it
-            samples the trials and derives each run's noise seed.
-        num_seeds: the study samples its trials from the seeds seed, seed + 1, ...,
-            seed + num_seeds - 1 (``trials`` split evenly; a figure that holds on one seed
+        num_seeds: the study samples its trials from the seeds s, s + 1, ...,
+            s + num_seeds - 1 (s: ``station.seed``) (``trials`` split evenly; a figure that holds on one seed
             only is not a result).
         trials: the study's number of random contacts (over all its seeds).
         contacts: contacts per trial: 1, or 2 (two links pushed at once; ``sample_trials``).
@@ -259,8 +256,6 @@ class ContactLocalizationScenario:
         motion: the posture motion of one run (None: holding the standing posture; the
             study sets it for its slow-motion run).
         internal_gain, external_gain: residual gains K, 1/s.
-        plant_config: Drake's ``MultibodyPlantConfig`` (default: 1 ms steps, point contact,
-            SAP; see ``diagrams.station.humanoid_station``).
         period: residual/detector/localizer period, s.
         settle_time: the localizer's wait after detection before averaging, s.
         localization_period: s between two localizations while in contact (the localizer
@@ -284,11 +279,9 @@ class ContactLocalizationScenario:
             online (they draw the estimate as it comes).
         simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``); the plant
             is discrete, so only ``target_realtime_rate`` and the publishing matter.
-        base_state, imperfections, model_refinement: the world of the study
-            (``diagrams.station.conditions``): realistic by default, ideal with ``--ideal``.
     """
 
-    model: str = "hrp4_like"
+    station: StationConfig = field(default_factory=StationConfig.realistic)
     push_body: str | None = None
     push_point: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
     push_force: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
@@ -297,9 +290,6 @@ class ContactLocalizationScenario:
     trial_gap: float = 0.4
     trials_per_run: int = 1
     shared_standing_start: bool = True
-    noise: bool = True
-    noise_scale: float = 1.0
-    seed: int = 0
     num_seeds: int = 5
     trials: int = 1000
     contacts: int = 1
@@ -311,7 +301,6 @@ class ContactLocalizationScenario:
     motion: SlowMotion | None = None
     internal_gain: float = 35.0
     external_gain: float = 35.0
-    plant_config: MultibodyPlantConfig = field(default_factory=default_plant_config)
     period: float = 1e-3
     settle_time: float = 0.1
     localization_period: float | None = 0.01
@@ -320,9 +309,6 @@ class ContactLocalizationScenario:
     log_period: float = 1e-3
     estimation: str = "offline"
     simulator_config: SimulatorConfig = field(default_factory=SimulatorConfig)
-    base_state: str = "invariant_ekf"
-    imperfections: Imperfections = field(default_factory=Imperfections.realistic)
-    model_refinement: str = "calibrate"
 
 
 @dataclass
@@ -402,10 +388,12 @@ def build_contact_localization_diagram(
     if meshcat is not None and not online:
         raise ValueError("a Meshcat replay draws the estimate as it comes: build it with online=True")
     builder = DiagramBuilder()
-    station = add_scenario_station(builder, scenario, model_corrections)
+    station = add_humanoid_station(builder, scenario.station, model_corrections=model_corrections)
     estimator = station.estimator
     if station.humanoid is None or not (station.known_wrench_frames or estimator.unknown_wrench_frames):
-        raise ValueError(f"the contact study needs a humanoid (a robot description with feet), got {scenario.model!r}")
+        raise ValueError(
+            f"the contact study needs a humanoid (a robot description with feet), got {scenario.station.model!r}"
+        )
     plant = station.plant
     if scenario.motion is None:
         reference = builder.AddSystem(ConstantVectorSource(station.q_hold))
@@ -647,7 +635,7 @@ def sample_trials(
         raise ValueError(f"contacts must be 1 or 2, got {contacts!r}")
     low, high = check_force_range(force_range)
     _, handles = build_contact_localization_diagram(
-        set_ideal_conditions(ContactLocalizationScenario(model=model, noise=False))
+        ContactLocalizationScenario(station=StationConfig(model=model, noise=False))
     )
     # The contacts are drawn on the simulated robot's own collision surfaces (the localizer's
     # candidate links: every link but the soles).
@@ -720,8 +708,10 @@ def sample_study_trials(scenario: ContactLocalizationScenario) -> list[dict]:
     per_seed, extra = divmod(scenario.trials, scenario.num_seeds)
     for k in range(scenario.num_seeds):
         count = per_seed + (1 if k < extra else 0)
-        seed = scenario.seed + k
-        trials = sample_trials(scenario.model, count, seed, scenario.contacts, scenario.force_range) if count else []
+        seed = scenario.station.seed + k
+        trials = (
+            sample_trials(scenario.station.model, count, seed, scenario.contacts, scenario.force_range) if count else []
+        )
         for spec in trials:
             specs.append({**spec, "trial": len(specs), "seed": seed, "trial_of_seed": spec["trial"]})
     return specs
@@ -731,11 +721,10 @@ def trial_scenario(scenario: ContactLocalizationScenario, spec: dict) -> Contact
     """The run of the trial ``spec`` (``sample_trials``) alone: ``scenario`` with its push and
     noise seed."""
     return dataclasses.replace(
-        scenario,
+        replace_station(scenario, seed=spec["noise_seed"]),
         push_body=spec["body"],
         push_point=list(spec["point_body"]),
         push_force=list(spec["force_world"]),
-        seed=spec["noise_seed"],
     )
 
 
@@ -763,20 +752,19 @@ def run_schedule(
 def no_contact_scenario(scenario: ContactLocalizationScenario) -> ContactLocalizationScenario:
     """The study's run without contact, standing: no push, its own noise seed (derived from
     the study's)."""
-    return dataclasses.replace(
-        scenario, push_body=None, motion=None, seed=(scenario.seed * 100003 + 99991) % (2**31 - 1)
-    )
+    seed = (scenario.station.seed * 100003 + 99991) % (2**31 - 1)
+    return dataclasses.replace(replace_station(scenario, seed=seed), push_body=None, motion=None)
 
 
 def slow_motion_scenario(scenario: ContactLocalizationScenario) -> ContactLocalizationScenario:
     """The study's run without contact during its slow whole-body motion (``slow_motion``,
     ``slow_motion_duration``): no push, its own noise seed."""
+    seed = (scenario.station.seed * 100003 + 99989) % (2**31 - 1)
     return dataclasses.replace(
-        scenario,
+        replace_station(scenario, seed=seed),
         push_body=None,
         motion=scenario.slow_motion,
         no_contact_duration=scenario.slow_motion_duration,
-        seed=(scenario.seed * 100003 + 99989) % (2**31 - 1),
     )
 
 
@@ -800,9 +788,8 @@ def averaged_input_covariances(
     least-squares ground wrenches (at the run's mean posture) are taken out (Sigma stays
     the raw residuals', whose sway of the ground wrenches the fit's projection removes).
     """
-    calibration = dataclasses.replace(
-        scenario, push_body=None, motion=None, seed=(scenario.seed * 100003 + 99971) % (2**31 - 1)
-    )
+    seed = (scenario.station.seed * 100003 + 99971) % (2**31 - 1)
+    calibration = dataclasses.replace(replace_station(scenario, seed=seed), push_body=None, motion=None)
     diagram, handles = build_contact_localization_diagram(
         calibration, model_corrections=model_corrections, online=False
     )
@@ -1311,7 +1298,7 @@ def no_contact_result(
     return {
         "duration_s": scenario.no_contact_duration,
         "motion": "standing" if scenario.motion is None else "slow whole-body motion",
-        "noise_seed": scenario.seed,
+        "noise_seed": scenario.station.seed,
         "false_detections": int(np.sum(np.diff(np.concatenate(([0.0], detected))) > 0.5)),
         "max_statistic_over_threshold": [float(stats[0].max() / on[0]), float(stats[1].max() / on[1])],
     }

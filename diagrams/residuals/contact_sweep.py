@@ -48,7 +48,6 @@ from diagrams.residuals.study_statistics import (
     quantile_interval,
 )
 from diagrams.scenarios import check_finite_and_signs, load_scenario, scenario_as_yaml
-from diagrams.station.conditions import set_ideal_conditions
 
 #: ``SweepGrid.world`` values.
 WORLDS = ("realistic", "ideal")
@@ -74,7 +73,7 @@ class SweepGrid:
         seed: the first seed the trials are drawn from (also the sensor noise's).
         num_seeds: the trials of a cell come from seeds seed ... seed + num_seeds - 1.
         world: "realistic" (the EKF's base state, the imperfections, a calibrated model) or
-            "ideal" (``set_ideal_conditions``: no imperfection, no calibration; the
+            "ideal" (``StationConfig.in_world``: no imperfection, no calibration; the
             imperfection axes then change nothing but the cell's name).
         base: the contact study's scenario every cell starts from (its model, trials,
             seeds, contacts, push duration, force range and noise scale are the cell's;
@@ -181,9 +180,9 @@ def sweep_cells(grid: SweepGrid) -> list[SweepCell]:
 def cell_scenario(grid: SweepGrid, cell: SweepCell) -> ContactLocalizationScenario:
     """The contact study of one cell (module docstring)."""
     base = grid.base
-    mismatch = base.imperfections.model_mismatch
+    mismatch = base.station.imperfections.model_mismatch
     imperfections = dataclasses.replace(
-        base.imperfections,
+        base.station.imperfections,
         seed=cell.imperfection_seed,
         model_mismatch=dataclasses.replace(
             mismatch,
@@ -192,28 +191,28 @@ def cell_scenario(grid: SweepGrid, cell: SweepCell) -> ContactLocalizationScenar
             inertia_percent=mismatch.inertia_percent * cell.mismatch_scale,
         ),
     )
+    station = dataclasses.replace(
+        base.station, model=cell.robot, seed=grid.seed, noise_scale=cell.noise_scale, imperfections=imperfections
+    )
     scenario = dataclasses.replace(
         base,
-        model=cell.robot,
+        station=station.in_world("ideal") if grid.world == "ideal" else station,
         trials=grid.trials_per_cell,
-        seed=grid.seed,
         num_seeds=grid.num_seeds,
         contacts=cell.contacts,
         multi_contact=False,
         push_duration=cell.push_duration,
         force_range=list(grid.force_range),
-        noise_scale=cell.noise_scale,
-        imperfections=imperfections,
         no_contact_duration=0.0,
         slow_motion_duration=0.0,
         trials_per_run=1,
     )
-    return set_ideal_conditions(scenario) if grid.world == "ideal" else scenario
+    return scenario
 
 
 def cell_needs_calibration(scenario: ContactLocalizationScenario) -> bool:
     """The cell's world calibrates its model (``model_refinement: calibrate``)."""
-    return scenario.model_refinement == "calibrate"
+    return scenario.station.model_refinement == "calibrate"
 
 
 def chunks(specs: Sequence[dict], size: int) -> list[list[dict]]:
@@ -421,7 +420,7 @@ def run_chunk(job: tuple[dict, int, list[dict], str, bytes | None]) -> tuple[str
     cell = SweepCell(**cell_fields)
     scenario = load_scenario(ContactLocalizationScenario, text=scenario_yaml)
     if calibration is not None:
-        scenario.model_refinement = str(_calibration_path(calibration))
+        scenario.station.model_refinement = str(_calibration_path(calibration))
     worker = f"{socket.gethostname()}:{os.getpid()}"
     results = run_trials([dict(s) for s in specs], scenario)
     return cell.key, chunk, [trial_row(cell, chunk, {**r, "worker": worker}) for r in results]

@@ -68,6 +68,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, ZeroOrderHold
 
 from diagrams.residuals.wiring import add_internal_and_external_residuals
+from diagrams.station.config import StationConfig
 from diagrams.station.estimator_plant import EstimatorPlant, build_estimator_plant
 from diagrams.station.humanoid_station import add_humanoid_station
 from models import add_ground, add_humanoid, point_contact_scene_graph_config
@@ -1437,7 +1438,7 @@ def simulate_push_log(
         push_body, np.asarray(push_point, dtype=float), force / magnitude, Step(magnitude, push_start, push_end)
     )
     builder = DiagramBuilder()
-    station = add_humanoid_station(builder, robot, noise=noise, seed=seed, base_state=base_state)
+    station = add_humanoid_station(builder, StationConfig(model=robot, noise=noise, seed=seed, base_state=base_state))
     unavailable = localization_unavailable(station.estimator)
     if unavailable is not None:
         raise ValueError(f"simulate_push_log: {robot!r} cannot be localized on: {unavailable}")

@@ -26,19 +26,18 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pydrake.multibody.plant import MultibodyPlant, MultibodyPlantConfig
+from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.analysis import Simulator, SimulatorConfig
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
 from diagrams.residuals.wiring import add_internal_and_external_residuals
 from diagrams.scenarios import scenario_as_yaml
-from diagrams.station.conditions import check_model_refinement
+from diagrams.station.config import StationConfig, check_model_refinement
 from diagrams.station.humanoid_station import (
     ONLINE_DYNAMICS,
     HumanoidStation,
-    add_scenario_station,
-    default_plant_config,
+    add_humanoid_station,
 )
 from diagrams.station.motions import SlowMotion, slow_whole_body_motion
 from models import robot_description
@@ -53,7 +52,7 @@ from systems.io.update_recorder import UpdateRecorder
 from systems.residuals.contact_estimation import unexplained_residuals
 from systems.residuals.momentum_residuals import ExternalResidual, InternalResidual, ResidualModel
 from systems.residuals.offline import replay_residuals, residual_noise_model
-from systems.simulation.imperfections import Imperfections, rated_joint_torques
+from systems.simulation.imperfections import rated_joint_torques
 
 #: The issue's floor: the calibration removes at least this fraction of the RMS spurious
 #: external force while standing.
@@ -104,13 +103,12 @@ class ModelRefinementScenario:
     """The calibration and its check. SI units.
 
     Attributes:
-        model: a humanoid standing on its feet: F/T sensors measure their wrenches; FSRs their
-            normal forces and centres of pressure (the rest unknowns of the fit).
-        noise, seed: the sensors' noise and its seed.
-        noise_scale: a factor on every sensor's noise std (1: the defaults).
-        imperfections: the simulated robot's imperfections (default: realistic, with the
-            5 % mass / 10 % CoM / 10 % inertia mismatch the refinement corrects).
-        base_state: the sensed base state's source (default: the invariant EKF).
+        station: the robot and its world (``diagrams.station.config``; default: the
+            realistic world, with the 5 % mass / 10 % CoM / 10 % inertia mismatch the
+            refinement corrects, the invariant EKF, and ``model_refinement`` "none": the
+            calibration starts from the unrefined model). The robot is a humanoid standing on
+            its feet: F/T sensors measure their wrenches; FSRs their normal forces and
+            centres of pressure (the rest unknowns of the fit).
         calibration_motion, calibration_duration: the calibration motion and its length, s.
             Its amplitudes are 1.5 times the slow motion's (torso pitch 0.3 rad, squat
             0.18 rad at the hips, arms 0.75 rad, within 80 % of the joint ranges): a
@@ -130,15 +128,10 @@ class ModelRefinementScenario:
         check_motion, check_duration: a different slow motion for the check, s.
         skip: the checks ignore their first ``skip`` s (residual and estimator start-up).
         internal_gain, external_gain: the residual gains K, 1/s.
-        plant_config, simulator_config: Drake's configurations.
+        simulator_config: Drake's ``SimulatorConfig``.
     """
 
-    model: str = "hrp4_like"
-    noise: bool = True
-    noise_scale: float = 1.0
-    seed: int = 0
-    imperfections: Imperfections = field(default_factory=Imperfections.realistic)
-    base_state: str = "invariant_ekf"
+    station: StationConfig = field(default_factory=lambda: StationConfig.realistic(model_refinement="none"))
     calibration_motion: SlowMotion = field(
         default_factory=lambda: SlowMotion(seed=1, amplitude_scale=1.5, min_peak_speed=0.4)
     )
@@ -149,7 +142,6 @@ class ModelRefinementScenario:
     skip: float = 2.0
     internal_gain: float = 35.0
     external_gain: float = 35.0
-    plant_config: MultibodyPlantConfig = field(default_factory=default_plant_config)
     simulator_config: SimulatorConfig = field(default_factory=SimulatorConfig)
 
     def validate(self) -> "ModelRefinementScenario":
@@ -199,10 +191,11 @@ def build_refinement_diagram(
     """
     scenario.validate()
     builder = DiagramBuilder()
-    station = add_scenario_station(builder, scenario, corrections)
+    station = add_humanoid_station(builder, scenario.station, model_corrections=corrections)
     if station.humanoid is None or not (station.known_wrench_frames or station.estimator.unknown_wrench_frames):
         raise ValueError(
-            f"model refinement needs a humanoid standing on its feet (a robot description), got {scenario.model!r}: "
+            "model refinement needs a humanoid standing on its feet (a robot description), got "
+            f"{scenario.station.model!r}: "
             "run with --ideal, or set model_refinement: none"
         )
     plant = station.plant
@@ -212,7 +205,7 @@ def build_refinement_diagram(
         reference = builder.AddSystem(slow_whole_body_motion(station, motion))
     reference.set_name("posture_reference")
     builder.Connect(reference.get_output_port(), station.desired_position)
-    T = scenario.plant_config.time_step
+    T = scenario.station.plant_config.time_step
     logged = {"sensed_state": station.sensed_state, "measured_torque": station.raw_measured_torque}
     if station.known_wrenches is not None:  # none on feet without F/T sensors or FSRs
         logged["known_wrenches"] = station.known_wrenches
@@ -406,18 +399,12 @@ def reduction(before: float, after: float) -> float:
 def refinement_scenario_for(scenario: Any) -> ModelRefinementScenario:
     """The calibration of the robot an experiment's ``scenario`` simulates: the same model,
     imperfections (the same robot: its mismatch and torque-sensor errors), base-state source
-    and plant configuration; the sensor noise is a different draw (seed + 1). An experiment
+    and plant configuration (its ``station``); the sensor noise is a different draw (seed + 1). An experiment
     whose residuals run with another gain (``residual_gain``: push-and-comply's) gets its
     residual noise model measured at that gain (``ResidualNoiseModel.check_gains``)."""
     return ModelRefinementScenario(
-        model=scenario.model,
-        noise=scenario.noise,
-        noise_scale=float(getattr(scenario, "noise_scale", 1.0)),
-        seed=scenario.seed + 1,
-        imperfections=scenario.imperfections,
-        base_state=scenario.base_state,
+        station=replace(scenario.station, seed=scenario.station.seed + 1, model_refinement="none"),
         internal_gain=float(getattr(scenario, "residual_gain", ModelRefinementScenario.internal_gain)),
-        plant_config=scenario.plant_config,
     )
 
 
@@ -439,7 +426,7 @@ def _content_digest(scenario: Any) -> str:
     the robot description, the model file it names and the collision meshes that file uses
     (by content, not by path), and the project's sources under ``_CALIBRATION_CODE``."""
     digest = hashlib.sha1()
-    description = robot_description(scenario.model)
+    description = robot_description(scenario.station.model)
     for path in (description.source, description.model_file, *collision_mesh_files(description)):
         if path is not None:
             digest.update(Path(path).read_bytes())
@@ -480,7 +467,7 @@ def refined_model(scenario: Any, cache_folder: Path | None = None) -> ModelCorre
         ValueError: a bad ``model_refinement``, an unreadable corrections file, or a
             ``cache_folder`` that cannot be created or written (found before calibrating).
     """
-    choice = check_model_refinement(scenario.model_refinement)
+    choice = check_model_refinement(scenario.station.model_refinement)
     if choice == "none":
         return None
     if choice != "calibrate":

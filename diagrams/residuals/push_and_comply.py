@@ -17,13 +17,13 @@ from pathlib import Path
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams
-from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
 from diagrams.scenarios import load_scenario as _load_scenario
-from diagrams.station.humanoid_station import HumanoidStation, add_scenario_station, default_plant_config
+from diagrams.station.config import StationConfig
+from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station
 from diagrams.station.standing import size_ratios
 from systems.estimation.model_identification import ModelCorrections
 from systems.residuals.admittance import JointAdmittanceController, admittance_gains_by_group, joint_position_selector
@@ -31,7 +31,6 @@ from systems.residuals.momentum_residuals import ClassicalResidual, ExternalResi
 from systems.residuals.sole_wrenches import SoleWrenchCompensation
 from systems.residuals.tare import ResidualTare
 from systems.simulation.disturbances import PolynomialRampUpDown, Push, PushSource
-from systems.simulation.imperfections import Imperfections
 
 RESIDUAL_KINDS = ("internal", "classical")
 #: A run counts as upright while the pelvis keeps this fraction of its height and tilts less.
@@ -61,7 +60,9 @@ class PushAndComplyScenario:
     """The experiment's settings (SI units). Defaults: the paper's scenario, Sec. IV.
 
     Attributes:
-        model: the humanoid (``hrp4_like``).
+        station: the robot (``hrp4_like``) and its world (``diagrams.station.config``):
+            realistic by default (the invariant EKF, ``Imperfections.realistic()``, the model
+            calibrated first), ideal with ``--ideal``.
         duration: s (15 s in the paper).
         push_start, push_peak_time, push_end: the polynomial force profile's times, s
             (5, 8.5 and 12 s in the paper).
@@ -126,20 +127,12 @@ class PushAndComplyScenario:
             knees bend with the ankles nearly still and the CoM moves back towards the
             heels (measured: 85 mm of the 110 mm to the heel edge in the ideal world; a
             robot with a 5 % model error went past it and fell backwards).
-        noise: sensor noise on (the defaults of ``systems.simulation.sensors``).
-        seed: sensor noise seed.
         log_period: loggers' sampling period, s.
-        plant_config: Drake's ``MultibodyPlantConfig`` (default: 1 ms steps, point contact,
-            SAP; its ``discrete_contact_approximation`` may be "sap", "similar" or "lagged",
-            see ``diagrams.station.humanoid_station``).
         simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``); the plant
             is discrete, so only ``target_realtime_rate`` and the publishing matter.
-        imperfections, base_state, model_refinement: the world (``diagrams.station.
-            conditions``): realistic by default (the invariant EKF, ``Imperfections.
-            realistic()``, the model calibrated first), ideal with ``--ideal``.
     """
 
-    model: str = "hrp4_like"
+    station: StationConfig = dataclasses.field(default_factory=StationConfig.realistic)
     duration: float = 15.0
     push_start: float = 5.0
     push_peak_time: float = 8.5
@@ -166,14 +159,8 @@ class PushAndComplyScenario:
     integrate_from: str = "desired"
     closed_chain_projection: bool = True
     hold_center_of_mass: bool = True
-    noise: bool = True
-    seed: int = 0
     log_period: float = 0.01
-    plant_config: MultibodyPlantConfig = dataclasses.field(default_factory=default_plant_config)
     simulator_config: SimulatorConfig = dataclasses.field(default_factory=SimulatorConfig)
-    imperfections: Imperfections = dataclasses.field(default_factory=Imperfections.realistic)
-    base_state: str = "invariant_ekf"
-    model_refinement: str = "calibrate"
 
 
 def load_scenario(path: str | Path | None = None, text: str | None = None) -> PushAndComplyScenario:
@@ -220,7 +207,9 @@ def admittance_dead_band(
     covariance = noise.covariance_internal if residual_kind == "internal" else noise.covariance_classical
     if covariance is None:
         return dead_band
-    noise.check_gains(scenario.residual_gain, noise.external_gain, scenario.plant_config.time_step, "push-and-comply")
+    noise.check_gains(
+        scenario.residual_gain, noise.external_gain, scenario.station.plant_config.time_step, "push-and-comply"
+    )
     sigma = np.sqrt(np.diag(covariance))
     return np.maximum(dead_band, scenario.dead_band_sigmas * sigma)
 
@@ -304,7 +293,7 @@ def build_push_and_comply_diagram(
             "(set tare_duration to at most push_start; 0 turns the tare off)"
         )
     builder = DiagramBuilder()
-    station = add_scenario_station(builder, scenario, model_corrections)
+    station = add_humanoid_station(builder, scenario.station, model_corrections=model_corrections)
     plant, humanoid = station.plant, station.humanoid
     if humanoid is None:
         raise ValueError("push-and-comply needs one of the humanoid models (its shoulders and joint groups)")

@@ -32,18 +32,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, SceneGraph
-from pydrake.multibody.plant import MultibodyPlant, MultibodyPlantConfig
+from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
-from diagrams.station.humanoid_station import HumanoidStation, add_scenario_station, default_plant_config
+from diagrams.station.config import StationConfig
+from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station
 from models import HumanoidHandles
 from systems.estimation.model_identification import ModelCorrections
 from systems.residuals.momentum_residuals import ClassicalResidual, ExternalResidual, InternalResidual, ResidualModel
 from systems.residuals.sole_wrenches import SoleWrenchCompensation
 from systems.simulation.disturbances import Push, PushSource, Sinusoid
-from systems.simulation.imperfections import Imperfections
 from systems.simulation.sensors import SensorHandles
 
 
@@ -52,7 +52,9 @@ class ResidualComparisonScenario:
     """The residual comparison's settings (paper Secs. II-C, III, V). SI units.
 
     Attributes:
-        model: ``hrp4_like``, ``nao_like`` or a path to a floating-base SDFormat/URDF file.
+        station: the robot (``hrp4_like``, ``nao_like``, a robot description or a
+            floating-base SDFormat/URDF file) and its world (``diagrams.station.config``):
+            realistic by default, ideal with ``--ideal``.
         push_body: the pushed body (default: the right shoulder body of the humanoids).
         push_point: the point of the push in the body frame, m.
         push_direction: the push's world direction (normalised); with horizontal components,
@@ -67,23 +69,14 @@ class ResidualComparisonScenario:
             first-order filter (time constant 1/K) whose output noise grows with K (velocity
             noise enters the momentum and is multiplied by K); 35/s balances the lag
             (omega/K = 1.8 % at 0.1 Hz) against the default sensor noise.
-        noise: sensor noise on (the sensors' documented defaults) or off.
-        seed: sensor noise seed.
-        plant_config: Drake's ``MultibodyPlantConfig`` (default: 1 ms steps, point contact,
-            SAP; see ``diagrams.station.humanoid_station``).
         period: the residuals' update period, s.
         log_period: the loggers' sampling period, s.
         skip: the metrics ignore the first ``skip`` s (less than ``duration``).
         simulator_config: Drake's ``SimulatorConfig`` (``ApplySimulatorConfig``); the plant
             is discrete, so only ``target_realtime_rate`` and the publishing matter.
-        base_state: the source of the sensed base state, "invariant_ekf" (default) or
-            "truth_plus_noise" (``--ideal``; see ``diagrams.station.humanoid_station``).
-        imperfections: the station's ``Imperfections`` (default: realistic; ``--ideal``: none).
-        model_refinement: "calibrate" (default), "none" or a saved model-corrections file
-            (``diagrams.station.conditions``).
     """
 
-    model: str = "hrp4_like"
+    station: StationConfig = field(default_factory=StationConfig.realistic)
     push_body: str | None = None
     push_point: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
     push_direction: list[float] = field(default_factory=lambda: [-0.4, 0.25, -0.88])
@@ -94,16 +87,10 @@ class ResidualComparisonScenario:
     classical_gain: float = 35.0
     internal_gain: float = 35.0
     external_gain: float = 35.0
-    noise: bool = True
-    seed: int = 0
-    plant_config: MultibodyPlantConfig = field(default_factory=default_plant_config)
     period: float = 1e-3
     log_period: float = 5e-3
     skip: float = 0.5
     simulator_config: SimulatorConfig = field(default_factory=SimulatorConfig)
-    base_state: str = "invariant_ekf"
-    imperfections: Imperfections = field(default_factory=Imperfections.realistic)
-    model_refinement: str = "calibrate"
 
 
 @dataclass
@@ -142,7 +129,7 @@ def build_residual_comparison_diagram(
     if scenario.duration <= 0 or scenario.push_frequency < 0 or scenario.log_period <= 0:
         raise ValueError("duration and log_period must be positive, push_frequency non-negative")
     builder = DiagramBuilder()
-    station = add_scenario_station(builder, scenario, model_corrections)
+    station = add_humanoid_station(builder, scenario.station, model_corrections=model_corrections)
     plant, humanoid = station.plant, station.humanoid
     builder.Connect(builder.AddSystem(ConstantVectorSource(station.q_hold)).get_output_port(), station.desired_position)
     amplitude = scenario.push_amplitude
@@ -347,13 +334,13 @@ def residual_comparison_metrics(
 
     before = t < scenario.push_start  # no push yet: the residuals show only noise
     return {
-        "model": scenario.model,
+        "model": scenario.station.model,
         "push_body": handles.push_source.pushes[0].body_name,
-        "noise": scenario.noise,
+        "noise": scenario.station.noise,
         "sensors": "simulated sensors"
         if handles.sensors is not None
         else "true state (no sensor model for this robot)",
-        "seed": scenario.seed,
+        "seed": scenario.station.seed,
         "duration_s": scenario.duration,
         "skip_s": skip,
         "gains_per_s": {

@@ -31,21 +31,20 @@ the simulator, the sensors and the ground-truth systems.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from pydrake.geometry import SceneGraph
-from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
+from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant
 from pydrake.systems.framework import Context, DiagramBuilder, InputPort, OutputPort
 from pydrake.systems.primitives import MatrixGain, Multiplexer, ZeroOrderHold
 
+from diagrams.station.config import StationConfig
 from diagrams.station.estimator_plant import (
     EstimatorPlant,
     add_model_file,
     build_estimator_plant,
     set_posture_inside_limits,
 )
-from diagrams.station.plant_config import check_plant_config, default_plant_config
 from diagrams.station.standing import default_gains
 from models import (
     HumanoidHandles,
@@ -66,7 +65,6 @@ from systems.estimation.base_state_estimator import (
     FootContactFromFsr,
     InvariantEkfBaseStateEstimator,
 )
-from systems.estimation.ekf_settings import STILL_MIN_DURATION
 from systems.estimation.model_identification import CorrectedJointTorque, ModelCorrections
 from systems.residuals.momentum_residuals import ResidualModel
 from systems.simulation.imperfections import (
@@ -77,9 +75,6 @@ from systems.simulation.imperfections import (
 )
 from systems.simulation.pd_gravity import PdGravityController
 from systems.simulation.sensors import SensorHandles, add_sensors
-
-#: The sources of the sensed state's base part (``add_humanoid_station``'s ``base_state``).
-BASE_STATE_SOURCES = ("truth_plus_noise", "invariant_ekf")
 
 #: The implementation of the estimators' dynamics on a humanoid (``HumanoidStation.dynamics_model``
 #: and the estimated contact flags' residuals; ``FloatingBaseDynamics``): Pinocchio's C++ kernels
@@ -193,37 +188,17 @@ class HumanoidStation:
 
 def add_humanoid_station(
     builder: DiagramBuilder,
-    model: str,
+    config: StationConfig | None = None,
     *,
-    plant_config: MultibodyPlantConfig | None = None,
-    noise: bool = True,
-    seed: int = 0,
-    imperfections: Imperfections | None = None,
-    base_state: str = "truth_plus_noise",
     model_corrections: ModelCorrections | None = None,
-    noise_scale: float = 1.0,
-    at_rest_duration: float | None = STILL_MIN_DURATION,
 ) -> HumanoidStation:
-    """Adds the station of the module docstring to ``builder``.
+    """Adds the station of the module docstring, as ``config`` says (default
+    ``StationConfig()``: hrp4_like, noisy sensors, the ideal world), to ``builder``.
 
     Args:
-        model: ``hrp4_like``, ``nao_like`` or a path to a floating-base SDFormat/URDF file.
-        plant_config: Drake's plant configuration (default ``default_plant_config()``: 1 ms
-            steps, point contact, SAP). Its ``time_step`` is the plant's discrete step, s,
-            and its ``discrete_contact_approximation`` one of ``plant_config.CONTACT_APPROXIMATIONS``:
-            "sap" (Drake's convex solver), "similar" or "lagged". Drake's TAMSI solver is
-            deprecated and refused; the station's geometry is made for point contact.
-        noise, seed: the sensors' noise (defaults of ``systems.simulation.sensors``) and its seed.
-        noise_scale: a factor on every sensor's noise std (``add_sensors``; 1: the defaults).
-        imperfections: ``systems.simulation.imperfections.Imperfections``; None or the
-            default (ideal) builds exactly the station without them. Friction acts on the
-            plant (rated torques: the actuators' effort limits); the sensor groups go to
-            ``add_sensors``; the model mismatch to ``dynamics_model``. Sensor and model
-            imperfections need a humanoid (a model from a file has neither).
-        base_state: the source of the sensed state's base pose and velocity, one of
-            ``BASE_STATE_SOURCES`` (see the module docstring): "truth_plus_noise" (default,
-            the stand-in) or "invariant_ekf" (needs a humanoid with foot F/T sensors, hrp4_like,
-            or foot FSRs, nao_like).
+        config: the robot, plant, sensors, imperfections, base-state source
+            (``diagrams.station.config.StationConfig``). Its ``model_refinement`` is the
+            caller's to act on: the station takes the result as ``model_corrections``.
         model_corrections: a refined model (``systems.estimation.model_identification``,
             identified from a calibration log of this robot, e.g. by
             ``diagrams.residuals.model_refinement.calibrate_model``), or None. Its link
@@ -231,25 +206,20 @@ def add_humanoid_station(
             estimators' refined model), and ``measured_torque`` becomes its
             ``CorrectedJointTorque``: the motor torque with the identified offset and scale
             removed and the identified joint friction added. Needs a humanoid.
-        at_rest_duration: s the robot stands still from its start (every station app starts
-            standing): the invariant EKF with bias states (the realistic IMU) measures the
-            IMU bias over it and starts from it (``InvariantEkfBaseStateEstimator``'s
-            ``at_rest_duration``; the gyro bias about the vertical is learned only so).
-            Default ``STILL_MIN_DURATION`` (0.5 s); None for a robot that moves at once.
 
     Raises:
-        ValueError: an unknown or unreadable model, a model without a floating base, an
-            unknown contact approximation, bad imperfections (naming the field), an unknown
-            ``base_state`` or "invariant_ekf" on a model with neither foot F/T sensors nor FSRs.
+        ValueError: a bad ``config`` field (named: an unknown or unreadable model, a model
+            without a floating base, an unknown contact approximation, bad imperfections, an
+            unknown ``base_state``), or "invariant_ekf" on a model with neither foot F/T
+            sensors nor FSRs.
     """
-    if base_state not in BASE_STATE_SOURCES:
-        raise ValueError(f"base_state must be one of {BASE_STATE_SOURCES}, got {base_state!r}")
-    imperfections = Imperfections() if imperfections is None else imperfections
-    if not isinstance(imperfections, Imperfections):
-        raise ValueError(f"imperfections must be Imperfections, got {type(imperfections).__name__}")
-    imperfections.validate()
-    plant_config = default_plant_config() if plant_config is None else plant_config
-    check_plant_config(plant_config)
+    config = StationConfig() if config is None else config
+    if not isinstance(config, StationConfig):
+        raise ValueError(f"add_humanoid_station takes a StationConfig, got {type(config).__name__}")
+    config.check()
+    model, plant_config, noise, seed = config.model, config.plant_config, config.noise, config.seed
+    imperfections, base_state, noise_scale = config.imperfections, config.base_state, config.noise_scale
+    at_rest_duration = config.at_rest_duration
     time_step = plant_config.time_step
     plant, scene_graph = AddMultibodyPlant(
         plant_config,
@@ -413,26 +383,6 @@ def add_humanoid_station(
         estimator_inertias=estimator_inertias,
         estimator=estimator,
         raw_measured_torque=sensors.measured_torque if sensors is not None else measured_torque,
-    )
-
-
-def add_scenario_station(
-    builder: DiagramBuilder, scenario: Any, model_corrections: ModelCorrections | None = None
-) -> HumanoidStation:
-    """``add_humanoid_station`` with an experiment scenario's fields: ``model``,
-    ``plant_config``, ``noise``, ``seed``, ``imperfections`` and ``base_state`` (the world,
-    ``diagrams.station.conditions``), ``noise_scale`` if it has one, and the refined model
-    ``model_corrections``."""
-    return add_humanoid_station(
-        builder,
-        scenario.model,
-        plant_config=scenario.plant_config,
-        noise=scenario.noise,
-        seed=scenario.seed,
-        imperfections=scenario.imperfections,
-        base_state=scenario.base_state,
-        model_corrections=model_corrections,
-        noise_scale=getattr(scenario, "noise_scale", 1.0),
     )
 
 

@@ -63,11 +63,11 @@ from pydrake.geometry import Meshcat, MeshcatVisualizer, Rgba
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.multibody.tree import BodyIndex
-from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.framework import Context, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, ZeroOrderHold
 
 from diagrams.residuals.wiring import add_internal_and_external_residuals
+from diagrams.simulation import simulate
 from diagrams.station.estimator_plant import EstimatorPlant, build_estimator_plant
 from diagrams.station.humanoid_station import add_humanoid_station
 from models import add_ground, add_humanoid, point_contact_scene_graph_config
@@ -1507,14 +1507,14 @@ def simulate_push_log(
     for name, port in outputs.items():
         loggers[name] = LogVectorOutput(port, builder, period)
     diagram = builder.Build()
-    simulator = Simulator(diagram)
-    context = simulator.get_mutable_context()
-    station.set_initial_state(context)
-    for name in held:
-        hold = diagram.GetSubsystemByName(f"log_hold_{name}")
-        hold.GetMyMutableContextFromRoot(context).SetDiscreteState(np.zeros(hold.get_output_port().size()))
-    simulator.Initialize()
-    simulator.AdvanceTo(duration)
+
+    def set_initial_state(context: Context) -> None:
+        station.set_initial_state(context)
+        for name in held:
+            hold = diagram.GetSubsystemByName(f"log_hold_{name}")
+            hold.GetMyMutableContextFromRoot(context).SetDiscreteState(np.zeros(hold.get_output_port().size()))
+
+    context = simulate(diagram, duration, set_initial_state=set_initial_state).context
     data = {name: logger.FindLog(context).data().T.copy() for name, logger in loggers.items()}
     times = loggers["state"].FindLog(context).sample_times()
     # The first logged sample precedes the first update (the holds' initial zeros): drop it.

@@ -1,6 +1,8 @@
 """The one runner every app uses: its command line (``--scenario FILE``, ``--scenario-text
 YAML``, ``--out DIR``, ``--headless``, ``--no-replay``), the scenario loading, the simulation
-with progress and Meshcat recording, the replay files, ``metrics.json``, and the errors.
+with progress and Meshcat recording (``simulate`` and ``SimulationRun``, re-exported from
+``diagrams.simulation``, the loop the calibrations and trials below the apps use too), the
+replay files, ``metrics.json``, and the errors.
 
 An app is then what is particular to its experiment: its scenario type and diagram (in
 ``diagrams/``), its metrics (next to the diagram), its plots and its printed table.
@@ -16,16 +18,13 @@ import os
 import shutil
 import sys
 import tempfile
-import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from pydrake.geometry import Meshcat
-from pydrake.systems.analysis import ApplySimulatorConfig, Simulator, SimulatorConfig
-from pydrake.systems.framework import Context, Diagram
+from pydrake.systems.framework import Context
 
 from diagrams.scenarios import (
     ScenarioError,
@@ -35,6 +34,7 @@ from diagrams.scenarios import (
     scenario_as_dict,
     scenario_file_text,
 )
+from diagrams.simulation import SimulationRun, simulate
 from diagrams.station.config import StationConfig
 from models import robot_description
 
@@ -350,77 +350,6 @@ def replay_meshcat(enabled: bool, headless: bool) -> Meshcat | None:
     if not headless:
         print(f"Meshcat (live view): {meshcat.web_url()}")
     return meshcat
-
-
-@dataclass
-class SimulationRun:
-    """A finished simulation: its simulator and root context (the loggers' logs are in it),
-    the simulated time, s, and the wall time it took, s."""
-
-    simulator: Simulator
-    context: Context
-    duration: float
-    wall_time_s: float
-
-    @property
-    def real_time_factor(self) -> float:
-        return self.duration / self.wall_time_s if self.wall_time_s > 0 else math.inf
-
-
-def simulate(
-    diagram: Diagram,
-    duration: float,
-    *,
-    set_initial_state: Callable[[Context], None] | None = None,
-    simulator_config: SimulatorConfig | None = None,
-    meshcat: Meshcat | None = None,
-    live: bool = True,
-    camera: tuple[list[float], list[float]] | None = None,
-    label: str | None = None,
-    progress_step: float = 0.5,
-) -> SimulationRun:
-    """Simulates ``diagram`` for ``duration`` s.
-
-    ``set_initial_state(root_context)`` sets the initial state before ``Initialize``. With
-    ``meshcat`` the run is recorded (32 frames per second) for a replay, and shown live too
-    when ``live`` (a headless run records without sending each frame to the live view); the
-    recording is published at the end (``save_replay`` writes it). ``camera`` is
-    (camera_in_world, target_in_world). With a ``label`` the progress is printed every
-    ``progress_step`` simulated seconds, then the wall time and the real-time factor.
-    """
-    if not (duration > 0.0 and math.isfinite(duration)):
-        raise ValueError(f"the simulated duration must be positive and finite, got {duration}")
-    if meshcat is not None:
-        meshcat.Delete()
-        meshcat.DeleteRecording()
-    simulator = Simulator(diagram)
-    if simulator_config is not None:
-        ApplySimulatorConfig(simulator_config, simulator)
-    context = simulator.get_mutable_context()
-    if set_initial_state is not None:
-        set_initial_state(context)
-    if meshcat is not None:
-        if camera is not None:
-            meshcat.SetCameraPose(camera_in_world=camera[0], target_in_world=camera[1])
-        meshcat.StartRecording(frames_per_second=32.0, set_visualizations_while_recording=live)
-    simulator.Initialize()
-    start = time.perf_counter()
-    if label is None:
-        simulator.AdvanceTo(duration)
-    else:
-        t = 0.0
-        while t < duration - 1e-9:
-            t = min(t + progress_step, duration)
-            simulator.AdvanceTo(t)
-            print(f"\r  {label:9s} {t:5.1f} / {duration:.1f} s simulated", end="", flush=True)
-    wall = time.perf_counter() - start
-    run = SimulationRun(simulator, context, duration, wall)
-    if label is not None:
-        print(f"  ({wall:.1f} s wall, real-time factor {run.real_time_factor:.2f})")
-    if meshcat is not None:
-        meshcat.StopRecording()
-        meshcat.PublishRecording()
-    return run
 
 
 def logged_signals(loggers: dict, context: Context, time_from: str) -> dict:

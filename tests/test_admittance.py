@@ -51,8 +51,8 @@ def _context(dut, residual, measured):
     """A context with fixed inputs, initialised as Simulator.Initialize would (q_d = the
     measured or the given initial position)."""
     ctx = dut.CreateDefaultContext()
-    dut.get_residual_input_port().FixValue(ctx, np.asarray(residual, dtype=float))
-    dut.get_measured_position_input_port().FixValue(ctx, np.asarray(measured, dtype=float))
+    dut.GetInputPort("residual").FixValue(ctx, np.asarray(residual, dtype=float))
+    dut.GetInputPort("measured_position").FixValue(ctx, np.asarray(measured, dtype=float))
     dut.ExecuteInitializationEvents(ctx)
     return ctx
 
@@ -62,7 +62,7 @@ def _step(dut, ctx, times=1):
     for _ in range(times):
         ctx.SetDiscreteState(dut.EvalUniquePeriodicDiscreteUpdate(ctx))
         ctx.SetTime(ctx.get_time() + dut.period)
-    return dut.get_desired_position_output_port().Eval(ctx)
+    return dut.GetOutputPort("desired_position").Eval(ctx)
 
 
 Q0 = np.array([0.1, -0.2, -0.3])
@@ -82,7 +82,7 @@ def test_ports_and_no_direct_feedthrough(chain):
     assert not dut.HasDirectFeedthrough(1, 0)
     assert not dut.HasAnyDirectFeedthrough()
     classical = JointAdmittanceController(chain, 0.1, residual_includes_base=True)
-    assert classical.get_residual_input_port().size() == chain.num_velocities() == 9
+    assert classical.GetInputPort("residual").size() == chain.num_velocities() == 9
 
 
 # -- the law -----------------------------------------------------------------------------
@@ -107,7 +107,7 @@ def test_desired_mode_integrates_residual(chain):
     q_d = _step(dut, ctx, N)
     np.testing.assert_allclose(q_d, Q0 + N * K * R * 2e-3, rtol=0, atol=1e-14)
     # It integrates from q_d, not from the measured position (which stays at Q0).
-    dut.get_measured_position_input_port().FixValue(ctx, Q0 + 1.0)
+    dut.GetInputPort("measured_position").FixValue(ctx, Q0 + 1.0)
     np.testing.assert_allclose(_step(dut, ctx), Q0 + (N + 1) * K * R * 2e-3, atol=1e-14)
 
 
@@ -136,21 +136,21 @@ def test_first_update_and_initialisation_start_from_measured(chain):
     builder = DiagramBuilder()
     sys = builder.AddSystem(dut)
     builder.Connect(
-        builder.AddSystem(ConstantVectorSource(np.zeros(3))).get_output_port(), sys.get_residual_input_port()
+        builder.AddSystem(ConstantVectorSource(np.zeros(3))).get_output_port(), sys.GetInputPort("residual")
     )
     builder.Connect(
-        builder.AddSystem(ConstantVectorSource(Q0)).get_output_port(), sys.get_measured_position_input_port()
+        builder.AddSystem(ConstantVectorSource(Q0)).get_output_port(), sys.GetInputPort("measured_position")
     )
     diagram = builder.Build()
     sim = Simulator(diagram)
     sim.Initialize()
-    out = sys.get_desired_position_output_port().Eval(sys.GetMyContextFromRoot(sim.get_context()))
+    out = sys.GetOutputPort("desired_position").Eval(sys.GetMyContextFromRoot(sim.get_context()))
     np.testing.assert_array_equal(out, Q0)
     # initial_position overrides the measured position (desired mode keeps it).
     q_init = np.array([0.3, 0.2, -0.1])
     dut2 = JointAdmittanceController(chain, 0.5, T, integrate_from="desired", initial_position=q_init)
     ctx2 = _context(dut2, np.zeros(3), Q0)
-    np.testing.assert_array_equal(dut2.get_desired_position_output_port().Eval(ctx2), q_init)
+    np.testing.assert_array_equal(dut2.GetOutputPort("desired_position").Eval(ctx2), q_init)
     np.testing.assert_array_equal(_step(dut2, ctx2, 3), q_init)
 
 
@@ -192,13 +192,13 @@ def test_model_limits_with_margin(chain):
         dut = JointAdmittanceController(chain, 1.0, T, limit_margin=margin, integrate_from=mode)
         ctx = _context(dut, [5.0, -5.0, 0.0], q_at_limit)
         np.testing.assert_array_equal(_step(dut, ctx, 3), q_at_limit)
-        dut.get_residual_input_port().FixValue(ctx, [-5.0, 5.0, 0.0])
+        dut.GetInputPort("residual").FixValue(ctx, [-5.0, 5.0, 0.0])
         np.testing.assert_allclose(_step(dut, ctx), q_at_limit + [-5.0 * T, 5.0 * T, 0.0])
     # Measured mode: a measured q beyond the shrunk limit (overshoot) is pulled back.
     dut = JointAdmittanceController(chain, 1.0, T, limit_margin=margin)
     ctx = _context(dut, [5.0, -5.0, 0.0], np.zeros(3))
     _step(dut, ctx)
-    dut.get_measured_position_input_port().FixValue(ctx, q_at_limit)
+    dut.GetInputPort("measured_position").FixValue(ctx, q_at_limit)
     np.testing.assert_allclose(_step(dut, ctx), [UPPER[0] - margin, LOWER[1] + margin, 0.0])
     # A range narrower than two margins collapses to its middle.
     dut = JointAdmittanceController(chain, 1.0, limit_margin=0.7)
@@ -287,13 +287,13 @@ def _simulate_push_on_joint(joint_name, effort, gains_by_group, integrate_from, 
     select = builder.AddSystem(joint_position_selector(plant))
     source = builder.AddSystem(ConstantVectorSource(residual))
     builder.Connect(plant.get_state_output_port(), select.get_input_port())
-    builder.Connect(plant.get_state_output_port(), pd.get_state_input_port())
-    builder.Connect(select.get_output_port(), adm.get_measured_position_input_port())
-    builder.Connect(source.get_output_port(), adm.get_residual_input_port())
-    builder.Connect(adm.get_desired_position_output_port(), pd.get_desired_position_input_port())
+    builder.Connect(plant.get_state_output_port(), pd.GetInputPort("state"))
+    builder.Connect(select.get_output_port(), adm.GetInputPort("measured_position"))
+    builder.Connect(source.get_output_port(), adm.GetInputPort("residual"))
+    builder.Connect(adm.GetOutputPort("desired_position"), pd.GetInputPort("desired_position"))
     builder.Connect(pd.get_output_port(), plant.get_actuation_input_port())
     log_q = LogVectorOutput(select.get_output_port(), builder, publish_period=0.01)
-    log_qd = LogVectorOutput(adm.get_desired_position_output_port(), builder, publish_period=0.01)
+    log_qd = LogVectorOutput(adm.GetOutputPort("desired_position"), builder, publish_period=0.01)
     diagram = builder.Build()
 
     sim = Simulator(diagram)
@@ -407,18 +407,18 @@ def test_nan_inputs_raise(chain):
     with pytest.raises(ValueError, match=r"input 'residual' has NaN or inf at indices \[1\]"):
         _step(dut, ctx)
     ctx = _context(dut, R, Q0)  # initialised, then a bad measurement arrives
-    dut.get_measured_position_input_port().FixValue(ctx, np.array([np.inf, 0.0, 0.0]))
+    dut.GetInputPort("measured_position").FixValue(ctx, np.array([np.inf, 0.0, 0.0]))
     with pytest.raises(ValueError, match=r"input 'measured_position' has NaN or inf at indices \[0\]"):
         _step(dut, ctx)
     # Also at initialisation (Simulator.Initialize) from a NaN measured position.
     builder = DiagramBuilder()
     sys = builder.AddSystem(JointAdmittanceController(chain, 0.1))
     builder.Connect(
-        builder.AddSystem(ConstantVectorSource(np.zeros(3))).get_output_port(), sys.get_residual_input_port()
+        builder.AddSystem(ConstantVectorSource(np.zeros(3))).get_output_port(), sys.GetInputPort("residual")
     )
     builder.Connect(
         builder.AddSystem(ConstantVectorSource([np.nan, 0.0, 0.0])).get_output_port(),
-        sys.get_measured_position_input_port(),
+        sys.GetInputPort("measured_position"),
     )
     with pytest.raises(ValueError, match="measured_position"):
         Simulator(builder.Build()).Initialize()

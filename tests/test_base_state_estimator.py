@@ -295,9 +295,9 @@ def _station_with_estimator(push: Push | None = None):
     if push is not None:
         source = builder.AddSystem(PushSource(station.plant, [push]))
         builder.Connect(
-            source.get_applied_spatial_forces_output_port(), station.plant.get_applied_spatial_force_input_port()
+            source.GetOutputPort("applied_spatial_forces"), station.plant.get_applied_spatial_force_input_port()
         )
-        builder.Connect(station.plant.get_state_output_port(), source.get_state_input_port())
+        builder.Connect(station.plant.get_state_output_port(), source.GetInputPort("state"))
     logs = {
         name: LogVectorOutput(estimator.GetOutputPort(name), builder, DT)
         for name in ("base_pose", "base_velocity", "valid")
@@ -760,9 +760,9 @@ def _realistic_imu_run(push: Push | None, duration: float, log_period: float = 0
     if push is not None:
         source = builder.AddSystem(PushSource(station.plant, [push]))
         builder.Connect(
-            source.get_applied_spatial_forces_output_port(), station.plant.get_applied_spatial_force_input_port()
+            source.GetOutputPort("applied_spatial_forces"), station.plant.get_applied_spatial_force_input_port()
         )
-        builder.Connect(station.plant.get_state_output_port(), source.get_state_input_port())
+        builder.Connect(station.plant.get_state_output_port(), source.GetInputPort("state"))
     estimators = {"with_bias": with_bias, "without_bias": without}
     logs = {
         (key, port): LogVectorOutput(e.GetOutputPort(port), builder, log_period)

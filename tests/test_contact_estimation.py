@@ -172,12 +172,12 @@ def _push_truth(plant, context, pushes_spec):
     source = PushSource(plant, pushes)
     sc = source.CreateDefaultContext()
     sc.SetTime(0.5)
-    source.get_state_input_port().FixValue(sc, plant.GetPositionsAndVelocities(context))
+    source.GetInputPort("state").FixValue(sc, plant.GetPositionsAndVelocities(context))
     return {
-        "wrench_world": source.get_total_wrench_world_output_port().Eval(sc),
-        "wrench_base": source.get_total_wrench_base_output_port().Eval(sc),
-        "tau": source.get_tau_c_real_output_port().Eval(sc),
-        "forces": source.get_force_world_output_port().Eval(sc),
+        "wrench_world": source.GetOutputPort("total_wrench_world").Eval(sc),
+        "wrench_base": source.GetOutputPort("total_wrench_base").Eval(sc),
+        "tau": source.GetOutputPort("tau_c_real").Eval(sc),
+        "forces": source.GetOutputPort("force_world").Eval(sc),
     }
 
 
@@ -246,7 +246,7 @@ def test_force_estimates_recover_a_simulated_push_eqs_19_and_20():
     station.set_initial_state(simulator.get_mutable_context())
     simulator.AdvanceTo(0.8)
     context = simulator.get_context()
-    applied = source.get_force_world_output_port().Eval(source.GetMyContextFromRoot(context))
+    applied = source.GetOutputPort("force_world").Eval(source.GetMyContextFromRoot(context))
     np.testing.assert_allclose(applied, force, rtol=1e-12)  # the step is on, along the push's direction
     for estimator in (eq19, eq20):
         estimate = estimator.GetOutputPort("contact_forces_world").Eval(estimator.GetMyContextFromRoot(context))

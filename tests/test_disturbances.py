@@ -277,11 +277,11 @@ def _check_against_drake(plant, pushes, x, t, dynamics=None):
     dut = PushSource(plant, pushes, dynamics=dynamics)
     ctx = dut.CreateDefaultContext()
     ctx.SetTime(t)
-    dut.get_state_input_port().FixValue(ctx, x)
+    dut.GetInputPort("state").FixValue(ctx, x)
     base_frame = (dynamics or FloatingBaseDynamics(plant)).topology.base_frame
     forces, points, wrench_W, wrench_F0, tau = _expected_ground_truth(plant, base_frame, pushes, x, t)
 
-    applied = dut.get_applied_spatial_forces_output_port().Eval(ctx)
+    applied = dut.GetOutputPort("applied_spatial_forces").Eval(ctx)
     on = [i for i, f in enumerate(forces) if f.any()]  # the pushes at zero are left out
     assert len(applied) == len(on)
     for push, a, f in zip([pushes[i] for i in on], applied, forces[on]):
@@ -290,8 +290,8 @@ def _check_against_drake(plant, pushes, x, t, dynamics=None):
         np.testing.assert_array_equal(a.F_Bq_W.rotational(), np.zeros(3))
         np.testing.assert_allclose(a.F_Bq_W.translational(), f, rtol=0, atol=1e-14)
 
-    np.testing.assert_allclose(dut.get_force_world_output_port().Eval(ctx), forces.reshape(-1), atol=1e-14)
-    np.testing.assert_allclose(dut.get_point_world_output_port().Eval(ctx), points.reshape(-1), atol=1e-13)
+    np.testing.assert_allclose(dut.GetOutputPort("force_world").Eval(ctx), forces.reshape(-1), atol=1e-14)
+    np.testing.assert_allclose(dut.GetOutputPort("point_world").Eval(ctx), points.reshape(-1), atol=1e-13)
     np.testing.assert_allclose(dut.GetOutputPort("total_wrench_world").Eval(ctx), wrench_W, atol=1e-12)
     np.testing.assert_allclose(dut.GetOutputPort("total_wrench_base").Eval(ctx), wrench_F0, atol=1e-12)
     tau_dut = dut.GetOutputPort("tau_c_real").Eval(ctx)
@@ -344,15 +344,15 @@ def test_zero_forces_give_zero_ground_truth():
     dut = PushSource(plant, pushes)
     ctx = dut.CreateDefaultContext()
     x = _random_state(plant, np.random.default_rng(2))
-    dut.get_state_input_port().FixValue(ctx, x)
+    dut.GetInputPort("state").FixValue(ctx, x)
     for t in (0.5, 2.5):
         ctx.SetTime(t)
         for name in ("force_world", "total_wrench_world", "total_wrench_base", "tau_c_real"):
             np.testing.assert_array_equal(dut.GetOutputPort(name).Eval(ctx), 0.0)
         assert np.linalg.norm(dut.GetOutputPort("point_world").Eval(ctx)) > 0.0
-        assert dut.get_applied_spatial_forces_output_port().Eval(ctx) == []  # off: nothing applied
+        assert dut.GetOutputPort("applied_spatial_forces").Eval(ctx) == []  # off: nothing applied
     ctx.SetTime(1.5)  # on: the cached values must be recomputed
-    applied = dut.get_applied_spatial_forces_output_port().Eval(ctx)
+    applied = dut.GetOutputPort("applied_spatial_forces").Eval(ctx)
     assert len(applied) == 1
     np.testing.assert_array_equal(applied[0].F_Bq_W.translational(), [5.0, 0.0, 0.0])
     assert np.linalg.norm(dut.GetOutputPort("tau_c_real").Eval(ctx)) > 0.0
@@ -368,7 +368,7 @@ def test_state_change_updates_cached_ground_truth():
     rng = np.random.default_rng(3)
     for _ in range(2):
         x = _random_state(plant, rng)
-        dut.get_state_input_port().FixValue(ctx, x)
+        dut.GetInputPort("state").FixValue(ctx, x)
         _, points, wrench_W, wrench_F0, tau = _expected_ground_truth(
             plant, dut.dynamics.topology.base_frame, pushes, x, 0.4
         )
@@ -384,9 +384,9 @@ def test_push_on_body_outside_robot_is_applied_but_not_ground_truth():
     np.testing.assert_array_equal(dut.on_robot, [False, True])
     ctx = dut.CreateDefaultContext()
     x = _random_state(plant, np.random.default_rng(4))
-    dut.get_state_input_port().FixValue(ctx, x)
+    dut.GetInputPort("state").FixValue(ctx, x)
     ctx.SetTime(1.0)
-    applied = dut.get_applied_spatial_forces_output_port().Eval(ctx)
+    applied = dut.GetOutputPort("applied_spatial_forces").Eval(ctx)
     assert applied[0].body_index == plant.GetBodyByName("wall").index()
     np.testing.assert_allclose(applied[0].F_Bq_W.translational(), [0, 0, 2.0])
     np.testing.assert_allclose(dut.GetOutputPort("force_world").Eval(ctx), [0, 0, 2, 5, 0, 0])
@@ -419,14 +419,14 @@ def test_model_instance_name_resolves_body():
 def test_applied_forces_do_not_depend_on_state():
     plant = _small_floating_plant()
     dut = PushSource(plant, _small_pushes())
-    state = dut.get_state_input_port().get_index()
-    assert not dut.HasDirectFeedthrough(state, dut.get_applied_spatial_forces_output_port().get_index())
-    assert not dut.HasDirectFeedthrough(state, dut.get_force_world_output_port().get_index())
+    state = dut.GetInputPort("state").get_index()
+    assert not dut.HasDirectFeedthrough(state, dut.GetOutputPort("applied_spatial_forces").get_index())
+    assert not dut.HasDirectFeedthrough(state, dut.GetOutputPort("force_world").get_index())
     assert dut.HasDirectFeedthrough(state, dut.GetOutputPort("tau_c_real").get_index())
     # Evaluates without the state input connected.
     ctx = dut.CreateDefaultContext()
     ctx.SetTime(0.3)
-    assert len(dut.get_applied_spatial_forces_output_port().Eval(ctx)) == 3  # the hand's push starts at 2 s
+    assert len(dut.GetOutputPort("applied_spatial_forces").Eval(ctx)) == 3  # the hand's push starts at 2 s
 
 
 class _CustomProfile:
@@ -450,14 +450,14 @@ def test_applied_forces_are_the_pushes_on_at_t_in_order():
     ctx = dut.CreateDefaultContext()
     for t in (0.0, 0.25, 0.52, 0.57, 0.65, 0.95, 1.5):
         ctx.SetTime(t)
-        applied = dut.get_applied_spatial_forces_output_port().Eval(ctx)
+        applied = dut.GetOutputPort("applied_spatial_forces").Eval(ctx)
         expected = [(i, p) for i, p in enumerate(pushes) if p.force_W(t).any()]
         assert [a.body_index for a in applied] == [dut.bodies[i].index() for i, _ in expected]
         for a, (_, push) in zip(applied, expected):
             np.testing.assert_array_equal(a.F_Bq_W.translational(), push.force_W(t))
             np.testing.assert_array_equal(a.p_BoBq_B, push.p_BoP_B)
     ctx.SetTime(1.5)
-    assert dut.get_applied_spatial_forces_output_port().Eval(ctx) == []
+    assert dut.GetOutputPort("applied_spatial_forces").Eval(ctx) == []
 
 
 def test_profile_support_bounds_each_profile_of_this_module():
@@ -475,8 +475,8 @@ def test_empty_push_list_connects_and_outputs_zeros():
     diagram, plant, source, _ = _pushed_diagram([], 1e-3, True)
     context = diagram.CreateDefaultContext()
     sc = source.GetMyContextFromRoot(context)
-    assert source.get_applied_spatial_forces_output_port().Eval(sc) == []
-    assert source.get_force_world_output_port().size() == 0
+    assert source.GetOutputPort("applied_spatial_forces").Eval(sc) == []
+    assert source.GetOutputPort("force_world").size() == 0
     np.testing.assert_array_equal(source.GetOutputPort("total_wrench_base").Eval(sc), np.zeros(6))
     np.testing.assert_array_equal(source.GetOutputPort("tau_c_real").Eval(sc), np.zeros(plant.num_velocities() - 6))
 
@@ -490,11 +490,11 @@ def _pushed_diagram(pushes, time_step, gravity, log_period=None):
     builder = DiagramBuilder()
     plant = _small_floating_plant(time_step=time_step, gravity=gravity, builder=builder)
     source = builder.AddSystem(PushSource(plant, pushes))
-    builder.Connect(source.get_applied_spatial_forces_output_port(), plant.get_applied_spatial_force_input_port())
-    builder.Connect(plant.get_state_output_port(), source.get_state_input_port())
+    builder.Connect(source.GetOutputPort("applied_spatial_forces"), plant.get_applied_spatial_force_input_port())
+    builder.Connect(plant.get_state_output_port(), source.GetInputPort("state"))
     logger = None
     if log_period is not None:
-        logger = LogVectorOutput(source.get_total_wrench_world_output_port(), builder, log_period)
+        logger = LogVectorOutput(source.GetOutputPort("total_wrench_world"), builder, log_period)
     diagram = builder.Build()
     return diagram, plant, source, logger
 

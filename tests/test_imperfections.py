@@ -291,14 +291,14 @@ def test_torque_scale_and_offset_are_applied_exactly():
     sensor = station.sensors.torque_sensor
     context = sensor.CreateDefaultContext()
     u = np.random.default_rng(1).uniform(-20.0, 20.0, plant.num_actuated_dofs())
-    sensor.get_actuation_input_port().FixValue(context, u)
+    sensor.GetInputPort("actuation").FixValue(context, u)
     measured = sensor.GetOutputPort("measured_torque").Eval(context)
     truth = plant.MakeActuationMatrix()[6:, :] @ u
     np.testing.assert_array_equal(measured, scale * truth + offset)
     # Standalone, scalar values.
     plain = MotorTorqueSensor(plant, noise_std=0.0, scale=1.1, offset=-0.5)
     context = plain.CreateDefaultContext()
-    plain.get_actuation_input_port().FixValue(context, u)
+    plain.GetInputPort("actuation").FixValue(context, u)
     np.testing.assert_array_equal(plain.GetOutputPort("measured_torque").Eval(context), 1.1 * truth - 0.5)
 
 

@@ -9,7 +9,7 @@ import pytest
 from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
+from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, ZeroOrderHold
 
 from apps.runner import (
     experiment_parser,
@@ -116,6 +116,33 @@ def test_simulate_runs_the_diagram_for_the_duration_and_the_logs_are_read_back(t
             "system",
         )
     )
+
+
+def test_start_simulation_sets_the_initial_state_before_initialize_and_apps_share_the_loop():
+    """``diagrams.simulation.start_simulation``: the config applied, the initial state set, then
+    ``Initialize`` (a logger's sample at t = 0 sees that state); ``apps.runner`` re-exports
+    the loop below the apps."""
+    import apps.runner
+    import diagrams.simulation
+
+    assert apps.runner.simulate is diagrams.simulation.simulate
+    assert apps.runner.SimulationRun is diagrams.simulation.SimulationRun
+    builder = DiagramBuilder()
+    source = builder.AddSystem(ConstantVectorSource([1.0, 2.0]))
+    hold = builder.AddSystem(ZeroOrderHold(0.1, 2))
+    builder.Connect(source.get_output_port(), hold.get_input_port())
+    logger = LogVectorOutput(hold.get_output_port(), builder, 0.1)
+    diagram = builder.Build()
+
+    def set_initial_state(context):
+        hold.GetMyMutableContextFromRoot(context).SetDiscreteState([5.0, 6.0])
+
+    config = SimulatorConfig(target_realtime_rate=3.0)
+    simulator = diagrams.simulation.start_simulation(
+        diagram, set_initial_state=set_initial_state, simulator_config=config
+    )
+    assert simulator.get_target_realtime_rate() == 3.0 and simulator.get_context().get_time() == 0.0
+    np.testing.assert_array_equal(logger.FindLog(simulator.get_context()).data()[:, 0], [5.0, 6.0])
 
 
 def test_results_option_writes_the_metrics_with_the_command_that_ran(tmp_path, monkeypatch):

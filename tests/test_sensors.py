@@ -647,8 +647,8 @@ def hrp4_standing():
     kp, kd = default_gains(plant, humanoid)
     controller = builder.AddSystem(PdGravityController(plant, kp, kd))
     source = builder.AddSystem(ConstantVectorSource(joint_vector_from_names(plant, humanoid.nominal_posture)))
-    builder.Connect(source.get_output_port(), controller.get_desired_position_input_port())
-    builder.Connect(plant.get_state_output_port(), controller.get_state_input_port())
+    builder.Connect(source.get_output_port(), controller.GetInputPort("desired_position"))
+    builder.Connect(plant.get_state_output_port(), controller.GetInputPort("state"))
     builder.Connect(controller.get_output_port(), plant.get_actuation_input_port())
     sensors = add_sensors(builder, plant, humanoid, noise=False)
     noisy = add_sensors(builder, plant, humanoid, noise=True, seed=5, name_prefix="noisy_")
@@ -721,7 +721,7 @@ def test_ft_wrenches_are_expressed_with_the_robots_own_orientation(hrp4_standing
     s = hrp4_standing
     diagram, plant, humanoid, context = s["diagram"], s["plant"], s["humanoid"], s["context"]
     for sensors in (s["sensors"], s["noisy"]):
-        source = diagram.connection_map()[(sensors.ft_sensors, sensors.ft_sensors.get_state_input_port().get_index())]
+        source = diagram.connection_map()[(sensors.ft_sensors, sensors.ft_sensors.GetInputPort("state").get_index())]
         assert source == (sensors.assembler, sensors.assembler.GetOutputPort("state").get_index())
     pctx = plant.GetMyContextFromRoot(context)
     raw = FootForceTorqueSensors(
@@ -815,7 +815,7 @@ def test_add_sensors_without_ft_sensors_nao():
     assert sensors.measured_torque.size() == plant.num_velocities() - 6
     assert sensors.imu.frame.name() == "imu"
     # The torque sensor reads what the motors applied: the plant's net actuation.
-    assert sensors.torque_sensor.get_actuation_input_port().size() == plant.num_actuated_dofs()
+    assert sensors.torque_sensor.GetInputPort("actuation").size() == plant.num_actuated_dofs()
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
     x = plant.GetPositionsAndVelocities(plant.GetMyContextFromRoot(context))

@@ -69,8 +69,8 @@ def test_markers_sit_at_joints_and_scale_with_effort(meshcat):
         effort[plant.GetJointByName(name).velocity_start() - 6] = e
     effort[plant.GetJointByName("L_WRIST_Y").velocity_start() - 6] = 100.0  # not shown
     context = dut.CreateDefaultContext()
-    dut.get_residual_input_port().FixValue(context, effort)
-    dut.get_state_input_port().FixValue(context, x)
+    dut.GetInputPort("residual").FixValue(context, effort)
+    dut.GetInputPort("state").FixValue(context, x)
     dut.ForcedPublish(context)
 
     scene = _scene(meshcat)
@@ -88,7 +88,7 @@ def test_markers_sit_at_joints_and_scale_with_effort(meshcat):
     # A new effort moves the scales (same time: re-sent, not held).
     effort[:] = 0.0
     effort[plant.GetJointByName("NECK_P").velocity_start() - 6] = -0.8
-    dut.get_residual_input_port().FixValue(context, effort)
+    dut.GetInputPort("residual").FixValue(context, effort)
     context.SetTime(0.1)
     dut.ForcedPublish(context)
     scene = _scene(meshcat)
@@ -100,7 +100,7 @@ def test_classical_residual_size_and_default_radius(meshcat):
     plant, _ = _plant()
     nv = plant.num_velocities()
     dut = JointEffortOverlay(plant, meshcat, ["L_KNEE_P"], max_effort=4.0, includes_base=True)
-    assert dut.get_residual_input_port().size() == nv
+    assert dut.GetInputPort("residual").size() == nv
     assert 0.045 < dut.radius < 0.075  # about 6 cm for a 1.5 m robot
     residual = np.zeros(nv)
     residual[plant.GetJointByName("L_KNEE_P").velocity_start()] = 1.0  # classical: index = v index
@@ -118,12 +118,12 @@ def test_marker_at_offset_child_frame_on_fixed_base_plant(meshcat):
     plant.AddJoint(RevoluteJoint("hinge", plant.world_frame(), frame, [0.0, 1.0, 0.0]))
     plant.Finalize()
     dut = JointEffortOverlay(plant, meshcat, ["hinge"], max_effort=2.0)
-    assert dut.get_residual_input_port().size() == 1
+    assert dut.GetInputPort("residual").size() == 1
     context = dut.CreateDefaultContext()
     plant_context = plant.CreateDefaultContext()
     plant.GetJointByName("hinge").set_angle(plant_context, 0.7)
-    dut.get_state_input_port().FixValue(context, plant.GetPositionsAndVelocities(plant_context))
-    dut.get_residual_input_port().FixValue(context, [-3.0])
+    dut.GetInputPort("state").FixValue(context, plant.GetPositionsAndVelocities(plant_context))
+    dut.GetInputPort("residual").FixValue(context, [-3.0])
     dut.ForcedPublish(context)
     scene = _scene(meshcat)
     X_WB = plant.EvalBodyPoseInWorld(plant_context, body)
@@ -139,8 +139,8 @@ def test_arrows_point_along_force_and_hide_at_zero(meshcat):
     forces = np.array([0.0, 0.0, -20.0, 6.0, 8.0, 0.0, 0.0, 0.0, 0.0])
     points = np.array([0.1, 0.2, 1.3, -0.3, 0.0, 0.9, 0.0, 0.0, 1.0])
     context = dut.CreateDefaultContext()
-    dut.get_force_world_input_port().FixValue(context, forces)
-    dut.get_point_world_input_port().FixValue(context, points)
+    dut.GetInputPort("force_world").FixValue(context, forces)
+    dut.GetInputPort("point_world").FixValue(context, points)
     dut.ForcedPublish(context)
     scene = _scene(meshcat)
     for i in range(2):
@@ -166,7 +166,7 @@ def test_arrows_point_along_force_and_hide_at_zero(meshcat):
     )
 
     # The force goes to zero: the arrow is hidden.
-    dut.get_force_world_input_port().FixValue(context, np.zeros(9))
+    dut.GetInputPort("force_world").FixValue(context, np.zeros(9))
     context.SetTime(0.5)
     dut.ForcedPublish(context)
     assert _scene(meshcat).properties["/drake/forces/0"]["visible"] is False
@@ -299,20 +299,20 @@ def test_bad_inputs_raise_value_errors(meshcat):
     x = plant.GetPositionsAndVelocities(plant.CreateDefaultContext())
     bad = np.zeros(n)
     bad[3] = np.nan
-    dut.get_residual_input_port().FixValue(context, bad)
-    dut.get_state_input_port().FixValue(context, x)
+    dut.GetInputPort("residual").FixValue(context, bad)
+    dut.GetInputPort("state").FixValue(context, x)
     with pytest.raises(ValueError, match="'residual'"):
         dut.ForcedPublish(context)
-    dut.get_residual_input_port().FixValue(context, np.zeros(n))
+    dut.GetInputPort("residual").FixValue(context, np.zeros(n))
     x_bad = x.copy()
     x_bad[0] = np.inf
-    dut.get_state_input_port().FixValue(context, x_bad)
+    dut.GetInputPort("state").FixValue(context, x_bad)
     with pytest.raises(ValueError, match="'state'"):
         dut.ForcedPublish(context)
     arrows = ForceArrows(meshcat, 1)
     context = arrows.CreateDefaultContext()
-    arrows.get_force_world_input_port().FixValue(context, [1.0, 0.0, 0.0])
-    arrows.get_point_world_input_port().FixValue(context, [0.0, np.nan, 0.0])
+    arrows.GetInputPort("force_world").FixValue(context, [1.0, 0.0, 0.0])
+    arrows.GetInputPort("point_world").FixValue(context, [0.0, np.nan, 0.0])
     with pytest.raises(ValueError, match="'point_world'"):
         arrows.ForcedPublish(context)
 

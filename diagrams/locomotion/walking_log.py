@@ -26,9 +26,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.systems.analysis import Simulator
 
 from diagrams.locomotion.nao_walk import NaoWalkScenario, build_nao_walk_diagram
+from diagrams.simulation import simulate
 from systems.common.topology import floating_base_topology
 from systems.io.robot_log import RobotLog, quaternion_to_rotation
 from systems.locomotion.walking_pattern import WalkingParameters
@@ -151,11 +151,7 @@ def simulate_walking_log(settings: WalkingLogSettings | None = None) -> WalkingL
     settings.check()
     scenario = walking_log_scenario(settings)
     diagram, handles = build_nao_walk_diagram(scenario)
-    simulator = Simulator(diagram)
-    context = simulator.get_mutable_context()
-    handles.set_initial_state(context)
-    simulator.Initialize()
-    simulator.AdvanceTo(settings.duration + 0.002)
+    context = simulate(diagram, settings.duration + 0.002, set_initial_state=handles.set_initial_state).context
     station = handles.station
     plant = station.plant
     data = {name: handles.loggers[name].FindLog(context).data().T for name in ("state", "sensed_state", "gyro")}

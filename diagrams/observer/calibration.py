@@ -1,5 +1,6 @@
-"""Calibration runs of the Nao experiments: explicit simulations that an app (or a test)
-calls before building its diagram, passing the result in. No diagram builder simulates.
+"""Calibration runs of the Nao experiments: explicit simulations (``diagrams.simulation``)
+that an app (or a test) calls before building its diagram, passing the result in. No
+diagram builder simulates.
 
 * ``settle_standing_state``: [q; v] of nao_like at rest on the ground in a posture (the
   experiments start from it, without the touch-down transient).
@@ -21,11 +22,11 @@ from collections.abc import Sequence
 import numpy as np
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.multibody.plant import MultibodyPlantConfig
-from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
 from diagrams.observer.nao_force_observer import full_posture, nao_model, wide_stance
+from diagrams.simulation import simulate
 from diagrams.station.config import StationConfig
 from diagrams.station.humanoid_station import add_humanoid_station
 from diagrams.station.plant_config import default_plant_config
@@ -51,12 +52,11 @@ def _settled_state(duration: float, posture: tuple, plant_config_yaml: str, robo
     hold = builder.AddSystem(ConstantVectorSource(joint_vector_from_names(model, angles)))
     builder.Connect(hold.get_output_port(), station.desired_position)
     diagram = builder.Build()
-    simulator = Simulator(diagram)
     plant_context = plant.CreateDefaultContext()
     set_standing_state(plant, plant_context, dataclasses.replace(humanoid, nominal_posture=angles))
-    station.set_initial_state(simulator.get_mutable_context(), plant.GetPositionsAndVelocities(plant_context))
-    simulator.AdvanceTo(duration)
-    plant_context = plant.GetMyContextFromRoot(simulator.get_context())
+    start = functools.partial(station.set_initial_state, state=plant.GetPositionsAndVelocities(plant_context))
+    run = simulate(diagram, duration, set_initial_state=start)
+    plant_context = plant.GetMyContextFromRoot(run.context)
     return tuple(plant.GetPositionsAndVelocities(plant_context).tolist())
 
 
@@ -138,10 +138,9 @@ def identify_motor_constant(
     builder.Connect(plant.get_state_output_port(), source.GetInputPort("state"))
     logger = LogVectorOutput(station.sensed_state, builder, 0.01)
     diagram = builder.Build()
-    simulator = Simulator(diagram)
-    station.set_initial_state(simulator.get_mutable_context(), settle_standing_state(posture))
-    simulator.AdvanceTo(t0 + len(loads) * hold)
-    log = logger.FindLog(simulator.get_context())
+    start = functools.partial(station.set_initial_state, state=settle_standing_state(posture))
+    run = simulate(diagram, t0 + len(loads) * hold, set_initial_state=start)
+    log = logger.FindLog(run.context)
     t, X = log.sample_times(), log.data().T
     rest_states = []
     for i in range(len(loads)):

@@ -49,7 +49,7 @@ import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, Rgba, SceneGraph
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import BodyIndex
-from pydrake.systems.analysis import Simulator, SimulatorConfig
+from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
@@ -61,6 +61,7 @@ from diagrams.residuals.study_statistics import (
     rate_table,
 )
 from diagrams.residuals.wiring import add_internal_and_external_residuals
+from diagrams.simulation import simulate
 from diagrams.station.config import StationConfig, replace_station
 from diagrams.station.humanoid_station import HumanoidStation, add_humanoid_station
 from diagrams.station.motions import SlowMotion, slow_whole_body_motion
@@ -793,11 +794,7 @@ def averaged_input_covariances(
     diagram, handles = build_contact_localization_diagram(
         calibration, model_corrections=model_corrections, online=False
     )
-    simulator = Simulator(diagram)
-    context = simulator.get_mutable_context()
-    handles.station.set_initial_state(context)
-    simulator.Initialize()
-    simulator.AdvanceTo(AVERAGED_NOISE_RUN_S)
+    simulate(diagram, AVERAGED_NOISE_RUN_S, set_initial_state=handles.station.set_initial_state)
     inputs = estimator_log(handles)
     replay = estimate_run(handles, inputs)
     keep = inputs.log_times >= AVERAGED_NOISE_STARTUP_S

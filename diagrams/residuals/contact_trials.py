@@ -13,7 +13,6 @@ import math
 import time
 
 import numpy as np
-from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
 
 from diagrams.residuals.contact_localization import (
     ContactLocalizationScenario,
@@ -31,6 +30,7 @@ from diagrams.residuals.contact_localization import (
     trial_scenario,
 )
 from diagrams.residuals.model_refinement import refined_model
+from diagrams.simulation import simulate, start_simulation
 
 #: Trials a worker process runs per job (at least one run of ``trials_per_run``).
 TRIALS_PER_JOB = 25
@@ -84,14 +84,14 @@ def run_trials(specs: list[dict], scenario: ContactLocalizationScenario) -> list
         diagram, handles = build_contact_localization_diagram(
             run_scenario, model_corrections=model_corrections, pushes=pushes
         )
-        simulator = Simulator(diagram)
-        ApplySimulatorConfig(scenario.simulator_config, simulator)
+        # ``start_simulation``, not ``simulate``: the run advances window by window from a cloned standing start.
+        simulator = start_simulation(
+            diagram, set_initial_state=handles.station.set_initial_state, simulator_config=scenario.simulator_config
+        )
         context = simulator.get_mutable_context()
-        handles.station.set_initial_state(context)
         plant_context = handles.plant.GetMyContextFromRoot(context)
         soles = handles.station.humanoid.sole_frames
         start = {name: frame.CalcPoseInWorld(plant_context) for name, frame in soles.items()}
-        simulator.Initialize()
         standing = None
         # Offline estimation (``handles.online`` False): the run's replayed segments so far
         # and the estimators' state after them.
@@ -189,13 +189,19 @@ def localize_multi_contact(
 
 
 def run_no_contact(scenario: ContactLocalizationScenario, kind: str = "no_contact") -> dict:
-    """A run without contact, standing (``kind`` "no_contact", ``no_contact_scenario``) or
-    in slow motion ("slow_motion", ``slow_motion_scenario``): its false detections."""
+    """A run without contact, standing for ``no_contact_duration`` s (``kind`` "no_contact",
+    ``no_contact_scenario``) or in slow motion for ``slow_motion_duration`` s ("slow_motion",
+    ``slow_motion_scenario``): its false detections.
+
+    Raises:
+        ValueError: a run's duration that is not positive and finite (``simulate``).
+    """
     run_scenario = no_contact_scenario(scenario) if kind == "no_contact" else slow_motion_scenario(scenario)
     diagram, handles = build_contact_localization_diagram(run_scenario, model_corrections=refined_model(scenario))
-    simulator = Simulator(diagram)
-    ApplySimulatorConfig(run_scenario.simulator_config, simulator)
-    handles.station.set_initial_state(simulator.get_mutable_context())
-    simulator.Initialize()
-    simulator.AdvanceTo(run_scenario.no_contact_duration)
-    return no_contact_result(run_scenario, handles, simulator.get_context())
+    run = simulate(
+        diagram,
+        run_scenario.no_contact_duration,
+        set_initial_state=handles.station.set_initial_state,
+        simulator_config=run_scenario.simulator_config,
+    )
+    return no_contact_result(run_scenario, handles, run.context)

@@ -63,11 +63,11 @@ from pydrake.geometry import Meshcat, MeshcatVisualizer, Rgba
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.multibody.tree import BodyIndex
-from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.framework import Context, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, ZeroOrderHold
 
 from diagrams.residuals.wiring import add_internal_and_external_residuals
+from diagrams.simulation import simulate
 from diagrams.station.config import StationConfig
 from diagrams.station.estimator_plant import EstimatorPlant, build_estimator_plant
 from diagrams.station.humanoid_station import add_humanoid_station
@@ -1508,14 +1508,14 @@ def simulate_push_log(
     for name, port in outputs.items():
         loggers[name] = LogVectorOutput(port, builder, period)
     diagram = builder.Build()
-    simulator = Simulator(diagram)
-    context = simulator.get_mutable_context()
-    station.set_initial_state(context)
-    for name in held:
-        hold = diagram.GetSubsystemByName(f"log_hold_{name}")
-        hold.GetMyMutableContextFromRoot(context).SetDiscreteState(np.zeros(hold.get_output_port().size()))
-    simulator.Initialize()
-    simulator.AdvanceTo(duration)
+
+    def set_initial_state(context: Context) -> None:
+        station.set_initial_state(context)
+        for name in held:
+            hold = diagram.GetSubsystemByName(f"log_hold_{name}")
+            hold.GetMyMutableContextFromRoot(context).SetDiscreteState(np.zeros(hold.get_output_port().size()))
+
+    context = simulate(diagram, duration, set_initial_state=set_initial_state).context
     data = {name: logger.FindLog(context).data().T.copy() for name, logger in loggers.items()}
     times = loggers["state"].FindLog(context).sample_times()
     # The first logged sample precedes the first update (the holds' initial zeros): drop it.
@@ -1627,8 +1627,8 @@ def record_replay(
     plant.Finalize()
     MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)
     arrows = builder.AddSystem(ForceArrows(meshcat, 1, **ESTIMATE_ARROW))
-    builder.ExportInput(arrows.get_force_world_input_port(), "force_world")
-    builder.ExportInput(arrows.get_point_world_input_port(), "point_world")
+    builder.ExportInput(arrows.GetInputPort("force_world"), "force_world")
+    builder.ExportInput(arrows.GetInputPort("point_world"), "point_world")
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
     plant_context = plant.GetMyMutableContextFromRoot(context)

@@ -27,12 +27,13 @@ from typing import Any
 
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.systems.analysis import Simulator, SimulatorConfig
+from pydrake.systems.analysis import SimulatorConfig
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
 from diagrams.residuals.wiring import add_internal_and_external_residuals
 from diagrams.scenarios import scenario_as_yaml
+from diagrams.simulation import simulate
 from diagrams.station.config import StationConfig, check_model_refinement
 from diagrams.station.humanoid_station import (
     ONLINE_DYNAMICS,
@@ -229,21 +230,24 @@ def build_refinement_diagram(
     return diagram, RefinementHandles(plant, station, internal, external, loggers, recorder)
 
 
-def run_refinement_diagram(diagram: Diagram, handles: RefinementHandles, duration: float, config) -> Context:
-    """Simulates ``diagram`` for ``duration`` s from the station's initial state; returns the
-    root context (the loggers' logs are in it; a recorder holds its samples itself: the
-    updates at 0, T, ..., ``duration`` - T)."""
-    from pydrake.systems.analysis import ApplySimulatorConfig
+def run_refinement_diagram(
+    diagram: Diagram, handles: RefinementHandles, duration: float, config: SimulatorConfig
+) -> Context:
+    """Simulates ``diagram`` for ``duration`` s from the station's initial state with the
+    simulator ``config`` (``diagrams.simulation.simulate``; a recorder's samples of an earlier
+    run are cleared first); returns the root context (the loggers' logs are in it; a recorder
+    holds its samples itself: the updates at 0, T, ..., ``duration`` - T).
 
-    simulator = Simulator(diagram)
-    ApplySimulatorConfig(config, simulator)
-    context = simulator.get_mutable_context()
-    handles.station.set_initial_state(context)
-    if handles.recorder is not None:
-        handles.recorder.clear()
-    simulator.Initialize()
-    simulator.AdvanceTo(duration)
-    return context
+    Raises:
+        ValueError: a ``duration`` that is not positive and finite.
+    """
+
+    def set_initial_state(context: Context) -> None:
+        handles.station.set_initial_state(context)
+        if handles.recorder is not None:
+            handles.recorder.clear()
+
+    return simulate(diagram, duration, set_initial_state=set_initial_state, simulator_config=config).context
 
 
 def calibration_log(handles: RefinementHandles, context: Context) -> CalibrationLog:

@@ -394,7 +394,7 @@ class JointAdmittanceController(LeafSystem):
         self._q_d_index = self.DeclareDiscreteState(BasicVector(default_q_d))
         self.DeclareInitializationDiscreteUpdateEvent(self._Initialize)
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._Update)
-        self._output_port = self.DeclareStateOutputPort("desired_position", self._q_d_index)
+        self.DeclareStateOutputPort("desired_position", self._q_d_index)
 
     # -- configuration --------------------------------------------------------------
 
@@ -530,15 +530,6 @@ class JointAdmittanceController(LeafSystem):
         )
         R_WR = self._support_frames[1].CalcRotationMatrixInWorld(context).matrix()
         return J_left, J_right, J_G, R_WR
-
-    def get_residual_input_port(self):
-        return self._residual_port
-
-    def get_measured_position_input_port(self):
-        return self._measured_port
-
-    def get_desired_position_output_port(self):
-        return self._output_port
 
     # -- the law ----------------------------------------------------------------------
 

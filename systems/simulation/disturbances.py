@@ -19,9 +19,9 @@ Typical use::
     pushes = [Push("R_SHOULDER_P_LINK", [0.0, -0.05, 0.0], [0.0, 0.0, -1.0],
                    PolynomialRampUpDown(peak=5.0, t_start=5.0, t_peak=8.5, t_end=12.0))]
     source = builder.AddSystem(PushSource(plant, pushes))
-    builder.Connect(source.get_applied_spatial_forces_output_port(),
+    builder.Connect(source.GetOutputPort("applied_spatial_forces"),
                     plant.get_applied_spatial_force_input_port())
-    builder.Connect(plant.get_state_output_port(), source.get_state_input_port())
+    builder.Connect(plant.get_state_output_port(), source.GetInputPort("state"))
 """
 
 from __future__ import annotations
@@ -494,7 +494,7 @@ class PushSource(LeafSystem):
 
         time_only = {self.time_ticket()}
         truth = {self.time_ticket(), self.input_port_ticket(self._state_port.get_index())}
-        self._forces_port = self.DeclareAbstractOutputPort(
+        self.DeclareAbstractOutputPort(
             "applied_spatial_forces",
             lambda: _ForceListValue([]),
             self._CalcAppliedForces,
@@ -507,21 +507,11 @@ class PushSource(LeafSystem):
             ),
             prerequisites_of_calc=truth,
         )
-        self._force_world_port = self.DeclareVectorOutputPort(
-            "force_world", 3 * k, self._CalcForceWorld, prerequisites_of_calc=time_only
-        )
-        self._point_world_port = self.DeclareVectorOutputPort(
-            "point_world", 3 * k, self._CalcPointWorld, prerequisites_of_calc=truth
-        )
-        self._wrench_world_port = self.DeclareVectorOutputPort(
-            "total_wrench_world", 6, self._CalcWrenchWorld, prerequisites_of_calc=truth
-        )
-        self._wrench_base_port = self.DeclareVectorOutputPort(
-            "total_wrench_base", 6, self._CalcWrenchBase, prerequisites_of_calc=truth
-        )
-        self._tau_port = self.DeclareVectorOutputPort(
-            "tau_c_real", self._n, self._CalcTauCReal, prerequisites_of_calc=truth
-        )
+        self.DeclareVectorOutputPort("force_world", 3 * k, self._CalcForceWorld, prerequisites_of_calc=time_only)
+        self.DeclareVectorOutputPort("point_world", 3 * k, self._CalcPointWorld, prerequisites_of_calc=truth)
+        self.DeclareVectorOutputPort("total_wrench_world", 6, self._CalcWrenchWorld, prerequisites_of_calc=truth)
+        self.DeclareVectorOutputPort("total_wrench_base", 6, self._CalcWrenchBase, prerequisites_of_calc=truth)
+        self.DeclareVectorOutputPort("tau_c_real", self._n, self._CalcTauCReal, prerequisites_of_calc=truth)
 
     # -- accessors ------------------------------------------------------------------------
 
@@ -542,27 +532,6 @@ class PushSource(LeafSystem):
     @property
     def dynamics(self) -> FloatingBaseDynamics:
         return self._dynamics
-
-    def get_state_input_port(self):
-        return self._state_port
-
-    def get_applied_spatial_forces_output_port(self):
-        return self._forces_port
-
-    def get_force_world_output_port(self):
-        return self._force_world_port
-
-    def get_point_world_output_port(self):
-        return self._point_world_port
-
-    def get_total_wrench_world_output_port(self):
-        return self._wrench_world_port
-
-    def get_total_wrench_base_output_port(self):
-        return self._wrench_base_port
-
-    def get_tau_c_real_output_port(self):
-        return self._tau_port
 
     def forces_at(self, t: float) -> np.ndarray:
         """(k, 3) world forces of the pushes at time t, N."""

@@ -140,12 +140,6 @@ class PdGravityController(LeafSystem):
         """n = nv - 6, the size of desired_position."""
         return self._n
 
-    def get_desired_position_input_port(self):
-        return self._desired_port
-
-    def get_state_input_port(self):
-        return self._state_port
-
     def CalcJointTorques(self, q_desired: np.ndarray, x: np.ndarray) -> np.ndarray:
         """Returns the clipped joint torques (n, v[6:] order) for desired q and state x."""
         q = x[: self._nq]

@@ -319,9 +319,6 @@ class MotorTorqueSensor(LeafSystem):
         """Indices k (into v[6:]) of the actuated joints, in actuation order."""
         return self._rows[np.argsort(self._cols)].copy()
 
-    def get_actuation_input_port(self):
-        return self._actuation
-
     def _CalcTorque(self, context: Context, output: BasicVector) -> None:
         u = self._actuation.Eval(context)
         check_finite_input("MotorTorqueSensor", "actuation", u)
@@ -502,12 +499,6 @@ class FootForceTorqueSensors(LeafSystem):
     @property
     def noise(self) -> SampledNoise:
         return self._noise
-
-    def get_reaction_forces_input_port(self):
-        return self._reaction
-
-    def get_state_input_port(self):
-        return self._state
 
     def CalcGroundWrenches(self, reaction_forces, x: np.ndarray) -> np.ndarray:
         """Noise-free ``wrenches`` for a reaction-force list and a state x = [q; v]."""
@@ -1025,7 +1016,7 @@ def add_sensors(
         MotorTorqueSensor(plant, noise_std=on * MOTOR_TORQUE_NOISE_STD, seed=seeds["torque"], **torque_errors)
     )
     torque.set_name(f"{name_prefix}motor_torque_sensor")
-    builder.Connect(plant.get_net_actuation_output_port(), torque.get_actuation_input_port())
+    builder.Connect(plant.get_net_actuation_output_port(), torque.GetInputPort("actuation"))
 
     ft = None
     sides = tuple(sorted(handles.ft_sensor_joints))
@@ -1040,7 +1031,7 @@ def add_sensors(
             )
         )
         ft.set_name(f"{name_prefix}foot_force_torque_sensors")
-        builder.Connect(plant.get_reaction_forces_output_port(), ft.get_reaction_forces_input_port())
+        builder.Connect(plant.get_reaction_forces_output_port(), ft.GetInputPort("reaction_forces"))
 
     fsr = None
     fsr_feet = [side for side, sensing in handles.foot_sensing.items() if sensing == "fsr"]
@@ -1104,7 +1095,7 @@ def add_sensors(
         # orientation, so the estimators see the wrenches and gravity in one frame. (Rotated
         # with the true orientation instead, a base tilt error of 0.02 deg biased a
         # calibration's hip torque offsets by up to 2 N m.)
-        builder.Connect(assembler.GetOutputPort("state"), ft.get_state_input_port())
+        builder.Connect(assembler.GetOutputPort("state"), ft.GetInputPort("state"))
 
     return SensorHandles(
         encoders=encoders,

@@ -299,12 +299,6 @@ class JointEffortOverlay(_MeshcatOverlay):
         """Meshcat path of each joint's marker node (transform and visibility)."""
         return tuple(self._nodes)
 
-    def get_residual_input_port(self):
-        return self._residual_port
-
-    def get_state_input_port(self):
-        return self._state_port
-
     def scales(self, effort: np.ndarray) -> np.ndarray:
         """Marker scales (fraction of ``radius``) for a ``residual`` input value."""
         return np.minimum(np.abs(np.asarray(effort)[self._indices]) * self._inv_max, 1.0)
@@ -485,12 +479,6 @@ class ForceArrows(_MeshcatOverlay):
         """Meshcat path of each arrow's root node."""
         return tuple(self._nodes)
 
-    def get_force_world_input_port(self):
-        return self._force_port
-
-    def get_point_world_input_port(self):
-        return self._point_port
-
     def arrow(self, f_W: np.ndarray, p_W: np.ndarray):
         """(tail, R_WA, length, cone scale c): the arrow drawn for one force."""
         f_W = np.asarray(f_W, dtype=float)
@@ -597,8 +585,8 @@ def add_effort_visualization(
         includes_base=includes_base,
     )
     for port, mine in (
-        (residual_port, overlay.get_residual_input_port()),
-        (state_port, overlay.get_state_input_port()),
+        (residual_port, overlay.GetInputPort("residual")),
+        (state_port, overlay.GetInputPort("state")),
     ):
         if port.size() != mine.size():
             raise ValueError(
@@ -609,8 +597,8 @@ def add_effort_visualization(
             )
     overlay.set_name(f"{prefix}joint_effort_overlay")
     builder.AddSystem(overlay)
-    builder.Connect(residual_port, overlay.get_residual_input_port())
-    builder.Connect(state_port, overlay.get_state_input_port())
+    builder.Connect(residual_port, overlay.GetInputPort("residual"))
+    builder.Connect(state_port, overlay.GetInputPort("state"))
     arrows = None
     if (force_port is None) != (point_port is None):
         raise ValueError("add_effort_visualization: give both force_port and point_port, or neither")
@@ -652,8 +640,8 @@ def add_force_arrows(
     arrows = ForceArrows(meshcat, force_port.size() // 3, **arrow_options)
     arrows.set_name(name)
     builder.AddSystem(arrows)
-    builder.Connect(force_port, arrows.get_force_world_input_port())
-    builder.Connect(point_port, arrows.get_point_world_input_port())
+    builder.Connect(force_port, arrows.GetInputPort("force_world"))
+    builder.Connect(point_port, arrows.GetInputPort("point_world"))
     return arrows
 
 

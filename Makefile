@@ -154,13 +154,15 @@ hawley-settings: $(STAMP)
 paper-speed: $(STAMP)
 	$(RUN) -m apps.paper_speed $(ARGS)
 
-# The generated tables of README.md, docs/*.md and BENCHMARKS.md, from results/*.json; then
+# The generated tables of README.md, docs/*.md and BENCHMARKS.md, from results/*.json, and the
+# figures of the docs pages, drawn from them into docs/_generated/figures (not tracked); then
 # the documentation site (docs/conf.py: the guides and the API reference built from the
 # docstrings) into docs/_build/html (open docs/_build/html/index.html), with warnings as errors:
 # -W --keep-going lists them all, -E reads every page again so that none is hidden by an
 # earlier build (about 2 min on one core; tests/test_docs.py builds it the same way).
 docs: $(STAMP)
 	$(PY) -m apps.doc_tables
+	$(PY) -m apps.doc_figures
 	$(PY) -m sphinx -b html -E -W --keep-going -q docs docs/_build/html
 
 # The contact study swept over robots, imperfection draws and noise levels (issue 35): a small

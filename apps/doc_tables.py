@@ -16,7 +16,7 @@ import re
 from collections.abc import Callable
 from pathlib import Path
 
-from apps.results import load_results
+from apps.results import load_results, provenance
 
 ROOT = Path(__file__).resolve().parent.parent
 #: The documents whose blocks are generated.
@@ -954,11 +954,6 @@ def sources(name: str) -> tuple[str, ...]:
     return SOURCES.get(name, (name,))
 
 
-def _release(drake) -> str:
-    """Drake's release as written by ``write_results`` ("1.58.0"; a list in older files)."""
-    return ".".join(map(str, drake)) if isinstance(drake, list) else str(drake)
-
-
 def render(name: str, folder: Path | None = None) -> str:
     """The block body of ``name``: its table, then the command and date of its results file.
 
@@ -971,19 +966,12 @@ def render(name: str, folder: Path | None = None) -> str:
     if len(payloads) == 1:
         ((source, payload),) = payloads.items()
         lines = RENDERERS[name](payload["data"])
-        lines += ["", _provenance("Measured by", source, payload) + "."]
+        lines += ["", provenance("Measured by", source, payload) + "."]
     else:
         lines = RENDERERS[name]({source: payload["data"] for source, payload in payloads.items()})
         lines += ["", "Measured by:", ""]
-        lines += [_provenance("-", source, payload) for source, payload in payloads.items()]
+        lines += [provenance("-", source, payload) for source, payload in payloads.items()]
     return "\n".join(lines) + "\n"
-
-
-def _provenance(prefix: str, source: str, payload: dict) -> str:
-    return (
-        f"{prefix} `{payload['command']}` on {payload['written']} (Python {payload['python']}, "
-        f"Drake {_release(payload['drake'])}; `results/{source}.json`)"
-    )
 
 
 def updated(text: str, folder: Path | None = None) -> tuple[str, list[str]]:

@@ -80,4 +80,28 @@ def load_results(name: str, folder: Path | None = None) -> dict[str, Any]:
     return payload
 
 
-__all__ = ["RESULTS_DIR", "RESULTS_DIR_VARIABLE", "app_command", "load_results", "results_path", "write_results"]
+def drake_release(drake) -> str:
+    """Drake's release as ``write_results`` writes it ("1.58.0"; a list in older files)."""
+    return ".".join(map(str, drake)) if isinstance(drake, list) else str(drake)
+
+
+def provenance(prefix: str, name: str, payload: dict) -> str:
+    """``prefix``, then the command that wrote the results file ``name`` (its ``payload``, as
+    ``load_results`` reads it), when, on which Python and Drake, and the file: the line under
+    each generated table and in each generated figure's caption."""
+    return (
+        f"{prefix} `{payload['command']}` on {payload['written']} (Python {payload['python']}, "
+        f"Drake {drake_release(payload['drake'])}; `results/{name}.json`)"
+    )
+
+
+__all__ = [
+    "RESULTS_DIR",
+    "RESULTS_DIR_VARIABLE",
+    "app_command",
+    "drake_release",
+    "load_results",
+    "provenance",
+    "results_path",
+    "write_results",
+]

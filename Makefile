@@ -46,8 +46,9 @@ $(STAMP): pyproject.toml
 	@test -x $(PY) || '$(PYTHON_BIN)' -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet ".[test,cluster]"
-	@echo "compiling the invariant EKF's steps and the localizer's geometric queries (numba, once; cached beside their source)"
+	@echo "compiling the invariant EKF's steps, the floating-base kernels and the localizer's geometric queries (numba, once; cached beside their source)"
 	@$(PY) -c 'from systems.estimation.base_state_estimator import load_compiled_filter_steps; load_compiled_filter_steps()'
+	@$(PY) -c 'from systems.dynamics.floating_base_kernels import load_compiled_kernels; load_compiled_kernels()'
 	@$(PY) -c 'from systems.residuals.geometry_intersection import load_compiled_queries; load_compiled_queries()'
 	@ls /usr/lib/*-linux-gnu/libtcmalloc_minimal.so.4 >/dev/null 2>&1 || [ "$$(id -u)" != 0 ] || ! command -v apt-get >/dev/null 2>&1 || \
 		{ echo "installing Debian's libtcmalloc-minimal4 (a faster memory allocator for the simulations)"; \

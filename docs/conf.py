@@ -7,6 +7,7 @@ napoleon). ``make docs`` builds it into docs/_build/html with warnings as errors
 from __future__ import annotations
 
 import re
+import shutil
 import sys
 from pathlib import Path
 
@@ -30,6 +31,9 @@ templates_path = ["_templates"]
 # (its functions and constants) and per class (its methods and attributes) into docs/api/
 # (generated, not tracked).
 autosummary_generate = True
+# Generated afresh at every build: a page left from a module that no longer exists would be
+# a warning (an error under -W).
+shutil.rmtree(Path(__file__).resolve().parent / "api", ignore_errors=True)
 autosummary_imported_members = False
 autodoc_member_order = "bysource"
 autodoc_typehints = "description"

@@ -39,6 +39,7 @@ from pydrake.multibody.tree import Frame, SpatialInertia
 
 from systems.common.topology import floating_base_topology
 from systems.dynamics.base_state import checked_state, quaternion_to_rotation, quaternions_to_rotations
+from systems.dynamics.floating_base_kernels import gather_mass_matrix_terms
 from systems.dynamics.floating_base_terms import FloatingBaseTerms, reduce_to_floating_terms
 from systems.dynamics.pinocchio_model import PlantPinocchioModel, pinocchio_inertia, pinocchio_model_from_plant
 
@@ -109,7 +110,6 @@ class PinocchioFloatingBaseDynamics:
         self._joint_flat = None if in_order else (joints_first[:, None] * nv + joints_first[None, :]).ravel()
         self._v_source = np.argsort(P)
         self._flat = (P[:, None] * nv + P[None, :]).ravel()  # M_F0 = M_pin.take(flat)
-        self._flat_T = (P[None, :] * nv + P[:, None]).ravel()  # (M_pin^T)[P][:, P]
 
     def _frame_id(self, frame: Frame) -> int:
         frame_id = self.pinocchio.frames.get(int(frame.index()))
@@ -149,12 +149,9 @@ class PinocchioFloatingBaseDynamics:
         q_pin, v_pin, R_WB, v0 = self._pinocchio_state(q, v)
         self._R_WB_last = R_WB
         model, data = self.model, self.data
-        nv = v.size
-        M = pin.crba(model, data, q_pin).take(self._flat).reshape(nv, nv)
+        M_pin = pin.crba(model, data, q_pin)
         C = pin.computeCoriolisMatrix(model, data, q_pin, v_pin)
-        M_dot = C.take(self._flat).reshape(nv, nv)
-        M_dot += C.take(self._flat_T).reshape(nv, nv)
-        bias = (C @ v_pin)[self.permutation] - M[:, 3:6] @ (self._gravity_W @ R_WB)
+        M, M_dot, bias = gather_mass_matrix_terms(M_pin, C, v_pin, self.permutation, self._gravity_W @ R_WB)
         return M, M_dot, bias, R_WB, v0
 
     def compute(self, q: np.ndarray, v: np.ndarray) -> FloatingBaseTerms:

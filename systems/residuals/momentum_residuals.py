@@ -68,6 +68,7 @@ from scipy.linalg import lapack
 
 from systems.common.checks import eval_finite_input
 from systems.dynamics.floating_base import FloatingBaseDynamics
+from systems.dynamics.floating_base_kernels import floating_state_rates
 from systems.dynamics.floating_base_terms import FloatingBaseTerms
 
 #: Default update period of the residuals [s].
@@ -204,9 +205,10 @@ class ResidualModel:
         elimination of eq. (9) and its derivative (eq. 13) applied to vectors rather than
         formed: with G = I0c^-1 F, H_fb qdot = H qdot - F^T G qdot, H_fb_dot qdot = H_dot
         qdot - G^T F_dot qdot - F_dot^T G qdot + G^T I0c_dot G qdot and C_fb = C^ - G^T p^,
-        G never formed (two Cholesky solves with I0c, of one and three right-hand sides):
-        the same numbers as ``evaluate``'s matrices times qdot, to rounding (tests), at a
-        fraction of the cost (``systems.residuals.offline`` does the same over a log).
+        G never formed (two Cholesky solves with I0c, of one and three right-hand sides;
+        compiled, ``systems.dynamics.floating_base_kernels``): the same numbers as ``evaluate``'s matrices times
+        qdot, to rounding (tests), at a fraction of the cost (``systems.residuals.offline``
+        does the same over a log).
 
         Raises:
             ValueError: I0c is not positive definite (a model without mass).
@@ -215,28 +217,15 @@ class ResidualModel:
         rates = self._rates
         if rates is not None:
             return rates
-        nq, nv = self.num_positions, self.num_velocities
+        nq = self.num_positions
         M, M_dot, bias, R_WB, v0 = self.dynamics.mass_matrix_terms(x[:nq], x[nq:])
         self._impl_at_key = not self._context_is_current  # its own kinematics are of x
         qdot = x[self._qdot_start :]
-        X = np.zeros((nv, 2))  # [[v0; qdot], [0; qdot]]
-        X[:6, 0] = v0
-        X[6:, 0] = X[6:, 1] = qdot
-        MX, M_dot_X = M @ X, M_dot @ X
-        classical = (MX[:, 0], M_dot_X[:, 0] - bias)
-        I0c_factor, info = lapack.dpotrf(M[:6, :6])
-        if info != 0:
-            raise ValueError(f"the composite inertia I0c is not positive definite (LAPACK dpotrf info={info})")
+        p_c, a_c, p_i, a_i, I0c_factor, positive = floating_state_rates(M, M_dot, bias, v0, qdot)
+        if not positive:
+            raise ValueError("the composite inertia I0c is not positive definite (a model without mass)")
         F = M[:6, 6:]
-        G_qdot = lapack.dpotrs(I0c_factor, MX[:6, 1])[0]
-        # G^T applied to [F_dot qdot, I0c_dot G qdot, p^] at once.
-        rhs = np.empty((6, 3))
-        rhs[:, 0], rhs[:, 1], rhs[:, 2] = M_dot_X[:6, 1], M_dot[:6, :6] @ G_qdot, bias[:6]
-        GT = F.T @ lapack.dpotrs(I0c_factor, rhs)[0]
-        H_fb_qdot = MX[6:, 1] - F.T @ G_qdot
-        H_fb_dot_qdot = M_dot_X[6:, 1] - GT[:, 0] - M_dot[6:, :6] @ G_qdot + GT[:, 1]
-        internal = (H_fb_qdot, H_fb_dot_qdot - (bias[6:] - GT[:, 2]))
-        base = (classical[0][:6], classical[1][:6])
+        classical, internal, base = (p_c, a_c), (p_i, a_i), (p_c[:6], a_c[:6])
         rates = StateRates(R_WB, v0, classical, internal, base, F, I0c_factor)
         self._rates = rates
         return rates

@@ -66,16 +66,14 @@ SPURIOUS_FORCE_REDUCTION_FLOOR = 0.70
 #: of TORQUE_OFFSET_PRIOR_FRACTION of the rated torque on the offsets and
 #: COULOMB_PRIOR_FRACTION on the Coulomb friction: a datasheet's tolerances, wider than the
 #: simulated errors. Everything else is the defaults of ``IdentificationOptions`` (5 Hz
-#: parallel filtering, 10 ms samples). The earlier choice, a ridge on the joint unknowns
-#: whose strength grew with the log (``joint_prior_weight`` 1e-3, an effective offset prior
-#: of ~0.05 N m), moved the leg offsets into the links' gravity parameters (2.7 N m on a
-#: knee) and those erred at the postures of a push. Viscous friction is identified on every
-#: joint the motion moves faster than 0.5 v_s (95th percentile; the default 2 v_s left every
-#: leg joint without it): between 0.5 and 2 v_s the tanh's curvature tells F_c from b.
-#: Measured on robot 3's calibration (imperfections seed 3): knee F_c / b 6.000 / 4.02 against
-#: the simulated 6 / 4 (with 2 v_s: 6.62 / 0, which overestimates the friction by 0.1 N m at
-#: 0.07 rad/s, in the direction of motion, where an admittance loop follows it), hip roll
-#: 3.60 / 2.37 against 3.6 / 2.4.
+#: parallel filtering, 10 ms samples). The offsets' prior is in N m of each joint, not a
+#: ridge whose strength grows with the log: a ridge of that kind lets the leg offsets move
+#: into the links' gravity parameters, which then err at the postures of a push. Viscous
+#: friction is identified on every joint the motion moves faster than 0.5 v_s (95th
+#: percentile): between 0.5 and 2 v_s the tanh's curvature tells F_c from b. With the
+#: default threshold (2 v_s) the slowly moved leg joints would get no viscous term, and
+#: their friction would be wrong at the slow speeds where an admittance loop follows it
+#: (``tests/test_model_identification.py`` checks the identified friction).
 #: The base twist comes from the stance kinematics (both soles still), not from the
 #: base-state estimator: its angular velocity is the gyro's, whose noise, differentiated,
 #: drives the weakly excited inertial combinations and calibrates too heavy a robot (the

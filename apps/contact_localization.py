@@ -44,7 +44,7 @@ the final localization used: ``ContactLocalizer.localize`` replays it),
 ``replay_trial_<i>.html`` (Meshcat replays of the first R trials: green arrow = true force
 ending at the true contact point, red arrow = the localizer's estimate, shown while valid).
 
-The metrics are defined in ``diagrams.residuals.contact_localization``.
+The metrics are defined in ``diagrams.residuals.contact_study``.
 """
 
 from __future__ import annotations
@@ -74,9 +74,11 @@ from apps.runner import (
     simulate,
     write_metrics,
 )
-from diagrams.residuals.contact_localization import (
+from diagrams.residuals.contact_study import (
     MAX_ANGLE_DEG,
     MIN_LOAD_CALIBRATION_TRIALS,
+    MULTI_CONTACT_TRIALS_PER_JOB,
+    TRIALS_PER_JOB,
     ContactLocalizationScenario,
     averaged_input_covariances,
     build_contact_localization_diagram,
@@ -84,16 +86,12 @@ from diagrams.residuals.contact_localization import (
     cross_fitting_folds,
     floors_for,
     load_model_error,
-    run_schedule,
-    sample_study_trials,
-    trial_scenario,
-)
-from diagrams.residuals.contact_trials import (
-    MULTI_CONTACT_TRIALS_PER_JOB,
-    TRIALS_PER_JOB,
     localize_multi_contact,
     run_no_contact,
+    run_schedule,
     run_trials,
+    sample_study_trials,
+    trial_scenario,
 )
 from diagrams.residuals.model_refinement import calibration_file, refined_model
 from diagrams.scenarios import load_scenario, scenario_as_yaml

@@ -11,7 +11,7 @@ import pytest
 from scenario_checks import SCENARIOS, check_scenario_convention
 
 from apps import contact_localization
-from diagrams.residuals.contact_localization import (
+from diagrams.residuals.contact_study import (
     ContactLocalizationScenario,
     build_contact_localization_diagram,
     no_contact_scenario,
@@ -262,7 +262,7 @@ def test_multi_contact_jobs_cross_fit_the_load_model_error_by_seed(hrp4_moved):
     get the model error under load measured on the OTHER seeds' detected trials
     (``load_model_error``), never on their own, and none when fewer than
     ``MIN_LOAD_CALIBRATION_TRIALS`` such trials are known."""
-    from diagrams.residuals.contact_localization import MIN_LOAD_CALIBRATION_TRIALS, load_model_error
+    from diagrams.residuals.contact_study import MIN_LOAD_CALIBRATION_TRIALS, load_model_error
 
     plant, _, _, context = hrp4_moved
     q = plant.GetPositions(context)

@@ -142,6 +142,53 @@ def test_study_trials_split_over_seeds_and_match_each_seeds_own_draw():
     assert len({s["noise_seed"] for s in specs}) == 7
 
 
+def test_study_first_pass_jobs_their_count_and_their_results_by_kind():
+    """The study's first pass (``contact_study.study``): the runs without contact first, the
+    trials in chunks of ``TRIALS_PER_JOB`` (at least ``trials_per_run``), counted by
+    ``first_pass_job_count`` (with two contacts the fits' noise too); ``run_jobs`` joins the
+    trials' results in trial order whatever order the engine returns them in; ``run_job``
+    refuses a kind it does not run (the app's replays)."""
+    from diagrams.residuals.contact_study import (
+        TRIALS_PER_JOB,
+        first_pass_job_count,
+        first_pass_jobs,
+        run_job,
+        run_jobs,
+    )
+
+    scenario = RealisticScenario(trials=2 * TRIALS_PER_JOB + 1, contacts=2, multi_contact=False, slow_motion_duration=0)
+    specs = [{"trial": i} for i in range(scenario.trials)]
+    count = first_pass_job_count(scenario, replay_jobs=2)
+    scenario.multi_contact = True  # as run_study sets it for two contacts
+    jobs = first_pass_jobs(scenario, specs, "yaml")
+    assert [kind for kind, *_ in jobs] == ["no_contact", "covariances", "trials", "trials", "trials"]
+    assert count == len(jobs) + 2
+    assert [t for kind, chunk, _, _ in jobs if kind == "trials" for t in chunk] == specs
+    scenario.trials_per_run = 2 * TRIALS_PER_JOB
+    assert [len(chunk) for kind, chunk, _, _ in first_pass_jobs(scenario, specs, "yaml") if kind == "trials"] == [
+        2 * TRIALS_PER_JOB,
+        1,
+    ]
+
+    class Reversed:  # an engine that returns the jobs' results last first
+        kind, workers = "reversed", 1
+
+        def imap_unordered(self, function, jobs):
+            return reversed([function(job) for job in jobs])
+
+    def fake(job):
+        kind, chunk, _, _ = job
+        return kind, [{"trial": t["trial"]} for t in chunk] if kind == "trials" else kind
+
+    seen = []
+    outputs = run_jobs(jobs, Reversed(), fake, progress=lambda done, total: seen.append((done, total)))
+    assert [r["trial"] for r in outputs["trials"]] == list(range(scenario.trials))
+    assert outputs["no_contact"] == "no_contact" and outputs["covariances"] == "covariances"
+    assert seen == [(k, len(jobs)) for k in range(1, len(jobs) + 1)]
+    with pytest.raises(ValueError, match="no job of kind 'replay'"):
+        run_job(("replay", {}, "yaml", None))
+
+
 @pytest.mark.slow
 def test_trials_run_one_after_another_each_detected_and_localized_in_its_window():
     """Three pushes in one run (``run_schedule``, 0.4 s apart): each trial's window holds its

@@ -262,7 +262,7 @@ def test_multi_contact_jobs_cross_fit_the_load_model_error_by_seed(hrp4_moved):
     get the model error under load measured on the OTHER seeds' detected trials
     (``load_model_error``), never on their own, and none when fewer than
     ``MIN_LOAD_CALIBRATION_TRIALS`` such trials are known."""
-    from diagrams.residuals.contact_study import MIN_LOAD_CALIBRATION_TRIALS, load_model_error
+    from diagrams.residuals.contact_study import MIN_LOAD_CALIBRATION_TRIALS, load_model_error, multi_contact_jobs
 
     plant, _, _, context = hrp4_moved
     q = plant.GetPositions(context)
@@ -286,7 +286,7 @@ def test_multi_contact_jobs_cross_fit_the_load_model_error_by_seed(hrp4_moved):
     few = MIN_LOAD_CALIBRATION_TRIALS - 1
     results = [trial(k, 0) for k in range(25)] + [trial(25 + k, 1, detected=k > 0) for k in range(few + 1)]
     covariances = (np.eye(6), np.eye(n))
-    jobs = contact_localization.multi_contact_jobs(results, plant, "yaml", covariances, chunk=10)
+    jobs = multi_contact_jobs(results, plant, "yaml", covariances, chunk=10)
     assert all(kind == "multi_contact" and len(trials) <= 10 for kind, trials, _, _ in jobs)
     assert sorted(t["trial"] for _, trials, _, _ in jobs for t in trials) == list(range(len(results)))
     for _, trials, text, (given, load) in jobs:

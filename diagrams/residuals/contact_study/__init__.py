@@ -24,7 +24,8 @@ Modules, each importing only those above it:
   without contact's (``no_contact_result``) and the study's totals
   (``contact_localization_metrics``);
 * ``trials``: the trials and the runs without contact as a worker runs them (``run_trials``,
-  ``run_no_contact``, ``localize_multi_contact``).
+  ``run_no_contact``, ``localize_multi_contact``);
+* ``study``: the study's phases on an engine (``run_study``, ``run_job``).
 
 The intervals are ``diagrams.residuals.study_statistics``'s (shared with the sweep).
 """
@@ -84,6 +85,18 @@ from diagrams.residuals.contact_study.scenario import (
     scenario_push,
     slow_motion_scenario,
     trial_scenario,
+)
+from diagrams.residuals.contact_study.study import (
+    JOB_KINDS,
+    StudyRun,
+    calibrate_study_model,
+    first_pass_job_count,
+    first_pass_jobs,
+    multi_contact_jobs,
+    run_job,
+    run_jobs,
+    run_study,
+    study_metrics,
 )
 from diagrams.residuals.contact_study.trials import (
     MULTI_CONTACT_TRIALS_PER_JOB,
@@ -151,4 +164,14 @@ __all__ = [
     "estimate_more",
     "localize_multi_contact",
     "run_no_contact",
+    "JOB_KINDS",
+    "run_job",
+    "run_jobs",
+    "calibrate_study_model",
+    "first_pass_jobs",
+    "first_pass_job_count",
+    "multi_contact_jobs",
+    "study_metrics",
+    "StudyRun",
+    "run_study",
 ]

@@ -248,11 +248,9 @@ def test_app_calibrates_once_in_the_realistic_world(tmp_path, monkeypatch):
     )
     assert code == 0 and len(calls) == 1
     metrics = json.loads((tmp_path / "contact_localization" / "metrics.json").read_text())
-    scenario = metrics["scenario"]
-    assert (
-        scenario["base_state"] == "invariant_ekf" and scenario["imperfections"]["model_mismatch"]["mass_percent"] == 5
-    )
-    saved = Path(scenario["model_refinement"])
+    station = metrics["scenario"]["station"]
+    assert station["base_state"] == "invariant_ekf" and station["imperfections"]["model_mismatch"]["mass_percent"] == 5
+    saved = Path(station["model_refinement"])
     assert saved.is_file() and saved.parent == tmp_path / "calibration_cache"
     assert metrics["trials"] == 1
 

@@ -511,7 +511,7 @@ def benchmark_contact_localizer(model: str = "hrp4_like", *, calls: int = 100, b
     scores) at a new sensed state, for the lines of 16 random contacts of the study, in us
     and as a ratio to one CalcMassMatrix after a new state measured in the same run (the
     unit of ``apps.benchmark``). For ``make benchmark``; the issue's floor is 2 ms."""
-    from diagrams.residuals.contact_localization import (
+    from diagrams.residuals.contact_study import (
         ContactLocalizationScenario,
         build_contact_localization_diagram,
         sample_trials,
@@ -572,7 +572,7 @@ def benchmark_multi_contact_fit(model: str = "hrp4_like", *, pairs: int = 10, se
     on the exact inputs of ``pairs`` two-contact trials of the study (``sample_trials``), at
     the standing pose after its precomputation (a steady posture), in ms: medians, the
     slowest ``fit_two``, and one ``fit_one`` at a new pose (its precomputation included)."""
-    from diagrams.residuals.contact_localization import (
+    from diagrams.residuals.contact_study import (
         ContactLocalizationScenario,
         build_contact_localization_diagram,
         sample_trials,

@@ -14,7 +14,7 @@ each trial's simulation on the inputs it recorded at each update (``estimation: 
 as they would have in the loop. ``--contacts 2`` pushes two links at once. Every trial
 also goes through the one-or-two-contact MultiContactLocalizer, after all trials
 (cross-fitted: each seed's trials with the model error under load measured on the other
-seeds' trials, whose pushes are known, ``multi_contact_jobs``).
+seeds' trials, whose pushes are known, ``diagrams.residuals.contact_study.multi_contact_jobs``).
 Per trial the app records
 detection and its delay, the localized link and point and the force at the end of the push
 (the localizer averages its inputs from 0.1 s after detection and localizes at 100 Hz),
@@ -44,13 +44,15 @@ the final localization used: ``ContactLocalizer.localize`` replays it),
 ``replay_trial_<i>.html`` (Meshcat replays of the first R trials: green arrow = true force
 ending at the true contact point, red arrow = the localizer's estimate, shown while valid).
 
-The metrics are defined in ``diagrams.residuals.contact_localization``.
+The study (its scenario, diagram, trials, offline estimation, metrics, and its phases on the
+engine, ``run_study``) is ``diagrams.residuals.contact_study``; this app holds its command line,
+its Meshcat replays and the files it writes.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
+import functools
 import time
 from pathlib import Path
 
@@ -74,29 +76,17 @@ from apps.runner import (
     simulate,
     write_metrics,
 )
-from diagrams.residuals.contact_localization import (
-    MAX_ANGLE_DEG,
-    MIN_LOAD_CALIBRATION_TRIALS,
+from diagrams.residuals.contact_study import (
     ContactLocalizationScenario,
-    averaged_input_covariances,
     build_contact_localization_diagram,
-    contact_localization_metrics,
-    cross_fitting_folds,
-    floors_for,
-    load_model_error,
+    first_pass_job_count,
+    run_job,
     run_schedule,
-    sample_study_trials,
+    run_study,
     trial_scenario,
 )
-from diagrams.residuals.contact_trials import (
-    MULTI_CONTACT_TRIALS_PER_JOB,
-    TRIALS_PER_JOB,
-    localize_multi_contact,
-    run_no_contact,
-    run_trials,
-)
-from diagrams.residuals.model_refinement import calibration_file, refined_model
-from diagrams.scenarios import load_scenario, scenario_as_yaml
+from diagrams.residuals.model_refinement import refined_model
+from diagrams.scenarios import load_scenario
 from systems.estimation.base_state_estimator import load_compiled_filter_steps
 
 #: The replays go on 0.3 s after the push, to show its release.
@@ -104,31 +94,8 @@ REPLAY_AFTER_PUSH_S = 0.3
 
 
 # ---------------------------------------------------------------------------------------
-# One trial (worker process).
+# The replays (worker process, or here).
 # ---------------------------------------------------------------------------------------
-
-
-def multi_contact_jobs(
-    results: list[dict],
-    plant,
-    scenario_yaml: str,
-    covariances: tuple[np.ndarray, np.ndarray],
-    chunk: int = MULTI_CONTACT_TRIALS_PER_JOB,
-) -> list[tuple]:
-    """The jobs of the one-or-two-contact localization of the study's ``results``,
-    cross-fitted (``cross_fitting_folds``): each fold's trials whitened with the model
-    error under load measured on the detected trials of the other folds
-    (``load_model_error``; none with fewer than ``MIN_LOAD_CALIBRATION_TRIALS``)."""
-    jobs = []
-    fields = ("trial", "contacts", "localizer_inputs", "true_points_world", "body_index", "force_world")
-    for fold in cross_fitting_folds(results):
-        inside = set(fold)
-        known = [r for i, r in enumerate(results) if i not in inside and r["detected"]]
-        load = load_model_error(plant, known) if len(known) >= MIN_LOAD_CALIBRATION_TRIALS else None
-        trials = [{k: results[i][k] for k in fields if k in results[i]} for i in fold]
-        for j in range(0, len(trials), chunk):
-            jobs.append(("multi_contact", trials[j : j + chunk], scenario_yaml, (covariances, load)))
-    return jobs
 
 
 def record_replay(spec: dict, scenario: ContactLocalizationScenario, meshcat, *, live: bool = True) -> None:
@@ -159,19 +126,13 @@ def save_trial_replay(spec: dict, scenario: ContactLocalizationScenario, out_dir
 
 
 def _job(job: tuple) -> tuple[str, object]:
-    # The scenario travels as YAML: Drake's config types do not pickle.
-    # extra: the (noise, load) covariances of a "multi_contact" job, the folder of a "replay".
+    """A job of the study (``run_job``), or a headless replay: ``("replay", spec,
+    scenario_yaml, folder)`` (``save_trial_replay``)."""
     kind, spec, scenario_yaml, extra = job
-    scenario = load_scenario(ContactLocalizationScenario, text=scenario_yaml)
-    if kind == "trials":
-        return kind, run_trials(spec, scenario)
-    if kind == "multi_contact":
-        return kind, localize_multi_contact(spec, scenario, *extra)
     if kind == "replay":
+        scenario = load_scenario(ContactLocalizationScenario, text=scenario_yaml)
         return kind, [str(save_trial_replay(spec, scenario, extra))]
-    if kind == "covariances":
-        return kind, averaged_input_covariances(scenario, refined_model(scenario))
-    return kind, run_no_contact(scenario, kind)
+    return run_job(job)
 
 
 # ---------------------------------------------------------------------------------------
@@ -264,21 +225,10 @@ def _parse(argv):
     return args
 
 
-def _run_jobs(jobs: list, engine) -> dict:
-    """Runs the jobs on ``engine`` (``apps.engine``); returns their results by kind: the
-    "trials" and "multi_contact" jobs' lists joined, in trial order, the "replay" jobs'
-    files, and the others' ("no_contact", "slow_motion", "covariances")."""
-    outputs_by_kind: dict = {}
-    for done, (kind, value) in enumerate(engine.imap_unordered(_job, jobs), 1):
-        if kind in ("trials", "multi_contact", "replay"):
-            outputs_by_kind.setdefault(kind, []).extend(value)
-        else:
-            outputs_by_kind[kind] = value
-        print(f"\r{done}/{len(jobs)} jobs done", end="", flush=True)
-    print()
-    for kind in ("trials", "multi_contact"):
-        outputs_by_kind.get(kind, []).sort(key=lambda r: r["trial"])
-    return outputs_by_kind
+def _progress(done: int, total: int) -> None:
+    print(f"\r{done}/{total} jobs done", end="", flush=True)
+    if done == total:
+        print()
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -314,94 +264,35 @@ def main(argv: list[str] | None = None) -> int:
         # compiled filter while the model is calibrated.
         choice = engine_from_args(args)
         if choice.kind == "pool":  # no more processes than jobs
-            choice = dataclasses.replace(choice, workers=min(choice.workers, _job_count(scenario, args)))
+            headless_replays = min(args.replays, scenario.trials) if args.headless else 0
+            workers = min(choice.workers, first_pass_job_count(scenario, headless_replays))
+            choice = dataclasses.replace(choice, workers=workers)
         with open_engine(choice, initializer=load_compiled_filter_steps) as engine:
             return _study(scenario, args, out_dir, start, engine)
 
     return run_app("contact_localization", body)
 
 
-def _job_count(scenario: ContactLocalizationScenario, args) -> int:
-    """The number of jobs of the study's first pass (``_study``)."""
-    size = max(scenario.trials_per_run, TRIALS_PER_JOB)
-    multi_contact = scenario.multi_contact or scenario.contacts == 2
-    return (
-        (scenario.no_contact_duration > 0)
-        + (scenario.slow_motion_duration > 0)
-        + bool(multi_contact)
-        + (min(args.replays, scenario.trials) if args.headless else 0)
-        + math.ceil(scenario.trials / size)
-    )
-
-
 def _study(scenario: ContactLocalizationScenario, args, out_dir: Path, start: float, engine) -> int:
-    """The study of ``main``, run on ``engine`` (``apps.engine``), from its start time
-    ``start`` (s, ``time.perf_counter``)."""
-    specs = sample_study_trials(scenario)
-    if scenario.station.model_refinement == "calibrate":
-        # Calibrated once, here; the workers read the saved corrections. The file is named
-        # before the calibration, as refined_model names it (its key hashes the code: an
-        # edit of the sources during a long calibration must not change the name read back).
-        saved = calibration_file(scenario, calibration_cache_folder(args))
-        refined_model(scenario, calibration_cache_folder(args))
-        scenario.station.model_refinement = str(saved)
-    phases = {"calibration": time.perf_counter() - start}  # wall time of each phase, s
-    scenario_yaml = scenario_as_yaml(scenario)
-    scenario.multi_contact = scenario.multi_contact or scenario.contacts == 2
-    jobs = []
-    if scenario.no_contact_duration > 0:  # the longest jobs first
-        jobs.append(("no_contact", None, scenario_yaml, None))
-    if scenario.slow_motion_duration > 0:
-        jobs.append(("slow_motion", None, scenario_yaml, None))
-    if scenario.multi_contact:  # the noise of the averaged inputs, for the fits after the trials
-        jobs.append(("covariances", None, scenario_yaml, None))
-    size = max(scenario.trials_per_run, TRIALS_PER_JOB)
-    jobs += [("trials", specs[i : i + size], scenario_yaml, None) for i in range(0, len(specs), size)]
-    # Headless, the replays are recorded in the workers too, last (short jobs: they fill
-    # the pool's tail); live, here after the study.
-    live_replays = [] if args.headless else specs[: args.replays]
-    if args.headless:
-        jobs += [("replay", spec, scenario_yaml, out_dir) for spec in specs[: args.replays]]
-    mark = time.perf_counter()
-    no_contact = _run_jobs(jobs, engine)
-    phases["simulations"] = time.perf_counter() - mark
-    results = no_contact.pop("trials")
-    no_contact.pop("replay", None)  # the files are written
-    mark = time.perf_counter()
-    if scenario.multi_contact:
-        # After all trials: each seed's trials whitened with the model error under
-        # load measured on the other seeds' (cross-fitting).
-        _, handles = build_contact_localization_diagram(scenario, model_corrections=refined_model(scenario))
-        covariances = no_contact.pop("covariances")
-        multi_jobs = multi_contact_jobs(results, handles.station.estimator.plant, scenario_yaml, covariances)
-        by_trial = {m.pop("trial"): m for m in _run_jobs(multi_jobs, engine)["multi_contact"]}
-        for r in results:
-            r.update(by_trial[r["trial"]])
-    phases["one_or_two_contact_fits"] = time.perf_counter() - mark
-    metrics = contact_localization_metrics(
-        results, no_contact.get("no_contact"), no_contact.get("slow_motion"), floors_for(scenario)
-    )
-    metrics.update(
-        {
-            "model": scenario.station.model,
-            "seed": scenario.station.seed,
-            "seeds": list(range(scenario.station.seed, scenario.station.seed + scenario.num_seeds)),
-            "trials_per_run": scenario.trials_per_run,
-            "contacts": scenario.contacts,
-            "trials_with_a_sole_slip": sum(r["sole_slipped"] for r in results),
-            "noise": scenario.station.noise,
-            "engine": engine.kind,
-            "workers": engine.workers,
-            "push_start_s": scenario.push_start,
-            "contact_duration_s": scenario.push_duration,
-            "force_range_N": list(scenario.force_range),
-            "max_angle_from_normal_deg": MAX_ANGLE_DEG,
-            "wall_time_s": None,
-            "no_contact_run": no_contact.get("no_contact"),
-            "slow_motion_run": no_contact.get("slow_motion"),
-        }
-    )
+    """The study of ``main``, run on ``engine`` (``apps.engine``; ``run_study``), from its
+    start time ``start`` (s, ``time.perf_counter``); then its live replays and its files."""
 
+    def replay_jobs(specs: list[dict], scenario_yaml: str) -> list[tuple]:
+        # Headless, the replays are recorded in the workers too, last (short jobs: they fill
+        # the pool's tail); live, here after the study.
+        return [("replay", spec, scenario_yaml, out_dir) for spec in specs[: args.replays]] if args.headless else []
+
+    study = run_study(
+        scenario,
+        engine,
+        calibration_folder=functools.partial(calibration_cache_folder, args),
+        start=start,
+        replay_jobs=replay_jobs,
+        function=_job,
+        progress=_progress,
+    )
+    metrics, results, phases = study.metrics, study.results, study.phases
+    live_replays = [] if args.headless else study.specs[: args.replays]
     mark = time.perf_counter()
     meshcat = replay_meshcat(bool(live_replays), args.headless)
     for spec in live_replays:

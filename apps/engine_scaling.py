@@ -253,7 +253,7 @@ def _calibrate(seed: int, cache: Path) -> float:
     (where the studies find it); returns its wall time, s."""
     import shutil
 
-    from diagrams.residuals.contact_localization import ContactLocalizationScenario
+    from diagrams.residuals.contact_study import ContactLocalizationScenario
     from diagrams.residuals.model_refinement import calibration_file, refined_model
     from diagrams.station.config import StationConfig
 

@@ -45,7 +45,7 @@ import pyarrow as pa
 from apps.engine import add_engine_arguments, engine_from_args, open_engine
 from apps.results import app_command, write_results
 from apps.runner import DEFAULT_OUT, calibration_cache_folder, json_text, print_written, results_name, run_app
-from diagrams.residuals.contact_localization import sample_study_trials
+from diagrams.residuals.contact_study import sample_study_trials
 from diagrams.residuals.contact_sweep import (
     SUMMARY_KEYS,
     SweepCell,

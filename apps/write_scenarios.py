@@ -21,7 +21,7 @@ from diagrams.observer.nao_compliant_arms import NaoCompliantArmsScenario
 from diagrams.observer.nao_force_guided_walk import NaoForceGuidedWalkScenario
 from diagrams.observer.nao_force_observer import NaoForceObserverScenario
 from diagrams.observer.nao_walk_pulled import NaoWalkPulledScenario
-from diagrams.residuals.contact_localization import ContactLocalizationScenario
+from diagrams.residuals.contact_study import ContactLocalizationScenario
 from diagrams.residuals.model_refinement import ModelRefinementScenario
 from diagrams.residuals.push_and_comply import PushAndComplyScenario
 from diagrams.residuals.residual_comparison import ResidualComparisonScenario

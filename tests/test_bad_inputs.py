@@ -29,7 +29,7 @@ from apps.runner import (
     writable_folder,
 )
 from diagrams.residuals import model_refinement
-from diagrams.residuals.contact_localization import FLOORS, contact_localization_metrics
+from diagrams.residuals.contact_study import FLOORS, contact_localization_metrics
 from diagrams.residuals.push_and_comply import PushAndComplyScenario
 from diagrams.station.standing import StandingMetrics
 

@@ -1,4 +1,4 @@
-"""Integration tests of diagrams/residuals/contact_localization.py: the detector and localizer in closed loop
+"""Integration tests of the contact study (diagrams/residuals/contact_study/): the detector and localizer in closed loop
 with the simulated robot, its sensors and the residuals."""
 
 from __future__ import annotations
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
-from diagrams.residuals.contact_localization import ContactLocalizationScenario as RealisticScenario
-from diagrams.residuals.contact_localization import build_contact_localization_diagram
+from diagrams.residuals.contact_study import ContactLocalizationScenario as RealisticScenario
+from diagrams.residuals.contact_study import build_contact_localization_diagram
 from diagrams.station.config import StationConfig
 from systems.residuals.contact_estimation import ALL_WRENCH_COMPONENTS, SOLE_SHEAR_AND_YAW, VALID
 
@@ -128,7 +128,7 @@ def test_feet_without_ft_sensors_are_unknowns_and_feet_are_never_pushed():
 def test_study_trials_split_over_seeds_and_match_each_seeds_own_draw():
     """``sample_study_trials``: 7 trials over 3 seeds go 3 / 2 / 2, numbered 0..6 across the
     seeds, each exactly the trial its seed's ``sample_trials`` draws."""
-    from diagrams.residuals.contact_localization import sample_study_trials, sample_trials
+    from diagrams.residuals.contact_study import sample_study_trials, sample_trials
 
     specs = sample_study_trials(
         ContactLocalizationScenario(station=StationConfig.realistic(seed=40), trials=7, num_seeds=3)
@@ -142,14 +142,60 @@ def test_study_trials_split_over_seeds_and_match_each_seeds_own_draw():
     assert len({s["noise_seed"] for s in specs}) == 7
 
 
+def test_study_first_pass_jobs_their_count_and_their_results_by_kind():
+    """The study's first pass (``contact_study.study``): the runs without contact first, the
+    trials in chunks of ``TRIALS_PER_JOB`` (at least ``trials_per_run``), counted by
+    ``first_pass_job_count`` (with two contacts the fits' noise too); ``run_jobs`` joins the
+    trials' results in trial order whatever order the engine returns them in; ``run_job``
+    refuses a kind it does not run (the app's replays)."""
+    from diagrams.residuals.contact_study import (
+        TRIALS_PER_JOB,
+        first_pass_job_count,
+        first_pass_jobs,
+        run_job,
+        run_jobs,
+    )
+
+    scenario = RealisticScenario(trials=2 * TRIALS_PER_JOB + 1, contacts=2, multi_contact=False, slow_motion_duration=0)
+    specs = [{"trial": i} for i in range(scenario.trials)]
+    count = first_pass_job_count(scenario, replay_jobs=2)
+    scenario.multi_contact = True  # as run_study sets it for two contacts
+    jobs = first_pass_jobs(scenario, specs, "yaml")
+    assert [kind for kind, *_ in jobs] == ["no_contact", "covariances", "trials", "trials", "trials"]
+    assert count == len(jobs) + 2
+    assert [t for kind, chunk, _, _ in jobs if kind == "trials" for t in chunk] == specs
+    scenario.trials_per_run = 2 * TRIALS_PER_JOB
+    assert [len(chunk) for kind, chunk, _, _ in first_pass_jobs(scenario, specs, "yaml") if kind == "trials"] == [
+        2 * TRIALS_PER_JOB,
+        1,
+    ]
+
+    class Reversed:  # an engine that returns the jobs' results last first
+        kind, workers = "reversed", 1
+
+        def imap_unordered(self, function, jobs):
+            return reversed([function(job) for job in jobs])
+
+    def fake(job):
+        kind, chunk, _, _ = job
+        return kind, [{"trial": t["trial"]} for t in chunk] if kind == "trials" else kind
+
+    seen = []
+    outputs = run_jobs(jobs, Reversed(), fake, progress=lambda done, total: seen.append((done, total)))
+    assert [r["trial"] for r in outputs["trials"]] == list(range(scenario.trials))
+    assert outputs["no_contact"] == "no_contact" and outputs["covariances"] == "covariances"
+    assert seen == [(k, len(jobs)) for k in range(1, len(jobs) + 1)]
+    with pytest.raises(ValueError, match="no job of kind 'replay'"):
+        run_job(("replay", {}, "yaml", None))
+
+
 @pytest.mark.slow
 def test_trials_run_one_after_another_each_detected_and_localized_in_its_window():
     """Three pushes in one run (``run_schedule``, 0.4 s apart): each trial's window holds its
     own detection (none carried over from the previous push, no false detection in the
     gap), its localization, and the true point of its own push; the study's runner
-    (``diagrams.residuals.contact_trials.run_trials``) reads the same results from the same run."""
-    from diagrams.residuals.contact_localization import run_schedule, sample_trials, trial_result
-    from diagrams.residuals.contact_trials import run_trials
+    (``diagrams.residuals.contact_study.trials.run_trials``) reads the same results from the same run."""
+    from diagrams.residuals.contact_study import run_schedule, run_trials, sample_trials, trial_result
 
     scenario = ContactLocalizationScenario(push_start=0.3, push_duration=0.3, trial_gap=0.4, trials_per_run=3)
     specs = sample_trials("hrp4_like", 3, seed=0)  # an elbow, a shoulder and a hand link
@@ -188,8 +234,7 @@ def test_trials_from_one_shared_standing_start_match_the_trials_run_alone():
     localization and force are those of the same trial run alone (from its own standing
     start) up to round-off, whatever the trials before it did; with noise the pushes see
     noise of their own (they come one after another in time)."""
-    from diagrams.residuals.contact_localization import sample_trials
-    from diagrams.residuals.contact_trials import run_trials
+    from diagrams.residuals.contact_study import run_trials, sample_trials
 
     shared = ContactLocalizationScenario(
         station=StationConfig.realistic(noise=False), push_start=0.3, push_duration=0.3, multi_contact=False
@@ -226,8 +271,7 @@ def test_offline_estimation_of_the_trials_equals_the_estimators_in_the_loop(worl
     the standing start, so that every restored trial starts with it on."""
     from dataclasses import replace
 
-    from diagrams.residuals.contact_localization import sample_trials
-    from diagrams.residuals.contact_trials import run_trials
+    from diagrams.residuals.contact_study import run_trials, sample_trials
     from systems.simulation.imperfections import Imperfections
 
     scenario = RealisticScenario(
@@ -266,7 +310,7 @@ def test_two_contact_tables_count_both_links():
     """With two contacts per trial the per-link table counts each pushed link as found when
     the answer has two contacts and names it, the per-seed table counts trials with both
     links right, and the confusion list names the true pair and what was found."""
-    from diagrams.residuals.contact_localization import _intervals_and_tables
+    from diagrams.residuals.contact_study.metrics import _intervals_and_tables
 
     def trial(seed, true, found):
         return {
@@ -305,8 +349,7 @@ def test_study_trials_on_a_robot_without_foot_ft_sensors():
     within 1 cm with its force within 5 % by the eq. (22) localizer (per link, the ground's
     wrenches unknowns) and by the stacked fit, whose sole normal forces are within 5 % of
     the robot's weight of the simulator's; a push on a stance shank is never claimed."""
-    from diagrams.residuals.contact_localization import body_regions, multi_contact_result, sample_trials
-    from diagrams.residuals.contact_trials import run_trials
+    from diagrams.residuals.contact_study import body_regions, multi_contact_result, run_trials, sample_trials
     from systems.residuals.multi_contact import MultiContactLocalizer
 
     robot = "models/robots/hrp4_like_no_ft.yaml"
@@ -352,7 +395,7 @@ def test_floors_follow_the_robots_foot_sensing():
     """Issue 36's per-region floors for a robot without foot F/T sensors, in either world
     (without the sole force floor where FSRs measure the forces); the F/T robot keeps the
     study's own."""
-    from diagrams.residuals.contact_localization import (
+    from diagrams.residuals.contact_study import (
         FLOORS,
         FSR_FEET_FLOORS,
         NO_FOOT_FT_FLOORS,
@@ -379,7 +422,7 @@ def test_floors_follow_the_robots_foot_sensing():
 def test_metrics_per_region_and_sole_forces_count_what_they_say():
     """Hand-made trials: the per-region table's rates and medians, the flat keys the floors
     read, and the sole normal force RMS (over the detected trials, of the weight)."""
-    from diagrams.residuals.contact_localization import NO_FOOT_FT_FLOORS, contact_localization_metrics
+    from diagrams.residuals.contact_study import NO_FOOT_FT_FLOORS, contact_localization_metrics
 
     def trial(k, region, detected, right, position, feet=None):
         r = {

@@ -11,7 +11,7 @@ import pytest
 from scenario_checks import SCENARIOS, check_scenario_convention
 
 from apps import contact_localization
-from diagrams.residuals.contact_localization import (
+from diagrams.residuals.contact_study import (
     ContactLocalizationScenario,
     build_contact_localization_diagram,
     no_contact_scenario,
@@ -248,11 +248,9 @@ def test_app_calibrates_once_in_the_realistic_world(tmp_path, monkeypatch):
     )
     assert code == 0 and len(calls) == 1
     metrics = json.loads((tmp_path / "contact_localization" / "metrics.json").read_text())
-    scenario = metrics["scenario"]
-    assert (
-        scenario["base_state"] == "invariant_ekf" and scenario["imperfections"]["model_mismatch"]["mass_percent"] == 5
-    )
-    saved = Path(scenario["model_refinement"])
+    station = metrics["scenario"]["station"]
+    assert station["base_state"] == "invariant_ekf" and station["imperfections"]["model_mismatch"]["mass_percent"] == 5
+    saved = Path(station["model_refinement"])
     assert saved.is_file() and saved.parent == tmp_path / "calibration_cache"
     assert metrics["trials"] == 1
 
@@ -262,7 +260,7 @@ def test_multi_contact_jobs_cross_fit_the_load_model_error_by_seed(hrp4_moved):
     get the model error under load measured on the OTHER seeds' detected trials
     (``load_model_error``), never on their own, and none when fewer than
     ``MIN_LOAD_CALIBRATION_TRIALS`` such trials are known."""
-    from diagrams.residuals.contact_localization import MIN_LOAD_CALIBRATION_TRIALS, load_model_error
+    from diagrams.residuals.contact_study import MIN_LOAD_CALIBRATION_TRIALS, load_model_error, multi_contact_jobs
 
     plant, _, _, context = hrp4_moved
     q = plant.GetPositions(context)
@@ -286,7 +284,7 @@ def test_multi_contact_jobs_cross_fit_the_load_model_error_by_seed(hrp4_moved):
     few = MIN_LOAD_CALIBRATION_TRIALS - 1
     results = [trial(k, 0) for k in range(25)] + [trial(25 + k, 1, detected=k > 0) for k in range(few + 1)]
     covariances = (np.eye(6), np.eye(n))
-    jobs = contact_localization.multi_contact_jobs(results, plant, "yaml", covariances, chunk=10)
+    jobs = multi_contact_jobs(results, plant, "yaml", covariances, chunk=10)
     assert all(kind == "multi_contact" and len(trials) <= 10 for kind, trials, _, _ in jobs)
     assert sorted(t["trial"] for _, trials, _, _ in jobs for t in trials) == list(range(len(results)))
     for _, trials, text, (given, load) in jobs:

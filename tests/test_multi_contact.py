@@ -4,7 +4,7 @@ The residuals fed to the localizer are computed here from known point forces wit
 directly: the external residual is the world wrench sum [p x f; f] (moment about the world
 origin), the internal one sum J^fb^T f with J^fb = J_j - J_b M_bb^-1 M_bj from
 ``CalcJacobianTranslationalVelocity`` and ``CalcMassMatrix``. True contacts are sampled as
-the contact study samples them (``diagrams/residuals/contact_localization.py::sample_trials``):
+the contact study samples them (``diagrams/residuals/contact_study/sampling.py::sample_trials``):
 a uniform candidate link, a primitive by area, a uniform point of it on the robot's outer
 surface, a force of 5-40 N within 60 deg of the inward normal.
 """
@@ -573,7 +573,7 @@ def test_load_covariance_measured_on_known_pushes_accounts_for_the_model_error(h
     and give p < 0.05 in nearly all; with the measured load covariance the localizer says
     two contacts in <= 5 % of the draws, its p-value is below 0.05 in <= 15 %, and two real
     contacts (with the load-proportional error) are still found."""
-    from diagrams.residuals.contact_localization import load_model_error
+    from diagrams.residuals.contact_study import load_model_error
 
     plant, scene_graph, context = hrp4
     q = plant.GetPositions(context)
@@ -629,7 +629,7 @@ def test_load_model_error_measures_what_the_true_contacts_do_not_explain(hrp4):
     Drake's Jacobians and mass matrix (``_exact_residuals``): exact residuals of the true
     contacts leave no model error; a known error e_k added to each trial's inputs comes
     back as sum e e^T / sum |F|^2, F the trial's total force, for one and two contacts."""
-    from diagrams.residuals.contact_localization import cross_fitting_folds, load_model_error
+    from diagrams.residuals.contact_study import cross_fitting_folds, load_model_error
 
     plant, scene_graph, context = hrp4
     q = plant.GetPositions(context)

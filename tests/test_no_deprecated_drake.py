@@ -104,7 +104,7 @@ def _case_push_and_comply() -> None:
 
 
 def _case_contact_localization() -> None:
-    from diagrams.residuals.contact_localization import ContactLocalizationScenario, build_contact_localization_diagram
+    from diagrams.residuals.contact_study import ContactLocalizationScenario, build_contact_localization_diagram
 
     config = ContactLocalizationScenario(push_body="CHEST_Y_LINK", push_force=(-20.0, 0.0, 0.0), push_start=0.0)
     diagram, handles = build_contact_localization_diagram(config, _meshcat())

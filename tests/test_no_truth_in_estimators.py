@@ -63,7 +63,7 @@ def _residual_comparison():
 
 
 def _contact_localization():
-    from diagrams.residuals.contact_localization import ContactLocalizationScenario, build_contact_localization_diagram
+    from diagrams.residuals.contact_study import ContactLocalizationScenario, build_contact_localization_diagram
 
     scenario = ContactLocalizationScenario(
         push_body=LINK, push_point=(0.0, -0.05, -0.1), push_force=(0.0, 15.0, 0.0), push_start=0.0

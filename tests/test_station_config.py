@@ -8,7 +8,7 @@ from pydrake.systems.framework import DiagramBuilder
 
 from apps.runner import experiment_parser, scenario_from_args
 from diagrams.locomotion.nao_walk import NaoWalkScenario
-from diagrams.residuals.contact_localization import ContactLocalizationScenario
+from diagrams.residuals.contact_study import ContactLocalizationScenario
 from diagrams.residuals.model_refinement import ModelRefinementScenario, refinement_scenario_for
 from diagrams.residuals.push_and_comply import PushAndComplyScenario
 from diagrams.residuals.residual_comparison import ResidualComparisonScenario
@@ -143,7 +143,7 @@ def test_ideal_is_only_offered_where_it_means_something():
 
 
 def test_the_contact_study_checks_the_floors_of_its_world():
-    from diagrams.residuals.contact_localization import FLOORS, REALISTIC_FLOORS, TWO_CONTACT_FLOORS, floors_for
+    from diagrams.residuals.contact_study import FLOORS, REALISTIC_FLOORS, TWO_CONTACT_FLOORS, floors_for
 
     assert floors_for(ContactLocalizationScenario()) is REALISTIC_FLOORS
     assert floors_for(ContactLocalizationScenario(station=StationConfig())) is FLOORS

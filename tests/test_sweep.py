@@ -13,7 +13,7 @@ import pytest
 from scipy.stats import beta
 
 from apps import sweep
-from diagrams.residuals.contact_localization import ContactLocalizationScenario
+from diagrams.residuals.contact_study import ContactLocalizationScenario
 from diagrams.residuals.contact_sweep import (
     ROW_SCHEMA,
     RUN_COLUMNS,

@@ -566,7 +566,7 @@ def test_a_standing_robot_with_fsr_feet_measures_its_weight_at_the_soles():
     what the soles' shear and yaw cannot explain, stays off."""
     from pydrake.systems.analysis import Simulator
 
-    from diagrams.residuals.contact_localization import ContactLocalizationScenario, build_contact_localization_diagram
+    from diagrams.residuals.contact_study import ContactLocalizationScenario, build_contact_localization_diagram
     from diagrams.station.config import StationConfig
 
     scenario = ContactLocalizationScenario(station=StationConfig(model="models/robots/hrp4_like_fsr.yaml"))

@@ -13,7 +13,7 @@ noise levels is the noise's, not the draw's). The cell's realistic world calibra
 model (``model_refinement: calibrate``), with its own sensors.
 
 The trials of a cell are run in chunks of ``trials_per_job`` from one standing start
-(``diagrams.residuals.contact_trials.run_trials``); a trial's result depends on its chunk
+(``diagrams.residuals.contact_study.trials.run_trials``); a trial's result depends on its chunk
 (the noise of the start is the chunk's), never on the engine or the number of workers.
 """
 
@@ -33,13 +33,13 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from diagrams.residuals.contact_localization import (
+from diagrams.residuals.contact_study import (
     MAX_FORCE,
     MIN_FORCE,
     ContactLocalizationScenario,
     check_force_range,
+    run_trials,
 )
-from diagrams.residuals.contact_trials import run_trials
 from diagrams.residuals.model_refinement import calibration_file, refined_model
 from diagrams.residuals.study_statistics import (
     CONFIDENCE_LEVEL,

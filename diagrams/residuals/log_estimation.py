@@ -135,7 +135,7 @@ __all__ = [
 @dataclass
 class LogEstimationSettings:
     """The estimators' settings (those of the contact study,
-    ``diagrams.residuals.contact_localization``). SI units.
+    ``diagrams.residuals.contact_study``). SI units.
 
     Attributes:
         internal_gain, external_gain: the residual gains K, 1/s (eqs. 11, 16).
@@ -1386,7 +1386,7 @@ def demo_push(robot: str, seed: int = 0) -> tuple[str, tuple[float, ...], tuple[
     11 N on nao_like's wrist, held for the demo's second, tips it over."""
     if robot == "hrp4_like":
         return DEMO_PUSH_BODY, DEMO_PUSH_POINT, DEMO_PUSH_FORCE
-    from diagrams.residuals.contact_localization import MAX_FORCE, sample_trials
+    from diagrams.residuals.contact_study import MAX_FORCE, sample_trials
     from diagrams.station.standing import size_ratios
 
     (spec,) = sample_trials(robot, 1, seed)

@@ -245,7 +245,7 @@ class ResidualModel:
         One Drake call (``FloatingBaseDynamics.gravity_generalized_forces``), whatever was
         evaluated before: a PD controller computes the same torque whether or not residual
         systems share this model (the contact study simulates its sensors without them and
-        runs the estimators on the log afterwards, ``diagrams.residuals.contact_localization``).
+        runs the estimators on the log afterwards, ``diagrams.residuals.contact_study``).
         """
         self._impl_at_key = False  # the gravity call may move the implementation's kinematics
         return self.dynamics.gravity_generalized_forces(x[: self.num_positions])[6:]

@@ -748,7 +748,7 @@ class MultiContactLocalizer:
             the load, as covariances per N^2 of the total external force (6 x 6 and n x n):
             each call whitens with the covariances plus |f|^2 times these, f the external
             residual's force (its inputs' ``wrench_W[3:]``). Measured on pushes of known
-            force (``diagrams.residuals.contact_localization.load_model_error``); default
+            force (``diagrams.residuals.contact_study.offline.load_model_error``); default
             None: no such term.
         unknown_wrench_frames: frames (or names) whose wrenches are unknowns (module
             docstring): the soles of a robot without foot F/T sensors, whose residuals were

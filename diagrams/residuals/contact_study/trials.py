@@ -14,19 +14,14 @@ import time
 
 import numpy as np
 
-from diagrams.residuals.contact_localization import (
+from diagrams.residuals.contact_study.builder import build_contact_localization_diagram
+from diagrams.residuals.contact_study.metrics import multi_contact_result, no_contact_result, trial_result
+from diagrams.residuals.contact_study.offline import estimate_run, estimator_log, multi_contact_localizer, offline_trial
+from diagrams.residuals.contact_study.scenario import (
     ContactLocalizationScenario,
-    build_contact_localization_diagram,
-    estimate_run,
-    estimator_log,
-    multi_contact_localizer,
-    multi_contact_result,
-    no_contact_result,
     no_contact_scenario,
-    offline_trial,
     run_schedule,
     slow_motion_scenario,
-    trial_result,
     trial_scenario,
 )
 from diagrams.residuals.model_refinement import refined_model

@@ -27,7 +27,7 @@ def test_app_calibrates_checks_and_reuses_its_log(tmp_path, capsys):
     # The mismatch's spurious force is there, and the refined model removes most of it.
     assert standing["nominal_model"]["external_force_rms_N"] > 2.0
     assert standing["external_force_reduction"] > 0.5
-    assert metrics["scenario"]["imperfections"]["model_mismatch"]["mass_percent"] == 5.0
+    assert metrics["scenario"]["station"]["imperfections"]["model_mismatch"]["mass_percent"] == 5.0
     assert "removed" in capsys.readouterr().out
     # The same identification from the saved log (a robot's own log), without the checks.
     again = tmp_path / "again"

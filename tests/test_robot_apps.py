@@ -39,7 +39,7 @@ def test_push_and_comply_on_talos(tmp_path):
     args = ["--robot", TALOS, "--ideal", "--headless", "--scenario-text", text, "--out", str(tmp_path)]
     assert push_and_comply.main(args) == 0
     metrics = json.loads((tmp_path / "push_and_comply" / "metrics.json").read_text())
-    assert metrics["scenario"]["model"] == TALOS
+    assert metrics["scenario"]["station"]["model"] == TALOS
     # The knees found by role (each six-joint leg's fourth joint), not by an HRP-4 name.
     assert set(metrics["internal"]["knee_pitch_flexion_per_knee_deg"]) == {"leg_left_4_joint", "leg_right_4_joint"}
 

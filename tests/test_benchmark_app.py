@@ -60,6 +60,11 @@ def test_benchmark_stops_with_a_clear_error_when_the_nao_recording_is_missing(tm
     assert "benchmark: error:" in err and str(tmp_path / "datasets" / "hawley2019-nao") in err
 
 
+def test_a_closed_loop_shorter_than_its_warm_up_is_refused_before_any_timing(capsys):
+    assert benchmark.main(["--model", "nao_like", "--loop-seconds", "0.03"]) == 2
+    assert "--loop-seconds must be 0 (skip) or exceed the closed loop's 0.05 s warm-up" in capsys.readouterr().err
+
+
 def test_residual_replay_benchmark_times_both_paths_on_one_log():
     """The calibration replay's timing (``benchmark_residual_replay``): both paths on the same
     short log, and they agree (to the mass matrix's central difference)."""

@@ -153,7 +153,9 @@ def test_the_tare_removes_a_torque_sensor_offset_before_the_push():
     runs = {}
     for tare in (0.0, 0.5):
         scenario = PushAndComplyScenario(station=StationConfig(), **timing, tare_duration=tare)
-        scenario.imperfections = Imperfections(torque_sensor=TorqueSensorImperfections(offset_percent=1.0), seed=3)
+        scenario.station.imperfections = Imperfections(
+            torque_sensor=TorqueSensorImperfections(offset_percent=1.0), seed=3
+        )
         runs[tare] = run_once(scenario, "internal", None, progress=False)["signals"]
 
     def moved_before_push_deg(s):

@@ -156,3 +156,15 @@ def test_the_contact_study_checks_the_floors_of_its_world():
     # Issue 12's ideal-world floors.
     assert FLOORS["correct_link_rate"] == (">=", 0.97) and FLOORS["valid_precision"] == (">=", 0.995)
     assert TWO_CONTACT_FLOORS["both_links_right_rate"] == (">=", 0.80)
+
+
+@pytest.mark.parametrize("schema", (*ALL, ModelRefinementScenario, NaoWalkScenario, StationConfig))
+def test_a_field_the_scenario_does_not_have_cannot_be_set(schema):
+    """Scenarios are slotted dataclasses: ``scenario.seed = 3`` on a scenario whose seed is its
+    station's is an error, not a new attribute that nothing reads."""
+    scenario = schema()
+    with pytest.raises(AttributeError):
+        scenario.sed = 3
+    if schema is not StationConfig:
+        with pytest.raises(AttributeError):
+            scenario.seed = 3

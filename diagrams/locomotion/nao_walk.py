@@ -84,7 +84,7 @@ def add_walking_loggers(
     return loggers
 
 
-@dataclass
+@dataclass(slots=True)
 class NaoWalkScenario:
     """The walking experiment's settings (SI units; ``diagrams.scenarios``). Defaults: the
     issue-7 walk (22 steps of 5 cm, 0.5 s each).

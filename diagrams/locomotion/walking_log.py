@@ -29,6 +29,7 @@ import numpy as np
 
 from diagrams.locomotion.nao_walk import NaoWalkScenario, build_nao_walk_diagram
 from diagrams.simulation import simulate
+from diagrams.station.config import StationConfig
 from systems.common.topology import floating_base_topology
 from systems.io.robot_log import RobotLog, quaternion_to_rotation
 from systems.locomotion.walking_pattern import WalkingParameters
@@ -129,11 +130,10 @@ def walking_log_scenario(settings: WalkingLogSettings) -> NaoWalkScenario:
         gyro_bias_y=float(bias[1]),
         gyro_bias_z=float(bias[2]),
     )
+    imperfections = Imperfections(imu=imu, encoders=EncoderImperfections(bits=14), seed=settings.seed)
     return NaoWalkScenario(
+        station=StationConfig(model="nao_like", noise=True, seed=settings.seed, imperfections=imperfections),
         walking=WalkingParameters(num_steps=steps),
-        noise=True,
-        seed=settings.seed,
-        imperfections=Imperfections(imu=imu, encoders=EncoderImperfections(bits=14), seed=settings.seed),
         log_period=0.001,
         standing_start=settings.standing_start,
         log_sensors=True,
@@ -191,7 +191,7 @@ def simulate_walking_log(settings: WalkingLogSettings | None = None) -> WalkingL
         truth_time=times.copy(),
         truth_base_pose=state[:, q0 : q0 + 7].copy(),
         truth_base_velocity=state[:, v0 : v0 + 6].copy(),
-        gyro_bias_rad_s=scenario.imperfections.imu.gyro_turn_on_bias(),
+        gyro_bias_rad_s=scenario.station.imperfections.imu.gyro_turn_on_bias(),
         settings=dataclasses.replace(settings),
     )
 

@@ -363,7 +363,7 @@ SIDES = tuple(c.side for c in NAO_ARM_CHAINS)
 CASE_NAMES = ("a", "b")
 
 
-@dataclass
+@dataclass(slots=True)
 class NaoCompliantArmsScenario:
     """The settings of ``apps.nao_compliant_arms`` (SI units). Defaults: the paper's
     Sec. 6.4 with a 1.5 N push per hand.

@@ -61,7 +61,7 @@ EDGE_MARGIN = 0.4
 HAND_BODIES = ("l_gripper", "r_gripper")
 
 
-@dataclass
+@dataclass(slots=True)
 class NaoForceGuidedWalkScenario:
     """The force-guided walk's settings (SI units; ``diagrams.scenarios``). Defaults: the
     app's. The force is 3 N, not 4 N: the ZMP shift it causes grows with it (z_c F / (m g),

@@ -315,7 +315,7 @@ COMPONENTS = ("x", "y", "z")
 EXPERIMENT_NUMBERS = (1, 2, 3)
 
 
-@dataclass
+@dataclass(slots=True)
 class NaoForceObserverScenario:
     """The settings of ``apps.nao_force_observer`` (SI units). Defaults: the paper's
     experiments 1-3 (Sec. 6.1-6.2) with the ramps and stance of ``make_experiment``.

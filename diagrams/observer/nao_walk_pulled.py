@@ -170,7 +170,7 @@ class NaoWalkPulledHandles(NaoWalkHandles):
     observer_loggers: dict | None = None
 
 
-@dataclass
+@dataclass(slots=True)
 class NaoWalkPulledScenario:
     """Experiment 4's settings (SI units; ``diagrams.scenarios``). Defaults: the issue-7 walk
     (22 steps of 5 cm) with the default cable, sensor noise on.

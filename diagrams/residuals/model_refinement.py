@@ -97,7 +97,7 @@ def calibration_options(plant: MultibodyPlant) -> IdentificationOptions:
     )
 
 
-@dataclass
+@dataclass(slots=True)
 class ModelRefinementScenario:
     """The calibration and its check. SI units.
 
@@ -406,7 +406,7 @@ def refinement_scenario_for(scenario: Any) -> ModelRefinementScenario:
     residual noise model measured at that gain (``ResidualNoiseModel.check_gains``)."""
     return ModelRefinementScenario(
         station=replace(scenario.station, seed=scenario.station.seed + 1, model_refinement="none"),
-        internal_gain=float(getattr(scenario, "residual_gain", ModelRefinementScenario.internal_gain)),
+        internal_gain=float(getattr(scenario, "residual_gain", ModelRefinementScenario().internal_gain)),
     )
 
 

@@ -55,7 +55,7 @@ def meets_robot_floors(internal: dict, classical: dict) -> bool:
     )
 
 
-@dataclass
+@dataclass(slots=True)
 class PushAndComplyScenario:
     """The experiment's settings (SI units). Defaults: the paper's scenario, Sec. IV.
 

@@ -47,7 +47,7 @@ from systems.simulation.disturbances import Push, PushSource, Sinusoid
 from systems.simulation.sensors import SensorHandles
 
 
-@dataclass
+@dataclass(slots=True)
 class ResidualComparisonScenario:
     """The residual comparison's settings (paper Secs. II-C, III, V). SI units.
 

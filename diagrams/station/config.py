@@ -44,7 +44,7 @@ def check_model_refinement(value: str) -> str:
     )
 
 
-@dataclass
+@dataclass(slots=True)
 class StationConfig:
     """The simulated world of an experiment: the robot, Drake's plant, the sensors and their
     noise, the robot's imperfections, the sensed base state's source and the estimators'

@@ -63,7 +63,7 @@ REFERENCE_MODEL = "hrp4_like"
 KD_STABILITY_MARGIN = 0.3
 
 
-@dataclass
+@dataclass(slots=True)
 class StandingScenario:
     """The standing experiment's settings (SI units).
 

@@ -135,7 +135,7 @@ def floors_for(scenario: "ContactLocalizationScenario") -> dict:
 MIN_FORCE, MAX_FORCE, MAX_ANGLE_DEG = 5.0, 40.0, 60.0
 
 
-@dataclass
+@dataclass(slots=True)
 class ContactLocalizationScenario:
     """The contact study, and one run of its diagram. SI units.
 

@@ -18,14 +18,13 @@ results files from DIR (neither rewrites a page); ``--check`` only reports the s
 from __future__ import annotations
 
 import argparse
-import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from apps.results import load_results, provenance
+from apps.results import generated_block_pattern, load_results, provenance, regenerated_blocks, stale_documents
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
@@ -36,7 +35,7 @@ DOCUMENTS = (ROOT / "README.md", ROOT / "BENCHMARKS.md", *sorted(DOCS.glob("*.md
 #: The resolution of every figure (the apps' plots use the same).
 DPI = 110
 
-_BLOCK = re.compile(r"(<!-- figure: (?P<name>[\w.-]+) -->\n)(?P<body>.*?)(<!-- /figure: (?P=name) -->)", re.S)
+_BLOCK = generated_block_pattern("figure")
 
 
 @dataclass(frozen=True)
@@ -775,15 +774,7 @@ def block(name: str, folder: Path | None = None) -> str:
 
 def updated(text: str, folder: Path | None = None) -> tuple[str, list[str]]:
     """``text`` with every figure block regenerated, and the names of the blocks that changed."""
-    changed = []
-
-    def replace(match: re.Match) -> str:
-        body = block(match["name"], folder)
-        if body != match["body"]:
-            changed.append(match["name"])
-        return match.group(1) + body + match.group(4)
-
-    return _BLOCK.sub(replace, text), changed
+    return regenerated_blocks(_BLOCK, text, lambda name: block(name, folder))
 
 
 def block_names(text: str) -> list[str]:
@@ -803,12 +794,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     def body() -> int:
-        stale, rewritten = [], {}
-        for path in DOCUMENTS:
-            text, changed = updated(path.read_text(), args.results)
-            stale += [f"{path.relative_to(ROOT)}: {name}" for name in changed]
-            if changed:
-                rewritten[path] = text
+        stale, rewritten = stale_documents(DOCUMENTS, lambda text: updated(text, args.results), ROOT)
         if args.check:
             print("\n".join(f"stale: {s}" for s in stale) if stale else "every figure block is up to date")
             return 1 if stale else 0

@@ -12,17 +12,16 @@ the stale ones (exit 1), as ``tests/test_doc_tables.py`` does.
 from __future__ import annotations
 
 import argparse
-import re
 from collections.abc import Callable
 from pathlib import Path
 
-from apps.results import load_results, provenance
+from apps.results import generated_block_pattern, load_results, provenance, regenerated_blocks, stale_documents
 
 ROOT = Path(__file__).resolve().parent.parent
 #: The documents whose blocks are generated.
 DOCUMENTS = (ROOT / "README.md", ROOT / "BENCHMARKS.md", *sorted((ROOT / "docs").glob("*.md")))
 
-_BLOCK = re.compile(r"(<!-- results: (?P<name>[\w.-]+) -->\n)(?P<body>.*?)(<!-- /results: (?P=name) -->)", re.S)
+_BLOCK = generated_block_pattern("results")
 
 
 def _deg(value) -> str:
@@ -976,15 +975,7 @@ def render(name: str, folder: Path | None = None) -> str:
 
 def updated(text: str, folder: Path | None = None) -> tuple[str, list[str]]:
     """``text`` with every block regenerated, and the names of the blocks that changed."""
-    changed = []
-
-    def replace(match: re.Match) -> str:
-        body = render(match["name"], folder)
-        if body != match["body"]:
-            changed.append(match["name"])
-        return match.group(1) + body + match.group(4)
-
-    return _BLOCK.sub(replace, text), changed
+    return regenerated_blocks(_BLOCK, text, lambda name: render(name, folder))
 
 
 def block_names(text: str) -> list[str]:
@@ -1002,12 +993,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     def body() -> int:
-        stale, rewritten = [], {}
-        for path in DOCUMENTS:
-            text, changed = updated(path.read_text())
-            stale += [f"{path.relative_to(ROOT)}: {name}" for name in changed]
-            if changed:
-                rewritten[path] = text
+        stale, rewritten = stale_documents(DOCUMENTS, updated, ROOT)
         if not args.check:
             for path, text in rewritten.items():
                 path.write_text(text)

@@ -14,8 +14,10 @@ import datetime
 import json
 import os
 import platform
+import re
 import shlex
 import sys
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -95,13 +97,50 @@ def provenance(prefix: str, name: str, payload: dict) -> str:
     )
 
 
+def generated_block_pattern(tag: str) -> re.Pattern:
+    """The generated blocks ``<!-- TAG: NAME -->`` ... ``<!-- /TAG: NAME -->`` of a document
+    (groups: opening line, ``name``, ``body``, closing line)."""
+    return re.compile(rf"(<!-- {tag}: (?P<name>[\w.-]+) -->\n)(?P<body>.*?)(<!-- /{tag}: (?P=name) -->)", re.S)
+
+
+def regenerated_blocks(pattern: re.Pattern, text: str, render: Callable[[str], str]) -> tuple[str, list[str]]:
+    """``text`` with the body of every block of ``pattern`` replaced by ``render(name)``, and
+    the names of the blocks whose body changed."""
+    changed = []
+
+    def replace(match: re.Match) -> str:
+        body = render(match["name"])
+        if body != match["body"]:
+            changed.append(match["name"])
+        return match.group(1) + body + match.group(4)
+
+    return pattern.sub(replace, text), changed
+
+
+def stale_documents(
+    documents: Sequence[Path], updated: Callable[[str], tuple[str, list[str]]], root: Path
+) -> tuple[list[str], dict[Path, str]]:
+    """Each document's stale blocks: (``<path relative to root>: <name>`` of every block that
+    ``updated(text)`` changes, {path: its regenerated text} of the documents that change)."""
+    stale, rewritten = [], {}
+    for path in documents:
+        text, changed = updated(path.read_text())
+        stale += [f"{path.relative_to(root)}: {name}" for name in changed]
+        if changed:
+            rewritten[path] = text
+    return stale, rewritten
+
+
 __all__ = [
     "RESULTS_DIR",
     "RESULTS_DIR_VARIABLE",
     "app_command",
     "drake_release",
+    "generated_block_pattern",
     "load_results",
     "provenance",
+    "regenerated_blocks",
     "results_path",
+    "stale_documents",
     "write_results",
 ]

@@ -113,7 +113,7 @@ def build_nao_force_observer_diagram(
             (e.g. ``wide_stance()``); the PD holds it (position control).
         support_foot: "left" or "right": origin of the support-foot frame.
         station: the robot and its world (``diagrams.station.config.StationConfig``; default
-            ``nao_station()``: ``nao_like``, noisy sensors, the ideal world). Its ``model`` is
+            ``StationConfig(model="nao_like")``: noisy sensors, the ideal world). Its ``model`` is
             one of ``NAO_ROBOTS``: ``nao_like`` (the documented link masses) or
             ``nao_like_recorded`` (its standing CoM at the recordings' height). Its ``noise``
             and ``seed`` are the observer pipeline's too (defaults of
@@ -127,7 +127,7 @@ def build_nao_force_observer_diagram(
     Raises:
         ValueError: unknown support foot or robot, bad pushes (unknown body), bad noise settings.
     """
-    config = nao_station() if station is None else station
+    config = StationConfig(model="nao_like") if station is None else station
     noise, seed = config.noise, config.seed
     builder = DiagramBuilder()
     station = add_humanoid_station(builder, dataclasses.replace(config, model=nao_model(config.model)))
@@ -229,12 +229,6 @@ def build_nao_force_observer_diagram(
 #: robot with its standing CoM at the height of the authors' recordings, 0.314 m:
 #: ``models.generate_sdf``), name -> what ``add_humanoid_station`` takes.
 NAO_ROBOTS = {"nao_like": "nao_like", "nao_like_recorded": str(MODELS_DIR / "nao_like_recorded.yaml")}
-
-
-def nao_station(robot: str = "nao_like", **fields) -> StationConfig:
-    """The station of the Nao experiments: ``robot`` (one of ``NAO_ROBOTS``), noisy sensors,
-    the ideal world, and ``fields`` set (``StationConfig``)."""
-    return StationConfig(model=robot, **fields)
 
 
 def nao_model(robot: str) -> str:
@@ -341,7 +335,7 @@ class NaoForceObserverScenario:
             is discrete, so only ``target_realtime_rate`` and the publishing matter.
     """
 
-    station: StationConfig = field(default_factory=lambda: nao_station("nao_like_recorded"))
+    station: StationConfig = field(default_factory=lambda: StationConfig(model="nao_like_recorded"))
     experiments: list[int] = field(default_factory=lambda: list(EXPERIMENT_NUMBERS))
     time_scale: float = 1.0
     ramp: float = DEFAULT_RAMP
